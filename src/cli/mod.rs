@@ -1,0 +1,80 @@
+//! The `vectorfusion` command line. Each subcommand lives in its own file; errors are turned
+//! into a message and an exit code in one place ([`main`]).
+
+use clap::{Parser, Subcommand};
+use std::process::ExitCode;
+
+/// Caption → clean, editable SVG (VectorFusion).
+#[derive(Parser, Debug)]
+#[command(name = "vectorfusion", version, about, long_about = None)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// Turn a caption into an SVG.
+    Generate(NotYet),
+    /// Trace a raster image into an SVG of closed paths (LIVE).
+    Vectorize(NotYet),
+    /// Render an SVG through our rasteriser to PNG.
+    Render(NotYet),
+    /// Run the HTTP service.
+    Serve(NotYet),
+    /// Evaluate generated SVGs with CLIP scorers.
+    Eval(NotYet),
+    /// Benchmarks.
+    Bench(NotYet),
+}
+
+/// Placeholder arguments for commands that are not implemented yet.
+#[derive(clap::Args, Debug)]
+pub struct NotYet {
+    #[arg(trailing_var_arg = true, allow_hyphen_values = true, hide = true)]
+    rest: Vec<String>,
+}
+
+/// Error from a CLI command: a message for the user and an exit code.
+#[derive(Debug, thiserror::Error)]
+pub enum CliError {
+    #[error("{0}")]
+    Usage(String),
+    #[error("not implemented yet: {0}")]
+    NotImplemented(&'static str),
+    #[error(transparent)]
+    Other(#[from] anyhow::Error),
+}
+
+impl CliError {
+    fn exit_code(&self) -> u8 {
+        match self {
+            CliError::Usage(_) => 2,
+            CliError::NotImplemented(_) => 3,
+            CliError::Other(_) => 1,
+        }
+    }
+}
+
+pub fn run(cli: Cli) -> Result<(), CliError> {
+    match cli.command {
+        Command::Generate(_) => Err(CliError::NotImplemented("generate")),
+        Command::Vectorize(_) => Err(CliError::NotImplemented("vectorize")),
+        Command::Render(_) => Err(CliError::NotImplemented("render")),
+        Command::Serve(_) => Err(CliError::NotImplemented("serve")),
+        Command::Eval(_) => Err(CliError::NotImplemented("eval")),
+        Command::Bench(_) => Err(CliError::NotImplemented("bench")),
+    }
+}
+
+/// Parses arguments, runs the command, prints errors and maps them to an exit code.
+pub fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match run(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::from(e.exit_code())
+        }
+    }
+}

@@ -1,0 +1,21 @@
+//! vectorfusion: caption → clean, editable SVG (VectorFusion, CVPR 2023) as a library, a CLI and
+//! an HTTP service.
+//!
+//! Data flows one way: HTTP or CLI → store → worker → pipeline stages → events → SVG. Lower
+//! modules never import higher ones.
+//!
+//! | module | job |
+//! |---|---|
+//! | [`scene`] | geometry and parameters (validated invariants, flat parameter groups) |
+//! | [`svg`] | scene ⇄ SVG text |
+//! | [`raster`] | differentiable CPU rasteriser: forward and backward |
+//! | [`image`] | RGBA f32 buffers, PNG in/out, metrics |
+//! | [`optim`] | Adam with parameter groups, schedules, NaN guards |
+//! | [`progress`] | progress events and cancellation, the seam to CLI and service |
+//! | [`cli`] | command-line front end |
+
+pub mod cli;
+pub mod image;
+pub mod optim;
+pub mod progress;
+pub mod scene;
