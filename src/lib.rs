@@ -16,6 +16,7 @@
 
 pub mod cli;
 pub mod image;
+pub mod models;
 pub mod optim;
 pub mod progress;
 pub mod scene;
