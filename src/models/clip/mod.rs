@@ -3,10 +3,15 @@
 //! OpenCLIP layout.
 
 pub mod config;
+pub mod model;
+pub mod preprocess;
 pub mod text;
 pub mod tokenizer;
+pub mod vision;
 
 pub use config::{Activation, ClipConfig, ClipTextConfig, ClipVisionConfig};
+pub use model::ClipModel;
+pub use preprocess::PreprocessConfig;
 pub use text::{ClipTextModel, ClipTextModelWithProjection, ClipTextTransformer, TextOutput};
 pub use tokenizer::ClipTokenizer;
 
