@@ -213,8 +213,65 @@ def main():
               os.path.join(OUT, "reference", "outputs.safetensors"))
     with open(os.path.join(OUT, "reference", "images.json"), "w") as f:
         json.dump({"images": names}, f)
+    make_openclip(vocab, merges, texts, tok, names, pil_rgb)
     print("vocab", V, "merges", len(merges), "texts", len(texts), "images", names)
     print("max unpadded length", max(len(r) for r in unpadded))
+
+
+def make_openclip(vocab, merges, texts, tok, names, pil_rgb):
+    """tests/fixtures/openclip-tiny: the same tokenizer, a tiny open_clip CLIP (exact GELU)."""
+    import shutil
+    import open_clip
+    from open_clip.transform import image_transform
+    out = os.path.join(ROOT, "tests", "fixtures", "openclip-tiny")
+    os.makedirs(os.path.join(out, "reference"), exist_ok=True)
+    for f in ["vocab.json", "merges.txt"]:
+        shutil.copy(os.path.join(OUT, f), os.path.join(out, f))
+    model_cfg = dict(embed_dim=16,
+                     vision_cfg=dict(layers=2, width=32, head_width=16, patch_size=4, image_size=32),
+                     text_cfg=dict(context_length=77, vocab_size=len(vocab), width=32, heads=2,
+                                   layers=2),
+                     quick_gelu=False)
+    torch.manual_seed(99)
+    model = open_clip.model.CLIP(**model_cfg).eval()
+    with torch.no_grad():
+        for name, p in model.named_parameters():
+            if name != "logit_scale":
+                p.add_(torch.randn_like(p) * 0.1)
+    sd = {k: v.detach().clone().contiguous() for k, v in model.state_dict().items()}
+    save_file(sd, os.path.join(out, "open_clip_model.safetensors"))
+    with open(os.path.join(out, "open_clip_config.json"), "w") as f:
+        json.dump({"model_cfg": model_cfg,
+                   "preprocess_cfg": {"mean": list(open_clip.OPENAI_DATASET_MEAN),
+                                      "std": list(open_clip.OPENAI_DATASET_STD),
+                                      "interpolation": "bicubic", "resize_mode": "shortest"}},
+                  f, indent=1)
+    # open_clip.tokenize layout: sot, tokens, eot (truncated keeping eot), zero padding.
+    rows = []
+    for t in texts:
+        ids = tok(t)["input_ids"]
+        if len(ids) > 77:
+            ids = ids[:76] + [tok.eos_token_id]
+        rows.append(ids + [0] * (77 - len(ids)))
+    ids_t = torch.tensor(rows, dtype=torch.long)
+    tf = image_transform(32, is_train=False, mean=open_clip.OPENAI_DATASET_MEAN,
+                         std=open_clip.OPENAI_DATASET_STD)
+    px = torch.stack([tf(im) for im in pil_rgb]).float()
+    with torch.no_grad():
+        te = model.encode_text(ids_t)
+        ie = model.encode_image(px)
+        logits = model.logit_scale.exp() * F_normalize(ie) @ F_normalize(te[:8]).T
+    save_file({"input_ids": ids_t.contiguous(), "text_embeds": te.contiguous(),
+               "pixel_values": px.contiguous(), "image_embeds": ie.contiguous(),
+               "logits_per_image": logits.contiguous()},
+              os.path.join(out, "reference", "outputs.safetensors"))
+    shutil.copytree(os.path.join(OUT, "images"), os.path.join(out, "images"), dirs_exist_ok=True)
+    with open(os.path.join(out, "reference", "images.json"), "w") as f:
+        json.dump({"images": names}, f)
+
+
+def F_normalize(x):
+    return x / x.norm(dim=-1, keepdim=True)
 
 
 if __name__ == "__main__":
