@@ -209,9 +209,63 @@ fn eval_cli_errors_are_clear() {
 
     let o = bin()
         .args(["eval", "--prompts", s(&prompts), "--svgs", s(&svgs)])
-        .args(["--scorer", "no/such-model"])
+        .env("HF_HUB_OFFLINE", "1")
+        .args(["--scorer", "./no/such-model"])
         .output()
         .unwrap();
     assert_eq!(o.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&o.stderr).contains("does not exist"));
+}
+
+#[test]
+fn eval_cli_loads_scorer_from_hub_cache_offline() {
+    let (prompts, svgs) = setup("hub");
+    let home = prompts.with_file_name("hf_home");
+    let repo = home.join("hub/models--tiny--clip-tiny");
+    let snap = repo.join("snapshots/0123abcd");
+    std::fs::create_dir_all(&snap).unwrap();
+    std::fs::create_dir_all(repo.join("refs")).unwrap();
+    std::fs::write(repo.join("refs/main"), "0123abcd").unwrap();
+    for f in [
+        "config.json",
+        "model.safetensors",
+        "vocab.json",
+        "merges.txt",
+        "tokenizer_config.json",
+        "preprocessor_config.json",
+    ] {
+        std::fs::copy(fixture("clip-tiny").join(f), snap.join(f)).unwrap();
+    }
+    let o = bin()
+        .env("HF_HOME", &home)
+        .env("HF_HUB_OFFLINE", "1")
+        .args([
+            "eval",
+            "--prompts",
+            s(&prompts),
+            "--svgs",
+            s(&svgs),
+            "--json",
+        ])
+        .args(["--scorer", "tiny/clip-tiny"])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["scorers"][0]["scorer"], "tiny/clip-tiny");
+
+    // A repo that is not cached, with downloads off: the error lists what is missing.
+    let o = bin()
+        .env("HF_HOME", &home)
+        .env("HF_HUB_OFFLINE", "1")
+        .args(["eval", "--prompts", s(&prompts), "--svgs", s(&svgs)])
+        .args(["--scorer", "nobody/not-cached"])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("config.json") && err.contains("HF_HUB_OFFLINE"),
+        "{err}"
+    );
 }

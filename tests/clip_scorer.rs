@@ -136,6 +136,7 @@ fn openclip_layout_matches_open_clip() {
 #[test]
 fn missing_scorer_directories_are_clear_errors() {
     let e = ClipScorer::load(&PathBuf::from("openai/clip-vit-large-patch14")).unwrap_err();
+    // (load() never touches the hub; load_source() does.)
     assert!(e.to_string().contains("huggingface-cli download"), "{e}");
     let tmp = std::env::temp_dir().join(format!("vf-scorer-empty-{}", std::process::id()));
     std::fs::create_dir_all(&tmp).unwrap();

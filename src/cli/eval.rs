@@ -17,9 +17,10 @@ pub struct EvalArgs {
     /// Evaluate already generated SVGs `0001.svg`, `0002.svg`, ... in this directory.
     #[arg(long)]
     pub svgs: Option<PathBuf>,
-    /// CLIP model directory (transformers or OpenCLIP layout); repeat for several scorers.
+    /// CLIP model directory (transformers or OpenCLIP layout) or hub repo id (`org/name`,
+    /// from the HF cache, downloaded when online); repeat for several scorers.
     #[arg(long = "scorer", required = true)]
-    pub scorers: Vec<PathBuf>,
+    pub scorers: Vec<String>,
     /// Print JSON instead of the table.
     #[arg(long)]
     pub json: bool,
@@ -44,7 +45,8 @@ pub fn run(args: EvalArgs) -> Result<(), CliError> {
     };
     let mut scorers = Vec::with_capacity(args.scorers.len());
     for s in &args.scorers {
-        scorers.push(ClipScorer::load(s).map_err(|e| CliError::Other(anyhow::Error::new(e)))?);
+        let sc = ClipScorer::load_source(s, true).map_err(|e| CliError::Other(e.into()))?;
+        scorers.push(sc);
     }
     let report = evaluate_svg_dir(&captions, &dir, &scorers).map_err(map_err)?;
     let json = serde_json::to_string_pretty(&report).map_err(|e| CliError::Other(e.into()))?;

@@ -32,15 +32,21 @@ pub enum ClipError {
     Config(String),
     #[error("tokenizer: {0}")]
     Tokenizer(String),
-    #[error(
-        "{dir}: missing {files:?} (download the model into this directory, e.g. with `huggingface-cli download <repo> --local-dir <dir>`)"
-    )]
-    MissingFiles { dir: PathBuf, files: Vec<String> },
+    #[error("{}: missing {}{hint}", dir.display(), files.join(", "))]
+    MissingFiles {
+        dir: PathBuf,
+        files: Vec<String>,
+        hint: String,
+    },
     #[error("bad input: {0}")]
     Input(String),
     #[error(transparent)]
     Candle(#[from] candle_core::Error),
 }
+
+/// Appended to missing-file errors of local directories.
+pub(crate) const DOWNLOAD_HINT: &str = " (download the model into this directory, e.g. with \
+    `huggingface-cli download <repo> --local-dir <dir>`)";
 
 impl ClipError {
     pub(crate) fn io(path: &Path, source: std::io::Error) -> Self {
@@ -75,6 +81,7 @@ pub fn weight_files(dir: &Path) -> Result<Vec<PathBuf>, ClipError> {
         return Err(ClipError::MissingFiles {
             dir: dir.to_path_buf(),
             files: vec!["model.safetensors".into()],
+            hint: DOWNLOAD_HINT.into(),
         });
     }
     Ok(all)

@@ -36,7 +36,7 @@ impl ClipScorer {
     pub fn load_on(dir: &Path, device: &Device) -> Result<Self, ClipError> {
         if !dir.is_dir() {
             let s = dir.display().to_string();
-            let hint = if s.matches('/').count() == 1 && !s.starts_with('.') {
+            let hint = if looks_like_repo_id(&s) {
                 format!(
                     " (it looks like a Hugging Face repo id: download it first, e.g. \
                      `huggingface-cli download {s} --local-dir models/{}`, and pass that directory)",
@@ -87,7 +87,22 @@ impl ClipScorer {
         })
     }
 
-    /// Short name (the directory name), used in evaluation tables.
+    /// Loads from a local directory or, for a Hugging Face repo id `org/name` that is not a
+    /// local path, from the hub cache (`HF_HOME`), downloading missing files when
+    /// `allow_download` and `HF_HUB_OFFLINE` is not set. The scorer is named after the repo id.
+    pub fn load_source(source: &str, allow_download: bool) -> Result<Self, ClipError> {
+        let path = Path::new(source);
+        if path.is_dir() || !looks_like_repo_id(source) {
+            return Self::load(path);
+        }
+        let offline = std::env::var("HF_HUB_OFFLINE").is_ok_and(|v| v != "0" && !v.is_empty());
+        let dir = resolve_hub(source, allow_download && !offline)?;
+        let mut s = Self::load(&dir)?;
+        s.name = source.to_string();
+        Ok(s)
+    }
+
+    /// Short name (the directory name, or the repo id), used in evaluation tables.
     pub fn name(&self) -> &str {
         &self.name
     }
@@ -168,6 +183,104 @@ impl ClipScorer {
     }
 }
 
+/// `org/name` with the characters the hub allows, and not an existing path.
+pub fn looks_like_repo_id(s: &str) -> bool {
+    let mut parts = s.split('/');
+    let ok = |p: &str| {
+        !p.is_empty()
+            && !p.starts_with('.')
+            && p.chars()
+                .all(|c| c.is_ascii_alphanumeric() || "-_.".contains(c))
+    };
+    matches!((parts.next(), parts.next(), parts.next()), (Some(a), Some(b), None) if ok(a) && ok(b))
+        && !Path::new(s).exists()
+}
+
+/// Files of a transformers-layout CLIP repo: (name, required).
+const HUB_FILES: &[(&str, bool)] = &[
+    ("config.json", true),
+    ("model.safetensors", true),
+    ("vocab.json", false),
+    ("merges.txt", false),
+    ("tokenizer.json", false),
+    ("tokenizer_config.json", false),
+    ("special_tokens_map.json", false),
+    ("preprocessor_config.json", false),
+];
+
+/// Files of an OpenCLIP-only repo.
+const HUB_FILES_OPENCLIP: &[(&str, bool)] = &[
+    ("open_clip_config.json", true),
+    ("open_clip_model.safetensors", true),
+    ("vocab.json", false),
+    ("merges.txt", false),
+    ("tokenizer.json", false),
+    ("tokenizer_config.json", false),
+    ("special_tokens_map.json", false),
+];
+
+fn resolve_hub(repo: &str, allow_download: bool) -> Result<PathBuf, ClipError> {
+    use hf_hub::Cache;
+    let cache = Cache::from_env();
+    let cached = cache.model(repo.to_string());
+    let api = if allow_download {
+        hf_hub::api::sync::ApiBuilder::from_env()
+            .build()
+            .ok()
+            .map(|a| a.model(repo.to_string()))
+    } else {
+        None
+    };
+    let fetch = |name: &str| -> Option<PathBuf> {
+        cached
+            .get(name)
+            .or_else(|| api.as_ref().and_then(|a| a.get(name).ok()))
+    };
+    let mut missing_all = Vec::new();
+    for files in [HUB_FILES, HUB_FILES_OPENCLIP] {
+        let mut dir = None;
+        let mut missing = Vec::new();
+        for (name, required) in files {
+            match fetch(name) {
+                Some(p) if dir.is_none() => dir = p.parent().map(Path::to_path_buf),
+                Some(_) => {}
+                None if *required => missing.push(name.to_string()),
+                None => {}
+            }
+            if !missing.is_empty() {
+                break;
+            }
+        }
+        match dir {
+            Some(d) if missing.is_empty() => {
+                let has_tok = d.join("tokenizer.json").is_file()
+                    || (d.join("vocab.json").is_file() && d.join("merges.txt").is_file());
+                if has_tok {
+                    return Ok(d);
+                }
+                missing_all.push("vocab.json + merges.txt (or tokenizer.json)".to_string());
+            }
+            _ => missing_all.extend(missing),
+        }
+    }
+    let how = if allow_download {
+        "the download failed or the repo has no such files"
+    } else {
+        "not in the local Hugging Face cache and downloads are off (HF_HUB_OFFLINE)"
+    };
+    Err(ClipError::MissingFiles {
+        dir: cache
+            .path()
+            .join(format!("models--{}", repo.replace('/', "--"))),
+        files: missing_all,
+        hint: format!(
+            " for hub repo {repo}: {how}; fetch it with `huggingface-cli download {repo}` \
+             (the transformers files, or open_clip_config.json + open_clip_model.safetensors) \
+             or pass a local directory"
+        ),
+    })
+}
+
 /// Dot product (cosine similarity of unit vectors).
 pub fn dot(a: &[f32], b: &[f32]) -> f32 {
     a.iter().zip(b).map(|(x, y)| x * y).sum()
@@ -178,7 +291,6 @@ fn missing(dir: &Path) -> ClipError {
         "config.json",
         "model.safetensors",
         "vocab.json + merges.txt (or tokenizer.json)",
-        "preprocessor_config.json (optional)",
     ];
     let files = want
         .iter()
@@ -188,5 +300,10 @@ fn missing(dir: &Path) -> ClipError {
     ClipError::MissingFiles {
         dir: PathBuf::from(dir),
         files,
+        hint: format!(
+            " (a transformers CLIP directory, or an OpenCLIP one with {}; {}",
+            openclip::CONFIG_FILE,
+            super::DOWNLOAD_HINT.trim_start().trim_start_matches('(')
+        ),
     }
 }

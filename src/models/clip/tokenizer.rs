@@ -222,6 +222,7 @@ impl ClipTokenizer {
         Err(ClipError::MissingFiles {
             dir: dir.to_path_buf(),
             files: vec!["vocab.json + merges.txt, or tokenizer.json".into()],
+            hint: super::DOWNLOAD_HINT.into(),
         })
     }
 
