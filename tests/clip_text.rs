@@ -137,3 +137,33 @@ fn missing_files_give_clear_errors() {
     assert!(e.contains("config.json"), "{e}");
     std::fs::remove_dir_all(&tmp).unwrap();
 }
+
+#[test]
+fn pad_token_and_context_come_from_tokenizer_config() {
+    // SD 2.x tokenizers pad with "!" (id 0); the config's model_max_length is honoured.
+    let tmp = std::env::temp_dir().join(format!("vf-clip-pad-{}", std::process::id()));
+    std::fs::create_dir_all(tmp.join("tokenizer")).unwrap();
+    for f in ["vocab.json", "merges.txt"] {
+        std::fs::copy(dir().join(f), tmp.join("tokenizer").join(f)).unwrap();
+    }
+    std::fs::write(
+        tmp.join("tokenizer/tokenizer_config.json"),
+        r#"{"pad_token": {"content": "!", "lstrip": false}, "model_max_length": 16}"#,
+    )
+    .unwrap();
+    let tok = ClipTokenizer::from_dir(&tmp).unwrap();
+    assert_eq!(tok.pad_id, tok.token_to_id("!").unwrap());
+    assert_eq!(tok.max_length, 16);
+    let ids = tok.encode_padded("a cat");
+    assert_eq!(ids.len(), 16);
+    assert_eq!(ids[0], tok.bos_id);
+    let eos_at = ids.iter().position(|&i| i == tok.eos_id).unwrap();
+    assert!(ids[eos_at + 1..].iter().all(|&i| i == tok.pad_id));
+    std::fs::write(
+        tmp.join("tokenizer/tokenizer_config.json"),
+        r#"{"pad_token": "<nope>"}"#,
+    )
+    .unwrap();
+    assert!(ClipTokenizer::from_dir(&tmp).is_err());
+    std::fs::remove_dir_all(&tmp).unwrap();
+}
