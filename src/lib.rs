@@ -18,4 +18,6 @@ pub mod cli;
 pub mod image;
 pub mod optim;
 pub mod progress;
+pub mod raster;
 pub mod scene;
+pub mod svg;
