@@ -25,7 +25,9 @@ fn closest<T: Real>(p: [T; 2], a: [T; 2], b: [T; 2]) -> (T, T) {
             .max(T::zero())
             .min(T::one())
     } else {
-        T::zero()
+        // Zero-length segment: the distance does not depend on s; splitting the gradient
+        // evenly between both ends is the symmetric subgradient.
+        T::c(0.5)
     };
     let q = [ap[0] - s * d[0], ap[1] - s * d[1]];
     (s, q[0] * q[0] + q[1] * q[1])
