@@ -72,7 +72,7 @@ fn param(sc: &mut SceneT<f64>, g: ParamGroup, k: usize) -> &mut f64 {
     }
 }
 
-fn group<'a>(g: &'a GradT<f64>, grp: ParamGroup) -> &'a [f64] {
+fn group(g: &GradT<f64>, grp: ParamGroup) -> &[f64] {
     match grp {
         ParamGroup::Points => &g.points,
         ParamGroup::Fill => &g.fill,
