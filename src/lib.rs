@@ -15,7 +15,9 @@
 //! | [`cli`] | command-line front end |
 
 pub mod cli;
+pub mod eval;
 pub mod image;
+pub mod models;
 pub mod optim;
 pub mod progress;
 pub mod raster;
