@@ -20,4 +20,6 @@ pub mod image;
 pub mod models;
 pub mod optim;
 pub mod progress;
+pub mod raster;
 pub mod scene;
+pub mod svg;
