@@ -12,10 +12,16 @@
 //! | [`image`] | RGBA f32 buffers, PNG in/out, metrics |
 //! | [`optim`] | Adam with parameter groups, schedules, NaN guards |
 //! | [`progress`] | progress events and cancellation, the seam to CLI and service |
+//! | [`teacher`] | SDS teacher interface; exact analytic test teacher |
+//! | [`augment`] | differentiable random perspective + crop |
+//! | [`stages`] | pipeline stages (SDS) |
 //! | [`cli`] | command-line front end |
 
+pub mod augment;
 pub mod cli;
 pub mod image;
 pub mod optim;
 pub mod progress;
 pub mod scene;
+pub mod stages;
+pub mod teacher;

@@ -1,0 +1,2 @@
+pub mod sds;
+pub mod styles;
