@@ -7,6 +7,8 @@
 //! exactly. Pixels sampled outside the source take the `fill` colour (white by default, like
 //! VectorFusion's `fill=1`).
 
+#![allow(clippy::needless_range_loop)] // index loops read clearest in pixel code
+
 use crate::image::Image;
 use rand::{Rng, RngExt};
 
@@ -88,7 +90,10 @@ pub type Homography = [f64; 9];
 /// Maps a point through a homography.
 pub fn apply_homography(h: &Homography, x: f64, y: f64) -> (f64, f64) {
     let w = h[6] * x + h[7] * y + h[8];
-    ((h[0] * x + h[1] * y + h[2]) / w, (h[3] * x + h[4] * y + h[5]) / w)
+    (
+        (h[0] * x + h[1] * y + h[2]) / w,
+        (h[3] * x + h[4] * y + h[5]) / w,
+    )
 }
 
 /// The homography that maps each `from[i]` onto `to[i]` (4 point pairs), or `None` when the
@@ -147,7 +152,10 @@ impl Warp {
         let apply_persp = cfg.perspective_p > 0.0 && rng.random::<f32>() < cfg.perspective_p;
         // `inv` maps a point of the warped image back to the source image.
         let inv = if apply_persp {
-            let (dx, dy) = (cfg.distortion as f64 * w / 2.0, cfg.distortion as f64 * h / 2.0);
+            let (dx, dy) = (
+                cfg.distortion as f64 * w / 2.0,
+                cfg.distortion as f64 * h / 2.0,
+            );
             let mut r = || rng.random::<f64>();
             let start = [(0.0, 0.0), (w, 0.0), (w, h), (0.0, h)];
             let end = [
@@ -189,7 +197,17 @@ impl Warp {
             (x0, y0)
         };
         Ok(Self::build(
-            in_w, in_h, out, out, &inv, x0, y0, cw, ch, cfg.fill, apply_persp,
+            in_w,
+            in_h,
+            out,
+            out,
+            &inv,
+            x0,
+            y0,
+            cw,
+            ch,
+            cfg.fill,
+            apply_persp,
         ))
     }
 
@@ -388,10 +406,17 @@ mod tests {
                 p.data[i] += h;
                 m.data[i] -= h;
                 let fd = (loss(&p) - loss(&m)) / (2.0 * h as f64);
-                assert!((fd - d_in[i] as f64).abs() < 2e-3, "i={i} fd={fd} {}", d_in[i]);
+                assert!(
+                    (fd - d_in[i] as f64).abs() < 2e-3,
+                    "i={i} fd={fd} {}",
+                    d_in[i]
+                );
             }
             // Adjoint identity on the linear part (fill = 0).
-            let w0 = Warp { fill: [0.0; 4], ..w };
+            let w0 = Warp {
+                fill: [0.0; 4],
+                ..w
+            };
             let x = random_image(&mut rng, 13, 11);
             let lhs: f64 = w0
                 .apply(&x)

@@ -19,6 +19,8 @@
 //! mixture; the unconditional mixture is all targets. With no name in the caption both coincide
 //! and guidance has no effect.
 
+#![allow(clippy::needless_range_loop)] // index loops read clearest in pixel code
+
 use super::{Conditioning, Latent, Teacher, TeacherError, sd_alphas_cumprod};
 use crate::image::Image;
 use std::path::Path;
@@ -183,10 +185,7 @@ impl AnalyticTeacher {
     fn check_latent(&self, z: &Latent) -> Result<(), TeacherError> {
         let want = self.latent_shape();
         if z.shape != want || z.data.len() != want.iter().product::<usize>() {
-            return Err(TeacherError::LatentShape {
-                got: z.shape,
-                want,
-            });
+            return Err(TeacherError::LatentShape { got: z.shape, want });
         }
         Ok(())
     }
@@ -488,7 +487,10 @@ mod tests {
             })
             .collect();
         let z: f64 = lik.iter().sum();
-        assert!(lik.iter().filter(|l| **l / z > 1e-3).count() >= 2, "{lik:?}");
+        assert!(
+            lik.iter().filter(|l| **l / z > 1e-3).count() >= 2,
+            "{lik:?}"
+        );
         for i in 0..n {
             let x0: f64 = (0..3).map(|k| lik[k] / z * te.latents[k][i]).sum();
             let e = (zt.data[i] as f64 - ab.sqrt() * x0) / var.sqrt();
