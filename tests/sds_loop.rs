@@ -298,3 +298,76 @@ fn bad_settings_are_errors() {
         .is_err()
     );
 }
+
+/// Records the timesteps the loop asks for.
+struct RecordingTeacher {
+    inner: AnalyticTeacher,
+    ts: Mutex<Vec<usize>>,
+}
+
+impl Teacher for RecordingTeacher {
+    fn name(&self) -> String {
+        "recording test teacher".into()
+    }
+    fn image_size(&self) -> u32 {
+        self.inner.image_size()
+    }
+    fn latent_shape(&self) -> [usize; 3] {
+        self.inner.latent_shape()
+    }
+    fn alphas_cumprod(&self) -> &[f32] {
+        self.inner.alphas_cumprod()
+    }
+    fn condition(&self, p: &str, n: &str) -> Result<Conditioning, TeacherError> {
+        self.inner.condition(p, n)
+    }
+    fn encode(&self, im: &Image) -> Result<Latent, TeacherError> {
+        self.inner.encode(im)
+    }
+    fn encode_vjp(&self, im: &Image, d: &Latent) -> Result<Vec<f32>, TeacherError> {
+        self.inner.encode_vjp(im, d)
+    }
+    fn predict_noise(
+        &self,
+        z: &Latent,
+        t: usize,
+        c: &Conditioning,
+        g: f32,
+    ) -> Result<Latent, TeacherError> {
+        self.ts.lock().unwrap().push(t);
+        self.inner.predict_noise(z, t, c, g)
+    }
+}
+
+#[test]
+fn timesteps_stay_in_the_annealed_range() {
+    let te = RecordingTeacher {
+        inner: teacher(),
+        ts: Mutex::new(Vec::new()),
+    };
+    let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(6);
+    let scene = Style::PixelArt.init_scene(64, 0, &mut rng).unwrap();
+    let mut cfg = config(101, 2);
+    cfg.t_min = 100;
+    cfg.t_max = 900;
+    cfg.t_max_end = Some(200);
+    run_sds(
+        &GridBackend,
+        &te,
+        scene,
+        &cfg,
+        &NullSink,
+        &CancelToken::new(),
+    )
+    .unwrap();
+    let ts = te.ts.into_inner().unwrap();
+    assert_eq!(ts.len(), 101);
+    for (i, &t) in ts.iter().enumerate() {
+        let hi = 900.0 - 700.0 * i as f32 / 100.0;
+        assert!(t >= 100 && t as f32 <= hi + 0.5, "step {i}: t={t} > {hi}");
+    }
+    assert!(
+        ts[..20].iter().any(|&t| t > 600),
+        "early steps reach high t"
+    );
+}
