@@ -22,6 +22,8 @@ pub mod cli;
 pub mod image;
 pub mod optim;
 pub mod progress;
+pub mod raster;
 pub mod scene;
 pub mod stages;
+pub mod svg;
 pub mod teacher;
