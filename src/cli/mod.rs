@@ -1,6 +1,8 @@
 //! The `vectorfusion` command line. Each subcommand lives in its own file; errors are turned
 //! into a message and an exit code in one place ([`main`]).
 
+pub mod generate;
+
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
@@ -15,7 +17,7 @@ pub struct Cli {
 #[derive(Subcommand, Debug)]
 pub enum Command {
     /// Turn a caption into an SVG.
-    Generate(NotYet),
+    Generate(generate::GenerateArgs),
     /// Trace a raster image into an SVG of closed paths (LIVE).
     Vectorize(NotYet),
     /// Render an SVG through our rasteriser to PNG.
@@ -58,7 +60,7 @@ impl CliError {
 
 pub fn run(cli: Cli) -> Result<(), CliError> {
     match cli.command {
-        Command::Generate(_) => Err(CliError::NotImplemented("generate")),
+        Command::Generate(a) => generate::run(a),
         Command::Vectorize(_) => Err(CliError::NotImplemented("vectorize")),
         Command::Render(_) => Err(CliError::NotImplemented("render")),
         Command::Serve(_) => Err(CliError::NotImplemented("serve")),

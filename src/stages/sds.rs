@@ -40,6 +40,31 @@ pub trait Backend {
     fn svg(&self, scene: &Scene) -> String;
 }
 
+/// The production backend: the CPU rasteriser ([`crate::raster`]) and SVG export
+/// ([`crate::svg`]).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct RasterBackend;
+
+impl RasterBackend {
+    /// SVG text of a scene with the default export options.
+    pub fn svg_text(scene: &Scene) -> String {
+        crate::svg::to_svg(scene, &crate::svg::SvgOptions::default())
+    }
+}
+
+impl Backend for RasterBackend {
+    type Tape = crate::raster::Tape;
+    fn render_tape(&self, scene: &Scene) -> (Image, Self::Tape) {
+        crate::raster::render_tape(scene)
+    }
+    fn backward(&self, scene: &Scene, tape: &Self::Tape, d_image: &[f32]) -> Params {
+        crate::raster::backward(scene, tape, d_image)
+    }
+    fn svg(&self, scene: &Scene) -> String {
+        Self::svg_text(scene)
+    }
+}
+
 /// Why SDS could not run.
 #[derive(Debug, thiserror::Error)]
 pub enum SdsError {
