@@ -16,6 +16,8 @@
 
 pub mod cli;
 pub mod image;
+pub mod losses;
 pub mod optim;
 pub mod progress;
 pub mod scene;
+pub mod stages;
