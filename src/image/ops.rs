@@ -209,7 +209,11 @@ pub fn distance_to_polylines(
         if m == 0 {
             continue;
         }
-        let segs = if closed { m } else { m.saturating_sub(1).max(1) };
+        let segs = if closed {
+            m
+        } else {
+            m.saturating_sub(1).max(1)
+        };
         for k in 0..segs {
             let a = line[k];
             let b = line[(k + 1) % m];
@@ -332,7 +336,11 @@ mod tests {
         let main = comps.iter().max_by_key(|c| c.area).unwrap();
         let (x, y) = main.interior;
         assert!((x as i32 - 20).abs() <= 1 && (y as i32 - 20).abs() <= 1);
-        assert!(main.inradius > 8.0 && main.inradius < 12.0, "{}", main.inradius);
+        assert!(
+            main.inradius > 8.0 && main.inradius < 12.0,
+            "{}",
+            main.inradius
+        );
     }
 
     #[test]

@@ -401,7 +401,11 @@ mod tests {
                 xing_loss(&s, 0..2, 0.5, &mut Params::zeros_like(&s))
             };
             let fd = (eval(h) - eval(-h)) / (2.0 * h as f64);
-            assert!((fd - pts[k] as f64).abs() < 2e-3, "k={k} fd={fd} an={}", pts[k]);
+            assert!(
+                (fd - pts[k] as f64).abs() < 2e-3,
+                "k={k} fd={fd} an={}",
+                pts[k]
+            );
         }
         // Only the requested range contributes.
         let mut g2 = Params::zeros_like(&scene);
