@@ -30,8 +30,8 @@ pub fn resize(src: &Image, width: u32, height: u32) -> Image {
                         let wx = ((xx + 1) as f32).min(x1) - (xx as f32).max(x0);
                         let w = wx * wy;
                         let i = 4 * (yy * sw + xx);
-                        for c in 0..4 {
-                            acc[c] += w * src.data[i + c];
+                        for (a, v) in acc.iter_mut().zip(&src.data[i..i + 4]) {
+                            *a += w * v;
                         }
                         wsum += w;
                         xx += 1;
@@ -49,11 +49,11 @@ pub fn resize(src: &Image, width: u32, height: u32) -> Image {
                 let (x0, y0) = (fx.floor() as usize, fy.floor() as usize);
                 let (x1, y1) = ((x0 + 1).min(sw - 1), (y0 + 1).min(sh - 1));
                 let (tx, ty) = (fx - x0 as f32, fy - y0 as f32);
-                for c in 0..4 {
+                for (c, a) in acc.iter_mut().enumerate() {
                     let g = |xx: usize, yy: usize| src.data[4 * (yy * sw + xx) + c];
                     let top = g(x0, y0) * (1.0 - tx) + g(x1, y0) * tx;
                     let bot = g(x0, y1) * (1.0 - tx) + g(x1, y1) * tx;
-                    acc[c] = top * (1.0 - ty) + bot * ty;
+                    *a = top * (1.0 - ty) + bot * ty;
                 }
             }
             out.data[4 * (y * dw + x)..4 * (y * dw + x) + 4].copy_from_slice(&acc);

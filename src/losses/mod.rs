@@ -244,8 +244,8 @@ mod tests {
             };
             let a = next();
             px[3] = a;
-            for c in 0..3 {
-                px[c] = next() * a;
+            for v in px.iter_mut().take(3) {
+                *v = next() * a;
             }
         }
         im
@@ -368,6 +368,7 @@ mod tests {
     }
 
     #[test]
+    #[allow(clippy::needless_range_loop)]
     fn xing_loss_scatters_into_scene_layout() {
         let mut scene = Scene::new(32, 32, Rgba::WHITE).unwrap();
         scene
