@@ -20,6 +20,7 @@
 pub mod augment;
 pub mod cli;
 pub mod image;
+pub mod losses;
 pub mod optim;
 pub mod progress;
 pub mod raster;
