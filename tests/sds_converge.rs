@@ -270,3 +270,64 @@ fn seeded_runs_are_deterministic() {
     let c = run(&te, Style::Iconography, 8, &cfg).1.scene;
     assert_ne!(a, c);
 }
+
+/// A backend that renders but returns no image gradient, so only the Xing term moves points.
+struct NoImageGrad;
+
+impl Backend for NoImageGrad {
+    type Tape = ();
+    fn render_tape(&self, s: &Scene) -> (Image, ()) {
+        (vectorfusion::raster::render(s), ())
+    }
+    fn backward(&self, s: &Scene, _: &(), _: &[f32]) -> Params {
+        Params::zeros_like(s)
+    }
+    fn svg(&self, s: &Scene) -> String {
+        RasterBackend.svg(s)
+    }
+}
+
+#[test]
+fn xing_loss_untangles_a_self_intersecting_path_in_the_loop() {
+    use vectorfusion::scene::{Point, Rgba, Shape};
+    let te = teacher(icon_targets());
+    let mut scene = Scene::new(SIZE, SIZE, Rgba::WHITE).unwrap();
+    let p = |x: f32, y: f32| Point::new(x, y);
+    let tangled = vec![
+        p(10.0, 10.0),
+        p(30.0, 20.0),
+        p(40.0, 40.0),
+        p(50.0, 50.0),
+        p(40.0, 20.0),
+        p(20.0, 40.0),
+        p(50.0, 10.0),
+        p(30.0, 30.0),
+        p(20.0, 20.0),
+        p(10.0, 50.0),
+        p(15.0, 30.0),
+        p(12.0, 20.0),
+    ];
+    scene
+        .shapes
+        .push(Shape::closed_cubic(tangled, Rgba::new(0.9, 0.5, 0.1, 1.0)).unwrap());
+    let xing = |s: &Scene| {
+        let mut g = Params::zeros_like(s);
+        vectorfusion::losses::xing_loss(s, 0..1, 1.0, &mut g)
+    };
+    let before = xing(&scene);
+    assert!(before > 0.1, "test path should self-intersect: {before}");
+    let mut cfg = fast_config(Style::Iconography, 60, 8);
+    cfg.xing_weight = 1.0;
+    let out = run_sds(
+        &NoImageGrad,
+        &te,
+        scene,
+        &cfg,
+        &NullSink,
+        &CancelToken::new(),
+    )
+    .unwrap();
+    let after = xing(&out.scene);
+    eprintln!("Xing {before} -> {after}");
+    assert!(after < 0.5 * before, "Xing loss {before} -> {after}");
+}

@@ -150,7 +150,7 @@ pub struct SdsConfig {
     /// Weight of the pixel-art saturation penalty `mean(R²+G²+B²)/3` on the render scaled to
     /// `[-1, 1]` (paper: 0.05 for pixel art, 0 otherwise).
     pub saturation_penalty: f32,
-    /// Weight of the Xing (self-intersection) loss on closed paths.
+    /// Weight of LIVE's Xing (self-intersection) loss on closed cubic paths (0 = off).
     pub xing_weight: f32,
     /// Send an SVG snapshot every this many steps (0 = only at the end).
     pub snapshot_every: u32,
@@ -504,8 +504,14 @@ pub fn run_sds<B: Backend>(
             saturation_penalty(&render, cfg.saturation_penalty, &mut d_render);
         }
         let mut grad = backend.backward(&scene, &tape, &d_render);
-        // TODO(live): add the Xing self-intersection loss (`crate::losses::xing_loss`) with
-        // `cfg.xing_weight` once branch `live` lands; until then `xing_weight` is ignored.
+        if cfg.xing_weight > 0.0 {
+            // LIVE's Xing loss on closed cubic paths keeps them free of self-intersections.
+            for (i, sh) in scene.shapes.iter().enumerate() {
+                if sh.kind == crate::scene::ShapeKind::ClosedCubic {
+                    crate::losses::xing_loss(&scene, i..i + 1, cfg.xing_weight, &mut grad);
+                }
+            }
+        }
         grad.mask(&cfg.trainable);
         if let Some(c) = cfg.grad_clip
             && grad.all_finite()
