@@ -64,6 +64,24 @@ fn generate_with_analytic_teacher_writes_svg_and_snapshots() {
         assert!(snaps.join("step_00010.svg").exists());
         assert!(snaps.join("step_00020.svg").exists());
     }
+    let st = bin()
+        .args([
+            "generate", "x", "--t-min", "900", "--t-max", "100", "--size", "32",
+        ])
+        .arg("--teacher")
+        .arg(format!("analytic:{}", targets.display()))
+        .arg("-o")
+        .arg(dir.join("never.svg"))
+        .output()
+        .unwrap();
+    assert_eq!(
+        st.status.code(),
+        Some(2),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    assert!(String::from_utf8_lossy(&st.stderr).contains("timestep range"));
+    assert!(!dir.join("never.svg").exists());
 }
 
 #[test]
@@ -105,5 +123,25 @@ fn generate_model_is_not_implemented_and_bad_input_is_usage() {
         .output()
         .unwrap();
     assert_eq!(st.status.code(), Some(2));
+    let st = bin()
+        .args([
+            "generate",
+            "a cat",
+            "--t-min",
+            "900",
+            "--t-max",
+            "100",
+            "--teacher",
+        ])
+        .arg(format!("analytic:{}", dir.display()))
+        .arg("-o")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert_eq!(
+        st.status.code(),
+        Some(2),
+        "no targets in dir is a usage error"
+    );
     assert!(!out.exists());
 }

@@ -43,6 +43,21 @@ pub struct GenerateArgs {
     /// Classifier-free guidance scale.
     #[arg(long, default_value_t = 100.0)]
     pub guidance: f32,
+    /// Smallest timestep drawn.
+    #[arg(long, default_value_t = 50)]
+    pub t_min: usize,
+    /// Largest timestep drawn (at the start, see `--t-max-end`).
+    #[arg(long, default_value_t = 950)]
+    pub t_max: usize,
+    /// Anneal the largest timestep linearly to this value by the last step.
+    #[arg(long)]
+    pub t_max_end: Option<usize>,
+    /// Clip each parameter group's gradient to this L2 norm.
+    #[arg(long)]
+    pub grad_clip: Option<f32>,
+    /// Also re-initialise closed paths whose area is below this many px² (iconography).
+    #[arg(long)]
+    pub reinit_min_area: Option<f32>,
     /// Turn off the random perspective + crop augmentation.
     #[arg(long)]
     pub no_augment: bool,
@@ -109,6 +124,13 @@ pub fn run(args: GenerateArgs) -> Result<(), CliError> {
     } else {
         0
     };
+    cfg.t_min = args.t_min;
+    cfg.t_max = args.t_max;
+    cfg.t_max_end = args.t_max_end;
+    cfg.grad_clip = args.grad_clip;
+    if let Some(r) = cfg.reinit.as_mut() {
+        r.min_area = args.reinit_min_area;
+    }
     if args.no_augment {
         cfg.augment = None;
     }
@@ -156,7 +178,10 @@ pub fn run(args: GenerateArgs) -> Result<(), CliError> {
         &sink,
         &CancelToken::new(),
     )
-    .context("score distillation")?;
+    .map_err(|e| match e {
+        crate::stages::sds::SdsError::Config(m) => CliError::Usage(m),
+        other => CliError::Other(anyhow::Error::new(other).context("score distillation")),
+    })?;
     bar.finish();
     if let Ok(Some(e)) = snap_err.into_inner() {
         eprintln!("warning: could not write a snapshot: {e}");
