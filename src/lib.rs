@@ -19,8 +19,10 @@
 
 pub mod augment;
 pub mod cli;
+pub mod eval;
 pub mod image;
 pub mod losses;
+pub mod models;
 pub mod optim;
 pub mod progress;
 pub mod raster;
