@@ -10,12 +10,14 @@
 //! | [`svg`] | scene ⇄ SVG text |
 //! | [`raster`] | differentiable CPU rasteriser: forward and backward |
 //! | [`image`] | RGBA f32 buffers, PNG in/out, metrics |
+//! | [`models`] | Stable Diffusion on candle: diffusers loading, UNet, VAE (+VJP), TAESD, samplers |
 //! | [`optim`] | Adam with parameter groups, schedules, NaN guards |
 //! | [`progress`] | progress events and cancellation, the seam to CLI and service |
 //! | [`cli`] | command-line front end |
 
 pub mod cli;
 pub mod image;
+pub mod models;
 pub mod optim;
 pub mod progress;
 pub mod scene;
