@@ -16,6 +16,7 @@
 //! | [`cli`] | command-line front end |
 
 pub mod cli;
+pub mod eval;
 pub mod image;
 pub mod models;
 pub mod optim;

@@ -345,3 +345,27 @@ fn unet_matches_diffusers_up_to_the_gelu_approximation() {
         );
     }
 }
+
+#[test]
+fn text_embeddings_from_prompt_match_transformers_and_drive_the_unet() {
+    let sd = sd();
+    let r = refs("sd-tiny");
+    let text = sd.text.as_ref().unwrap();
+    let ids: Vec<u32> = text
+        .ids("a red cat", &Device::Cpu)
+        .unwrap()
+        .flatten_all()
+        .unwrap()
+        .to_vec1()
+        .unwrap();
+    let want: Vec<i64> = r["text.ids_cond"].flatten_all().unwrap().to_vec1().unwrap();
+    assert_eq!(ids.iter().map(|&x| x as i64).collect::<Vec<_>>(), want);
+    let (cond, uncond) = sd.text_embeddings("a red cat").unwrap();
+    assert_close("cond emb", &cond, &r["text.cond"], 1e-4);
+    assert_close("uncond emb", &uncond, &r["text.uncond"], 1e-4);
+    // full path: prompt -> embeddings -> guided noise prediction
+    let g = sd
+        .predict_noise(&r["unet.z"], 500, &cond, &uncond, 7.5)
+        .unwrap();
+    assert_close("prompt-guided t=500", &g, &r["unet_tanh.guided.t500"], 1e-4);
+}

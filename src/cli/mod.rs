@@ -1,6 +1,8 @@
 //! The `vectorfusion` command line. Each subcommand lives in its own file; errors are turned
 //! into a message and an exit code in one place ([`main`]).
 
+pub mod eval;
+
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
@@ -23,7 +25,7 @@ pub enum Command {
     /// Run the HTTP service.
     Serve(NotYet),
     /// Evaluate generated SVGs with CLIP scorers.
-    Eval(NotYet),
+    Eval(eval::EvalArgs),
     /// Benchmarks.
     Bench(NotYet),
 }
@@ -62,7 +64,7 @@ pub fn run(cli: Cli) -> Result<(), CliError> {
         Command::Vectorize(_) => Err(CliError::NotImplemented("vectorize")),
         Command::Render(_) => Err(CliError::NotImplemented("render")),
         Command::Serve(_) => Err(CliError::NotImplemented("serve")),
-        Command::Eval(_) => Err(CliError::NotImplemented("eval")),
+        Command::Eval(a) => eval::run(a),
         Command::Bench(_) => Err(CliError::NotImplemented("bench")),
     }
 }

@@ -10,10 +10,12 @@
 //! | [`vae`] | `AutoencoderKL`: encode, decode and the encoder VJP without weight gradients |
 //! | [`taesd`] | `AutoencoderTiny` (madebyollin/taesd layout): encode (+VJP) and decode |
 //! | [`scheduler`] | noise schedules (`alphas_cumprod`), DDIM and Euler samplers |
+//! | [`clip`] | CLIP text/vision towers and BPE tokenizer (text encoder of SD 1.x/2.x) |
 //! | [`nn`] | small layers with hand-written input-only backward passes |
 //!
 //! [`StableDiffusion`] ties them together behind the small API the SDS and sampling stages use.
 
+pub mod clip;
 pub mod loader;
 pub mod nn;
 pub mod pipeline;
@@ -69,6 +71,9 @@ pub enum ModelError {
     /// A tensor operation failed.
     #[error("tensor op failed: {0}")]
     Candle(#[from] candle_core::Error),
+    /// The text encoder or tokenizer failed to load or run.
+    #[error("text encoder: {0}")]
+    Clip(#[from] clip::ClipError),
     #[error("not implemented: {0}")]
     NotImplemented(&'static str),
 }

@@ -1,5 +1,6 @@
 //! [`StableDiffusion`]: the components SDS and sampling need, behind one small API.
 
+use super::clip::{ClipTextConfig, ClipTextModel, ClipTokenizer};
 use super::loader::{self, LoadOptions, ModelSource, Precision, UNET_WEIGHTS};
 use super::scheduler::{PredictionType, Sampler, SamplerKind, SchedulerConfig, split_prediction};
 use super::unet::{Unet, UnetConfig};
@@ -59,9 +60,44 @@ pub fn load_scheduler(dir: &Path) -> Result<SchedulerConfig> {
     Ok(cfg)
 }
 
-/// UNet + VAE + noise schedule of a Stable Diffusion checkpoint.
+/// SD's text conditioning: the CLIP tokenizer and `CLIPTextModel` (`last_hidden_state`).
+#[derive(Debug, Clone)]
+pub struct TextEncoder {
+    pub tokenizer: ClipTokenizer,
+    pub model: ClipTextModel,
+}
+
+impl TextEncoder {
+    /// Loads `root/tokenizer/` and `root/text_encoder/` (config + safetensors).
+    pub fn load(root: &Path, precision: Precision, device: &Device) -> Result<Self> {
+        check_precision("text_encoder", precision, device)?;
+        let tokenizer = ClipTokenizer::from_dir(&root.join("tokenizer"))?;
+        let dir = root.join("text_encoder");
+        let config = ClipTextConfig::from_file(&dir.join("config.json"))?;
+        let w = loader::find_weights(&dir, loader::TEXT_WEIGHTS)?;
+        let vb = loader::var_builder(&w, precision.dtype(), device)?;
+        let model =
+            ClipTextModel::new(vb, &config).map_err(loader::mismatch("text_encoder", &w))?;
+        Ok(Self { tokenizer, model })
+    }
+
+    /// Token ids padded to the context length (`[1, 77]`, u32).
+    pub fn ids(&self, prompt: &str, device: &Device) -> Result<Tensor> {
+        let ids = self.tokenizer.encode_padded(prompt);
+        Ok(Tensor::from_vec(ids.clone(), (1, ids.len()), device)?)
+    }
+
+    /// `[1, 77, hidden]` f32 embeddings of a prompt (`""` gives the unconditional ones).
+    pub fn embed(&self, prompt: &str, device: &Device) -> Result<Tensor> {
+        let out = self.model.forward(&self.ids(prompt, device)?)?;
+        Ok(out.last_hidden_state.to_dtype(candle_core::DType::F32)?)
+    }
+}
+
+/// Text encoder + UNet + VAE + noise schedule of a Stable Diffusion checkpoint.
 #[derive(Debug)]
 pub struct StableDiffusion {
+    pub text: Option<TextEncoder>,
     pub unet: Unet,
     pub vae: AutoencoderKl,
     pub scheduler: SchedulerConfig,
@@ -81,7 +117,10 @@ impl StableDiffusion {
         let unet = load_unet(&root.join("unet"), opts.unet, &opts.device)?;
         let vae = load_vae(&root.join("vae"), opts.vae, &opts.device)?;
         let scheduler = load_scheduler(&root.join("scheduler"))?;
-        Self::from_parts(unet, vae, scheduler, opts.device.clone())
+        let text = TextEncoder::load(&root, opts.text, &opts.device)?;
+        let mut sd = Self::from_parts(unet, vae, scheduler, opts.device.clone())?;
+        sd.text = Some(text);
+        Ok(sd)
     }
 
     /// Assembles already built components (benchmarks use random-weight ones).
@@ -98,12 +137,26 @@ impl StableDiffusion {
                 reason,
             })?;
         Ok(Self {
+            text: None,
             unet,
             vae,
             scheduler,
             alphas_cumprod,
             device,
         })
+    }
+
+    /// Embeddings of a prompt, `[1, 77, cross_attention_dim]`.
+    pub fn embed_text(&self, prompt: &str) -> Result<Tensor> {
+        let t = self.text.as_ref().ok_or(ModelError::NotImplemented(
+            "this StableDiffusion was assembled without a text encoder",
+        ))?;
+        t.embed(prompt, &self.device)
+    }
+
+    /// `(prompt embeddings, empty-prompt embeddings)` for classifier-free guidance.
+    pub fn text_embeddings(&self, prompt: &str) -> Result<(Tensor, Tensor)> {
+        Ok((self.embed_text(prompt)?, self.embed_text("")?))
     }
 
     pub fn device(&self) -> &Device {
