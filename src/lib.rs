@@ -10,6 +10,7 @@
 //! | [`svg`] | scene ⇄ SVG text |
 //! | [`raster`] | differentiable CPU rasteriser: forward and backward |
 //! | [`image`] | RGBA f32 buffers, PNG in/out, metrics |
+//! | [`models`] | Stable Diffusion on candle: diffusers loading, UNet, VAE (+VJP), TAESD, samplers |
 //! | [`optim`] | Adam with parameter groups, schedules, NaN guards |
 //! | [`progress`] | progress events and cancellation, the seam to CLI and service |
 //! | [`teacher`] | SDS teacher interface; exact analytic test teacher |
