@@ -1,5 +1,5 @@
-//! `vectorfusion generate` with the analytic TEST teacher: writes a valid, NaN-free SVG and
-//! snapshots; `--model` is a clear not-implemented error; bad input is a usage error.
+//! `vectorfusion generate` with the analytic TEST teacher and with the tiny Stable Diffusion
+//! fixture (`--model`): writes a valid, NaN-free SVG and snapshots; bad input is a clear error.
 
 use std::process::Command;
 use vectorfusion::image::Image;
@@ -85,7 +85,7 @@ fn generate_with_analytic_teacher_writes_svg_and_snapshots() {
 }
 
 #[test]
-fn generate_model_is_not_implemented_and_bad_input_is_usage() {
+fn generate_bad_input_is_a_clear_error() {
     let dir = tmpdir("err");
     let out = dir.join("o.svg");
     let st = bin()
@@ -93,8 +93,8 @@ fn generate_model_is_not_implemented_and_bad_input_is_usage() {
         .arg(&out)
         .output()
         .unwrap();
-    assert_eq!(st.status.code(), Some(3));
-    assert!(String::from_utf8_lossy(&st.stderr).contains("not implemented"));
+    assert_eq!(st.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&st.stderr).contains("loading the model"));
     let st = bin()
         .args(["generate", "a cat", "--teacher", "magic:x", "-o"])
         .arg(&out)
@@ -144,4 +144,27 @@ fn generate_model_is_not_implemented_and_bad_input_is_usage() {
         "no targets in dir is a usage error"
     );
     assert!(!out.exists());
+}
+
+#[test]
+fn generate_with_the_tiny_model_directory() {
+    let dir = tmpdir("model");
+    let out = dir.join("m.svg");
+    let model = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/sd-tiny");
+    let st = bin()
+        .args(["generate", "a red cat", "--style", "sketch", "--model"])
+        .arg(&model)
+        .args(["--size", "32", "--steps", "3", "--guidance", "7.5", "-o"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    let svg = std::fs::read_to_string(&out).unwrap();
+    let scene = vectorfusion::svg::from_svg(&svg).unwrap();
+    assert_eq!(scene.shapes.len(), 16);
+    assert!(!svg.contains("NaN"));
 }

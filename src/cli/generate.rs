@@ -1,14 +1,14 @@
 //! `vectorfusion generate`: caption → SVG by score distillation from scratch.
 //!
 //! `--teacher analytic:DIR` uses the analytic TEST teacher (the exact denoiser of the PNG targets
-//! in DIR; the caption is only recorded and may name a target). `--model DIR` (Stable Diffusion)
-//! is not implemented yet.
+//! in DIR; the caption is only recorded and may name a target). `--model DIR` loads a Stable
+//! Diffusion diffusers directory (local files only) as the teacher.
 
 use super::CliError;
 use crate::progress::{CancelToken, Progress};
 use crate::stages::sds::{RasterBackend, SdsConfig, run_sds};
 use crate::stages::styles::Style;
-use crate::teacher::{AnalyticTeacher, AnalyticTeacherConfig, Teacher};
+use crate::teacher::{AnalyticTeacher, AnalyticTeacherConfig, SdTeacher, Teacher, TeacherError};
 use anyhow::Context;
 use indicatif::{ProgressBar, ProgressStyle};
 use rand::SeedableRng;
@@ -78,19 +78,6 @@ pub fn run(args: GenerateArgs) -> Result<(), CliError> {
         ));
     }
     let style: Style = args.style.parse().map_err(CliError::Usage)?;
-    if args.model.is_some() {
-        return Err(CliError::NotImplemented(
-            "generate --model (the Stable Diffusion teacher lands with branch `models`); use --teacher analytic:DIR",
-        ));
-    }
-    let spec = args.teacher.as_deref().ok_or_else(|| {
-        CliError::Usage("give --teacher analytic:DIR (or --model DIR once implemented)".into())
-    })?;
-    let dir = spec.strip_prefix("analytic:").ok_or_else(|| {
-        CliError::Usage(format!(
-            "unknown teacher {spec:?}: the only teacher so far is analytic:DIR"
-        ))
-    })?;
     if args.size < 8 || args.size > 2048 {
         return Err(CliError::Usage(format!(
             "--size {} out of range 8..=2048",
@@ -100,20 +87,38 @@ pub fn run(args: GenerateArgs) -> Result<(), CliError> {
     if args.steps == 0 {
         return Err(CliError::Usage("--steps must be positive".into()));
     }
-    let pool = if args.size >= 64 && args.size % 64 == 0 {
-        args.size / 64
+    let teacher: Box<dyn Teacher> = if let Some(dir) = &args.model {
+        Box::new(SdTeacher::load(dir, args.size).map_err(|e| match e {
+            TeacherError::Setup(m) => CliError::Usage(m),
+            other => CliError::Other(anyhow::Error::new(other).context("loading the model")),
+        })?)
     } else {
-        1
+        let spec = args
+            .teacher
+            .as_deref()
+            .ok_or_else(|| CliError::Usage("give --model DIR or --teacher analytic:DIR".into()))?;
+        let dir = spec.strip_prefix("analytic:").ok_or_else(|| {
+            CliError::Usage(format!(
+                "unknown teacher {spec:?}: the only test teacher is analytic:DIR"
+            ))
+        })?;
+        let pool = if args.size >= 64 && args.size % 64 == 0 {
+            args.size / 64
+        } else {
+            1
+        };
+        Box::new(
+            AnalyticTeacher::from_dir(
+                std::path::Path::new(dir),
+                AnalyticTeacherConfig {
+                    image_size: args.size,
+                    pool,
+                    num_train_timesteps: 1000,
+                },
+            )
+            .map_err(|e| CliError::Usage(e.to_string()))?,
+        )
     };
-    let teacher = AnalyticTeacher::from_dir(
-        std::path::Path::new(dir),
-        AnalyticTeacherConfig {
-            image_size: args.size,
-            pool,
-            num_train_timesteps: 1000,
-        },
-    )
-    .map_err(|e| CliError::Usage(e.to_string()))?;
     eprintln!("teacher: {}", teacher.name());
 
     let mut cfg = SdsConfig::for_style(style, &args.caption, args.steps, args.size);
@@ -172,7 +177,7 @@ pub fn run(args: GenerateArgs) -> Result<(), CliError> {
     };
     let out = run_sds(
         &RasterBackend,
-        &teacher,
+        teacher.as_ref(),
         scene,
         &cfg,
         &sink,

@@ -2,14 +2,15 @@
 //!
 //! A [`Teacher`] encodes an image into a latent (with an exact vector-Jacobian product back to the
 //! image), exposes its noise schedule (`alphas_cumprod`), and predicts the noise in a noised latent
-//! with classifier-free guidance. Stable Diffusion (VAE or TAESD encoder) implements it on branch
-//! `models`; [`analytic::AnalyticTeacher`] is an exact **test teacher** (the optimal denoiser of a
+//! with classifier-free guidance. [`sd::SdTeacher`] wraps Stable Diffusion (VAE encoder); [`analytic::AnalyticTeacher`] is an exact **test teacher** (the optimal denoiser of a
 //! small fixed set of target images) used to prove that distillation converges end to end without
 //! pretrained weights.
 
 pub mod analytic;
+pub mod sd;
 
 pub use analytic::{AnalyticTeacher, AnalyticTeacherConfig};
+pub use sd::SdTeacher;
 
 use crate::image::Image;
 
