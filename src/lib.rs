@@ -10,16 +10,24 @@
 //! | [`svg`] | scene ⇄ SVG text |
 //! | [`raster`] | differentiable CPU rasteriser: forward and backward |
 //! | [`image`] | RGBA f32 buffers, PNG in/out, metrics |
+//! | [`models`] | Stable Diffusion on candle: diffusers loading, UNet, VAE (+VJP), TAESD, samplers |
 //! | [`optim`] | Adam with parameter groups, schedules, NaN guards |
 //! | [`progress`] | progress events and cancellation, the seam to CLI and service |
+//! | [`teacher`] | SDS teacher interface; exact analytic test teacher |
+//! | [`augment`] | differentiable random perspective + crop |
+//! | [`stages`] | pipeline stages (SDS) |
 //! | [`cli`] | command-line front end |
 
+pub mod augment;
 pub mod cli;
 pub mod eval;
 pub mod image;
+pub mod losses;
 pub mod models;
 pub mod optim;
 pub mod progress;
 pub mod raster;
 pub mod scene;
+pub mod stages;
 pub mod svg;
+pub mod teacher;

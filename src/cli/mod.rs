@@ -2,6 +2,7 @@
 //! into a message and an exit code in one place ([`main`]).
 
 pub mod eval;
+pub mod generate;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
@@ -17,7 +18,7 @@ pub struct Cli {
 #[derive(Subcommand, Debug)]
 pub enum Command {
     /// Turn a caption into an SVG.
-    Generate(NotYet),
+    Generate(Box<generate::GenerateArgs>),
     /// Trace a raster image into an SVG of closed paths (LIVE).
     Vectorize(NotYet),
     /// Render an SVG through our rasteriser to PNG.
@@ -60,7 +61,7 @@ impl CliError {
 
 pub fn run(cli: Cli) -> Result<(), CliError> {
     match cli.command {
-        Command::Generate(_) => Err(CliError::NotImplemented("generate")),
+        Command::Generate(a) => generate::run(*a),
         Command::Vectorize(_) => Err(CliError::NotImplemented("vectorize")),
         Command::Render(_) => Err(CliError::NotImplemented("render")),
         Command::Serve(_) => Err(CliError::NotImplemented("serve")),

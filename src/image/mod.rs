@@ -3,6 +3,8 @@
 //! Pixels are row-major, 4 channels, **premultiplied** alpha, values in `[0, 1]`. With an opaque
 //! background (the usual case) premultiplied and straight alpha coincide.
 
+pub mod ops;
+
 use std::path::Path;
 
 /// Why an image could not be read or written.

@@ -1,3 +1,81 @@
-//! Neural networks on candle.
+//! Latent diffusion components on candle, loaded from the standard diffusers layout.
+//!
+//! The architecture always comes from the `config.json` files next to the weights (SD 1.x, 2.x
+//! including `v_prediction`, SD-Turbo and tiny test models load through the same code path):
+//!
+//! | file | component |
+//! |---|---|
+//! | [`loader`] | diffusers directory / Hugging Face hub resolution, safetensors, precision |
+//! | [`unet`] | `UNet2DConditionModel` (config → candle-transformers UNet), classifier-free guidance |
+//! | [`vae`] | `AutoencoderKL`: encode, decode and the encoder VJP without weight gradients |
+//! | [`taesd`] | `AutoencoderTiny` (madebyollin/taesd layout): encode (+VJP) and decode |
+//! | [`scheduler`] | noise schedules (`alphas_cumprod`), DDIM and Euler samplers |
+//! | [`clip`] | CLIP text/vision towers and BPE tokenizer (text encoder of SD 1.x/2.x) |
+//! | [`nn`] | small layers with hand-written input-only backward passes |
+//!
+//! [`StableDiffusion`] ties them together behind the small API the SDS and sampling stages use.
 
 pub mod clip;
+pub mod loader;
+pub mod nn;
+pub mod pipeline;
+pub mod scheduler;
+pub mod taesd;
+pub mod unet;
+pub mod vae;
+
+pub use loader::{LoadOptions, ModelSource, Precision};
+pub use pipeline::StableDiffusion;
+
+/// Errors of the models layer.
+#[derive(Debug, thiserror::Error)]
+pub enum ModelError {
+    /// Files the layout needs are absent (locally and, when offline, from the hub cache).
+    #[error("missing model files for {what}: {missing:?}\n{hint}")]
+    MissingFiles {
+        what: String,
+        missing: Vec<String>,
+        hint: String,
+    },
+    /// A config file could not be read or parsed.
+    #[error("bad config {path}: {reason}")]
+    Config { path: String, reason: String },
+    /// The config asks for an architecture feature this implementation does not have.
+    #[error("unsupported {component} config ({path}): {reason}")]
+    Unsupported {
+        component: &'static str,
+        path: String,
+        reason: String,
+    },
+    /// A weights file is unreadable or not valid safetensors.
+    #[error("corrupt weights file {path}: {reason}")]
+    CorruptWeights { path: String, reason: String },
+    /// Weights do not match the architecture the config describes (missing tensor, wrong shape).
+    #[error("weights in {path} do not match {component}/config.json: {reason}")]
+    WeightMismatch {
+        component: &'static str,
+        path: String,
+        reason: String,
+    },
+    /// Bad arguments (shapes, ranges) passed to a model call.
+    #[error("invalid input: {0}")]
+    InvalidInput(String),
+    /// Fetching from the Hugging Face hub failed.
+    #[error("hub download of {repo}/{file} failed: {reason}\n{hint}")]
+    Hub {
+        repo: String,
+        file: String,
+        reason: String,
+        hint: String,
+    },
+    /// A tensor operation failed.
+    #[error("tensor op failed: {0}")]
+    Candle(#[from] candle_core::Error),
+    /// The text encoder or tokenizer failed to load or run.
+    #[error("text encoder: {0}")]
+    Clip(#[from] clip::ClipError),
+    #[error("not implemented: {0}")]
+    NotImplemented(&'static str),
+}
+
+pub type Result<T> = std::result::Result<T, ModelError>;

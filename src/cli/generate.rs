@@ -1,0 +1,207 @@
+//! `vectorfusion generate`: caption → SVG by score distillation from scratch.
+//!
+//! `--teacher analytic:DIR` uses the analytic TEST teacher (the exact denoiser of the PNG targets
+//! in DIR; the caption is only recorded and may name a target). `--model DIR` loads a Stable
+//! Diffusion diffusers directory (local files only) as the teacher.
+
+use super::CliError;
+use crate::progress::{CancelToken, Progress};
+use crate::stages::sds::{RasterBackend, SdsConfig, run_sds};
+use crate::stages::styles::Style;
+use crate::teacher::{AnalyticTeacher, AnalyticTeacherConfig, SdTeacher, Teacher, TeacherError};
+use anyhow::Context;
+use indicatif::{ProgressBar, ProgressStyle};
+use rand::SeedableRng;
+use std::path::PathBuf;
+
+#[derive(clap::Args, Debug)]
+pub struct GenerateArgs {
+    /// The caption (with the analytic test teacher it is only recorded).
+    pub caption: String,
+    /// Generation method (only `scratch` so far).
+    #[arg(long, default_value = "scratch")]
+    pub method: String,
+    /// Style: iconography, pixel-art or sketch.
+    #[arg(long, default_value = "iconography")]
+    pub style: String,
+    /// Stable Diffusion model directory (diffusers layout).
+    #[arg(long, conflicts_with = "teacher")]
+    pub model: Option<PathBuf>,
+    /// `analytic:DIR`: the analytic TEST teacher built from the PNG targets in DIR.
+    #[arg(long)]
+    pub teacher: Option<String>,
+    /// Teacher input size in pixels (the SVG is written at this width).
+    #[arg(long, default_value_t = 64)]
+    pub size: u32,
+    #[arg(long, default_value_t = 500)]
+    pub steps: u32,
+    /// Number of paths (iconography, sketch; pixel art is always a 32x32 grid).
+    #[arg(long)]
+    pub paths: Option<usize>,
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Classifier-free guidance scale.
+    #[arg(long, default_value_t = 100.0)]
+    pub guidance: f32,
+    /// Smallest timestep drawn.
+    #[arg(long, default_value_t = 50)]
+    pub t_min: usize,
+    /// Largest timestep drawn (at the start, see `--t-max-end`).
+    #[arg(long, default_value_t = 950)]
+    pub t_max: usize,
+    /// Anneal the largest timestep linearly to this value by the last step.
+    #[arg(long)]
+    pub t_max_end: Option<usize>,
+    /// Clip each parameter group's gradient to this L2 norm.
+    #[arg(long)]
+    pub grad_clip: Option<f32>,
+    /// Also re-initialise closed paths whose area is below this many px² (iconography).
+    #[arg(long)]
+    pub reinit_min_area: Option<f32>,
+    /// Turn off the random perspective + crop augmentation.
+    #[arg(long)]
+    pub no_augment: bool,
+    /// Output SVG path.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Write an SVG snapshot here every `--snapshot-every` steps.
+    #[arg(long)]
+    pub snapshots: Option<PathBuf>,
+    #[arg(long, default_value_t = 50)]
+    pub snapshot_every: u32,
+}
+
+pub fn run(args: GenerateArgs) -> Result<(), CliError> {
+    if args.method != "scratch" {
+        return Err(CliError::NotImplemented(
+            "generate --method other than scratch (sd_live, sd_live_sds come with the pipeline)",
+        ));
+    }
+    let style: Style = args.style.parse().map_err(CliError::Usage)?;
+    if args.size < 8 || args.size > 2048 {
+        return Err(CliError::Usage(format!(
+            "--size {} out of range 8..=2048",
+            args.size
+        )));
+    }
+    if args.steps == 0 {
+        return Err(CliError::Usage("--steps must be positive".into()));
+    }
+    let teacher: Box<dyn Teacher> = if let Some(dir) = &args.model {
+        Box::new(SdTeacher::load(dir, args.size).map_err(|e| match e {
+            TeacherError::Setup(m) => CliError::Usage(m),
+            other => CliError::Other(anyhow::Error::new(other).context("loading the model")),
+        })?)
+    } else {
+        let spec = args
+            .teacher
+            .as_deref()
+            .ok_or_else(|| CliError::Usage("give --model DIR or --teacher analytic:DIR".into()))?;
+        let dir = spec.strip_prefix("analytic:").ok_or_else(|| {
+            CliError::Usage(format!(
+                "unknown teacher {spec:?}: the only test teacher is analytic:DIR"
+            ))
+        })?;
+        let pool = if args.size >= 64 && args.size % 64 == 0 {
+            args.size / 64
+        } else {
+            1
+        };
+        Box::new(
+            AnalyticTeacher::from_dir(
+                std::path::Path::new(dir),
+                AnalyticTeacherConfig {
+                    image_size: args.size,
+                    pool,
+                    num_train_timesteps: 1000,
+                },
+            )
+            .map_err(|e| CliError::Usage(e.to_string()))?,
+        )
+    };
+    eprintln!("teacher: {}", teacher.name());
+
+    let mut cfg = SdsConfig::for_style(style, &args.caption, args.steps, args.size);
+    cfg.seed = args.seed;
+    cfg.guidance = args.guidance;
+    cfg.snapshot_every = if args.snapshots.is_some() {
+        args.snapshot_every
+    } else {
+        0
+    };
+    cfg.t_min = args.t_min;
+    cfg.t_max = args.t_max;
+    cfg.t_max_end = args.t_max_end;
+    cfg.grad_clip = args.grad_clip;
+    if let Some(r) = cfg.reinit.as_mut() {
+        r.min_area = args.reinit_min_area;
+    }
+    if args.no_augment {
+        cfg.augment = None;
+    }
+    let render = cfg.render_size(args.size);
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(args.seed ^ 0x5eed_1a17);
+    let paths = args.paths.unwrap_or(style.default_paths());
+    if paths == 0 || paths > 4096 {
+        return Err(CliError::Usage("--paths must be in 1..=4096".into()));
+    }
+    let scene = style
+        .init_scene(render, paths, &mut rng)
+        .context("initial scene")?;
+
+    if let Some(d) = &args.snapshots {
+        std::fs::create_dir_all(d)
+            .with_context(|| format!("cannot create snapshot directory {}", d.display()))?;
+    }
+    let bar = ProgressBar::new(args.steps as u64);
+    bar.set_style(
+        ProgressStyle::with_template("sds [{bar:40}] {pos}/{len} {msg} ({eta})")
+            .unwrap_or_else(|_| ProgressStyle::default_bar())
+            .progress_chars("=> "),
+    );
+    let snap_dir = args.snapshots.clone();
+    let snap_err = std::sync::Mutex::new(None::<String>);
+    let sink = |p: Progress| {
+        bar.set_position(p.step as u64);
+        if let Some(l) = p.loss {
+            bar.set_message(format!("loss {l:.4}"));
+        }
+        if let (Some(dir), Some(svg)) = (&snap_dir, &p.svg) {
+            let path = dir.join(format!("step_{:05}.svg", p.step));
+            if let Err(e) = std::fs::write(&path, svg)
+                && let Ok(mut g) = snap_err.lock()
+            {
+                *g = Some(format!("{}: {e}", path.display()));
+            }
+        }
+    };
+    let out = run_sds(
+        &RasterBackend,
+        teacher.as_ref(),
+        scene,
+        &cfg,
+        &sink,
+        &CancelToken::new(),
+    )
+    .map_err(|e| match e {
+        crate::stages::sds::SdsError::Config(m) => CliError::Usage(m),
+        other => CliError::Other(anyhow::Error::new(other).context("score distillation")),
+    })?;
+    bar.finish();
+    if let Ok(Some(e)) = snap_err.into_inner() {
+        eprintln!("warning: could not write a snapshot: {e}");
+    }
+    let final_scene = out.scene.scaled_to_width(args.size);
+    let svg = RasterBackend::svg_text(&final_scene);
+    std::fs::write(&args.output, svg)
+        .with_context(|| format!("cannot write {}", args.output.display()))?;
+    eprintln!(
+        "wrote {} ({} steps, {} skipped non-finite, {} lr halvings, {} re-inits)",
+        args.output.display(),
+        out.stats.steps_done,
+        out.stats.skipped_nonfinite,
+        out.stats.lr_halvings,
+        out.stats.reinits
+    );
+    Ok(())
+}

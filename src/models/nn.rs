@@ -1,0 +1,464 @@
+//! Layers with a forward pass that can record a tape and a hand-written backward pass that
+//! returns only the gradient with respect to the layer input (never the weights' gradients).
+//!
+//! Score distillation needs `J_encoder^T · g`; candle's autograd would also compute every
+//! kernel gradient (one extra convolution per layer, plus memory), which is pure waste here.
+//! Field names follow the checkpoint keys.
+
+use candle_core::{D, DType, Module, Tensor};
+use candle_nn::VarBuilder;
+
+type R<T> = candle_core::Result<T>;
+
+/// 2-D convolution (`weight [co, ci, k, k]`, optional `bias [co]`).
+#[derive(Debug, Clone)]
+pub struct Conv2d {
+    pub weight: Tensor,
+    pub bias: Option<Tensor>,
+    pub stride: usize,
+    pub padding: usize,
+}
+
+impl Conv2d {
+    pub fn load(
+        vb: VarBuilder,
+        ci: usize,
+        co: usize,
+        k: usize,
+        stride: usize,
+        padding: usize,
+        bias: bool,
+    ) -> R<Self> {
+        let weight = vb.get((co, ci, k, k), "weight")?;
+        let bias = if bias {
+            Some(vb.get(co, "bias")?)
+        } else {
+            None
+        };
+        Ok(Self {
+            weight,
+            bias,
+            stride,
+            padding,
+        })
+    }
+
+    pub fn forward(&self, x: &Tensor) -> R<Tensor> {
+        let y = x.conv2d(&self.weight, self.padding, self.stride, 1, 1)?;
+        match &self.bias {
+            Some(b) => y.broadcast_add(&b.reshape((1, b.dim(0)?, 1, 1))?),
+            None => Ok(y),
+        }
+    }
+
+    /// Gradient w.r.t. the input of spatial size `(h, w)` given the output gradient `dy`:
+    /// a stride-1 convolution of the (dilated, padded) `dy` with the flipped, transposed
+    /// kernel, which reuses candle's fast im2col + GEMM path.
+    pub fn backward(&self, dy: &Tensor, h: usize, w: usize) -> R<Tensor> {
+        let (_, _, k, _) = self.weight.dims4()?;
+        let (b, c, oh, ow) = dy.dims4()?;
+        let s = self.stride;
+        let dy = if s > 1 {
+            dy.reshape((b, c, oh, 1, ow, 1))?
+                .pad_with_zeros(3, 0, s - 1)?
+                .pad_with_zeros(5, 0, s - 1)?
+                .reshape((b, c, oh * s, ow * s))?
+                .narrow(2, 0, (oh - 1) * s + 1)?
+                .narrow(3, 0, (ow - 1) * s + 1)?
+        } else {
+            dy.clone()
+        };
+        let wt = flip_transpose(&self.weight)?;
+        // full correlation: pad by k-1, then remove the forward padding
+        let full = dy
+            .pad_with_zeros(2, k - 1, k - 1)?
+            .pad_with_zeros(3, k - 1, k - 1)?
+            .conv2d(&wt, 0, 1, 1, 1)?;
+        let (_, _, fh, fw) = full.dims4()?;
+        // full covers padded-input rows [0, fh); input row i sits at padded row i + padding
+        let p = self.padding;
+        let take_h = h.min(fh.saturating_sub(p));
+        let take_w = w.min(fw.saturating_sub(p));
+        let g = full.narrow(2, p, take_h)?.narrow(3, p, take_w)?;
+        let g = if take_h < h {
+            g.pad_with_zeros(2, 0, h - take_h)?
+        } else {
+            g
+        };
+        if take_w < w {
+            g.pad_with_zeros(3, 0, w - take_w)
+        } else {
+            Ok(g)
+        }
+    }
+}
+
+/// `W[co, ci, kh, kw] -> W'[ci, co, k-1-kh, k-1-kw]`.
+fn flip_transpose(w: &Tensor) -> R<Tensor> {
+    let (_, _, kh, kw) = w.dims4()?;
+    let dev = w.device();
+    let rh: Vec<u32> = (0..kh as u32).rev().collect();
+    let rw: Vec<u32> = (0..kw as u32).rev().collect();
+    let w = if kh > 1 {
+        w.index_select(&Tensor::new(rh.as_slice(), dev)?, 2)?
+    } else {
+        w.clone()
+    };
+    let w = if kw > 1 {
+        w.index_select(&Tensor::new(rw.as_slice(), dev)?, 3)?
+    } else {
+        w
+    };
+    w.transpose(0, 1)?.contiguous()
+}
+
+/// Group normalisation over `[b, c, h, w]` (or `[b, c, n]`) inputs.
+#[derive(Debug, Clone)]
+pub struct GroupNorm {
+    pub weight: Tensor,
+    pub bias: Tensor,
+    pub groups: usize,
+    pub eps: f64,
+}
+
+/// What [`GroupNorm::backward`] needs: the normalised input and `1/σ` per group.
+#[derive(Debug)]
+pub struct GroupNormTape {
+    xhat: Tensor,
+    inv_std: Tensor,
+}
+
+impl GroupNorm {
+    pub fn load(vb: VarBuilder, groups: usize, channels: usize, eps: f64) -> R<Self> {
+        if groups == 0 || channels % groups != 0 {
+            candle_core::bail!("group norm: {channels} channels not divisible by {groups} groups");
+        }
+        Ok(Self {
+            weight: vb.get(channels, "weight")?,
+            bias: vb.get(channels, "bias")?,
+            groups,
+            eps,
+        })
+    }
+
+    fn affine(&self, xhat: &Tensor, shape: &[usize]) -> R<Tensor> {
+        let c = shape[1];
+        let mut bshape = vec![1usize; shape.len()];
+        bshape[1] = c;
+        xhat.reshape(shape)?
+            .broadcast_mul(&self.weight.reshape(bshape.as_slice())?)?
+            .broadcast_add(&self.bias.reshape(bshape.as_slice())?)
+    }
+
+    fn normalise(&self, x: &Tensor) -> R<(Tensor, Tensor)> {
+        let b = x.dim(0)?;
+        let xg = x.reshape((b, self.groups, ()))?;
+        let in_dtype = xg.dtype();
+        let xg = xg.to_dtype(DType::F32)?;
+        let mean = xg.mean_keepdim(2)?;
+        let xc = xg.broadcast_sub(&mean)?;
+        let var = xc.sqr()?.mean_keepdim(2)?;
+        let inv_std = (var + self.eps)?.sqrt()?.recip()?;
+        let xhat = xc.broadcast_mul(&inv_std)?.to_dtype(in_dtype)?;
+        Ok((xhat, inv_std))
+    }
+
+    pub fn forward(&self, x: &Tensor) -> R<Tensor> {
+        let (xhat, _) = self.normalise(x)?;
+        self.affine(&xhat, x.dims())
+    }
+
+    pub fn forward_t(&self, x: &Tensor) -> R<(Tensor, GroupNormTape)> {
+        let (xhat, inv_std) = self.normalise(x)?;
+        let y = self.affine(&xhat, x.dims())?;
+        Ok((y, GroupNormTape { xhat, inv_std }))
+    }
+
+    pub fn backward(&self, t: &GroupNormTape, dy: &Tensor) -> R<Tensor> {
+        let shape = dy.dims().to_vec();
+        let b = shape[0];
+        let mut bshape = vec![1usize; shape.len()];
+        bshape[1] = shape[1];
+        let dxhat = dy
+            .broadcast_mul(&self.weight.reshape(bshape.as_slice())?)?
+            .reshape((b, self.groups, ()))?;
+        let m1 = dxhat.mean_keepdim(2)?;
+        let m2 = (&dxhat * &t.xhat)?.mean_keepdim(2)?;
+        let dx = dxhat
+            .broadcast_sub(&m1)?
+            .sub(&t.xhat.broadcast_mul(&m2)?)?
+            .broadcast_mul(&t.inv_std)?;
+        dx.reshape(shape)
+    }
+}
+
+/// `silu'(x) · dy`.
+pub fn silu_backward(x: &Tensor, dy: &Tensor) -> R<Tensor> {
+    let s = candle_nn::ops::sigmoid(x)?;
+    // s * (1 + x * (1 - s))
+    let d = (&s * ((x * (1.0 - &s)?)? + 1.0)?)?;
+    dy * d
+}
+
+/// Linear layer, `weight [out, in]` (a 1×1 conv weight `[out, in, 1, 1]` is accepted too).
+#[derive(Debug, Clone)]
+pub struct Linear {
+    pub weight: Tensor,
+    pub bias: Option<Tensor>,
+}
+
+impl Linear {
+    pub fn load(vb: VarBuilder, i: usize, o: usize, bias: bool) -> R<Self> {
+        let weight = match vb.get((o, i), "weight") {
+            Ok(w) => w,
+            Err(e) => match vb.get((o, i, 1, 1), "weight") {
+                Ok(w) => w.reshape((o, i))?,
+                Err(_) => return Err(e),
+            },
+        };
+        let bias = if bias { Some(vb.get(o, "bias")?) } else { None };
+        Ok(Self { weight, bias })
+    }
+
+    /// `x [b, n, in] -> [b, n, out]`.
+    pub fn forward(&self, x: &Tensor) -> R<Tensor> {
+        let y = x.broadcast_matmul(&self.weight.t()?)?;
+        match &self.bias {
+            Some(b) => y.broadcast_add(b),
+            None => Ok(y),
+        }
+    }
+
+    pub fn backward(&self, dy: &Tensor) -> R<Tensor> {
+        dy.broadcast_matmul(&self.weight)
+    }
+}
+
+/// diffusers `ResnetBlock2D` without time embedding (the VAE's).
+#[derive(Debug, Clone)]
+pub struct ResnetBlock {
+    pub norm1: GroupNorm,
+    pub conv1: Conv2d,
+    pub norm2: GroupNorm,
+    pub conv2: Conv2d,
+    pub conv_shortcut: Option<Conv2d>,
+}
+
+#[derive(Debug)]
+pub struct ResnetTape {
+    n1: GroupNormTape,
+    a1: Tensor,
+    n2: GroupNormTape,
+    a2: Tensor,
+    hw: (usize, usize),
+}
+
+impl ResnetBlock {
+    pub fn load(vb: VarBuilder, ci: usize, co: usize, groups: usize, eps: f64) -> R<Self> {
+        let conv_shortcut = if ci != co {
+            Some(Conv2d::load(vb.pp("conv_shortcut"), ci, co, 1, 1, 0, true)?)
+        } else {
+            None
+        };
+        Ok(Self {
+            norm1: GroupNorm::load(vb.pp("norm1"), groups, ci, eps)?,
+            conv1: Conv2d::load(vb.pp("conv1"), ci, co, 3, 1, 1, true)?,
+            norm2: GroupNorm::load(vb.pp("norm2"), groups, co, eps)?,
+            conv2: Conv2d::load(vb.pp("conv2"), co, co, 3, 1, 1, true)?,
+            conv_shortcut,
+        })
+    }
+
+    pub fn forward(&self, x: &Tensor) -> R<Tensor> {
+        let h = self.conv1.forward(&self.norm1.forward(x)?.silu()?)?;
+        let h = self.conv2.forward(&self.norm2.forward(&h)?.silu()?)?;
+        let skip = match &self.conv_shortcut {
+            Some(c) => c.forward(x)?,
+            None => x.clone(),
+        };
+        skip + h
+    }
+
+    pub fn forward_t(&self, x: &Tensor) -> R<(Tensor, ResnetTape)> {
+        let (_, _, hh, ww) = x.dims4()?;
+        let (a1, n1) = self.norm1.forward_t(x)?;
+        let h = self.conv1.forward(&a1.silu()?)?;
+        let (a2, n2) = self.norm2.forward_t(&h)?;
+        let h = self.conv2.forward(&a2.silu()?)?;
+        let skip = match &self.conv_shortcut {
+            Some(c) => c.forward(x)?,
+            None => x.clone(),
+        };
+        let y = (skip + h)?;
+        Ok((
+            y,
+            ResnetTape {
+                n1,
+                a1,
+                n2,
+                a2,
+                hw: (hh, ww),
+            },
+        ))
+    }
+
+    pub fn backward(&self, t: &ResnetTape, dy: &Tensor) -> R<Tensor> {
+        let (h, w) = t.hw;
+        let d = self.conv2.backward(dy, h, w)?;
+        let d = silu_backward(&t.a2, &d)?;
+        let d = self.norm2.backward(&t.n2, &d)?;
+        let d = self.conv1.backward(&d, h, w)?;
+        let d = silu_backward(&t.a1, &d)?;
+        let d = self.norm1.backward(&t.n1, &d)?;
+        let skip = match &self.conv_shortcut {
+            Some(c) => c.backward(dy, h, w)?,
+            None => dy.clone(),
+        };
+        d + skip
+    }
+}
+
+/// diffusers VAE mid-block `Attention` (group norm, single or multi head, residual).
+#[derive(Debug, Clone)]
+pub struct SpatialSelfAttention {
+    pub group_norm: GroupNorm,
+    pub to_q: Linear,
+    pub to_k: Linear,
+    pub to_v: Linear,
+    pub to_out: Linear,
+    pub heads: usize,
+}
+
+#[derive(Debug)]
+pub struct AttentionTape {
+    n: GroupNormTape,
+    q: Tensor,
+    k: Tensor,
+    v: Tensor,
+    p: Tensor,
+}
+
+impl SpatialSelfAttention {
+    pub fn load(vb: VarBuilder, c: usize, groups: usize, eps: f64, heads: usize) -> R<Self> {
+        if heads == 0 || c % heads != 0 {
+            candle_core::bail!("attention: {c} channels not divisible by {heads} heads");
+        }
+        // current diffusers names; older checkpoints use query/key/value/proj_attn
+        let (q, k, v, o) = if vb.contains_tensor("to_q.weight") {
+            ("to_q", "to_k", "to_v", "to_out.0")
+        } else {
+            ("query", "key", "value", "proj_attn")
+        };
+        Ok(Self {
+            group_norm: GroupNorm::load(vb.pp("group_norm"), groups, c, eps)?,
+            to_q: Linear::load(vb.pp(q), c, c, true)?,
+            to_k: Linear::load(vb.pp(k), c, c, true)?,
+            to_v: Linear::load(vb.pp(v), c, c, true)?,
+            to_out: Linear::load(vb.pp(o), c, c, true)?,
+            heads,
+        })
+    }
+
+    /// `[b, n, c] -> [b, heads, n, c/heads]`
+    fn split(&self, x: &Tensor) -> R<Tensor> {
+        let (b, n, c) = x.dims3()?;
+        x.reshape((b, n, self.heads, c / self.heads))?
+            .transpose(1, 2)?
+            .contiguous()
+    }
+
+    fn merge(&self, x: &Tensor) -> R<Tensor> {
+        let (b, hds, n, d) = x.dims4()?;
+        x.transpose(1, 2)?.contiguous()?.reshape((b, n, hds * d))
+    }
+
+    fn to_tokens(x: &Tensor) -> R<Tensor> {
+        let (b, c, h, w) = x.dims4()?;
+        x.reshape((b, c, h * w))?.transpose(1, 2)?.contiguous()
+    }
+
+    fn from_tokens(x: &Tensor, h: usize, w: usize) -> R<Tensor> {
+        let (b, _, c) = x.dims3()?;
+        x.transpose(1, 2)?.contiguous()?.reshape((b, c, h, w))
+    }
+
+    fn core(&self, x: &Tensor) -> R<(Tensor, Option<GroupNormTape>, [Tensor; 4])> {
+        let (_, c, _, _) = x.dims4()?;
+        let (hn, tape) = self.group_norm.forward_t(x)?;
+        let tokens = Self::to_tokens(&hn)?;
+        let q = self.split(&self.to_q.forward(&tokens)?)?;
+        let k = self.split(&self.to_k.forward(&tokens)?)?;
+        let v = self.split(&self.to_v.forward(&tokens)?)?;
+        let scale = 1.0 / ((c / self.heads) as f64).sqrt();
+        let s = (q.matmul(&k.t()?)? * scale)?;
+        let p = candle_nn::ops::softmax_last_dim(&s)?;
+        let o = self.merge(&p.matmul(&v)?)?;
+        Ok((o, Some(tape), [q, k, v, p]))
+    }
+
+    pub fn forward(&self, x: &Tensor) -> R<Tensor> {
+        let (_, _, h, w) = x.dims4()?;
+        let (o, _, _) = self.core(x)?;
+        let y = Self::from_tokens(&self.to_out.forward(&o)?, h, w)?;
+        x + y
+    }
+
+    pub fn forward_t(&self, x: &Tensor) -> R<(Tensor, AttentionTape)> {
+        let (_, _, h, w) = x.dims4()?;
+        let (o, tape, [q, k, v, p]) = self.core(x)?;
+        let n = tape.ok_or_else(|| candle_core::Error::Msg("attention tape missing".into()))?;
+        let y = (x + Self::from_tokens(&self.to_out.forward(&o)?, h, w)?)?;
+        Ok((y, AttentionTape { n, q, k, v, p }))
+    }
+
+    pub fn backward(&self, t: &AttentionTape, dy: &Tensor) -> R<Tensor> {
+        let (_, c, h, w) = dy.dims4()?;
+        let scale = 1.0 / ((c / self.heads) as f64).sqrt();
+        let d_out = Self::to_tokens(dy)?;
+        let d_o = self.split(&self.to_out.backward(&d_out)?)?;
+        let d_p = d_o.matmul(&t.v.t()?)?;
+        let d_v = t.p.t()?.matmul(&d_o)?;
+        let row = (&d_p * &t.p)?.sum_keepdim(D::Minus1)?;
+        let d_s = (t.p.clone() * d_p.broadcast_sub(&row)?)?;
+        let d_q = (d_s.matmul(&t.k)? * scale)?;
+        let d_k = (d_s.t()?.matmul(&t.q)? * scale)?;
+        let d_tok = ((self.to_q.backward(&self.merge(&d_q)?)?
+            + self.to_k.backward(&self.merge(&d_k)?)?)?
+            + self.to_v.backward(&self.merge(&d_v)?)?)?;
+        let d_hn = Self::from_tokens(&d_tok, h, w)?;
+        let d_x = self.group_norm.backward(&t.n, &d_hn)?;
+        d_x + dy
+    }
+}
+
+/// A convolution preceded by the asymmetric `(0, 1, 0, 1)` zero padding the VAE downsampler
+/// uses.
+#[derive(Debug, Clone)]
+pub struct Downsample {
+    pub conv: Conv2d,
+}
+
+impl Downsample {
+    pub fn load(vb: VarBuilder, c: usize) -> R<Self> {
+        Ok(Self {
+            conv: Conv2d::load(vb.pp("conv"), c, c, 3, 2, 0, true)?,
+        })
+    }
+
+    pub fn forward(&self, x: &Tensor) -> R<Tensor> {
+        let x = x.pad_with_zeros(2, 0, 1)?.pad_with_zeros(3, 0, 1)?;
+        self.conv.forward(&x)
+    }
+
+    pub fn backward(&self, dy: &Tensor, h: usize, w: usize) -> R<Tensor> {
+        let d = self.conv.backward(dy, h + 1, w + 1)?;
+        d.narrow(2, 0, h)?.narrow(3, 0, w)
+    }
+}
+
+/// Plain module helper so [`Linear`] can be used where candle expects a `Module`.
+impl Module for Linear {
+    fn forward(&self, xs: &Tensor) -> R<Tensor> {
+        Linear::forward(self, xs)
+    }
+}

@@ -1,0 +1,279 @@
+//! [`StableDiffusion`]: the components SDS and sampling need, behind one small API.
+
+use super::clip::{ClipTextConfig, ClipTextModel, ClipTokenizer};
+use super::loader::{self, LoadOptions, ModelSource, Precision, UNET_WEIGHTS};
+use super::scheduler::{PredictionType, Sampler, SamplerKind, SchedulerConfig, split_prediction};
+use super::unet::{Unet, UnetConfig};
+use super::vae::{AutoencoderKl, VaeConfig};
+use super::{ModelError, Result};
+use candle_core::{Device, Tensor};
+use std::path::Path;
+
+/// candle has no bf16 matmul on CPU: refuse it up front instead of failing mid-forward.
+pub fn check_precision(
+    component: &'static str,
+    precision: Precision,
+    device: &Device,
+) -> Result<()> {
+    if precision == Precision::Bf16 && device.is_cpu() {
+        return Err(ModelError::Unsupported {
+            component,
+            path: "<load options>".into(),
+            reason: "bf16 on CPU (candle has no CPU bf16 matmul); use f32 or f16, or bf16 with the `cuda` feature".into(),
+        });
+    }
+    Ok(())
+}
+
+/// Loads `dir/config.json` + weights as a UNet.
+pub fn load_unet(dir: &Path, precision: Precision, device: &Device) -> Result<Unet> {
+    check_precision("unet", precision, device)?;
+    let cfg: UnetConfig = loader::read_config(&dir.join("config.json"))?;
+    let w = loader::find_weights(dir, UNET_WEIGHTS)?;
+    let vb = loader::var_builder(&w, precision.dtype(), device)?;
+    Unet::new(vb, cfg, &w)
+}
+
+/// Loads `dir/config.json` + weights as an `AutoencoderKL`.
+pub fn load_vae(dir: &Path, precision: Precision, device: &Device) -> Result<AutoencoderKl> {
+    check_precision("vae", precision, device)?;
+    let cfg_path = dir.join("config.json");
+    let cfg: VaeConfig = loader::read_config(&cfg_path)?;
+    cfg.validate().map_err(|reason| ModelError::Unsupported {
+        component: "vae",
+        path: cfg_path.display().to_string(),
+        reason,
+    })?;
+    let w = loader::find_weights(dir, UNET_WEIGHTS)?;
+    let vb = loader::var_builder(&w, precision.dtype(), device)?;
+    AutoencoderKl::new(vb, cfg).map_err(loader::mismatch("vae", &w))
+}
+
+/// Loads `dir/scheduler_config.json`.
+pub fn load_scheduler(dir: &Path) -> Result<SchedulerConfig> {
+    let p = dir.join("scheduler_config.json");
+    let cfg: SchedulerConfig = loader::read_config(&p)?;
+    cfg.alphas_cumprod().map_err(|reason| ModelError::Config {
+        path: p.display().to_string(),
+        reason,
+    })?;
+    Ok(cfg)
+}
+
+/// SD's text conditioning: the CLIP tokenizer and `CLIPTextModel` (`last_hidden_state`).
+#[derive(Debug, Clone)]
+pub struct TextEncoder {
+    pub tokenizer: ClipTokenizer,
+    pub model: ClipTextModel,
+}
+
+impl TextEncoder {
+    /// Loads `root/tokenizer/` and `root/text_encoder/` (config + safetensors).
+    pub fn load(root: &Path, precision: Precision, device: &Device) -> Result<Self> {
+        check_precision("text_encoder", precision, device)?;
+        let tokenizer = ClipTokenizer::from_dir(&root.join("tokenizer"))?;
+        let dir = root.join("text_encoder");
+        let config = ClipTextConfig::from_file(&dir.join("config.json"))?;
+        let w = loader::find_weights(&dir, loader::TEXT_WEIGHTS)?;
+        let vb = loader::var_builder(&w, precision.dtype(), device)?;
+        let model =
+            ClipTextModel::new(vb, &config).map_err(loader::mismatch("text_encoder", &w))?;
+        Ok(Self { tokenizer, model })
+    }
+
+    /// Token ids padded to the context length (`[1, 77]`, u32).
+    pub fn ids(&self, prompt: &str, device: &Device) -> Result<Tensor> {
+        let ids = self.tokenizer.encode_padded(prompt);
+        Ok(Tensor::from_vec(ids.clone(), (1, ids.len()), device)?)
+    }
+
+    /// `[1, 77, hidden]` f32 embeddings of a prompt (`""` gives the unconditional ones).
+    pub fn embed(&self, prompt: &str, device: &Device) -> Result<Tensor> {
+        let out = self.model.forward(&self.ids(prompt, device)?)?;
+        Ok(out.last_hidden_state.to_dtype(candle_core::DType::F32)?)
+    }
+}
+
+/// Text encoder + UNet + VAE + noise schedule of a Stable Diffusion checkpoint.
+#[derive(Debug)]
+pub struct StableDiffusion {
+    pub text: Option<TextEncoder>,
+    pub unet: Unet,
+    pub vae: AutoencoderKl,
+    pub scheduler: SchedulerConfig,
+    alphas_cumprod: Vec<f64>,
+    device: Device,
+}
+
+impl StableDiffusion {
+    /// Loads from a diffusers directory.
+    pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Self> {
+        Self::load_source(&ModelSource::Dir(dir.to_path_buf()), opts)
+    }
+
+    /// Loads from a directory or a hub repo (fetched into the HF cache when online).
+    pub fn load_source(source: &ModelSource, opts: &LoadOptions) -> Result<Self> {
+        let root = loader::resolve(source, opts.allow_download)?;
+        let unet = load_unet(&root.join("unet"), opts.unet, &opts.device)?;
+        let vae = load_vae(&root.join("vae"), opts.vae, &opts.device)?;
+        let scheduler = load_scheduler(&root.join("scheduler"))?;
+        let text = TextEncoder::load(&root, opts.text, &opts.device)?;
+        let mut sd = Self::from_parts(unet, vae, scheduler, opts.device.clone())?;
+        sd.text = Some(text);
+        Ok(sd)
+    }
+
+    /// Assembles already built components (benchmarks use random-weight ones).
+    pub fn from_parts(
+        unet: Unet,
+        vae: AutoencoderKl,
+        scheduler: SchedulerConfig,
+        device: Device,
+    ) -> Result<Self> {
+        let alphas_cumprod = scheduler
+            .alphas_cumprod()
+            .map_err(|reason| ModelError::Config {
+                path: "scheduler_config.json".into(),
+                reason,
+            })?;
+        Ok(Self {
+            text: None,
+            unet,
+            vae,
+            scheduler,
+            alphas_cumprod,
+            device,
+        })
+    }
+
+    /// Embeddings of a prompt, `[1, 77, cross_attention_dim]`.
+    pub fn embed_text(&self, prompt: &str) -> Result<Tensor> {
+        let t = self.text.as_ref().ok_or(ModelError::NotImplemented(
+            "this StableDiffusion was assembled without a text encoder",
+        ))?;
+        t.embed(prompt, &self.device)
+    }
+
+    /// `(prompt embeddings, empty-prompt embeddings)` for classifier-free guidance.
+    pub fn text_embeddings(&self, prompt: &str) -> Result<(Tensor, Tensor)> {
+        Ok((self.embed_text(prompt)?, self.embed_text("")?))
+    }
+
+    pub fn device(&self) -> &Device {
+        &self.device
+    }
+
+    /// `ᾱ_t` for every training timestep.
+    pub fn alphas_cumprod(&self) -> &[f64] {
+        &self.alphas_cumprod
+    }
+
+    pub fn prediction_type(&self) -> PredictionType {
+        self.scheduler.prediction_type
+    }
+
+    /// Images `[b, 3, H, W]` in `[0, 1]` → scaled latents `[b, 4, H/8, W/8]`.
+    pub fn encode(&self, image: &Tensor) -> Result<Tensor> {
+        self.vae.encode(image)
+    }
+
+    /// `J_encode^T · d_latents` with respect to the `[0, 1]` image (no weight gradients).
+    pub fn encode_vjp(&self, image: &Tensor, d_latents: &Tensor) -> Result<Tensor> {
+        Ok(self.vae.encode_vjp(image, d_latents)?.1)
+    }
+
+    /// Scaled latents → images in `[0, 1]`.
+    pub fn decode(&self, latents: &Tensor) -> Result<Tensor> {
+        self.vae.decode(latents)
+    }
+
+    fn guided_raw(
+        &self,
+        z_t: &Tensor,
+        t: f64,
+        text_emb: &Tensor,
+        uncond_emb: &Tensor,
+        guidance: f64,
+    ) -> Result<Tensor> {
+        if guidance == 1.0 {
+            return self.unet.forward(z_t, t, text_emb);
+        }
+        let b = z_t.dim(0)?;
+        let ctx = Tensor::cat(&[uncond_emb, text_emb], 0).map_err(|e| {
+            ModelError::InvalidInput(format!(
+                "text and empty-prompt embeddings differ in shape: {e}"
+            ))
+        })?;
+        let out = self.unet.forward(&Tensor::cat(&[z_t, z_t], 0)?, t, &ctx)?;
+        let u = out.narrow(0, 0, b)?;
+        let c = out.narrow(0, b, b)?;
+        Ok((&u + ((c - &u)? * guidance)?)?)
+    }
+
+    /// Classifier-free-guided noise prediction `ε̂(z_t, t)`; v-prediction models are converted
+    /// to ε. `guidance == 1` runs the conditional branch only.
+    pub fn predict_noise(
+        &self,
+        z_t: &Tensor,
+        t: usize,
+        text_emb: &Tensor,
+        uncond_emb: &Tensor,
+        guidance: f64,
+    ) -> Result<Tensor> {
+        let a = *self.alphas_cumprod.get(t).ok_or_else(|| {
+            ModelError::InvalidInput(format!(
+                "timestep {t} out of range 0..{}",
+                self.alphas_cumprod.len()
+            ))
+        })?;
+        let raw = self.guided_raw(z_t, t as f64, text_emb, uncond_emb, guidance)?;
+        Ok(split_prediction(self.prediction_type(), &raw, z_t, a)?.1)
+    }
+
+    /// Latent-space SDS gradient `w(t) (ε̂(z_t, t) − ε)` with `w(t) = 1 − ᾱ_t` and
+    /// `z_t = √ᾱ_t z + √(1−ᾱ_t) ε`.
+    pub fn sds_latent_grad(
+        &self,
+        latents: &Tensor,
+        t: usize,
+        noise: &Tensor,
+        text_emb: &Tensor,
+        uncond_emb: &Tensor,
+        guidance: f64,
+    ) -> Result<Tensor> {
+        let a = *self
+            .alphas_cumprod
+            .get(t)
+            .ok_or_else(|| ModelError::InvalidInput(format!("timestep {t} out of range")))?;
+        let z_t = ((latents * a.sqrt())? + (noise * (1.0 - a).sqrt())?)?;
+        let eps = self.predict_noise(&z_t, t, text_emb, uncond_emb, guidance)?;
+        Ok(((eps - noise)? * (1.0 - a))?)
+    }
+
+    /// Samples latents from `init_noise` (standard normal, `[b, 4, h, w]`) with CFG; returns the
+    /// latents after every step (the last one is the result).
+    pub fn sample(
+        &self,
+        init_noise: &Tensor,
+        text_emb: &Tensor,
+        uncond_emb: &Tensor,
+        guidance: f64,
+        steps: usize,
+        kind: SamplerKind,
+    ) -> Result<Vec<Tensor>> {
+        let s = Sampler::new(&self.scheduler, kind, steps)?;
+        let spacing = matches!(
+            self.scheduler.timestep_spacing.as_str(),
+            "trailing" | "linspace"
+        );
+        let mut x = (init_noise * s.init_noise_sigma(spacing))?;
+        let mut traj = Vec::with_capacity(steps);
+        for (i, &t) in s.timesteps.iter().enumerate() {
+            let inp = s.scale_model_input(&x, i)?;
+            let out = self.guided_raw(&inp, t, text_emb, uncond_emb, guidance)?;
+            x = s.step(&out, i, &x)?;
+            traj.push(x.clone());
+        }
+        Ok(traj)
+    }
+}

@@ -1,0 +1,116 @@
+//! Pruning: drop paths whose removal barely changes the render, and find faint or tiny paths.
+
+use crate::image::{Image, mse_rgb_over_white};
+use crate::losses::{outline, polygon_area};
+use crate::scene::Scene;
+
+/// Removes, one at a time from the top of the stack down, every path whose removal changes the
+/// render by less than `tolerance` (mean squared RGB difference over white). `render` draws a
+/// scene. Returns the indices (in the original scene) of the removed paths, ascending.
+pub fn prune_paths(
+    scene: &mut Scene,
+    tolerance: f64,
+    mut render: impl FnMut(&Scene) -> Image,
+) -> Vec<usize> {
+    let mut current = render(scene);
+    let mut alive: Vec<usize> = (0..scene.shapes.len()).collect();
+    let mut removed = Vec::new();
+    let mut i = scene.shapes.len();
+    while i > 0 {
+        i -= 1;
+        let mut trial = scene.clone();
+        trial.shapes.remove(i);
+        let img = render(&trial);
+        if mse_rgb_over_white(&img, &current) < tolerance {
+            *scene = trial;
+            current = img;
+            removed.push(alive.remove(i));
+        }
+    }
+    removed.sort_unstable();
+    removed
+}
+
+/// Indices of paths that are faint (fill opacity below `min_opacity`) or tiny (outline area
+/// below `min_area` square pixels): candidates for re-initialisation.
+pub fn weak_paths(scene: &Scene, min_opacity: f32, min_area: f32) -> Vec<usize> {
+    scene
+        .shapes
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| {
+            let faint = s.fill.is_none_or(|f| f.a < min_opacity);
+            let area = polygon_area(&outline(s, 8)).abs();
+            faint || area < min_area
+        })
+        .map(|(i, _)| i)
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::{Rgba, Shape};
+
+    /// Coverage-free "renderer" for the test: paints each square's bounding box.
+    fn boxes(scene: &Scene) -> Image {
+        let mut im = Image::filled(scene.width, scene.height, [1.0, 1.0, 1.0, 1.0]);
+        for s in &scene.shapes {
+            let (lo, hi) = s.control_bounds();
+            let f = s.fill.unwrap_or(Rgba::TRANSPARENT);
+            for y in lo.y.max(0.0) as u32..(hi.y as u32).min(scene.height) {
+                for x in lo.x.max(0.0) as u32..(hi.x as u32).min(scene.width) {
+                    let i = 4 * (y * scene.width + x) as usize;
+                    for c in 0..3 {
+                        let v = [f.r, f.g, f.b][c];
+                        im.data[i + c] = im.data[i + c] * (1.0 - f.a) + v * f.a;
+                    }
+                }
+            }
+        }
+        im
+    }
+
+    #[test]
+    fn prune_removes_hidden_and_invisible_paths_only() {
+        let mut scene = Scene::new(32, 32, Rgba::WHITE).unwrap();
+        let red = Rgba::new(1.0, 0.0, 0.0, 1.0);
+        // 0: hidden under 2; 1: visible; 2: covers 0; 3: white on white.
+        scene
+            .shapes
+            .push(Shape::square(4.0, 4.0, 4.0, Rgba::BLACK).unwrap());
+        scene
+            .shapes
+            .push(Shape::square(20.0, 20.0, 8.0, red).unwrap());
+        scene
+            .shapes
+            .push(Shape::square(2.0, 2.0, 10.0, red).unwrap());
+        scene
+            .shapes
+            .push(Shape::square(14.0, 2.0, 6.0, Rgba::WHITE).unwrap());
+        let before = boxes(&scene);
+        let removed = prune_paths(&mut scene, 1e-6, boxes);
+        assert_eq!(removed, vec![0, 3]);
+        assert_eq!(scene.shapes.len(), 2);
+        assert!(mse_rgb_over_white(&boxes(&scene), &before) < 1e-6);
+        // A large tolerance removes everything small enough.
+        let mut s2 = scene.clone();
+        let removed = prune_paths(&mut s2, 1.0, boxes);
+        assert_eq!(removed.len(), 2);
+    }
+
+    #[test]
+    fn weak_paths_finds_faint_and_tiny() {
+        let mut scene = Scene::new(64, 64, Rgba::WHITE).unwrap();
+        scene
+            .shapes
+            .push(Shape::circle(20.0, 20.0, 10.0, 4, Rgba::BLACK).unwrap());
+        scene
+            .shapes
+            .push(Shape::circle(40.0, 40.0, 10.0, 4, Rgba::new(0.0, 0.0, 0.0, 0.01)).unwrap());
+        scene
+            .shapes
+            .push(Shape::circle(10.0, 50.0, 3.0, 4, Rgba::BLACK).unwrap());
+        assert_eq!(weak_paths(&scene, 0.05, 64.0), vec![1, 2]);
+    }
+}

@@ -1,0 +1,5 @@
+//! Pipeline stages: pure functions of (inputs, config, progress sink, cancel flag) → scene.
+
+pub mod live;
+pub mod sds;
+pub mod styles;

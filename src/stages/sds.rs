@@ -1,0 +1,701 @@
+//! Latent score distillation (SDS / LSDS): optimise a vector scene so that a diffusion teacher
+//! finds its (augmented, encoded) render likely.
+//!
+//! One step: render (with a tape) → random perspective + crop ([`crate::augment`]) → encode →
+//! `t ~ U(t_min, t_max)`, `ε ~ N(0, I)`, `z_t = √ᾱ z + √(1−ᾱ) ε` → `ε̂` with classifier-free
+//! guidance → latent gradient `w(t)(ε̂ − ε)` → encoder VJP → augmentation VJP (+ image-space
+//! penalties) → rasteriser backward → gradient clipping → Adam with the paper's schedules.
+//!
+//! Guards: a non-finite gradient skips the step; non-finite parameters after a step are rolled
+//! back and the learning rate is halved. Both are counted in [`SdsStats`]; no NaN ever reaches the
+//! scene or an SVG. Faint paths (opacity < 0.05, optionally tiny area) are re-initialised every
+//! `reinit.every` steps until the last quarter. Progress events go to a [`ProgressSink`] with an
+//! SVG snapshot every `snapshot_every` steps; the [`CancelToken`] is polled between steps.
+//!
+//! The loop is generic over a [`Backend`] (render with tape, backward, SVG text) so it can be
+//! driven by the CPU rasteriser in production and by exact toy renderers in tests.
+
+#![allow(clippy::needless_range_loop)] // index loops read clearest in pixel code
+
+use super::styles::{Style, random_circle};
+use crate::augment::{AugmentConfig, AugmentError, Warp};
+use crate::image::Image;
+use crate::optim::{Adam, AdamConfig, GroupSchedules, StepOutcome};
+use crate::progress::{CancelToken, Progress, ProgressSink};
+use crate::scene::{ParamGroup, Params, Scene, SceneError, Trainable};
+use crate::teacher::{Conditioning, Latent, Teacher, TeacherError};
+use rand::{Rng, RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+/// What the SDS loop needs from a differentiable renderer.
+pub trait Backend {
+    /// Whatever the forward pass records for the backward pass.
+    type Tape;
+    /// Renders `scene` at its own size (premultiplied RGBA, background composited).
+    fn render_tape(&self, scene: &Scene) -> (Image, Self::Tape);
+    /// dL/d(params) from dL/d(rendered premultiplied RGBA data).
+    fn backward(&self, scene: &Scene, tape: &Self::Tape, d_image: &[f32]) -> Params;
+    /// SVG text for progress snapshots.
+    fn svg(&self, scene: &Scene) -> String;
+}
+
+/// The production backend: the CPU rasteriser ([`crate::raster`]) and SVG export
+/// ([`crate::svg`]).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct RasterBackend;
+
+impl RasterBackend {
+    /// SVG text of a scene with the default export options.
+    pub fn svg_text(scene: &Scene) -> String {
+        crate::svg::to_svg(scene, &crate::svg::SvgOptions::default())
+    }
+}
+
+impl Backend for RasterBackend {
+    type Tape = crate::raster::Tape;
+    fn render_tape(&self, scene: &Scene) -> (Image, Self::Tape) {
+        crate::raster::render_tape(scene)
+    }
+    fn backward(&self, scene: &Scene, tape: &Self::Tape, d_image: &[f32]) -> Params {
+        crate::raster::backward(scene, tape, d_image)
+    }
+    fn svg(&self, scene: &Scene) -> String {
+        Self::svg_text(scene)
+    }
+}
+
+/// Why SDS could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum SdsError {
+    #[error(transparent)]
+    Teacher(#[from] TeacherError),
+    #[error(transparent)]
+    Augment(#[from] AugmentError),
+    #[error(transparent)]
+    Scene(#[from] SceneError),
+    #[error("invalid SDS settings: {0}")]
+    Config(String),
+}
+
+/// The weighting `w(t)` of the SDS gradient.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Weighting {
+    /// `w(t) = 1 − ᾱ_t` (DreamFusion, VectorFusion).
+    OneMinusAlpha,
+    /// `w(t) = 1`.
+    Uniform,
+    /// `w(t) = √ᾱ_t · √(1 − ᾱ_t)`.
+    SqrtAlphaSigma,
+}
+
+impl Weighting {
+    pub fn weight(self, alpha_bar: f32) -> f32 {
+        match self {
+            Weighting::OneMinusAlpha => 1.0 - alpha_bar,
+            Weighting::Uniform => 1.0,
+            Weighting::SqrtAlphaSigma => (alpha_bar * (1.0 - alpha_bar)).sqrt(),
+        }
+    }
+}
+
+/// Re-initialisation of faint (and optionally tiny) closed paths.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ReinitConfig {
+    /// Check every this many steps.
+    pub every: u32,
+    /// Paths with fill opacity below this are re-initialised.
+    pub min_opacity: f32,
+    /// Paths whose control-polygon area is below this many px² are re-initialised too.
+    pub min_area: Option<f32>,
+    /// Stop re-initialising after this fraction of the steps (paper: the last quarter is left
+    /// alone → 0.75).
+    pub until_fraction: f32,
+}
+
+impl Default for ReinitConfig {
+    fn default() -> Self {
+        Self {
+            every: 50,
+            min_opacity: 0.05,
+            min_area: None,
+            until_fraction: 0.75,
+        }
+    }
+}
+
+/// SDS settings. [`SdsConfig::for_style`] gives the paper's defaults.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SdsConfig {
+    pub steps: u32,
+    /// Caption with style suffix (what the teacher is conditioned on).
+    pub prompt: String,
+    pub negative_prompt: String,
+    /// Timestep range `[t_min, t_max]` (inclusive) at the start …
+    pub t_min: usize,
+    pub t_max: usize,
+    /// … and `t_max` at the last step (linear annealing); `None` = no annealing.
+    pub t_max_end: Option<usize>,
+    pub guidance: f32,
+    pub weighting: Weighting,
+    /// Maximum L2 norm of the parameter gradient of each group (`None` = no clipping).
+    pub grad_clip: Option<f32>,
+    /// Augmentation (`None` = the render is only resized to the teacher's input size).
+    pub augment: Option<AugmentConfig>,
+    pub adam: AdamConfig,
+    pub schedules: GroupSchedules,
+    pub trainable: Trainable,
+    pub reinit: Option<ReinitConfig>,
+    /// Weight of the pixel-art saturation penalty `mean(R²+G²+B²)/3` on the render scaled to
+    /// `[-1, 1]` (paper: 0.05 for pixel art, 0 otherwise).
+    pub saturation_penalty: f32,
+    /// Weight of LIVE's Xing (self-intersection) loss on closed cubic paths (0 = off).
+    pub xing_weight: f32,
+    /// Send an SVG snapshot every this many steps (0 = only at the end).
+    pub snapshot_every: u32,
+    pub seed: u64,
+}
+
+impl SdsConfig {
+    /// The paper's settings for `style` over `steps` steps, with augmentation producing
+    /// `teacher_size` px encoder inputs (render at [`AugmentConfig::render_size`]).
+    pub fn for_style(style: Style, caption: &str, steps: u32, teacher_size: u32) -> Self {
+        Self {
+            steps,
+            prompt: style.prompt(caption),
+            negative_prompt: String::new(),
+            t_min: 50,
+            t_max: 950,
+            t_max_end: None,
+            guidance: 100.0,
+            weighting: Weighting::OneMinusAlpha,
+            grad_clip: None,
+            augment: Some(AugmentConfig::vectorfusion(teacher_size)),
+            adam: AdamConfig::default(),
+            schedules: style.schedules(steps),
+            trainable: style.trainable(),
+            reinit: style.reinit_faint_paths().then(ReinitConfig::default),
+            saturation_penalty: if style == Style::PixelArt { 0.05 } else { 0.0 },
+            xing_weight: if style == Style::Iconography {
+                0.01
+            } else {
+                0.0
+            },
+            snapshot_every: 50,
+            seed: 0,
+        }
+    }
+
+    /// The scene side to render at for a teacher of `teacher_size` px.
+    pub fn render_size(&self, teacher_size: u32) -> u32 {
+        self.augment
+            .as_ref()
+            .map_or(teacher_size, AugmentConfig::render_size)
+    }
+
+    fn validate(&self, num_timesteps: usize) -> Result<(), SdsError> {
+        let t_hi = self.t_max.max(self.t_max_end.unwrap_or(0));
+        if self.t_min > self.t_max || t_hi >= num_timesteps {
+            return Err(SdsError::Config(format!(
+                "timestep range [{}, {}] must be ordered and below {num_timesteps}",
+                self.t_min, t_hi
+            )));
+        }
+        if let Some(e) = self.t_max_end
+            && e < self.t_min
+        {
+            return Err(SdsError::Config("t_max_end must be >= t_min".into()));
+        }
+        if !self.guidance.is_finite() || self.grad_clip.is_some_and(|c| c.is_nan() || c <= 0.0) {
+            return Err(SdsError::Config(
+                "guidance must be finite and grad_clip positive".into(),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Counters of what the loop did.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct SdsStats {
+    pub steps_done: u32,
+    /// Steps skipped because a gradient held NaN/inf.
+    pub skipped_nonfinite: u32,
+    /// Times the parameters went non-finite, were rolled back and the lr halved.
+    pub lr_halvings: u32,
+    /// Paths re-initialised.
+    pub reinits: u32,
+    /// Steps whose gradient was clipped.
+    pub clipped: u32,
+    pub cancelled: bool,
+    /// Mean `w(t)·|ε̂ − ε|²` per latent element at the last step.
+    pub last_loss: f64,
+}
+
+/// The result of [`run_sds`].
+#[derive(Clone, Debug)]
+pub struct SdsOutcome {
+    pub scene: Scene,
+    pub stats: SdsStats,
+}
+
+/// Standard normal sample (Box–Muller).
+pub fn gaussian<R: Rng>(rng: &mut R) -> f32 {
+    let u1: f64 = rng.random::<f64>().max(1e-12);
+    let u2: f64 = rng.random::<f64>();
+    ((-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()) as f32
+}
+
+/// The SDS latent gradient `w(t)(ε̂ − ε)` for an encoded latent `z`, timestep `t` and noise `ε`.
+/// Returns the gradient and the mean `w·|ε̂ − ε|²`.
+pub fn sds_latent_grad(
+    teacher: &dyn Teacher,
+    z: &Latent,
+    t: usize,
+    noise: &[f32],
+    cond: &Conditioning,
+    guidance: f32,
+    weighting: Weighting,
+) -> Result<(Latent, f64), SdsError> {
+    let ab = *teacher
+        .alphas_cumprod()
+        .get(t)
+        .ok_or(TeacherError::Timestep {
+            t,
+            max: teacher.alphas_cumprod().len(),
+        })?;
+    if noise.len() != z.len() {
+        return Err(SdsError::Config("noise length differs from latent".into()));
+    }
+    let (sa, s) = (ab.sqrt(), (1.0 - ab).sqrt());
+    let z_t = Latent {
+        shape: z.shape,
+        data: z
+            .data
+            .iter()
+            .zip(noise)
+            .map(|(z, e)| sa * z + s * e)
+            .collect(),
+    };
+    let eps_hat = teacher.predict_noise(&z_t, t, cond, guidance)?;
+    let w = weighting.weight(ab);
+    let mut loss = 0.0f64;
+    let data = eps_hat
+        .data
+        .iter()
+        .zip(noise)
+        .map(|(h, e)| {
+            let d = h - e;
+            loss += (w * d * d) as f64;
+            w * d
+        })
+        .collect();
+    let n = z.len().max(1) as f64;
+    Ok((
+        Latent {
+            shape: z.shape,
+            data,
+        },
+        loss / n,
+    ))
+}
+
+/// The SDS image-space gradient for a fixed teacher input image, `t` and noise: encode, latent
+/// gradient, encoder VJP. Returns dL/d(image data) and the loss value.
+pub fn sds_image_grad(
+    teacher: &dyn Teacher,
+    image: &Image,
+    t: usize,
+    noise: &[f32],
+    cond: &Conditioning,
+    guidance: f32,
+    weighting: Weighting,
+) -> Result<(Vec<f32>, f64), SdsError> {
+    let z = teacher.encode(image)?;
+    let (gz, loss) = sds_latent_grad(teacher, &z, t, noise, cond, guidance, weighting)?;
+    Ok((teacher.encode_vjp(image, &gz)?, loss))
+}
+
+/// Adds the gradient of `weight · mean_pixels((R²+G²+B²)/3)` (image composited over white and
+/// scaled to `[-1, 1]`) to `d_image` and returns the penalty value.
+pub fn saturation_penalty(image: &Image, weight: f32, d_image: &mut [f32]) -> f64 {
+    let n = image.len_pixels().max(1) as f32;
+    let mut total = 0.0f64;
+    for (p, d) in image.data.chunks_exact(4).zip(d_image.chunks_exact_mut(4)) {
+        for c in 0..3 {
+            let y = 2.0 * (p[c] + 1.0 - p[3]) - 1.0;
+            total += (y * y) as f64;
+            // d/dy = 2y·w/(3n); dy/dp_c = 2, dy/dp_a = −2.
+            let g = 2.0 * y * weight / (3.0 * n) * 2.0;
+            d[c] += g;
+            d[3] -= g;
+        }
+    }
+    weight as f64 * total / (3.0 * n as f64)
+}
+
+fn scaled_schedules(s: &GroupSchedules, k: f32) -> GroupSchedules {
+    GroupSchedules {
+        points: s.points.scaled(k),
+        fill: s.fill.scaled(k),
+        stroke: s.stroke.scaled(k),
+        width: s.width.scaled(k),
+        background: s.background.scaled(k),
+    }
+}
+
+/// Clips each group's gradient to an L2 norm of at most `max`; returns whether anything changed.
+fn clip_groups(g: &mut Params, max: f32) -> bool {
+    let mut clipped = false;
+    for grp in ParamGroup::ALL {
+        let v = g.get_mut(grp);
+        let norm = v.iter().map(|x| (x * x) as f64).sum::<f64>().sqrt() as f32;
+        if norm > max {
+            let k = max / norm;
+            v.iter_mut().for_each(|x| *x *= k);
+            clipped = true;
+        }
+    }
+    clipped
+}
+
+/// Shoelace area of a shape's control polygon.
+fn control_area(points: &[crate::scene::Point]) -> f32 {
+    let n = points.len();
+    let mut a = 0.0;
+    for i in 0..n {
+        let (p, q) = (points[i], points[(i + 1) % n]);
+        a += p.x * q.y - q.x * p.y;
+    }
+    0.5 * a.abs()
+}
+
+/// Re-initialises faint / tiny closed cubic paths in place (new random circle) and resets their
+/// Adam moments. Returns the number re-initialised.
+fn reinit_faint<R: Rng>(
+    scene: &mut Scene,
+    params: &mut Params,
+    adam: &mut Adam,
+    cfg: &ReinitConfig,
+    rng: &mut R,
+) -> Result<u32, SdsError> {
+    let mut count = 0;
+    let mut fill_idx = 0usize;
+    let size = scene.width.min(scene.height);
+    for i in 0..scene.shapes.len() {
+        let sh = &scene.shapes[i];
+        let Some(fill) = sh.fill else { continue };
+        let faint = fill.a < cfg.min_opacity
+            || cfg
+                .min_area
+                .is_some_and(|m| sh.is_closed() && control_area(&sh.points) < m);
+        let same_layout = sh.kind == crate::scene::ShapeKind::ClosedCubic && sh.points.len() == 12;
+        if faint && same_layout {
+            let fresh = random_circle(size, rng)?;
+            let off = Params::point_offset(scene, i);
+            let np = 2 * fresh.points.len();
+            let pts = params.get_mut(ParamGroup::Points);
+            for (k, p) in fresh.points.iter().enumerate() {
+                pts[off + 2 * k] = p.x;
+                pts[off + 2 * k + 1] = p.y;
+            }
+            if let Some(f) = fresh.fill {
+                params.get_mut(ParamGroup::Fill)[4 * fill_idx..4 * fill_idx + 4]
+                    .copy_from_slice(&f.to_array());
+            }
+            adam.reset_range(ParamGroup::Points, off..off + np);
+            adam.reset_range(ParamGroup::Fill, 4 * fill_idx..4 * fill_idx + 4);
+            scene.shapes[i] = fresh;
+            count += 1;
+        }
+        fill_idx += 1;
+    }
+    Ok(count)
+}
+
+/// Runs SDS on `scene` (rendered at its own size) with `teacher`. The scene should be
+/// [`SdsConfig::render_size`] px wide for the teacher's input size.
+pub fn run_sds<B: Backend>(
+    backend: &B,
+    teacher: &dyn Teacher,
+    mut scene: Scene,
+    cfg: &SdsConfig,
+    sink: &dyn ProgressSink,
+    cancel: &CancelToken,
+) -> Result<SdsOutcome, SdsError> {
+    scene.validate()?;
+    let alphas = teacher.alphas_cumprod().to_vec();
+    cfg.validate(alphas.len())?;
+    let cond = teacher.condition(&cfg.prompt, &cfg.negative_prompt)?;
+    let size = teacher.image_size();
+    let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);
+    let mut params = Params::from_scene(&scene);
+    let mut adam = Adam::new(
+        &params,
+        cfg.adam.clone(),
+        cfg.schedules.clone(),
+        cfg.trainable,
+    );
+    let mut lr_scale = 1.0f32;
+    let mut stats = SdsStats::default();
+    // Deterministic resize when not augmenting and the render is not the teacher's size.
+    let identity = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
+    let resize =
+        (cfg.augment.is_none() && (scene.width != size || scene.height != size)).then(|| {
+            Warp::build(
+                scene.width,
+                scene.height,
+                size,
+                size,
+                &identity,
+                0.0,
+                0.0,
+                scene.width as f64,
+                scene.height as f64,
+                [1.0; 4],
+                false,
+            )
+        });
+    let reinit_until = cfg
+        .reinit
+        .as_ref()
+        .map_or(0, |r| (r.until_fraction * cfg.steps as f32) as u32);
+    let latent_len: usize = teacher.latent_shape().iter().product();
+
+    for step in 0..cfg.steps {
+        if cancel.is_cancelled() {
+            stats.cancelled = true;
+            break;
+        }
+        let (render, tape) = backend.render_tape(&scene);
+        let warp = match &cfg.augment {
+            Some(a) => Some(Warp::sample(a, render.width, render.height, &mut rng)?),
+            None => resize.clone(),
+        };
+        let input = match &warp {
+            Some(w) => w.apply(&render)?,
+            None => render.clone(),
+        };
+        let t_max = match cfg.t_max_end {
+            Some(end) if cfg.steps > 1 => {
+                let f = step as f32 / (cfg.steps - 1) as f32;
+                (cfg.t_max as f32 + (end as f32 - cfg.t_max as f32) * f).round() as usize
+            }
+            _ => cfg.t_max,
+        }
+        .max(cfg.t_min);
+        let t = rng.random_range(cfg.t_min..=t_max);
+        let noise: Vec<f32> = (0..latent_len).map(|_| gaussian(&mut rng)).collect();
+        let (d_input, loss) = sds_image_grad(
+            teacher,
+            &input,
+            t,
+            &noise,
+            &cond,
+            cfg.guidance,
+            cfg.weighting,
+        )?;
+        let mut d_render = match &warp {
+            Some(w) => w.vjp(&d_input)?,
+            None => d_input,
+        };
+        if cfg.saturation_penalty > 0.0 {
+            saturation_penalty(&render, cfg.saturation_penalty, &mut d_render);
+        }
+        let mut grad = backend.backward(&scene, &tape, &d_render);
+        if cfg.xing_weight > 0.0 {
+            // LIVE's Xing loss on closed cubic paths keeps them free of self-intersections.
+            for (i, sh) in scene.shapes.iter().enumerate() {
+                if sh.kind == crate::scene::ShapeKind::ClosedCubic {
+                    crate::losses::xing_loss(&scene, i..i + 1, cfg.xing_weight, &mut grad);
+                }
+            }
+        }
+        grad.mask(&cfg.trainable);
+        if let Some(c) = cfg.grad_clip
+            && grad.all_finite()
+            && clip_groups(&mut grad, c)
+        {
+            stats.clipped += 1;
+        }
+        let before = params.clone();
+        match adam.step(&mut params, &grad) {
+            StepOutcome::SkippedNonFinite => stats.skipped_nonfinite += 1,
+            StepOutcome::Applied => {
+                if params.all_finite() {
+                    params.write_to(&mut scene)?;
+                    // Keep params consistent with the clamped scene.
+                    params = Params::from_scene(&scene);
+                } else {
+                    params = before;
+                    lr_scale *= 0.5;
+                    adam.schedules = scaled_schedules(&cfg.schedules, lr_scale);
+                    stats.lr_halvings += 1;
+                }
+            }
+        }
+        stats.last_loss = loss;
+        stats.steps_done = step + 1;
+        if let Some(r) = &cfg.reinit
+            && r.every > 0
+            && (step + 1) % r.every == 0
+            && step + 1 < reinit_until
+        {
+            let n = reinit_faint(&mut scene, &mut params, &mut adam, r, &mut rng)?;
+            stats.reinits += n;
+        }
+        let mut ev = Progress::new("sds", step + 1, cfg.steps);
+        ev.loss = Some(loss);
+        if cfg.snapshot_every > 0 && (step + 1) % cfg.snapshot_every == 0 {
+            ev.svg = Some(backend.svg(&scene));
+        }
+        if stats.skipped_nonfinite + stats.lr_halvings > 0 {
+            ev.detail = Some(serde_json::json!({
+                "skipped_nonfinite": stats.skipped_nonfinite,
+                "lr_halvings": stats.lr_halvings,
+            }));
+        }
+        sink.report(ev);
+    }
+    scene.validate()?;
+    let mut ev = Progress::new("sds", stats.steps_done, cfg.steps);
+    ev.loss = Some(stats.last_loss);
+    ev.svg = Some(backend.svg(&scene));
+    ev.detail = Some(serde_json::to_value(&stats).unwrap_or_default());
+    sink.report(ev);
+    Ok(SdsOutcome { scene, stats })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::optim::LrSchedule;
+    use crate::scene::{Rgba, Shape};
+
+    #[test]
+    fn saturation_penalty_gradient_matches_finite_differences() {
+        let mut rng = ChaCha8Rng::seed_from_u64(1);
+        let mut im = Image::new(5, 4);
+        for px in im.data.chunks_exact_mut(4) {
+            let a: f32 = rng.random_range(0.2..1.0);
+            for c in 0..3 {
+                px[c] = a * rng.random::<f32>();
+            }
+            px[3] = a;
+        }
+        let mut g = vec![0.0; im.data.len()];
+        let v = saturation_penalty(&im, 0.05, &mut g);
+        assert!(v > 0.0);
+        for i in 0..im.data.len() {
+            let h = 1e-3;
+            let (mut p, mut m) = (im.clone(), im.clone());
+            p.data[i] += h;
+            m.data[i] -= h;
+            let mut scratch = vec![0.0; im.data.len()];
+            let fd = (saturation_penalty(&p, 0.05, &mut scratch)
+                - saturation_penalty(&m, 0.05, &mut scratch))
+                / (2.0 * h as f64);
+            assert!((fd - g[i] as f64).abs() < 1e-5, "i={i} fd={fd} an={}", g[i]);
+        }
+        // Black (saturated) costs 0.05, mid-grey costs 0.
+        let mut z = vec![0.0; 4];
+        let black = Image::filled(1, 1, [0.0, 0.0, 0.0, 1.0]);
+        assert!((saturation_penalty(&black, 0.05, &mut z) - 0.05).abs() < 1e-6);
+        let grey = Image::filled(1, 1, [0.5, 0.5, 0.5, 1.0]);
+        assert!(saturation_penalty(&grey, 0.05, &mut z).abs() < 1e-9);
+    }
+
+    #[test]
+    fn faint_and_tiny_paths_are_reinitialised_with_fresh_moments() {
+        let mut scene = Scene::new(64, 64, Rgba::WHITE).unwrap();
+        let c = |a| Shape::circle(20.0, 20.0, 8.0, 4, Rgba::new(0.5, 0.5, 0.5, a)).unwrap();
+        scene.shapes.push(c(0.9));
+        scene.shapes.push(c(0.01));
+        scene
+            .shapes
+            .push(Shape::circle(5.0, 5.0, 1.0, 4, Rgba::BLACK).unwrap());
+        let mut params = Params::from_scene(&scene);
+        let sched = Style::Iconography.schedules(100);
+        let mut adam = Adam::new(
+            &params,
+            AdamConfig::default(),
+            sched,
+            Style::Iconography.trainable(),
+        );
+        let mut g = params.clone();
+        g.get_mut(ParamGroup::Points).fill(1.0);
+        g.get_mut(ParamGroup::Fill).fill(1.0);
+        adam.step(&mut params.clone(), &g);
+        let mut rng = ChaCha8Rng::seed_from_u64(2);
+        let cfg = ReinitConfig::default();
+        let before = scene.clone();
+        let n = reinit_faint(&mut scene, &mut params, &mut adam, &cfg, &mut rng).unwrap();
+        assert_eq!(n, 1);
+        assert_eq!(scene.shapes[0], before.shapes[0]);
+        assert_ne!(scene.shapes[1], before.shapes[1]);
+        assert!(scene.shapes[1].fill.unwrap().a >= 0.7);
+        assert_eq!(params, Params::from_scene(&scene));
+        let cfg = ReinitConfig {
+            min_area: Some(16.0),
+            ..cfg
+        };
+        let n = reinit_faint(&mut scene, &mut params, &mut adam, &cfg, &mut rng).unwrap();
+        assert_eq!(n, 1, "the r=1 circle has area < 16 px²");
+        assert_eq!(params, Params::from_scene(&scene));
+    }
+
+    #[test]
+    fn clipping_bounds_each_group_norm() {
+        let mut scene = Scene::new(8, 8, Rgba::WHITE).unwrap();
+        scene
+            .shapes
+            .push(Shape::circle(4.0, 4.0, 2.0, 4, Rgba::BLACK).unwrap());
+        let mut g = Params::from_scene(&scene);
+        assert!(clip_groups(&mut g, 1.0));
+        for grp in ParamGroup::ALL {
+            let n: f32 = g.get(grp).iter().map(|x| x * x).sum::<f32>().sqrt();
+            assert!(n <= 1.0 + 1e-5);
+        }
+        let mut small = Params::zeros_like(&scene);
+        assert!(!clip_groups(&mut small, 1.0));
+    }
+
+    #[test]
+    fn config_validation_and_style_defaults() {
+        let cfg = SdsConfig::for_style(Style::PixelArt, "a cat", 1000, 512);
+        assert_eq!(cfg.prompt, "a cat. pixel art. trending on artstation");
+        assert_eq!(cfg.saturation_penalty, 0.05);
+        assert!(cfg.reinit.is_none());
+        assert_eq!(cfg.render_size(512), 600);
+        assert!(cfg.validate(1000).is_ok());
+        let mut bad = cfg.clone();
+        bad.t_max_end = Some(10);
+        assert!(bad.validate(1000).is_err());
+        bad.t_max_end = None;
+        bad.grad_clip = Some(0.0);
+        assert!(bad.validate(1000).is_err());
+        let icon = SdsConfig::for_style(Style::Iconography, "a cat", 1000, 512);
+        assert_eq!(icon.reinit, Some(ReinitConfig::default()));
+        assert_eq!(
+            icon.schedules.points,
+            LrSchedule::WarmupCosine {
+                start: 0.02,
+                peak: 0.2,
+                warmup: 500,
+                end: 0.05,
+                total: 1000
+            }
+        );
+        assert!((Weighting::OneMinusAlpha.weight(0.25) - 0.75).abs() < 1e-7);
+    }
+
+    #[test]
+    fn gaussian_has_unit_moments() {
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let xs: Vec<f64> = (0..20000).map(|_| gaussian(&mut rng) as f64).collect();
+        let m = xs.iter().sum::<f64>() / xs.len() as f64;
+        let v = xs.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / xs.len() as f64;
+        assert!(m.abs() < 0.03 && (v - 1.0).abs() < 0.05, "{m} {v}");
+    }
+}

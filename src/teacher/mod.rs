@@ -1,0 +1,152 @@
+//! The score-distillation teacher interface: what SDS needs from a diffusion model.
+//!
+//! A [`Teacher`] encodes an image into a latent (with an exact vector-Jacobian product back to the
+//! image), exposes its noise schedule (`alphas_cumprod`), and predicts the noise in a noised latent
+//! with classifier-free guidance. [`sd::SdTeacher`] wraps Stable Diffusion (VAE encoder); [`analytic::AnalyticTeacher`] is an exact **test teacher** (the optimal denoiser of a
+//! small fixed set of target images) used to prove that distillation converges end to end without
+//! pretrained weights.
+
+pub mod analytic;
+pub mod sd;
+
+pub use analytic::{AnalyticTeacher, AnalyticTeacherConfig};
+pub use sd::SdTeacher;
+
+use crate::image::Image;
+
+/// Why a teacher call failed.
+#[derive(Debug, thiserror::Error)]
+pub enum TeacherError {
+    #[error("image is {got_w}x{got_h}, the teacher expects {want_w}x{want_h}")]
+    ImageSize {
+        got_w: u32,
+        got_h: u32,
+        want_w: u32,
+        want_h: u32,
+    },
+    #[error("latent has shape {got:?}, the teacher expects {want:?}")]
+    LatentShape { got: [usize; 3], want: [usize; 3] },
+    #[error("timestep {t} is out of range 0..{max}")]
+    Timestep { t: usize, max: usize },
+    #[error("invalid teacher setup: {0}")]
+    Setup(String),
+    #[error("teacher I/O: {0}")]
+    Io(String),
+    #[error("model error: {0}")]
+    Model(String),
+}
+
+/// A `C x H x W` latent tensor (row-major, channel planes).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Latent {
+    pub shape: [usize; 3],
+    pub data: Vec<f32>,
+}
+
+impl Latent {
+    pub fn zeros(shape: [usize; 3]) -> Self {
+        Self {
+            shape,
+            data: vec![0.0; shape[0] * shape[1] * shape[2]],
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        self.data.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.data.is_empty()
+    }
+
+    pub fn all_finite(&self) -> bool {
+        self.data.iter().all(|v| v.is_finite())
+    }
+}
+
+/// Text conditioning prepared once per job by [`Teacher::condition`].
+///
+/// Model teachers keep their text embeddings here (`cond` and `uncond`, flattened, with
+/// `embed_shape`); the analytic test teacher keeps only the prompt (and may select a target by it).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Conditioning {
+    pub prompt: String,
+    pub negative_prompt: String,
+    pub embed_shape: Vec<usize>,
+    pub cond: Vec<f32>,
+    pub uncond: Vec<f32>,
+}
+
+/// A diffusion model seen through the needs of score distillation.
+pub trait Teacher: Send + Sync {
+    /// Short human-readable name (the analytic teacher says it is a test teacher).
+    fn name(&self) -> String;
+
+    /// Whether this is a test teacher (not a generative model).
+    fn is_test_teacher(&self) -> bool {
+        false
+    }
+
+    /// Side of the square image the encoder expects, in pixels.
+    fn image_size(&self) -> u32;
+
+    /// Latent shape `[C, H, W]` produced by [`Teacher::encode`].
+    fn latent_shape(&self) -> [usize; 3];
+
+    /// `ᾱ_t` for `t = 0..T` (DDPM training schedule).
+    fn alphas_cumprod(&self) -> &[f32];
+
+    /// Prepares text conditioning for a caption (and negative prompt).
+    fn condition(&self, prompt: &str, negative_prompt: &str) -> Result<Conditioning, TeacherError>;
+
+    /// Encodes a premultiplied RGBA image of side [`Teacher::image_size`] into a latent.
+    fn encode(&self, image: &Image) -> Result<Latent, TeacherError>;
+
+    /// Vector-Jacobian product of [`Teacher::encode`] at `image`: returns dL/d(image data)
+    /// (length `4 * w * h`, premultiplied RGBA layout) given dL/d(latent).
+    fn encode_vjp(&self, image: &Image, d_latent: &Latent) -> Result<Vec<f32>, TeacherError>;
+
+    /// Predicts the noise in `z_t` at timestep `t` with classifier-free guidance
+    /// `ε̂ = ε_u + guidance · (ε_c − ε_u)`.
+    fn predict_noise(
+        &self,
+        z_t: &Latent,
+        t: usize,
+        cond: &Conditioning,
+        guidance: f32,
+    ) -> Result<Latent, TeacherError>;
+}
+
+/// The scaled-linear `ᾱ` schedule of Stable Diffusion (β from 0.00085 to 0.012 over 1000 steps,
+/// linear in √β), computed in f64.
+pub fn sd_alphas_cumprod(num_train_timesteps: usize) -> Vec<f32> {
+    let (b0, b1) = (0.00085f64.sqrt(), 0.012f64.sqrt());
+    let n = num_train_timesteps.max(1);
+    let mut acc = 1.0f64;
+    (0..n)
+        .map(|i| {
+            let s = if n == 1 {
+                b0
+            } else {
+                b0 + (b1 - b0) * i as f64 / (n - 1) as f64
+            };
+            acc *= 1.0 - s * s;
+            acc as f32
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sd_schedule_endpoints() {
+        let a = sd_alphas_cumprod(1000);
+        assert_eq!(a.len(), 1000);
+        assert!((a[0] - (1.0 - 0.00085)).abs() < 1e-6);
+        // diffusers' final ᾱ for SD 1.x is ≈ 0.0047.
+        assert!((a[999] - 0.00466).abs() < 2e-4, "{}", a[999]);
+        assert!(a.windows(2).all(|w| w[1] < w[0]));
+    }
+}

@@ -1,0 +1,222 @@
+//! Stable Diffusion as an SDS [`Teacher`]: the VAE encoder (fp32) with its VJP, the UNet with
+//! classifier-free guidance and the CLIP text encoder, from [`crate::models::StableDiffusion`].
+//!
+//! Images cross the boundary composited over white as `[1, 3, H, W]` tensors in `[0, 1]`; the
+//! image gradient is mapped back to premultiplied RGBA (`d/dα = −Σ_c d/dc`).
+
+use super::{Conditioning, Latent, Teacher, TeacherError};
+use crate::image::Image;
+use crate::models::{LoadOptions, StableDiffusion};
+use candle_core::{DType, Tensor};
+use std::path::Path;
+
+/// Stable Diffusion behind the [`Teacher`] interface.
+pub struct SdTeacher {
+    sd: StableDiffusion,
+    image_size: u32,
+    latent_shape: [usize; 3],
+    alphas: Vec<f32>,
+}
+
+fn model_err(e: impl std::fmt::Display) -> TeacherError {
+    TeacherError::Model(e.to_string())
+}
+
+impl SdTeacher {
+    /// Loads a diffusers directory; `image_size` is the encoder input side (512 for SD 1.x).
+    pub fn load(dir: &Path, image_size: u32) -> Result<Self, TeacherError> {
+        let opts = LoadOptions {
+            allow_download: false,
+            ..LoadOptions::default()
+        };
+        let sd = StableDiffusion::load(dir, &opts).map_err(model_err)?;
+        Self::new(sd, image_size)
+    }
+
+    /// Wraps an already built model (benchmarks use random weights).
+    pub fn new(sd: StableDiffusion, image_size: u32) -> Result<Self, TeacherError> {
+        let cfg = &sd.vae.config;
+        let down = 1usize << cfg.block_out_channels.len().saturating_sub(1);
+        if image_size == 0 || image_size as usize % down != 0 {
+            return Err(TeacherError::Setup(format!(
+                "image size {image_size} must be a positive multiple of the VAE's downsampling {down}"
+            )));
+        }
+        let s = image_size as usize / down;
+        let latent_shape = [cfg.latent_channels, s, s];
+        let alphas = sd.alphas_cumprod().iter().map(|&a| a as f32).collect();
+        Ok(Self {
+            sd,
+            image_size,
+            latent_shape,
+            alphas,
+        })
+    }
+
+    pub fn model(&self) -> &StableDiffusion {
+        &self.sd
+    }
+
+    fn image_tensor(&self, image: &Image) -> Result<Tensor, TeacherError> {
+        let s = self.image_size;
+        if image.width != s || image.height != s || image.data.len() != 4 * (s * s) as usize {
+            return Err(TeacherError::ImageSize {
+                got_w: image.width,
+                got_h: image.height,
+                want_w: s,
+                want_h: s,
+            });
+        }
+        let n = (s * s) as usize;
+        let mut planar = vec![0.0f32; 3 * n];
+        for (i, p) in image.data.chunks_exact(4).enumerate() {
+            for c in 0..3 {
+                planar[c * n + i] = p[c] + 1.0 - p[3];
+            }
+        }
+        Tensor::from_vec(planar, (1, 3, s as usize, s as usize), self.sd.device())
+            .map_err(model_err)
+    }
+
+    fn latent_tensor(&self, z: &Latent) -> Result<Tensor, TeacherError> {
+        if z.shape != self.latent_shape || z.data.len() != z.shape.iter().product::<usize>() {
+            return Err(TeacherError::LatentShape {
+                got: z.shape,
+                want: self.latent_shape,
+            });
+        }
+        let [c, h, w] = z.shape;
+        Tensor::from_vec(z.data.clone(), (1, c, h, w), self.sd.device()).map_err(model_err)
+    }
+
+    fn to_latent(&self, t: &Tensor) -> Result<Latent, TeacherError> {
+        let data = t
+            .to_dtype(DType::F32)
+            .and_then(|t| t.flatten_all())
+            .and_then(|t| t.to_vec1::<f32>())
+            .map_err(model_err)?;
+        if data.len() != self.latent_shape.iter().product::<usize>() {
+            return Err(TeacherError::Model(format!(
+                "model returned {} latent values, expected shape {:?}",
+                data.len(),
+                self.latent_shape
+            )));
+        }
+        Ok(Latent {
+            shape: self.latent_shape,
+            data,
+        })
+    }
+
+    fn embedding(&self, data: &[f32], shape: &[usize]) -> Result<Tensor, TeacherError> {
+        if shape.is_empty() || shape.iter().product::<usize>() != data.len() {
+            return Err(TeacherError::Setup(
+                "conditioning has no text embeddings for this model (use Teacher::condition)"
+                    .into(),
+            ));
+        }
+        Tensor::from_vec(data.to_vec(), shape, self.sd.device()).map_err(model_err)
+    }
+}
+
+fn flat(t: &Tensor) -> Result<(Vec<f32>, Vec<usize>), TeacherError> {
+    let dims = t.dims().to_vec();
+    let v = t
+        .to_dtype(DType::F32)
+        .and_then(|t| t.flatten_all())
+        .and_then(|t| t.to_vec1::<f32>())
+        .map_err(model_err)?;
+    Ok((v, dims))
+}
+
+impl Teacher for SdTeacher {
+    fn name(&self) -> String {
+        format!("Stable Diffusion (VAE encoder, {} px)", self.image_size)
+    }
+
+    fn image_size(&self) -> u32 {
+        self.image_size
+    }
+
+    fn latent_shape(&self) -> [usize; 3] {
+        self.latent_shape
+    }
+
+    fn alphas_cumprod(&self) -> &[f32] {
+        &self.alphas
+    }
+
+    fn condition(&self, prompt: &str, negative_prompt: &str) -> Result<Conditioning, TeacherError> {
+        let cond = self.sd.embed_text(prompt).map_err(model_err)?;
+        let uncond = self.sd.embed_text(negative_prompt).map_err(model_err)?;
+        let (c, shape) = flat(&cond)?;
+        let (u, ushape) = flat(&uncond)?;
+        if shape != ushape {
+            return Err(TeacherError::Model(
+                "prompt and negative-prompt embeddings differ in shape".into(),
+            ));
+        }
+        Ok(Conditioning {
+            prompt: prompt.to_string(),
+            negative_prompt: negative_prompt.to_string(),
+            embed_shape: shape,
+            cond: c,
+            uncond: u,
+        })
+    }
+
+    fn encode(&self, image: &Image) -> Result<Latent, TeacherError> {
+        let x = self.image_tensor(image)?;
+        let z = self.sd.encode(&x).map_err(model_err)?;
+        self.to_latent(&z)
+    }
+
+    fn encode_vjp(&self, image: &Image, d_latent: &Latent) -> Result<Vec<f32>, TeacherError> {
+        let x = self.image_tensor(image)?;
+        let dz = self.latent_tensor(d_latent)?;
+        let dx = self.sd.encode_vjp(&x, &dz).map_err(model_err)?;
+        let (dx, _) = flat(&dx)?;
+        let n = (self.image_size * self.image_size) as usize;
+        if dx.len() != 3 * n {
+            return Err(TeacherError::Model(format!(
+                "encoder VJP returned {} values, expected {}",
+                dx.len(),
+                3 * n
+            )));
+        }
+        let mut out = vec![0.0f32; 4 * n];
+        for i in 0..n {
+            let mut da = 0.0;
+            for c in 0..3 {
+                let g = dx[c * n + i];
+                out[4 * i + c] = g;
+                da -= g;
+            }
+            out[4 * i + 3] = da;
+        }
+        Ok(out)
+    }
+
+    fn predict_noise(
+        &self,
+        z_t: &Latent,
+        t: usize,
+        cond: &Conditioning,
+        guidance: f32,
+    ) -> Result<Latent, TeacherError> {
+        if t >= self.alphas.len() {
+            return Err(TeacherError::Timestep {
+                t,
+                max: self.alphas.len(),
+            });
+        }
+        let z = self.latent_tensor(z_t)?;
+        let c = self.embedding(&cond.cond, &cond.embed_shape)?;
+        let u = self.embedding(&cond.uncond, &cond.embed_shape)?;
+        let eps = self
+            .sd
+            .predict_noise(&z, t, &c, &u, guidance as f64)
+            .map_err(model_err)?;
+        self.to_latent(&eps)
+    }
+}

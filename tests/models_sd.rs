@@ -1,0 +1,371 @@
+//! Equivalence of the Stable Diffusion components with diffusers on the tiny fixtures
+//! produced by `scripts/make_sd_fixtures.py` (fp32, max abs error ≤ 1e-4).
+
+use candle_core::{DType, Device, Tensor};
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use vectorfusion::models::pipeline::{load_scheduler, load_unet};
+use vectorfusion::models::scheduler::SamplerKind;
+use vectorfusion::models::taesd::Taesd;
+use vectorfusion::models::{LoadOptions, ModelError, Precision, StableDiffusion};
+
+fn fixture(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/fixtures")
+        .join(name)
+}
+
+fn refs(name: &str) -> HashMap<String, Tensor> {
+    candle_core::safetensors::load(fixture(name).join("refs.safetensors"), &Device::Cpu).unwrap()
+}
+
+fn max_abs(a: &Tensor, b: &Tensor) -> f32 {
+    assert_eq!(a.dims(), b.dims(), "shape mismatch");
+    (a.to_dtype(DType::F32).unwrap() - b.to_dtype(DType::F32).unwrap())
+        .unwrap()
+        .abs()
+        .unwrap()
+        .flatten_all()
+        .unwrap()
+        .max(0)
+        .unwrap()
+        .to_scalar::<f32>()
+        .unwrap()
+}
+
+fn scale(a: &Tensor) -> f32 {
+    a.abs()
+        .unwrap()
+        .flatten_all()
+        .unwrap()
+        .max(0)
+        .unwrap()
+        .to_scalar::<f32>()
+        .unwrap()
+}
+
+fn assert_close(name: &str, got: &Tensor, want: &Tensor, tol: f32) {
+    let e = max_abs(got, want);
+    assert!(
+        e <= tol,
+        "{name}: max abs err {e} > {tol} (ref scale {})",
+        scale(want)
+    );
+    assert!(scale(want) > 1e-3, "{name}: reference is trivially small");
+}
+
+/// Comparisons that go through the UNet's GEGLU: candle-transformers uses the tanh GELU
+/// approximation where diffusers uses the exact one (isolated by
+/// `unet_matches_diffusers_up_to_the_gelu_approximation`, which holds at 1e-4), so these allow
+/// a relative 2e-4 of the output scale.
+fn assert_close_gelu(name: &str, got: &Tensor, want: &Tensor) {
+    let tol = 2e-4 * scale(want).max(1.0);
+    assert_close(name, got, want, tol);
+}
+
+fn sd() -> StableDiffusion {
+    StableDiffusion::load(&fixture("sd-tiny"), &LoadOptions::default()).unwrap()
+}
+
+#[test]
+fn unet_matches_exact_gelu_diffusers_within_documented_tolerance() {
+    let sd = sd();
+    let r = refs("sd-tiny");
+    let (z, cond, uncond) = (&r["unet.z"], &r["text.cond"], &r["text.uncond"]);
+    for t in [999usize, 500, 10] {
+        let out = sd.unet.forward(z, t as f64, cond).unwrap();
+        assert_close_gelu(&format!("cond t={t}"), &out, &r[&format!("unet.cond.t{t}")]);
+        let g = sd.predict_noise(z, t, cond, uncond, 7.5).unwrap();
+        assert_close_gelu(
+            &format!("guided t={t}"),
+            &g,
+            &r[&format!("unet.guided.t{t}")],
+        );
+    }
+}
+
+#[test]
+fn v_prediction_unet_from_fp16_file_matches() {
+    let dir = fixture("sd-tiny-v");
+    let unet = load_unet(&dir.join("unet"), Precision::F32, &Device::Cpu).unwrap();
+    let sched = load_scheduler(&dir.join("scheduler")).unwrap();
+    let sd = StableDiffusion::from_parts(
+        unet,
+        StableDiffusion::load(&fixture("sd-tiny"), &LoadOptions::default())
+            .unwrap()
+            .vae,
+        sched,
+        Device::Cpu,
+    )
+    .unwrap();
+    assert_eq!(
+        sd.prediction_type(),
+        vectorfusion::models::scheduler::PredictionType::VPrediction
+    );
+    let r = refs("sd-tiny-v");
+    for t in [999usize, 500, 10] {
+        let eps = sd
+            .predict_noise(&r["unet.z"], t, &r["text.cond"], &r["text.uncond"], 7.5)
+            .unwrap();
+        assert_close_gelu(
+            &format!("v->eps t={t}"),
+            &eps,
+            &r[&format!("unet.eps.t{t}")],
+        );
+    }
+}
+
+#[test]
+fn vae_encode_decode_match_diffusers() {
+    let sd = sd();
+    let r = refs("sd-tiny");
+    let d = sd.vae.encode_dist(&r["vae.image"]).unwrap();
+    assert_close("mean", &d.mean, &r["vae.mean"], 1e-4);
+    assert_close("logvar", &d.logvar, &r["vae.logvar"], 1e-4);
+    let dec = sd.vae.decode_raw(&r["vae.z"]).unwrap();
+    assert_close("decode", &dec, &r["vae.decoded"], 1e-4);
+    let img = sd.decode(&r["vae.z"]).unwrap();
+    let lo = img
+        .flatten_all()
+        .unwrap()
+        .min(0)
+        .unwrap()
+        .to_scalar::<f32>()
+        .unwrap();
+    let hi = img
+        .flatten_all()
+        .unwrap()
+        .max(0)
+        .unwrap()
+        .to_scalar::<f32>()
+        .unwrap();
+    assert!((0.0..=1.0).contains(&lo) && (0.0..=1.0).contains(&hi));
+}
+
+#[test]
+fn encoder_vjp_matches_torch_autograd() {
+    let sd = sd();
+    let r = refs("sd-tiny");
+    let lat = sd.encode(&r["vae.image"]).unwrap();
+    assert_close("latents", &lat, &r["vjp.latents"], 1e-4);
+    let d = sd.encode_vjp(&r["vae.image"], &r["vjp.d_latents"]).unwrap();
+    assert_close("d_image", &d, &r["vjp.d_image"], 1e-4);
+}
+
+#[test]
+fn encoder_vjp_matches_finite_differences() {
+    // independent of the fixture: directional derivative of <d, encode(x)> along v
+    let sd = sd();
+    let r = refs("sd-tiny");
+    let x = r["vae.image"].to_dtype(DType::F64).unwrap();
+    let d = &r["vjp.d_latents"];
+    let v = Tensor::randn(0f32, 1f32, x.dims(), &Device::Cpu).unwrap();
+    let g = sd.encode_vjp(&x.to_dtype(DType::F32).unwrap(), d).unwrap();
+    let analytic = (&g * &v)
+        .unwrap()
+        .sum_all()
+        .unwrap()
+        .to_scalar::<f32>()
+        .unwrap() as f64;
+    let h = 1e-2;
+    let f = |s: f64| {
+        let xs = (x.to_dtype(DType::F32).unwrap() + (&v * s).unwrap()).unwrap();
+        let l = sd.encode(&xs).unwrap();
+        (l * d)
+            .unwrap()
+            .sum_all()
+            .unwrap()
+            .to_scalar::<f32>()
+            .unwrap() as f64
+    };
+    let numeric = (f(h) - f(-h)) / (2.0 * h);
+    let rel = (analytic - numeric).abs() / numeric.abs().max(1e-3);
+    assert!(rel < 2e-2, "analytic {analytic} vs numeric {numeric}");
+}
+
+#[test]
+fn ddim_trajectory_matches_diffusers() {
+    let sd = sd();
+    let r = refs("sd-tiny");
+    let traj = sd
+        .sample(
+            &r["ddim.init"],
+            &r["text.cond"],
+            &r["text.uncond"],
+            7.5,
+            3,
+            SamplerKind::Ddim,
+        )
+        .unwrap();
+    assert_eq!(traj.len(), 3);
+    for (i, x) in traj.iter().enumerate() {
+        assert_close_gelu(&format!("ddim step {i}"), x, &r[&format!("ddim.step{i}")]);
+    }
+}
+
+#[test]
+fn alphas_cumprod_matches_diffusers() {
+    let sd = sd();
+    let r = refs("sd-tiny");
+    let want: Vec<f32> = r["sched.alphas_cumprod"].to_vec1().unwrap();
+    assert_eq!(want.len(), sd.alphas_cumprod().len());
+    for (a, b) in sd.alphas_cumprod().iter().zip(&want) {
+        assert!((*a as f32 - b).abs() < 1e-6, "{a} vs {b}");
+    }
+}
+
+#[test]
+fn euler_trailing_trajectory_matches_diffusers() {
+    use vectorfusion::models::scheduler::{Sampler, SchedulerConfig};
+    let mut sd = sd();
+    let r = refs("sd-tiny");
+    let mut cfg: SchedulerConfig = sd.scheduler.clone();
+    cfg.timestep_spacing = "trailing".into();
+    let s = Sampler::new(&cfg, SamplerKind::Euler, 2).unwrap();
+    let want_t: Vec<f32> = r["euler.timesteps"].to_vec1().unwrap();
+    let got_t: Vec<f32> = s.timesteps.iter().map(|&t| t as f32).collect();
+    assert_eq!(got_t, want_t);
+    sd.scheduler = cfg;
+    let traj = sd
+        .sample(
+            &r["euler.init"],
+            &r["text.cond"],
+            &r["text.uncond"],
+            7.5,
+            2,
+            SamplerKind::Euler,
+        )
+        .unwrap();
+    for (i, x) in traj.iter().enumerate() {
+        assert_close_gelu(&format!("euler step {i}"), x, &r[&format!("euler.step{i}")]);
+    }
+}
+
+#[test]
+fn sds_image_gradient_matches_reference() {
+    let sd = sd();
+    let r = refs("sd-tiny");
+    let img = &r["vae.image"];
+    let lat = sd.encode(img).unwrap();
+    let g = sd
+        .sds_latent_grad(
+            &lat,
+            600,
+            &r["sds.noise"],
+            &r["text.cond"],
+            &r["text.uncond"],
+            7.5,
+        )
+        .unwrap();
+    assert_close_gelu("sds latent grad", &g, &r["sds.grad_latents"]);
+    let d = sd.encode_vjp(img, &g).unwrap();
+    assert_close_gelu("sds image grad", &d, &r["sds.d_image"]);
+}
+
+#[test]
+fn taesd_encode_vjp_decode_match_diffusers() {
+    let t = Taesd::load(&fixture("taesd-tiny"), Precision::F32, &Device::Cpu).unwrap();
+    let r = refs("taesd-tiny");
+    let lat = t.encode(&r["image"]).unwrap();
+    assert_close("taesd latents", &lat, &r["latents"], 1e-4);
+    let (_, d) = t.encode_vjp(&r["image"], &r["d_latents"]).unwrap();
+    assert_close("taesd d_image", &d, &r["d_image"], 1e-4);
+    let dec = t.decode_raw(&r["z"]).unwrap();
+    assert_close("taesd decode", &dec, &r["decoded"], 1e-4);
+}
+
+#[test]
+fn half_precision_unet_within_documented_tolerance() {
+    // documented tolerances (docs/MODELS.md): unguided UNet output of scale ~2.5,
+    // f16 ≤ 2e-2 (measured ≤ 1.4e-2); bf16 is refused on CPU (no candle CPU bf16 matmul)
+    let r = refs("sd-tiny");
+    let bf16 = LoadOptions {
+        unet: Precision::Bf16,
+        ..LoadOptions::default()
+    };
+    assert!(matches!(
+        StableDiffusion::load(&fixture("sd-tiny"), &bf16),
+        Err(ModelError::Unsupported { .. })
+    ));
+    for (p, tol) in [(Precision::F16, 2e-2f32)] {
+        let opts = LoadOptions {
+            unet: p,
+            ..LoadOptions::default()
+        };
+        let sd = StableDiffusion::load(&fixture("sd-tiny"), &opts).unwrap();
+        for t in [999usize, 500, 10] {
+            let out = sd
+                .unet
+                .forward(&r["unet.z"], t as f64, &r["text.cond"])
+                .unwrap();
+            assert_eq!(out.dtype(), DType::F32);
+            let e = max_abs(&out, &r[&format!("unet.cond.t{t}")]);
+            eprintln!("{p:?} t={t}: max abs err {e}");
+            assert!(e <= tol, "{p:?}: {e} > {tol}");
+        }
+    }
+}
+
+#[test]
+fn bad_inputs_are_rejected() {
+    let sd = sd();
+    let r = refs("sd-tiny");
+    let bad = Tensor::zeros((1, 3, 31, 31), DType::F32, &Device::Cpu).unwrap();
+    assert!(matches!(sd.encode(&bad), Err(ModelError::InvalidInput(_))));
+    assert!(matches!(
+        sd.predict_noise(&r["unet.z"], 1000, &r["text.cond"], &r["text.uncond"], 7.5),
+        Err(ModelError::InvalidInput(_))
+    ));
+    let wrong_ctx = Tensor::zeros((1, 77, 8), DType::F32, &Device::Cpu).unwrap();
+    assert!(matches!(
+        sd.unet.forward(&r["unet.z"], 10.0, &wrong_ctx),
+        Err(ModelError::InvalidInput(_))
+    ));
+}
+
+#[test]
+fn unet_matches_diffusers_up_to_the_gelu_approximation() {
+    let sd = sd();
+    let r = refs("sd-tiny");
+    let (z, cond, uncond) = (&r["unet.z"], &r["text.cond"], &r["text.uncond"]);
+    for t in [999usize, 500, 10] {
+        let out = sd.unet.forward(z, t as f64, cond).unwrap();
+        assert_close(
+            &format!("cond t={t}"),
+            &out,
+            &r[&format!("unet_tanh.cond.t{t}")],
+            1e-4,
+        );
+        let g = sd.predict_noise(z, t, cond, uncond, 7.5).unwrap();
+        assert_close(
+            &format!("guided t={t}"),
+            &g,
+            &r[&format!("unet_tanh.guided.t{t}")],
+            1e-4,
+        );
+    }
+}
+
+#[test]
+fn text_embeddings_from_prompt_match_transformers_and_drive_the_unet() {
+    let sd = sd();
+    let r = refs("sd-tiny");
+    let text = sd.text.as_ref().unwrap();
+    let ids: Vec<u32> = text
+        .ids("a red cat", &Device::Cpu)
+        .unwrap()
+        .flatten_all()
+        .unwrap()
+        .to_vec1()
+        .unwrap();
+    let want: Vec<i64> = r["text.ids_cond"].flatten_all().unwrap().to_vec1().unwrap();
+    assert_eq!(ids.iter().map(|&x| x as i64).collect::<Vec<_>>(), want);
+    let (cond, uncond) = sd.text_embeddings("a red cat").unwrap();
+    assert_close("cond emb", &cond, &r["text.cond"], 1e-4);
+    assert_close("uncond emb", &uncond, &r["text.uncond"], 1e-4);
+    // full path: prompt -> embeddings -> guided noise prediction
+    let g = sd
+        .predict_noise(&r["unet.z"], 500, &cond, &uncond, 7.5)
+        .unwrap();
+    assert_close("prompt-guided t=500", &g, &r["unet_tanh.guided.t500"], 1e-4);
+}
