@@ -19,5 +19,7 @@ pub mod image;
 pub mod losses;
 pub mod optim;
 pub mod progress;
+pub mod raster;
 pub mod scene;
 pub mod stages;
+pub mod svg;
