@@ -342,7 +342,12 @@ impl Run<'_> {
             let (loss, d_image) = weighted_l2(&img, &self.target, &weights)?;
             let mut grad = crate::raster::backward(scene, &tape, &d_image);
             let xing = if self.cfg.xing_weight > 0.0 {
-                xing_loss(scene, 0..scene.shapes.len(), self.cfg.xing_weight, &mut grad)
+                xing_loss(
+                    scene,
+                    0..scene.shapes.len(),
+                    self.cfg.xing_weight,
+                    &mut grad,
+                )
             } else {
                 0.0
             };
@@ -375,11 +380,7 @@ impl Run<'_> {
 
     /// Replaces faint or tiny paths by circles at the current high-error regions.
     fn reinit_weak(&self, scene: &mut Scene, rng: &mut ChaCha8Rng) -> usize {
-        let weak = prune::weak_paths(
-            scene,
-            self.cfg.reinit_min_opacity,
-            self.cfg.reinit_min_area,
-        );
+        let weak = prune::weak_paths(scene, self.cfg.reinit_min_opacity, self.cfg.reinit_min_area);
         if weak.is_empty() {
             return 0;
         }
@@ -465,8 +466,8 @@ pub fn vectorize(
         PathBudget::Auto { max_paths, .. } => *max_paths,
     };
     let vtracer_stage = cfg.init == InitMode::Vtracer;
-    let total = cfg.iters_per_stage * (stages_plan.len() as u32 + vtracer_stage as u32)
-        + cfg.final_iters;
+    let total =
+        cfg.iters_per_stage * (stages_plan.len() as u32 + vtracer_stage as u32) + cfg.final_iters;
     let mut run = Run {
         cfg,
         target: work,
