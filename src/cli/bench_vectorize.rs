@@ -247,7 +247,7 @@ pub fn run(a: BenchVectorizeArgs) -> Result<(), CliError> {
             "images": files.len(),
             "rows": rows.iter().map(|r| serde_json::json!({
                 "method": r.method,
-                "paths": if r.budget > 0 { serde_json::json!(r.budget) } else { serde_json::json!(r.paths) },
+                "paths": if r.budget > 0 { r.budget } else { r.paths.round() as usize },
                 "paths_mean": r.paths,
                 "psnr_mean": r.psnr_mean,
                 "seconds_mean": r.seconds_mean,

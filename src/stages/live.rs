@@ -119,6 +119,12 @@ pub struct LiveConfig {
     /// New-path circle radius (pixels at the working size) and its segment count.
     pub init_radius: f32,
     pub init_segments: usize,
+    /// Grow each new circle to fill its region (its inscribed radius, at least `init_radius`)
+    /// instead of LIVE's fixed small circle: far fewer steps are needed to cover large regions.
+    pub init_fit_region: bool,
+    /// Keep every fill fully opaque (smaller SVGs, no faint layers); otherwise opacity is
+    /// optimised too.
+    pub opaque: bool,
     /// Re-initialise paths with opacity below this...
     pub reinit_min_opacity: f32,
     /// ... or area below this (square pixels at the working size); 0 disables.
@@ -135,8 +141,8 @@ impl LiveConfig {
             size: 128,
             budget: PathBudget::fixed(64),
             init: InitMode::Circles,
-            iters_per_stage: 60,
-            final_iters: 40,
+            iters_per_stage: 100,
+            final_iters: 50,
             lr_points: 1.0,
             lr_fill: 0.02,
             lr_background: 0.01,
@@ -145,6 +151,8 @@ impl LiveConfig {
             xing_weight: 0.01,
             init_radius: 3.0,
             init_segments: 4,
+            init_fit_region: true,
+            opaque: true,
             reinit_min_opacity: 0.05,
             reinit_min_area: 16.0,
             seed: 0,
@@ -153,9 +161,9 @@ impl LiveConfig {
         match preset {
             Preset::Fast => base,
             Preset::Balanced => LiveConfig {
-                size: 192,
-                iters_per_stage: 80,
-                final_iters: 60,
+                size: 160,
+                iters_per_stage: 200,
+                final_iters: 100,
                 init_radius: 4.0,
                 udf_tau: 6.0,
                 reinit_min_area: 36.0,
@@ -163,8 +171,8 @@ impl LiveConfig {
             },
             Preset::Quality => LiveConfig {
                 size: 256,
-                iters_per_stage: 150,
-                final_iters: 100,
+                iters_per_stage: 300,
+                final_iters: 150,
                 init_radius: 5.0,
                 udf_tau: 8.0,
                 reinit_min_area: 64.0,
@@ -231,7 +239,7 @@ use crate::image::ops::resize;
 use crate::losses::{outline, udf_weights, weighted_l2, xing_loss};
 use crate::optim::{Adam, AdamConfig, GroupSchedules, LrSchedule};
 use crate::progress::{CancelToken, Progress, ProgressSink};
-use crate::scene::{Params, Rgba, Scene, Trainable};
+use crate::scene::{ParamGroup, Params, Rgba, Scene, Trainable};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use std::ops::Range;
@@ -352,6 +360,19 @@ impl Run<'_> {
                 0.0
             };
             adam.step(&mut params, &grad);
+            if self.cfg.opaque {
+                for a in params
+                    .get_mut(ParamGroup::Fill)
+                    .iter_mut()
+                    .skip(3)
+                    .step_by(4)
+                {
+                    *a = 1.0;
+                }
+            }
+            if let Some(a) = params.get_mut(ParamGroup::Background).get_mut(3) {
+                *a = 1.0;
+            }
             params.write_to(scene)?;
             // Keep the optimiser's copy inside the valid (clamped) range.
             params = Params::from_scene(scene);
@@ -397,6 +418,7 @@ impl Run<'_> {
         init::InitConfig {
             radius: self.cfg.init_radius,
             segments: self.cfg.init_segments,
+            fit_region: self.cfg.init_fit_region,
             ..init::InitConfig::default()
         }
     }
@@ -486,6 +508,7 @@ pub fn vectorize(
             tracer::trace(&small, &tracer::TracerSetting::default()).map_err(LiveError::Tracer)?;
         let start = tracer::traced_to_scene(&traced, ww, wh, max_total, 12)?;
         scene.shapes = start.shapes;
+        scene.background = start.background;
         let n = scene.shapes.len();
         let loss = run.optimise(&mut scene, 0..n, cfg.iters_per_stage, 0)?;
         let reinit = run.reinit_weak(&mut scene, &mut rng);
