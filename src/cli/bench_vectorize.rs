@@ -21,7 +21,7 @@ pub struct BenchVectorizeArgs {
     /// Path budgets for LIVE and the tuned vtracer setting.
     #[arg(long, default_value = "16,32,64")]
     pub paths: String,
-    #[arg(long, value_enum, default_value = "fast")]
+    #[arg(long, value_enum, default_value = "balanced")]
     pub preset: Preset,
     /// Also run `--paths auto`.
     #[arg(long)]
@@ -35,8 +35,8 @@ pub struct BenchVectorizeArgs {
     /// Only the first N images (name order).
     #[arg(long)]
     pub limit: Option<usize>,
-    /// Decimal places in our SVGs.
-    #[arg(long, default_value_t = 1)]
+    /// Decimal places in our SVGs (0 = whole pixels, enough at 256 px and the smallest files).
+    #[arg(long, default_value_t = 0)]
     pub precision: u8,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,

@@ -97,8 +97,8 @@ pub enum Preset {
 /// User-facing LIVE settings.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct LiveConfig {
-    /// Longest side (pixels) of the canvas the optimisation runs at; the result is scaled back
-    /// to the target's size.
+    /// Longest side (pixels) of the canvas the optimisation runs at (never more than the
+    /// target's); the result is scaled back to the target's size.
     pub size: u32,
     pub budget: PathBudget,
     pub init: InitMode,
@@ -470,7 +470,8 @@ pub fn vectorize(
     if target.data.iter().any(|v| !v.is_finite()) {
         return Err(LiveError::Target("image has non-finite values".into()));
     }
-    let k = cfg.size as f32 / tw.max(th) as f32;
+    // Never upsample: small inputs are optimised at their own size.
+    let k = (cfg.size as f32 / tw.max(th) as f32).min(1.0);
     let (ww, wh) = (
         ((tw as f32 * k).round() as u32).max(1),
         ((th as f32 * k).round() as u32).max(1),
