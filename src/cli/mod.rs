@@ -1,8 +1,10 @@
 //! The `vectorfusion` command line. Each subcommand lives in its own file; errors are turned
 //! into a message and an exit code in one place ([`main`]).
 
+pub mod bench_vectorize;
 pub mod eval;
 pub mod generate;
+pub mod vectorize;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
@@ -20,7 +22,7 @@ pub enum Command {
     /// Turn a caption into an SVG.
     Generate(Box<generate::GenerateArgs>),
     /// Trace a raster image into an SVG of closed paths (LIVE).
-    Vectorize(NotYet),
+    Vectorize(vectorize::VectorizeArgs),
     /// Render an SVG through our rasteriser to PNG.
     Render(NotYet),
     /// Run the HTTP service.
@@ -28,7 +30,20 @@ pub enum Command {
     /// Evaluate generated SVGs with CLIP scorers.
     Eval(eval::EvalArgs),
     /// Benchmarks.
-    Bench(NotYet),
+    Bench(BenchArgs),
+}
+
+/// `vectorfusion bench <which>`.
+#[derive(clap::Args, Debug)]
+pub struct BenchArgs {
+    #[command(subcommand)]
+    pub which: BenchCommand,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum BenchCommand {
+    /// LIVE vs vtracer fidelity (PSNR, seconds, SVG bytes) on a folder of PNGs.
+    Vectorize(bench_vectorize::BenchVectorizeArgs),
 }
 
 /// Placeholder arguments for commands that are not implemented yet.
@@ -62,11 +77,13 @@ impl CliError {
 pub fn run(cli: Cli) -> Result<(), CliError> {
     match cli.command {
         Command::Generate(a) => generate::run(*a),
-        Command::Vectorize(_) => Err(CliError::NotImplemented("vectorize")),
+        Command::Vectorize(a) => vectorize::run(a),
         Command::Render(_) => Err(CliError::NotImplemented("render")),
         Command::Serve(_) => Err(CliError::NotImplemented("serve")),
         Command::Eval(a) => eval::run(a),
-        Command::Bench(_) => Err(CliError::NotImplemented("bench")),
+        Command::Bench(b) => match b.which {
+            BenchCommand::Vectorize(a) => bench_vectorize::run(a),
+        },
     }
 }
 

@@ -97,8 +97,8 @@ pub enum Preset {
 /// User-facing LIVE settings.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct LiveConfig {
-    /// Longest side (pixels) of the canvas the optimisation runs at; the result is scaled back
-    /// to the target's size.
+    /// Longest side (pixels) of the canvas the optimisation runs at (never more than the
+    /// target's); the result is scaled back to the target's size.
     pub size: u32,
     pub budget: PathBudget,
     pub init: InitMode,
@@ -119,6 +119,12 @@ pub struct LiveConfig {
     /// New-path circle radius (pixels at the working size) and its segment count.
     pub init_radius: f32,
     pub init_segments: usize,
+    /// Grow each new circle to fill its region (its inscribed radius, at least `init_radius`)
+    /// instead of LIVE's fixed small circle: far fewer steps are needed to cover large regions.
+    pub init_fit_region: bool,
+    /// Keep every fill fully opaque (smaller SVGs, no faint layers); otherwise opacity is
+    /// optimised too.
+    pub opaque: bool,
     /// Re-initialise paths with opacity below this...
     pub reinit_min_opacity: f32,
     /// ... or area below this (square pixels at the working size); 0 disables.
@@ -135,8 +141,8 @@ impl LiveConfig {
             size: 128,
             budget: PathBudget::fixed(64),
             init: InitMode::Circles,
-            iters_per_stage: 60,
-            final_iters: 40,
+            iters_per_stage: 100,
+            final_iters: 50,
             lr_points: 1.0,
             lr_fill: 0.02,
             lr_background: 0.01,
@@ -145,6 +151,8 @@ impl LiveConfig {
             xing_weight: 0.01,
             init_radius: 3.0,
             init_segments: 4,
+            init_fit_region: true,
+            opaque: true,
             reinit_min_opacity: 0.05,
             reinit_min_area: 16.0,
             seed: 0,
@@ -153,9 +161,9 @@ impl LiveConfig {
         match preset {
             Preset::Fast => base,
             Preset::Balanced => LiveConfig {
-                size: 192,
-                iters_per_stage: 80,
-                final_iters: 60,
+                size: 160,
+                iters_per_stage: 200,
+                final_iters: 100,
                 init_radius: 4.0,
                 udf_tau: 6.0,
                 reinit_min_area: 36.0,
@@ -163,8 +171,8 @@ impl LiveConfig {
             },
             Preset::Quality => LiveConfig {
                 size: 256,
-                iters_per_stage: 150,
-                final_iters: 100,
+                iters_per_stage: 300,
+                final_iters: 150,
                 init_radius: 5.0,
                 udf_tau: 8.0,
                 reinit_min_area: 64.0,
@@ -225,3 +233,363 @@ impl Default for LiveConfig {
 
 /// Most paths a run may create.
 pub const MAX_PATHS: usize = 1024;
+
+use crate::image::Image;
+use crate::image::ops::resize;
+use crate::losses::{outline, udf_weights, weighted_l2, xing_loss};
+use crate::optim::{Adam, AdamConfig, GroupSchedules, LrSchedule};
+use crate::progress::{CancelToken, Progress, ProgressSink};
+use crate::scene::{ParamGroup, Params, Rgba, Scene, Trainable};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use std::ops::Range;
+
+/// What one stage did.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StageReport {
+    /// 1-based stage number (stage 0 is the vtracer start, if any).
+    pub stage: usize,
+    /// Paths added by the stage.
+    pub added: usize,
+    /// Paths after the stage.
+    pub paths: usize,
+    /// Paths re-initialised after the stage.
+    pub reinitialised: usize,
+    /// PSNR at the working size after the stage.
+    pub psnr: f64,
+    /// Loss at the last step.
+    pub loss: f64,
+}
+
+/// The result of [`vectorize`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct LiveResult {
+    /// The traced scene at the target's size.
+    pub scene: Scene,
+    /// Number of paths in `scene` (the chosen count for `--paths auto`).
+    pub paths: usize,
+    /// PSNR (dB, RGB over white) of our render of `scene` against the target.
+    pub psnr: f64,
+    pub stages: Vec<StageReport>,
+    /// Paths removed by pruning (`auto` only).
+    pub pruned: usize,
+    /// Adam steps taken.
+    pub steps: u32,
+}
+
+struct Run<'a> {
+    cfg: &'a LiveConfig,
+    target: Image,
+    sink: &'a dyn ProgressSink,
+    cancel: &'a CancelToken,
+    step: u32,
+    total: u32,
+    out_width: u32,
+}
+
+impl Run<'_> {
+    fn schedules(&self, iters: u32) -> GroupSchedules {
+        let sched = |lr: f32| LrSchedule::WarmupCosine {
+            start: 0.2 * lr,
+            peak: lr,
+            warmup: (iters / 10).max(1),
+            end: 0.1 * lr,
+            total: iters,
+        };
+        GroupSchedules {
+            points: sched(self.cfg.lr_points),
+            fill: sched(self.cfg.lr_fill),
+            stroke: LrSchedule::Constant { lr: 0.0 },
+            width: LrSchedule::Constant { lr: 0.0 },
+            background: sched(self.cfg.lr_background),
+        }
+    }
+
+    /// Optimises every path of `scene` for `iters` steps; the UDF term focuses on `focus`.
+    fn optimise(
+        &mut self,
+        scene: &mut Scene,
+        focus: Range<usize>,
+        iters: u32,
+        stage: usize,
+    ) -> Result<f64, LiveError> {
+        let mut params = Params::from_scene(scene);
+        let trainable = Trainable {
+            points: true,
+            fill: true,
+            stroke: false,
+            width: false,
+            background: true,
+        };
+        let mut adam = Adam::new(
+            &params,
+            AdamConfig::default(),
+            self.schedules(iters),
+            trainable,
+        );
+        let n = self.target.len_pixels();
+        let uniform = 1.0 / (3.0 * n as f32);
+        let mut last = f64::NAN;
+        for _ in 0..iters {
+            if self.cancel.is_cancelled() {
+                return Err(LiveError::Cancelled);
+            }
+            let (img, tape) = crate::raster::render_tape(scene);
+            let mut weights = vec![uniform; n];
+            if self.cfg.udf_weight > 0.0 && !focus.is_empty() {
+                let outlines: Vec<Vec<(f32, f32)>> = scene.shapes[focus.clone()]
+                    .iter()
+                    .map(|s| outline(s, 8))
+                    .collect();
+                let udf = udf_weights(scene.width, scene.height, &outlines, self.cfg.udf_tau);
+                let k = self.cfg.udf_weight / 3.0;
+                for (w, u) in weights.iter_mut().zip(&udf) {
+                    *w += k * u;
+                }
+            }
+            let (loss, d_image) = weighted_l2(&img, &self.target, &weights)?;
+            let mut grad = crate::raster::backward(scene, &tape, &d_image);
+            let xing = if self.cfg.xing_weight > 0.0 {
+                xing_loss(
+                    scene,
+                    0..scene.shapes.len(),
+                    self.cfg.xing_weight,
+                    &mut grad,
+                )
+            } else {
+                0.0
+            };
+            adam.step(&mut params, &grad);
+            if self.cfg.opaque {
+                for a in params
+                    .get_mut(ParamGroup::Fill)
+                    .iter_mut()
+                    .skip(3)
+                    .step_by(4)
+                {
+                    *a = 1.0;
+                }
+            }
+            if let Some(a) = params.get_mut(ParamGroup::Background).get_mut(3) {
+                *a = 1.0;
+            }
+            params.write_to(scene)?;
+            // Keep the optimiser's copy inside the valid (clamped) range.
+            params = Params::from_scene(scene);
+            last = loss + xing;
+            self.step += 1;
+            self.report(scene, stage, last);
+        }
+        Ok(last)
+    }
+
+    fn report(&self, scene: &Scene, stage: usize, loss: f64) {
+        let every = self.cfg.snapshot_every;
+        let snapshot = every > 0 && (self.step % every == 0 || self.step == self.total);
+        if !(snapshot || self.step % 10 == 0) {
+            return;
+        }
+        let mut ev = Progress::new("live", self.step, self.total);
+        ev.loss = Some(loss);
+        ev.detail = Some(serde_json::json!({"live_stage": stage, "paths": scene.shapes.len()}));
+        if snapshot {
+            let out = scene.scaled_to_width(self.out_width);
+            ev.svg = Some(crate::svg::to_svg(&out, &crate::svg::SvgOptions::default()));
+        }
+        self.sink.report(ev);
+    }
+
+    /// Replaces faint or tiny paths by circles at the current high-error regions.
+    fn reinit_weak(&self, scene: &mut Scene, rng: &mut ChaCha8Rng) -> usize {
+        let weak = prune::weak_paths(scene, self.cfg.reinit_min_opacity, self.cfg.reinit_min_area);
+        if weak.is_empty() {
+            return 0;
+        }
+        let current = crate::raster::render(scene);
+        let fresh = init::init_paths(&current, &self.target, weak.len(), &self.init_cfg(), rng);
+        let count = fresh.len();
+        for (i, shape) in weak.into_iter().zip(fresh) {
+            scene.shapes[i] = shape;
+        }
+        count
+    }
+
+    fn init_cfg(&self) -> init::InitConfig {
+        init::InitConfig {
+            radius: self.cfg.init_radius,
+            segments: self.cfg.init_segments,
+            fit_region: self.cfg.init_fit_region,
+            ..init::InitConfig::default()
+        }
+    }
+
+    fn psnr(&self, scene: &Scene) -> f64 {
+        crate::image::psnr(&crate::raster::render(scene), &self.target)
+    }
+}
+
+/// Mean colour of the image border (over white): the starting background.
+fn border_colour(img: &Image) -> Rgba {
+    let (w, h) = (img.width, img.height);
+    let mut s = [0.0f64; 3];
+    let mut n = 0.0f64;
+    for y in 0..h {
+        for x in 0..w {
+            if x == 0 || y == 0 || x + 1 == w || y + 1 == h {
+                let p = img.pixel(x, y);
+                for c in 0..3 {
+                    s[c] += (p[c] + 1.0 - p[3]) as f64;
+                }
+                n += 1.0;
+            }
+        }
+    }
+    let n = n.max(1.0);
+    Rgba::new((s[0] / n) as f32, (s[1] / n) as f32, (s[2] / n) as f32, 1.0).clamped()
+}
+
+/// Traces `target` into closed cubic paths (see the module docs). Emits progress events with
+/// stage `"live"` and checks `cancel` before every step.
+pub fn vectorize(
+    target: &Image,
+    cfg: &LiveConfig,
+    sink: &dyn ProgressSink,
+    cancel: &CancelToken,
+) -> Result<LiveResult, LiveError> {
+    cfg.validate()?;
+    let (tw, th) = (target.width, target.height);
+    if tw == 0 || th == 0 || target.data.len() != 4 * target.len_pixels() {
+        return Err(LiveError::Target("empty or malformed image".into()));
+    }
+    if tw > crate::scene::MAX_SIDE || th > crate::scene::MAX_SIDE {
+        return Err(LiveError::Target(format!(
+            "{tw}x{th} is larger than {} px per side",
+            crate::scene::MAX_SIDE
+        )));
+    }
+    if target.data.iter().any(|v| !v.is_finite()) {
+        return Err(LiveError::Target("image has non-finite values".into()));
+    }
+    // Never upsample: small inputs are optimised at their own size.
+    let k = (cfg.size as f32 / tw.max(th) as f32).min(1.0);
+    let (ww, wh) = (
+        ((tw as f32 * k).round() as u32).max(1),
+        ((th as f32 * k).round() as u32).max(1),
+    );
+    let work = resize(&target.over([1.0, 1.0, 1.0]), ww, wh);
+    let mut scene = Scene::new(ww, wh, border_colour(&work))?;
+    let stages_plan: Vec<usize> = match &cfg.budget {
+        PathBudget::Schedule { stages } => stages.clone(),
+        PathBudget::Auto {
+            stage, max_paths, ..
+        } => vec![*stage; max_paths.div_ceil(*stage)],
+    };
+    let max_total = match &cfg.budget {
+        PathBudget::Schedule { stages } => stages.iter().sum(),
+        PathBudget::Auto { max_paths, .. } => *max_paths,
+    };
+    let vtracer_stage = cfg.init == InitMode::Vtracer;
+    let total =
+        cfg.iters_per_stage * (stages_plan.len() as u32 + vtracer_stage as u32) + cfg.final_iters;
+    let mut run = Run {
+        cfg,
+        target: work,
+        sink,
+        cancel,
+        step: 0,
+        total,
+        out_width: tw,
+    };
+    let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);
+    let mut reports = Vec::new();
+
+    if vtracer_stage {
+        let small = resize(target, ww, wh);
+        let traced =
+            tracer::trace(&small, &tracer::TracerSetting::default()).map_err(LiveError::Tracer)?;
+        let start = tracer::traced_to_scene(&traced, ww, wh, max_total, 12)?;
+        scene.shapes = start.shapes;
+        scene.background = start.background;
+        let n = scene.shapes.len();
+        let loss = run.optimise(&mut scene, 0..n, cfg.iters_per_stage, 0)?;
+        let reinit = run.reinit_weak(&mut scene, &mut rng);
+        reports.push(StageReport {
+            stage: 0,
+            added: n,
+            paths: n,
+            reinitialised: reinit,
+            psnr: run.psnr(&scene),
+            loss,
+        });
+    }
+
+    let mut prev_psnr = run.psnr(&scene);
+    for (si, &want) in stages_plan.iter().enumerate() {
+        let room = max_total.saturating_sub(scene.shapes.len());
+        let want = want.min(room);
+        if want == 0 {
+            break;
+        }
+        let current = crate::raster::render(&scene);
+        let fresh = init::init_paths(&current, &run.target, want, &run.init_cfg(), &mut rng);
+        let added = fresh.len();
+        if added == 0 {
+            break;
+        }
+        let start = scene.shapes.len();
+        scene.shapes.extend(fresh);
+        let end = scene.shapes.len();
+        let loss = run.optimise(&mut scene, start..end, cfg.iters_per_stage, si + 1)?;
+        let reinit = run.reinit_weak(&mut scene, &mut rng);
+        let psnr = run.psnr(&scene);
+        reports.push(StageReport {
+            stage: si + 1,
+            added,
+            paths: end,
+            reinitialised: reinit,
+            psnr,
+            loss,
+        });
+        if let PathBudget::Auto {
+            min_gain_db_per_path,
+            ..
+        } = cfg.budget
+            && !schedule::auto_should_continue(prev_psnr, psnr, added, min_gain_db_per_path)
+        {
+            break;
+        }
+        prev_psnr = psnr;
+    }
+    if cfg.final_iters > 0 && !scene.shapes.is_empty() {
+        let n = scene.shapes.len();
+        run.optimise(&mut scene, n..n, cfg.final_iters, reports.len() + 1)?;
+    }
+    // Drop paths that stayed faint or tiny after the last re-initialisation.
+    let weak = prune::weak_paths(&scene, cfg.reinit_min_opacity, 1.0);
+    for &i in weak.iter().rev() {
+        scene.shapes.remove(i);
+    }
+    let mut pruned = 0;
+    if let PathBudget::Auto {
+        prune_tolerance, ..
+    } = cfg.budget
+    {
+        pruned = prune::prune_paths(&mut scene, prune_tolerance, crate::raster::render).len();
+    }
+    let mut out = scene.scaled_to_width(tw);
+    out.height = th;
+    out.validate()?;
+    let psnr = crate::image::psnr(&crate::raster::render(&out), target);
+    let mut done = Progress::new("live", run.total, run.total);
+    done.svg = Some(crate::svg::to_svg(&out, &crate::svg::SvgOptions::default()));
+    done.detail = Some(serde_json::json!({"paths": out.shapes.len(), "psnr": psnr, "done": true}));
+    sink.report(done);
+    Ok(LiveResult {
+        paths: out.shapes.len(),
+        scene: out,
+        psnr,
+        stages: reports,
+        pruned,
+        steps: run.step,
+    })
+}

@@ -20,6 +20,8 @@ pub struct InitConfig {
     pub colour_tolerance: f32,
     /// Regions smaller than this (pixels) are ignored.
     pub min_area: usize,
+    /// Grow the circle to the region's inscribed radius (at least `radius`).
+    pub fit_region: bool,
 }
 
 impl Default for InitConfig {
@@ -30,6 +32,7 @@ impl Default for InitConfig {
             error_threshold: 0.01,
             colour_tolerance: 0.01,
             min_area: 4,
+            fit_region: false,
         }
     }
 }
@@ -102,7 +105,11 @@ pub fn find_seeds(
             Seed {
                 x: comp.interior.0 as f32 + 0.5 + jx,
                 y: comp.interior.1 as f32 + 0.5 + jy,
-                radius: cfg.radius.min(comp.inradius.max(1.0)),
+                radius: if cfg.fit_region {
+                    (0.9 * comp.inradius).max(cfg.radius)
+                } else {
+                    cfg.radius.min(comp.inradius.max(1.0))
+                },
                 colour: Rgba::new((s[0] / n) as f32, (s[1] / n) as f32, (s[2] / n) as f32, 1.0)
                     .clamped(),
                 area: comp.area,

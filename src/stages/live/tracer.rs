@@ -164,6 +164,8 @@ fn smooth_closed(pts: &[(f32, f32)], fill: Rgba) -> Option<Shape> {
 /// to between 4 and `max_segments` segments (about one per 16 px of perimeter). Holes are
 /// dropped (in vtracer's stacked mode the layers above cover them). If there are more than
 /// `max_paths` outlines, the smallest are merged away (dropped) first, keeping paint order.
+/// A bottom outline covering at least 90% of the canvas becomes the scene background instead
+/// of a path.
 pub fn traced_to_scene(
     traced: &Traced,
     width: u32,
@@ -217,6 +219,15 @@ pub fn traced_to_scene(
             candidates.push((area, shape));
         }
     }
+    let mut background = Rgba::WHITE;
+    if let Some((area, first)) = candidates.first()
+        && *area >= 0.9 * (width * height) as f32
+        && let Some(f) = first.fill
+        && f.a >= 1.0
+    {
+        background = f;
+        candidates.remove(0);
+    }
     if candidates.len() > max_paths {
         let mut by_area: Vec<usize> = (0..candidates.len()).collect();
         by_area.sort_by(|&a, &b| candidates[b].0.total_cmp(&candidates[a].0).then(a.cmp(&b)));
@@ -230,7 +241,7 @@ pub fn traced_to_scene(
             .filter_map(|(c, k)| k.then_some(c))
             .collect();
     }
-    let mut scene = Scene::new(width, height, Rgba::WHITE)?;
+    let mut scene = Scene::new(width, height, background)?;
     scene.shapes = candidates.into_iter().map(|(_, s)| s).collect();
     scene.validate()?;
     Ok(scene)

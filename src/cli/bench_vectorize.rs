@@ -1,0 +1,302 @@
+//! `vectorfusion bench vectorize --images DIR --paths 16,32,64 [--json]`: LIVE against vtracer
+//! (its defaults, polygon mode, and a setting tuned per image to land near each path count) on
+//! every PNG in DIR. Every SVG is rendered back with resvg at the input size and compared with
+//! the input on RGB over white.
+
+use super::CliError;
+use super::vectorize::load_input;
+use crate::image::{Image, psnr};
+use crate::progress::{CancelToken, NullSink};
+use crate::stages::live::tracer::{TracerSetting, render_svg, trace};
+use crate::stages::live::{self, InitMode, LiveConfig, PathBudget, Preset};
+use serde::Serialize;
+use std::path::PathBuf;
+use std::time::Instant;
+
+#[derive(clap::Args, Debug, Clone)]
+pub struct BenchVectorizeArgs {
+    /// Folder of PNG images (see scripts/prepare_fidelity_set.sh).
+    #[arg(long)]
+    pub images: PathBuf,
+    /// Path budgets for LIVE and the tuned vtracer setting.
+    #[arg(long, default_value = "16,32,64")]
+    pub paths: String,
+    #[arg(long, value_enum, default_value = "balanced")]
+    pub preset: Preset,
+    /// Also run `--paths auto`.
+    #[arg(long)]
+    pub auto: bool,
+    /// Also run LIVE started from vtracer's trace at each budget.
+    #[arg(long)]
+    pub vtracer_init: bool,
+    /// Skip LIVE (vtracer rows only).
+    #[arg(long)]
+    pub no_live: bool,
+    /// Only the first N images (name order).
+    #[arg(long)]
+    pub limit: Option<usize>,
+    /// Decimal places in our SVGs (0 = whole pixels, enough at 256 px and the smallest files).
+    #[arg(long, default_value_t = 0)]
+    pub precision: u8,
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Print one JSON object instead of a table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// One method on one image.
+#[derive(Clone, Debug, Serialize)]
+pub struct Sample {
+    pub image: String,
+    pub method: String,
+    /// Requested budget (0 for untuned vtracer settings).
+    pub budget: usize,
+    /// Paths actually in the SVG.
+    pub paths: usize,
+    pub psnr: f64,
+    pub seconds: f64,
+    pub svg_bytes: usize,
+}
+
+/// Mean over images of one method and budget.
+#[derive(Clone, Debug, Serialize)]
+pub struct Row {
+    pub method: String,
+    /// Mean path count actually produced.
+    pub paths: f64,
+    pub budget: usize,
+    pub psnr_mean: f64,
+    pub seconds_mean: f64,
+    pub svg_bytes_mean: f64,
+}
+
+fn measure(
+    name: &str,
+    method: &str,
+    budget: usize,
+    target: &Image,
+    run: impl FnOnce() -> Result<(String, usize), String>,
+) -> Result<Sample, CliError> {
+    let t0 = Instant::now();
+    let (svg, paths) = run().map_err(|e| CliError::Other(anyhow::anyhow!("{name}: {e}")))?;
+    let seconds = t0.elapsed().as_secs_f64();
+    let back = render_svg(&svg, target.width, target.height)
+        .map_err(|e| CliError::Other(anyhow::anyhow!("{name}: {method}: {e}")))?;
+    Ok(Sample {
+        image: name.to_string(),
+        method: method.to_string(),
+        budget,
+        paths,
+        psnr: psnr(target, &back),
+        seconds,
+        svg_bytes: svg.len(),
+    })
+}
+
+/// The vtracer settings searched for the tuned baseline.
+fn tuning_grid() -> Vec<TracerSetting> {
+    let mut out = Vec::new();
+    for polygon in [true, false] {
+        for color_precision in [6, 5, 4] {
+            for filter_speckle in [4, 6, 8, 10, 12, 16, 20, 24, 32] {
+                out.push(TracerSetting {
+                    polygon,
+                    filter_speckle,
+                    color_precision,
+                    layer_difference: 16,
+                });
+            }
+        }
+    }
+    out
+}
+
+pub fn run(a: BenchVectorizeArgs) -> Result<(), CliError> {
+    let budgets = live::schedule::parse_schedule(&a.paths, usize::MAX)
+        .map_err(|e| CliError::Usage(format!("--paths: {e}")))?;
+    let mut files: Vec<PathBuf> = std::fs::read_dir(&a.images)
+        .map_err(|e| CliError::Usage(format!("cannot read {}: {e}", a.images.display())))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x.eq_ignore_ascii_case("png")))
+        .collect();
+    files.sort();
+    if let Some(n) = a.limit {
+        files.truncate(n);
+    }
+    if files.is_empty() {
+        return Err(CliError::Usage(format!(
+            "no PNG files in {} (run scripts/prepare_fidelity_set.sh)",
+            a.images.display()
+        )));
+    }
+    let mut samples = Vec::new();
+    let svg_opts = crate::svg::SvgOptions {
+        precision: a.precision,
+    };
+    for file in &files {
+        let name = file
+            .file_stem()
+            .and_then(|s| s.to_str())
+            .unwrap_or("?")
+            .to_string();
+        let target = load_input(file)?;
+        let tref = &target;
+        let vt = |s: TracerSetting| {
+            move || {
+                trace(tref, &s)
+                    .map(|t| (t.path_count(), t.svg))
+                    .map(|(n, s)| (s, n))
+            }
+        };
+        samples.push(measure(
+            &name,
+            "vtracer-default",
+            0,
+            &target,
+            vt(TracerSetting::default()),
+        )?);
+        samples.push(measure(
+            &name,
+            "vtracer-polygon",
+            0,
+            &target,
+            vt(TracerSetting {
+                polygon: true,
+                ..TracerSetting::default()
+            }),
+        )?);
+        // Tuned: per image and budget, the grid setting with the best PSNR among those with at
+        // most `budget` paths (or the fewest paths if none fits). Seconds are for that single
+        // trace, not the search.
+        let grid: Vec<Sample> = tuning_grid()
+            .into_iter()
+            .map(|s| measure(&name, &s.label(), 0, &target, vt(s)))
+            .collect::<Result<_, _>>()?;
+        for &b in &budgets {
+            let best = grid
+                .iter()
+                .filter(|s| s.paths <= b)
+                .max_by(|x, y| x.psnr.total_cmp(&y.psnr))
+                .or_else(|| grid.iter().min_by_key(|s| s.paths));
+            if let Some(best) = best {
+                let mut s = best.clone();
+                s.method = "vtracer-tuned".into();
+                s.budget = b;
+                samples.push(s);
+            }
+        }
+        if a.no_live {
+            continue;
+        }
+        let mut live_runs: Vec<(String, usize, LiveConfig)> = Vec::new();
+        let base = LiveConfig {
+            seed: a.seed,
+            snapshot_every: 0,
+            ..LiveConfig::preset(a.preset)
+        };
+        for &b in &budgets {
+            live_runs.push((
+                "live".into(),
+                b,
+                LiveConfig {
+                    budget: PathBudget::fixed(b),
+                    ..base.clone()
+                },
+            ));
+            if a.vtracer_init {
+                live_runs.push((
+                    "live-vtracer-init".into(),
+                    b,
+                    LiveConfig {
+                        budget: PathBudget::fixed(b),
+                        init: InitMode::Vtracer,
+                        ..base.clone()
+                    },
+                ));
+            }
+        }
+        if a.auto {
+            live_runs.push((
+                "live-auto".into(),
+                0,
+                LiveConfig {
+                    budget: PathBudget::auto(),
+                    ..base.clone()
+                },
+            ));
+        }
+        for (method, b, cfg) in live_runs {
+            let s = measure(&name, &method, b, &target, || {
+                let r = live::vectorize(&target, &cfg, &NullSink, &CancelToken::new())
+                    .map_err(|e| e.to_string())?;
+                Ok((crate::svg::to_svg(&r.scene, &svg_opts), r.paths))
+            })?;
+            if !a.json {
+                eprintln!(
+                    "{name:50} {method:18} budget {b:3} paths {:3} psnr {:6.2} bytes {:6} {:.2} s",
+                    s.paths, s.psnr, s.svg_bytes, s.seconds
+                );
+            }
+            samples.push(s);
+        }
+    }
+    let rows = summarise(&samples);
+    if a.json {
+        let out = serde_json::json!({
+            "images": files.len(),
+            "rows": rows.iter().map(|r| serde_json::json!({
+                "method": r.method,
+                "paths": if r.budget > 0 { r.budget } else { r.paths.round() as usize },
+                "paths_mean": r.paths,
+                "psnr_mean": r.psnr_mean,
+                "seconds_mean": r.seconds_mean,
+                "svg_bytes_mean": r.svg_bytes_mean,
+            })).collect::<Vec<_>>(),
+            "per_image": samples,
+        });
+        println!("{out}");
+    } else {
+        println!("{} images", files.len());
+        println!(
+            "{:20} {:>6} {:>10} {:>9} {:>10} {:>12}",
+            "method", "budget", "paths_mean", "psnr_dB", "seconds", "svg_bytes"
+        );
+        for r in &rows {
+            println!(
+                "{:20} {:>6} {:>10.1} {:>9.2} {:>10.3} {:>12.0}",
+                r.method, r.budget, r.paths, r.psnr_mean, r.seconds_mean, r.svg_bytes_mean
+            );
+        }
+    }
+    Ok(())
+}
+
+/// Groups samples by (method, budget) in first-seen order and averages them.
+pub fn summarise(samples: &[Sample]) -> Vec<Row> {
+    let mut keys: Vec<(String, usize)> = Vec::new();
+    for s in samples {
+        let k = (s.method.clone(), s.budget);
+        if !keys.contains(&k) {
+            keys.push(k);
+        }
+    }
+    keys.into_iter()
+        .map(|(method, budget)| {
+            let g: Vec<&Sample> = samples
+                .iter()
+                .filter(|s| s.method == method && s.budget == budget)
+                .collect();
+            let n = g.len().max(1) as f64;
+            let mean = |f: &dyn Fn(&Sample) -> f64| g.iter().map(|s| f(s)).sum::<f64>() / n;
+            Row {
+                paths: mean(&|s| s.paths as f64),
+                psnr_mean: mean(&|s| s.psnr.min(100.0)),
+                seconds_mean: mean(&|s| s.seconds),
+                svg_bytes_mean: mean(&|s| s.svg_bytes as f64),
+                method,
+                budget,
+            }
+        })
+        .collect()
+}

@@ -1,0 +1,190 @@
+//! `vectorfusion vectorize INPUT.png -o OUT.svg`: trace a raster image into closed cubic paths
+//! with LIVE.
+
+use super::CliError;
+use crate::image::Image;
+use crate::progress::{CancelToken, Progress};
+use crate::stages::live::{self, InitMode, LiveConfig, PathBudget, Preset};
+use std::path::{Path, PathBuf};
+
+/// Largest input side the command accepts (larger images are refused before decoding).
+pub const MAX_INPUT_SIDE: u32 = 4096;
+
+#[derive(clap::Args, Debug, Clone)]
+pub struct VectorizeArgs {
+    /// Input image (PNG or JPEG).
+    pub input: PathBuf,
+    /// Output SVG.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Number of paths, or `auto` (add stages while they pay off, then prune).
+    #[arg(long, default_value = "64")]
+    pub paths: String,
+    /// Custom stage schedule, e.g. `8,8,16,16,16` (overrides --paths N).
+    #[arg(long)]
+    pub schedule: Option<String>,
+    /// Working size in pixels (longest side) for the optimisation; the preset's by default.
+    #[arg(long)]
+    pub size: Option<u32>,
+    /// Adam iterations per stage; the preset's by default.
+    #[arg(long)]
+    pub iters: Option<u32>,
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    #[arg(long, value_enum, default_value = "balanced")]
+    pub preset: Preset,
+    /// Start from vtracer's trace instead of circles.
+    #[arg(long, value_enum, default_value = "circles")]
+    pub init: InitArg,
+    /// Weight of the self-intersection (Xing) loss.
+    #[arg(long)]
+    pub xing_weight: Option<f32>,
+    /// Decimal places in the SVG.
+    #[arg(long, default_value_t = 1)]
+    pub precision: u8,
+    /// Also write our render of the result as PNG.
+    #[arg(long)]
+    pub preview: Option<PathBuf>,
+    /// No progress bar.
+    #[arg(long, short)]
+    pub quiet: bool,
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum InitArg {
+    Circles,
+    Vtracer,
+}
+
+/// Reads an image, refusing unreadable files and images over [`MAX_INPUT_SIDE`] with a clear
+/// message before decoding them fully.
+pub fn load_input(path: &Path) -> Result<Image, CliError> {
+    let dims = image::ImageReader::open(path)
+        .map_err(|e| CliError::Usage(format!("cannot open {}: {e}", path.display())))?
+        .with_guessed_format()
+        .map_err(|e| CliError::Usage(format!("cannot read {}: {e}", path.display())))?
+        .into_dimensions()
+        .map_err(|e| {
+            CliError::Usage(format!(
+                "{} is not a readable PNG/JPEG image: {e}",
+                path.display()
+            ))
+        })?;
+    if dims.0 > MAX_INPUT_SIDE || dims.1 > MAX_INPUT_SIDE {
+        return Err(CliError::Usage(format!(
+            "{} is {}x{}; images larger than {MAX_INPUT_SIDE} px per side are refused \
+             (downscale it first)",
+            path.display(),
+            dims.0,
+            dims.1
+        )));
+    }
+    Image::open(path).map_err(|e| CliError::Usage(format!("{}: {e}", path.display())))
+}
+
+/// Builds the LIVE configuration from the command-line options.
+pub fn config_from_args(a: &VectorizeArgs) -> Result<LiveConfig, CliError> {
+    let mut cfg = LiveConfig::preset(a.preset);
+    cfg.budget = if let Some(s) = &a.schedule {
+        PathBudget::Schedule {
+            stages: live::schedule::parse_schedule(s, live::MAX_PATHS)
+                .map_err(|e| CliError::Usage(e.to_string()))?,
+        }
+    } else if a.paths.trim() == "auto" {
+        PathBudget::auto()
+    } else {
+        let n: usize = a.paths.trim().parse().map_err(|_| {
+            CliError::Usage(format!(
+                "--paths must be a number or `auto`, got {:?}",
+                a.paths
+            ))
+        })?;
+        if n == 0 || n > live::MAX_PATHS {
+            return Err(CliError::Usage(format!(
+                "--paths must be in 1..={}",
+                live::MAX_PATHS
+            )));
+        }
+        PathBudget::fixed(n)
+    };
+    if let Some(s) = a.size {
+        cfg.size = s;
+    }
+    if let Some(i) = a.iters {
+        cfg.iters_per_stage = i;
+    }
+    if let Some(x) = a.xing_weight {
+        cfg.xing_weight = x;
+    }
+    cfg.seed = a.seed;
+    cfg.init = match a.init {
+        InitArg::Circles => InitMode::Circles,
+        InitArg::Vtracer => InitMode::Vtracer,
+    };
+    cfg.validate().map_err(|e| CliError::Usage(e.to_string()))?;
+    Ok(cfg)
+}
+
+pub fn run(a: VectorizeArgs) -> Result<(), CliError> {
+    let cfg = config_from_args(&a)?;
+    let target = load_input(&a.input)?;
+    let bar = if a.quiet {
+        indicatif::ProgressBar::hidden()
+    } else {
+        indicatif::ProgressBar::new(1)
+    };
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{spinner} [{elapsed_precise}] {bar:40} {pos}/{len} {msg}",
+        )
+        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    let sink = {
+        let bar = bar.clone();
+        move |p: Progress| {
+            bar.set_length(p.total as u64);
+            bar.set_position(p.step as u64);
+            let paths = p
+                .detail
+                .as_ref()
+                .and_then(|d| d.get("paths"))
+                .and_then(|v| v.as_u64())
+                .unwrap_or(0);
+            if let Some(l) = p.loss {
+                bar.set_message(format!("paths {paths} loss {l:.5}"));
+            }
+        }
+    };
+    let t0 = std::time::Instant::now();
+    let result = live::vectorize(&target, &cfg, &sink, &CancelToken::new())
+        .map_err(|e| CliError::Other(anyhow::anyhow!("vectorize failed: {e}")))?;
+    bar.finish_and_clear();
+    let svg = crate::svg::to_svg(
+        &result.scene,
+        &crate::svg::SvgOptions {
+            precision: a.precision,
+        },
+    );
+    std::fs::write(&a.output, &svg).map_err(|e| {
+        CliError::Other(anyhow::anyhow!("cannot write {}: {e}", a.output.display()))
+    })?;
+    if let Some(p) = &a.preview {
+        crate::raster::render(&result.scene)
+            .save_png(p)
+            .map_err(|e| CliError::Other(anyhow::anyhow!("preview: {e}")))?;
+    }
+    eprintln!(
+        "{}: {} paths{}, PSNR {:.2} dB, {} bytes, {:.1} s",
+        a.output.display(),
+        result.paths,
+        if result.pruned > 0 {
+            format!(" ({} pruned)", result.pruned)
+        } else {
+            String::new()
+        },
+        result.psnr,
+        svg.len(),
+        t0.elapsed().as_secs_f64()
+    );
+    Ok(())
+}
