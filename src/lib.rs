@@ -12,10 +12,20 @@
 //! | [`image`] | RGBA f32 buffers, PNG in/out, metrics |
 //! | [`optim`] | Adam with parameter groups, schedules, NaN guards |
 //! | [`progress`] | progress events and cancellation, the seam to CLI and service |
+//! | [`pipeline`] | the job-execution seam the service calls (`JobSpec`, `Executor`) |
+//! | [`store`] | SQLite job queue: jobs, attempts, snapshots, results |
+//! | [`worker`] | worker pool: claims jobs, runs them on OS threads, heartbeats, checkpoints |
+//! | [`server`] | axum HTTP API, SSE, metrics |
+//! | [`config`] | service configuration (`config.toml`, env, flags) |
 //! | [`cli`] | command-line front end |
 
 pub mod cli;
+pub mod config;
 pub mod image;
 pub mod optim;
+pub mod pipeline;
 pub mod progress;
 pub mod scene;
+pub mod server;
+pub mod store;
+pub mod worker;

@@ -1,6 +1,8 @@
 //! The `vectorfusion` command line. Each subcommand lives in its own file; errors are turned
 //! into a message and an exit code in one place ([`main`]).
 
+pub mod serve;
+
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
@@ -21,7 +23,7 @@ pub enum Command {
     /// Render an SVG through our rasteriser to PNG.
     Render(NotYet),
     /// Run the HTTP service.
-    Serve(NotYet),
+    Serve(serve::ServeArgs),
     /// Evaluate generated SVGs with CLIP scorers.
     Eval(NotYet),
     /// Benchmarks.
@@ -61,7 +63,7 @@ pub fn run(cli: Cli) -> Result<(), CliError> {
         Command::Generate(_) => Err(CliError::NotImplemented("generate")),
         Command::Vectorize(_) => Err(CliError::NotImplemented("vectorize")),
         Command::Render(_) => Err(CliError::NotImplemented("render")),
-        Command::Serve(_) => Err(CliError::NotImplemented("serve")),
+        Command::Serve(args) => serve::run(args),
         Command::Eval(_) => Err(CliError::NotImplemented("eval")),
         Command::Bench(_) => Err(CliError::NotImplemented("bench")),
     }
