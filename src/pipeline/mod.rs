@@ -20,6 +20,10 @@ pub enum JobKind {
     Vectorize,
 }
 
+impl JobKind {
+    pub const ALL: &[JobKind] = &[JobKind::Text, JobKind::Vectorize];
+}
+
 /// Visual style of the output.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -28,6 +32,10 @@ pub enum Style {
     Iconography,
     PixelArt,
     Sketch,
+}
+
+impl Style {
+    pub const ALL: &[Style] = &[Style::Iconography, Style::PixelArt, Style::Sketch];
 }
 
 /// How a text job is produced (VectorFusion §4): sample+trace, sample+trace+SDS, or SDS alone.
@@ -40,6 +48,10 @@ pub enum Method {
     SdLiveSds,
 }
 
+impl Method {
+    pub const ALL: &[Method] = &[Method::Scratch, Method::SdLive, Method::SdLiveSds];
+}
+
 /// Named speed/quality trade-offs.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -48,6 +60,10 @@ pub enum Preset {
     #[default]
     Default,
     Quality,
+}
+
+impl Preset {
+    pub const ALL: &[Preset] = &[Preset::Fast, Preset::Default, Preset::Quality];
 }
 
 /// Hard limits on a job's parameters (set from the service configuration).

@@ -8,8 +8,8 @@ use crate::store::{JobRow, JobStatus, NewJob, now_ms};
 use crate::worker::events::JobEvent;
 use crate::worker::metrics::Metrics;
 use axum::Json;
-use axum::body::Bytes;
-use axum::extract::rejection::{BytesRejection, QueryRejection};
+use axum::body::Body;
+use axum::extract::rejection::QueryRejection;
 use axum::extract::{Path, Query, Request, State};
 use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::middleware::Next;
@@ -43,20 +43,11 @@ const IDEMPOTENCY_HEADER: &str = "idempotency-key";
 pub(super) async fn submit(
     State(state): State<AppState>,
     headers: HeaderMap,
-    body: Result<Bytes, BytesRejection>,
+    body: Body,
 ) -> Result<Response, ApiError> {
     if *state.shutdown.borrow() {
         return Err(ApiError::ShuttingDown);
     }
-    let body = body.map_err(|rej| {
-        if rej.status() == StatusCode::PAYLOAD_TOO_LARGE {
-            ApiError::PayloadTooLarge {
-                limit: state.cfg.server.max_body_bytes,
-            }
-        } else {
-            ApiError::MalformedJson(rej.body_text())
-        }
-    })?;
     let is_json = headers
         .get(header::CONTENT_TYPE)
         .and_then(|v| v.to_str().ok())
@@ -73,6 +64,24 @@ pub(super) async fn submit(
     if !is_json {
         return Err(ApiError::UnsupportedMediaType);
     }
+    // Refuse oversized bodies from their declared length, before reading (and before a client
+    // that sent `Expect: 100-continue` uploads anything).
+    let limit = state.cfg.server.max_body_bytes;
+    let declared = headers
+        .get(header::CONTENT_LENGTH)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|s| s.trim().parse::<u64>().ok());
+    if declared.is_some_and(|n| n > limit as u64) {
+        return Err(ApiError::PayloadTooLarge { limit });
+    }
+    let body = axum::body::to_bytes(body, limit).await.map_err(|e| {
+        let msg = format!("{e:#}");
+        if msg.contains("length limit") {
+            ApiError::PayloadTooLarge { limit }
+        } else {
+            ApiError::MalformedJson(format!("could not read the request body: {msg}"))
+        }
+    })?;
     let key = match headers.get(IDEMPOTENCY_HEADER) {
         None => None,
         Some(v) => {
