@@ -23,6 +23,7 @@ use axum::http::Method;
 use axum::routing::{MethodRouter, delete, get, post};
 use std::future::Future;
 use std::sync::Arc;
+use std::sync::atomic::{AtomicI64, Ordering};
 use std::time::Duration;
 use tokio::net::TcpListener;
 use tokio::sync::watch;
@@ -47,6 +48,9 @@ pub struct Inner {
     pub cfg: Config,
     pub limits: Limits,
     pub shutdown: watch::Receiver<bool>,
+    /// Queued jobs as last counted plus jobs submitted since: admission control reads this and
+    /// only counts exactly (one SQL query) when it says the queue is full.
+    pub queued_estimate: AtomicI64,
 }
 
 /// Shared state of all handlers.
@@ -146,8 +150,10 @@ pub async fn run(
         limits: cfg.limits(),
         cfg,
         shutdown: stop_rx,
+        queued_estimate: AtomicI64::new(0),
     }));
     let pruner = tokio::spawn(prune_loop(state.clone()));
+    let counter = tokio::spawn(depth_loop(state.clone()));
     let app = router(state.clone());
     let addr = listener.local_addr()?;
     info!(%addr, workers = state.pool.workers(), db = %state.cfg.database.path.display(), "listening");
@@ -163,6 +169,7 @@ pub async fn run(
         .with_graceful_shutdown(graceful)
         .await;
     pruner.abort();
+    counter.abort();
     // Workers finish their current step, record the interruption and exit.
     let grace = Duration::from_secs(state.cfg.server.shutdown_grace_secs);
     let st = state.clone();
@@ -190,5 +197,15 @@ async fn prune_loop(state: AppState) {
             Err(e) => warn!(error = %e, "pruning failed"),
         }
         tokio::time::sleep(every).await;
+    }
+}
+
+/// Refreshes the queue-depth estimate used for admission control.
+async fn depth_loop(state: AppState) {
+    loop {
+        if let Ok(n) = state.store.queue_depth().await {
+            state.queued_estimate.store(n, Ordering::Relaxed);
+        }
+        tokio::time::sleep(Duration::from_millis(200)).await;
     }
 }

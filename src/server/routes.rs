@@ -16,6 +16,7 @@ use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
 use serde::Deserialize;
 use sha2::Digest;
+use std::sync::atomic::Ordering;
 
 /// Parses a job id path segment; anything that is not a UUID cannot name a job.
 pub(super) fn job_id(raw: &str) -> Result<String, ApiError> {
@@ -39,6 +40,8 @@ pub(super) async fn load_job(state: &AppState, id: &str) -> Result<JobRow, ApiEr
 }
 
 const IDEMPOTENCY_HEADER: &str = "idempotency-key";
+/// Request bodies up to this size are parsed on the async thread.
+const INLINE_PARSE_BYTES: usize = 16 * 1024;
 
 pub(super) async fn submit(
     State(state): State<AppState>,
@@ -105,33 +108,49 @@ pub(super) async fn submit(
             .map_err(|_| ApiError::Internal("uuid has 16 bytes".into()))?,
     );
     let limits = state.limits.clone();
-    let body_for_check = body.clone();
-    // JSON parsing, base64, image decoding and SVG parsing are CPU work: off the async threads.
-    let spec = tokio::task::spawn_blocking(move || {
-        let spec = parse_submit(&body_for_check, &limits, default_seed)?;
-        if let Some(img) = &spec.image {
-            check_image(img, &limits)?;
-        }
-        if let Some(svg) = &spec.svg {
-            check_svg(svg)?;
-        }
-        Ok::<_, ApiError>(spec)
-    })
-    .await
-    .map_err(|e| ApiError::Internal(format!("validation task failed: {e}")))??;
+    // Small bodies are parsed in place (microseconds); big ones, and image decoding and SVG
+    // parsing, are CPU work that runs off the async threads.
+    let spec = if body.len() <= INLINE_PARSE_BYTES {
+        parse_submit(&body, &limits, default_seed)?
+    } else {
+        let b = body.clone();
+        let l = limits.clone();
+        tokio::task::spawn_blocking(move || parse_submit(&b, &l, default_seed))
+            .await
+            .map_err(|e| ApiError::Internal(format!("validation task failed: {e}")))??
+    };
+    let spec = if spec.image.is_some() || spec.svg.is_some() {
+        tokio::task::spawn_blocking(move || {
+            if let Some(img) = &spec.image {
+                check_image(img, &limits)?;
+            }
+            if let Some(svg) = &spec.svg {
+                check_svg(svg)?;
+            }
+            Ok::<_, ApiError>(spec)
+        })
+        .await
+        .map_err(|e| ApiError::Internal(format!("validation task failed: {e}")))??
+    } else {
+        spec
+    };
 
     if spec.kind == JobKind::Text
         && let Err(msg) = state.executor.text_ready()
     {
         return Err(ApiError::ModelsNotConfigured(msg));
     }
-    let depth = state.store.queue_depth().await?;
-    if depth >= state.cfg.server.max_queue_depth {
-        Metrics::inc(&state.metrics.jobs_rejected_queue_full);
-        return Err(ApiError::QueueFull {
-            depth,
-            retry_after_secs: 5,
-        });
+    let max_depth = state.cfg.server.max_queue_depth;
+    if state.queued_estimate.load(Ordering::Relaxed) >= max_depth {
+        let depth = state.store.queue_depth().await?;
+        state.queued_estimate.store(depth, Ordering::Relaxed);
+        if depth >= max_depth {
+            Metrics::inc(&state.metrics.jobs_rejected_queue_full);
+            return Err(ApiError::QueueFull {
+                depth,
+                retry_after_secs: 5,
+            });
+        }
     }
     let spec_json = serde_json::to_string(&spec).map_err(|e| ApiError::Internal(e.to_string()))?;
     let hash = key
@@ -155,6 +174,7 @@ pub(super) async fn submit(
     }
     if created {
         Metrics::inc(&state.metrics.jobs_submitted);
+        state.queued_estimate.fetch_add(1, Ordering::Relaxed);
         state.pool.notify();
         tracing::info!(job = %row.id, kind = %row.kind, "job submitted");
     }

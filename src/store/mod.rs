@@ -203,9 +203,16 @@ pub fn now_ms() -> i64 {
 }
 
 /// Handle to the database; cheap to clone.
+///
+/// Writes go through a single connection (`writer`) so that in-process writers queue fairly in
+/// the pool instead of contending for SQLite's lock (whose busy handler sleeps for
+/// milliseconds); reads use a pool of connections (WAL readers never block the writer). The SQL
+/// stays safe with several processes on one file: every claim and fenced write is atomic in
+/// SQLite itself.
 #[derive(Clone, Debug)]
 pub struct Store {
     pool: SqlitePool,
+    writer: SqlitePool,
 }
 
 impl Store {
@@ -227,12 +234,16 @@ impl Store {
             .synchronous(SqliteSynchronous::Normal)
             .foreign_keys(true)
             .busy_timeout(Duration::from_secs(10));
+        let writer = SqlitePoolOptions::new()
+            .max_connections(1)
+            .connect_with(options.clone())
+            .await?;
+        sqlx::migrate!("./migrations").run(&writer).await?;
         let pool = SqlitePoolOptions::new()
             .max_connections(max_connections.max(1))
             .connect_with(options)
             .await?;
-        sqlx::migrate!("./migrations").run(&pool).await?;
-        Ok(Store { pool })
+        Ok(Store { pool, writer })
     }
 
     pub fn pool(&self) -> &SqlitePool {
@@ -242,6 +253,7 @@ impl Store {
     /// Closes every connection (checkpoints the WAL).
     pub async fn close(&self) {
         self.pool.close().await;
+        self.writer.close().await;
     }
 
     /// A trivial query, for readiness checks.
@@ -262,14 +274,14 @@ impl Store {
             .bind(&job.request_hash)
             .bind(job.max_attempts)
             .bind(now)
-            .fetch_optional(&self.pool)
+            .fetch_optional(&self.writer)
             .await?;
         if let Some(row) = inserted {
             return Ok((row, true));
         }
         let existing: Option<JobRow> = sqlx::query_as(include_str!("sql/get_job_by_key.sql"))
             .bind(&job.idempotency_key)
-            .fetch_optional(&self.pool)
+            .fetch_optional(&self.writer)
             .await?;
         existing
             .map(|r| (r, false))
@@ -315,7 +327,7 @@ impl Store {
         Ok(sqlx::query_as(include_str!("sql/request_cancel.sql"))
             .bind(id)
             .bind(now)
-            .fetch_optional(&self.pool)
+            .fetch_optional(&self.writer)
             .await?)
     }
 
@@ -323,14 +335,14 @@ impl Store {
     pub async fn reap_expired(&self, now: i64) -> Result<Vec<JobRow>, StoreError> {
         let rows: Vec<JobRow> = sqlx::query_as(include_str!("sql/reap_expired.sql"))
             .bind(now)
-            .fetch_all(&self.pool)
+            .fetch_all(&self.writer)
             .await?;
         for row in &rows {
             sqlx::query(include_str!("sql/mark_lost_attempts.sql"))
                 .bind(&row.id)
                 .bind(i64::MAX)
                 .bind(now)
-                .execute(&self.pool)
+                .execute(&self.writer)
                 .await?;
         }
         Ok(rows)
@@ -343,26 +355,33 @@ impl Store {
         now: i64,
         lease_ms: i64,
     ) -> Result<Option<(JobRow, Lease)>, StoreError> {
+        let mut tx = self.writer.begin_with("BEGIN IMMEDIATE").await?;
         let row: Option<JobRow> = sqlx::query_as(include_str!("sql/claim.sql"))
             .bind(worker)
             .bind(now)
             .bind(lease_ms)
-            .fetch_optional(&self.pool)
+            .fetch_optional(&mut *tx)
             .await?;
-        let Some(row) = row else { return Ok(None) };
-        sqlx::query(include_str!("sql/mark_lost_attempts.sql"))
-            .bind(&row.id)
-            .bind(row.attempts)
-            .bind(now)
-            .execute(&self.pool)
-            .await?;
+        let Some(row) = row else {
+            tx.rollback().await?;
+            return Ok(None);
+        };
+        if row.attempts > 1 {
+            sqlx::query(include_str!("sql/mark_lost_attempts.sql"))
+                .bind(&row.id)
+                .bind(row.attempts)
+                .bind(now)
+                .execute(&mut *tx)
+                .await?;
+        }
         sqlx::query(include_str!("sql/insert_attempt.sql"))
             .bind(&row.id)
             .bind(row.attempts)
             .bind(worker)
             .bind(now)
-            .execute(&self.pool)
+            .execute(&mut *tx)
             .await?;
+        tx.commit().await?;
         let lease = Lease {
             job_id: row.id.clone(),
             worker: worker.to_string(),
@@ -383,7 +402,7 @@ impl Store {
             .bind(lease.attempt)
             .bind(now)
             .bind(lease_ms)
-            .fetch_optional(&self.pool)
+            .fetch_optional(&self.writer)
             .await?;
         Ok(match flag {
             Some(c) => Heartbeat::Held { cancel: c != 0 },
@@ -411,7 +430,7 @@ impl Store {
             .bind(total as i64)
             .bind(loss.filter(|l| l.is_finite()))
             .bind(now)
-            .execute(&self.pool)
+            .execute(&self.writer)
             .await?;
         Ok(r.rows_affected() == 1)
     }
@@ -429,7 +448,7 @@ impl Store {
             .bind(lease.attempt)
             .bind(state)
             .bind(now)
-            .execute(&self.pool)
+            .execute(&self.writer)
             .await?;
         Ok(r.rows_affected() == 1)
     }
@@ -453,7 +472,7 @@ impl Store {
             .bind(step as i64)
             .bind(svg)
             .bind(now)
-            .fetch_optional(&self.pool)
+            .fetch_optional(&self.writer)
             .await?;
         if let Some(n) = n
             && n > keep
@@ -461,7 +480,7 @@ impl Store {
             sqlx::query(include_str!("sql/trim_snapshots.sql"))
                 .bind(&lease.job_id)
                 .bind(n - keep.max(1))
-                .execute(&self.pool)
+                .execute(&self.writer)
                 .await?;
         }
         Ok(n)
@@ -477,7 +496,7 @@ impl Store {
         detail: &str,
         now: i64,
     ) -> Result<bool, StoreError> {
-        let mut tx = self.pool.begin_with("BEGIN IMMEDIATE").await?;
+        let mut tx = self.writer.begin_with("BEGIN IMMEDIATE").await?;
         let r = sqlx::query(include_str!("sql/complete_job.sql"))
             .bind(&lease.job_id)
             .bind(&lease.worker)
@@ -511,7 +530,7 @@ impl Store {
         retry_at: Option<i64>,
         now: i64,
     ) -> Result<Option<JobRow>, StoreError> {
-        let mut tx = self.pool.begin_with("BEGIN IMMEDIATE").await?;
+        let mut tx = self.writer.begin_with("BEGIN IMMEDIATE").await?;
         let row: Option<JobRow> = sqlx::query_as(include_str!("sql/fail_job.sql"))
             .bind(&lease.job_id)
             .bind(&lease.worker)
@@ -567,7 +586,7 @@ impl Store {
         outcome: AttemptOutcome,
         now: i64,
     ) -> Result<Option<JobRow>, StoreError> {
-        let mut tx = self.pool.begin_with("BEGIN IMMEDIATE").await?;
+        let mut tx = self.writer.begin_with("BEGIN IMMEDIATE").await?;
         let row: Option<JobRow> = sqlx::query_as(sql)
             .bind(&lease.job_id)
             .bind(&lease.worker)
@@ -629,7 +648,7 @@ impl Store {
     pub async fn prune(&self, before: i64) -> Result<u64, StoreError> {
         let r = sqlx::query(include_str!("sql/prune.sql"))
             .bind(before)
-            .execute(&self.pool)
+            .execute(&self.writer)
             .await?;
         Ok(r.rows_affected())
     }

@@ -75,14 +75,20 @@ async fn claim_order_priority_then_fifo() {
 
 #[tokio::test]
 async fn concurrent_claims_never_share_a_job() {
-    let (_d, store) = temp_store(8).await;
+    // Several Store handles on one file = several writer connections racing in SQLite itself
+    // (as with several server processes), plus several tasks per handle.
+    let (d, store) = temp_store(8).await;
+    let mut handles_db = vec![store.clone()];
+    for _ in 0..3 {
+        handles_db.push(Store::open(&d.path().join("jobs.db"), 2).await.unwrap());
+    }
     let n = 60;
     for i in 0..n {
         store.insert_job(&new_job(i), 1).await.unwrap();
     }
     let mut handles = Vec::new();
     for w in 0..8 {
-        let store = store.clone();
+        let store = handles_db[w % handles_db.len()].clone();
         handles.push(tokio::spawn(async move {
             let mut mine = Vec::new();
             while let Some((row, lease)) = store.claim(&format!("w{w}"), 10, 60_000).await.unwrap()
