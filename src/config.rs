@@ -22,7 +22,7 @@ pub enum ConfigError {
     Invalid { key: &'static str, reason: String },
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct Config {
     pub server: ServerConfig,
@@ -158,19 +158,6 @@ impl Default for LogConfig {
         LogConfig {
             format: "text".into(),
             level: "info".into(),
-        }
-    }
-}
-
-impl Default for Config {
-    fn default() -> Self {
-        Config {
-            server: ServerConfig::default(),
-            database: DatabaseConfig::default(),
-            queue: QueueConfig::default(),
-            limits: LimitsConfig::default(),
-            models: ModelsConfig::default(),
-            log: LogConfig::default(),
         }
     }
 }
