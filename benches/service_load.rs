@@ -185,6 +185,26 @@ fn main() {
             "\njobs submitted: {submitted}, succeeded: {done}, wall {secs:.1} s ({:.0} jobs/s end to end with 2 workers)",
             done as f64 / secs
         );
+        // server-side view: share of requests handled within each bucket bound
+        let m = http::get(addr, "/metrics").await.text();
+        println!("\nserver-side handling time (vectorfusion_http_request_duration_seconds), all rates together:");
+        for route in ["POST /jobs", "GET /jobs/{id}"] {
+            let prefix = format!("vectorfusion_http_request_duration_seconds_bucket{{route=\"{route}\",le=\"");
+            let buckets: Vec<(String, f64)> = m
+                .lines()
+                .filter_map(|l| l.strip_prefix(prefix.as_str()))
+                .filter_map(|rest| {
+                    let (le, n) = rest.split_once("\"} ")?;
+                    Some((le.to_string(), n.parse::<f64>().ok()?))
+                })
+                .collect();
+            let total = buckets.last().map_or(0.0, |b| b.1).max(1.0);
+            let shares: Vec<String> = buckets
+                .iter()
+                .map(|(le, n)| format!("<={le}s: {:.2}%", 100.0 * n / total))
+                .collect();
+            println!("{route}: {}", shares.join(", "));
+        }
         let _ = tx.send(());
         let _ = server.await;
     });

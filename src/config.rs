@@ -256,6 +256,9 @@ impl Config {
         if !matches!(self.log.format.as_str(), "text" | "json") {
             return bad("log.format", "must be \"text\" or \"json\"");
         }
+        if self.server.max_queue_depth < 1 {
+            return bad("server.max_queue_depth", "must be at least 1");
+        }
         if self.server.max_body_bytes < 1024 {
             return bad("server.max_body_bytes", "must be at least 1024");
         }

@@ -948,7 +948,8 @@ async fn graceful_shutdown_requeues_running_job_and_restart_resumes_it() {
     let store = vectorfusion::store::Store::open(&db, 1).await.unwrap();
     let result = store.result(&id).await.unwrap().unwrap();
     let detail: Value = serde_json::from_str(&result.detail).unwrap();
-    assert!(detail["resumed_from"].as_u64().unwrap() >= 5, "{detail}");
+    // checkpointed when shutdown cancelled it, not just at the last periodic checkpoint
+    assert!(detail["resumed_from"].as_u64().unwrap() >= 20, "{detail}");
     assert_eq!(
         result.svg,
         scene_svg(&scene_at(3, 3, 300, 300).unwrap()),

@@ -247,5 +247,6 @@ async fn sigterm_checkpoints_and_requeues_then_restart_resumes() {
     let store = vectorfusion::store::Store::open(&db, 1).await.unwrap();
     let detail: Value =
         serde_json::from_str(&store.result(&id).await.unwrap().unwrap().detail).unwrap();
-    assert!(detail["resumed_from"].as_u64().unwrap() >= 10, "{detail}");
+    // the job checkpointed when SIGTERM stopped it (it had passed step 12)
+    assert!(detail["resumed_from"].as_u64().unwrap() >= 12, "{detail}");
 }

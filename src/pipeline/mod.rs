@@ -317,7 +317,9 @@ impl JobContext {
         self.cancel.is_cancelled()
     }
 
-    /// `Err(Cancelled)` once cancellation was requested; call between steps.
+    /// `Err(Cancelled)` once cancellation was requested; call between steps. Executors that
+    /// checkpoint should save one when they see the cancellation, before returning
+    /// [`PipelineError::Cancelled`]: on shutdown the job resumes from it.
     pub fn check_cancelled(&self) -> Result<(), PipelineError> {
         if self.is_cancelled() {
             Err(PipelineError::Cancelled)

@@ -200,9 +200,17 @@ async fn prune_loop(state: AppState) {
     }
 }
 
-/// Refreshes the queue-depth estimate used for admission control.
+/// Refreshes the queue-depth estimate used for admission control, and checkpoints the WAL
+/// (off the write path) about once a second.
 async fn depth_loop(state: AppState) {
+    let mut ticks = 0u32;
     loop {
+        ticks = ticks.wrapping_add(1);
+        if ticks % 5 == 0
+            && let Err(e) = state.store.checkpoint().await
+        {
+            warn!(error = %e, "WAL checkpoint failed");
+        }
         if let Ok(n) = state.store.queue_depth().await {
             state.queued_estimate.store(n, Ordering::Relaxed);
         }

@@ -457,6 +457,8 @@ pub(super) async fn auth_and_count(
     req: Request,
     next: Next,
 ) -> Response {
+    let started = std::time::Instant::now();
+    let route = route_label(req.method().as_str(), req.uri().path());
     let key = &state.cfg.server.api_key;
     let open = matches!(req.uri().path(), "/healthz" | "/readyz");
     let resp = if key.is_empty() || open {
@@ -474,5 +476,29 @@ pub(super) async fn auth_and_count(
         }
     };
     state.metrics.http_response(resp.status().as_u16());
+    state
+        .metrics
+        .observe_http(&route, started.elapsed().as_secs_f64());
     resp
+}
+
+/// `METHOD /path/template` for metrics: job ids and snapshot numbers collapse, unknown paths
+/// share one label.
+fn route_label(method: &str, path: &str) -> String {
+    let segs: Vec<&str> = path.trim_start_matches('/').split('/').collect();
+    let template = match segs.as_slice() {
+        ["jobs"] => "/jobs".to_string(),
+        ["jobs", _] => "/jobs/{id}".to_string(),
+        ["jobs", _, "snapshots", _] => "/jobs/{id}/snapshots/{n}.svg".to_string(),
+        ["jobs", _, leaf @ ("events" | "result.svg" | "result.png")] => {
+            format!("/jobs/{{id}}/{leaf}")
+        }
+        [one @ ("healthz" | "readyz" | "metrics")] => format!("/{one}"),
+        _ => "other".to_string(),
+    };
+    let method = match method {
+        "GET" | "POST" | "DELETE" | "PUT" | "PATCH" | "HEAD" | "OPTIONS" => method,
+        _ => "OTHER",
+    };
+    format!("{method} {template}")
 }

@@ -233,7 +233,10 @@ impl Store {
             .journal_mode(SqliteJournalMode::Wal)
             .synchronous(SqliteSynchronous::Normal)
             .foreign_keys(true)
-            .busy_timeout(Duration::from_secs(10));
+            .busy_timeout(Duration::from_secs(10))
+            // No checkpoint inside a commit (it fsyncs and would stall every queued write);
+            // the owner calls `checkpoint` from a background task instead.
+            .pragma("wal_autocheckpoint", "0");
         let writer = SqlitePoolOptions::new()
             .max_connections(1)
             .connect_with(options.clone())
@@ -252,8 +255,21 @@ impl Store {
 
     /// Closes every connection (checkpoints the WAL).
     pub async fn close(&self) {
+        let _ = sqlx::query("PRAGMA wal_checkpoint(TRUNCATE)")
+            .execute(&self.writer)
+            .await;
         self.pool.close().await;
         self.writer.close().await;
+    }
+
+    /// Copies the WAL back into the database file without blocking readers or the writer
+    /// (`PRAGMA wal_checkpoint(PASSIVE)`). Automatic checkpoints are off: long-lived owners
+    /// (the server) call this periodically; [`Store::close`] truncates the WAL.
+    pub async fn checkpoint(&self) -> Result<(), StoreError> {
+        sqlx::query("PRAGMA wal_checkpoint(PASSIVE)")
+            .execute(&self.pool)
+            .await?;
+        Ok(())
     }
 
     /// A trivial query, for readiness checks.

@@ -10,16 +10,37 @@ const SECONDS_BUCKETS: [f64; 12] = [
     0.005, 0.01, 0.05, 0.1, 0.5, 1.0, 5.0, 10.0, 30.0, 60.0, 300.0, 1800.0,
 ];
 
-#[derive(Clone, Debug, Default)]
+/// Bucket bounds for HTTP request durations, seconds.
+const HTTP_BUCKETS: [f64; 12] = [
+    0.0005, 0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 5.0,
+];
+
+#[derive(Clone, Debug)]
 struct Histogram {
-    counts: [u64; SECONDS_BUCKETS.len()],
+    bounds: &'static [f64],
+    counts: Vec<u64>,
     count: u64,
     sum: f64,
 }
 
+impl Default for Histogram {
+    fn default() -> Self {
+        Histogram::new(&SECONDS_BUCKETS)
+    }
+}
+
 impl Histogram {
+    fn new(bounds: &'static [f64]) -> Self {
+        Histogram {
+            bounds,
+            counts: vec![0; bounds.len()],
+            count: 0,
+            sum: 0.0,
+        }
+    }
+
     fn observe(&mut self, v: f64) {
-        for (i, b) in SECONDS_BUCKETS.iter().enumerate() {
+        for (i, b) in self.bounds.iter().enumerate() {
             if v <= *b {
                 self.counts[i] += 1;
             }
@@ -30,7 +51,7 @@ impl Histogram {
 
     fn render(&self, out: &mut String, name: &str, labels: &str) {
         let sep = if labels.is_empty() { "" } else { "," };
-        for (i, b) in SECONDS_BUCKETS.iter().enumerate() {
+        for (i, b) in self.bounds.iter().enumerate() {
             let _ = writeln!(
                 out,
                 "{name}_bucket{{{labels}{sep}le=\"{b}\"}} {}",
@@ -65,6 +86,7 @@ pub struct Metrics {
     job_seconds: Mutex<Histogram>,
     stage_seconds: Mutex<BTreeMap<String, Histogram>>,
     http_responses: Mutex<BTreeMap<u16, u64>>,
+    http_seconds: Mutex<BTreeMap<String, Histogram>>,
 }
 
 fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
@@ -102,6 +124,15 @@ impl Metrics {
 
     pub fn http_response(&self, status: u16) {
         *lock(&self.http_responses).entry(status).or_default() += 1;
+    }
+
+    /// Server-side handling time of one request; `route` is a path template like
+    /// `POST /jobs/{id}` (keep the label set small).
+    pub fn observe_http(&self, route: &str, seconds: f64) {
+        lock(&self.http_seconds)
+            .entry(route.to_string())
+            .or_insert_with(|| Histogram::new(&HTTP_BUCKETS))
+            .observe(seconds);
     }
 
     /// Prometheus text; `jobs_by_status` comes from the database at scrape time.
@@ -208,6 +239,17 @@ impl Metrics {
             let _ = writeln!(
                 out,
                 "vectorfusion_http_responses_total{{code=\"{code}\"}} {n}"
+            );
+        }
+        let _ = writeln!(
+            out,
+            "# HELP vectorfusion_http_request_duration_seconds Server-side request handling time (to response headers).\n# TYPE vectorfusion_http_request_duration_seconds histogram"
+        );
+        for (route, h) in lock(&self.http_seconds).iter() {
+            h.render(
+                &mut out,
+                "vectorfusion_http_request_duration_seconds",
+                &format!("route=\"{}\"", label_value(route)),
             );
         }
         out

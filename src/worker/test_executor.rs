@@ -1,8 +1,8 @@
 //! A test double for the service, NOT a product feature: an [`Executor`] that draws a small,
 //! deterministic scene of circles (one per requested path, laid out from the seed) with
 //! [`crate::scene`], pretending to optimise it for `steps` steps of `step_ms` each. It emits
-//! progress and SVG snapshots, checkpoints `{ "step": n }` when due, resumes from a checkpoint,
-//! honours cancellation between steps, and validates input images by decoding them. It exists so
+//! progress and SVG snapshots, checkpoints `{ "step": n }` when due and when cancelled, resumes
+//! from a checkpoint, honours cancellation between steps, and validates input images by decoding them. It exists so
 //! the queue, workers, SSE and crash recovery can be tested end to end before (and independently
 //! of) the real pipeline. The server binary enables it only through the hidden
 //! `serve --test-executor STEP_MS` flag.
@@ -137,7 +137,14 @@ impl Executor for TestExecutor {
             .and_then(|v| v.get("step").and_then(|s| s.as_u64()))
             .map_or(0, |s| s.min(spec.steps as u64) as u32);
         for step in resumed_from + 1..=spec.steps {
-            ctx.check_cancelled()?;
+            if ctx.is_cancelled() {
+                // Save the work done so far, so a shutdown loses nothing (a failed save only
+                // means the next attempt resumes from the previous checkpoint).
+                if step > 1 {
+                    let _ = ctx.checkpoint(serde_json::json!({ "step": step - 1 }));
+                }
+                return Err(PipelineError::Cancelled);
+            }
             std::thread::sleep(Duration::from_millis(self.step_ms));
             let mut p = Progress::new("test", step, spec.steps);
             p.loss = Some(1.0 / step as f64);
