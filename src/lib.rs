@@ -16,18 +16,28 @@
 //! | [`teacher`] | SDS teacher interface; exact analytic test teacher |
 //! | [`augment`] | differentiable random perspective + crop |
 //! | [`stages`] | pipeline stages (SDS) |
+//! | [`pipeline`] | the job-execution seam the service calls (`JobSpec`, `Executor`) |
+//! | [`store`] | SQLite job queue: jobs, attempts, snapshots, results |
+//! | [`worker`] | worker pool: claims jobs, runs them on OS threads, heartbeats, checkpoints |
+//! | [`server`] | axum HTTP API, SSE, metrics |
+//! | [`config`] | service configuration (`config.toml`, env, flags) |
 //! | [`cli`] | command-line front end |
 
 pub mod augment;
 pub mod cli;
 pub mod eval;
+pub mod config;
 pub mod image;
 pub mod losses;
 pub mod models;
 pub mod optim;
+pub mod pipeline;
 pub mod progress;
 pub mod raster;
 pub mod scene;
 pub mod stages;
 pub mod svg;
 pub mod teacher;
+pub mod server;
+pub mod store;
+pub mod worker;

@@ -5,6 +5,7 @@ pub mod bench_vectorize;
 pub mod eval;
 pub mod generate;
 pub mod vectorize;
+pub mod serve;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
@@ -26,7 +27,7 @@ pub enum Command {
     /// Render an SVG through our rasteriser to PNG.
     Render(NotYet),
     /// Run the HTTP service.
-    Serve(NotYet),
+    Serve(serve::ServeArgs),
     /// Evaluate generated SVGs with CLIP scorers.
     Eval(eval::EvalArgs),
     /// Benchmarks.
@@ -79,7 +80,7 @@ pub fn run(cli: Cli) -> Result<(), CliError> {
         Command::Generate(a) => generate::run(*a),
         Command::Vectorize(a) => vectorize::run(a),
         Command::Render(_) => Err(CliError::NotImplemented("render")),
-        Command::Serve(_) => Err(CliError::NotImplemented("serve")),
+        Command::Serve(args) => serve::run(args),
         Command::Eval(a) => eval::run(a),
         Command::Bench(b) => match b.which {
             BenchCommand::Vectorize(a) => bench_vectorize::run(a),

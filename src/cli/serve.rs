@@ -1,0 +1,104 @@
+//! `vectorfusion serve`: run the HTTP service.
+
+use super::CliError;
+use crate::config::Config;
+use crate::pipeline::{DefaultExecutor, Executor};
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::sync::Arc;
+
+/// Run the HTTP job service (see docs/SERVICE.md). Without flags: 127.0.0.1:8080, ./vectorfusion.db.
+#[derive(clap::Args, Debug)]
+pub struct ServeArgs {
+    /// Configuration file (TOML; see config.toml for every setting).
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// Listen address, overrides server.bind.
+    #[arg(long, value_name = "ADDR:PORT")]
+    pub bind: Option<SocketAddr>,
+    /// SQLite database file, overrides database.path.
+    #[arg(long, value_name = "PATH")]
+    pub db: Option<PathBuf>,
+    /// Worker threads, overrides queue.workers.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u16).range(1..=256))]
+    pub workers: Option<u16>,
+    /// Testing only: replace the pipeline with the service test double, sleeping STEP_MS per
+    /// step. Not a product feature.
+    #[arg(long, value_name = "STEP_MS", hide = true)]
+    pub test_executor: Option<u64>,
+}
+
+pub fn run(args: ServeArgs) -> Result<(), CliError> {
+    let mut cfg =
+        Config::load(args.config.as_deref()).map_err(|e| CliError::Usage(e.to_string()))?;
+    if let Some(b) = args.bind {
+        cfg.server.bind = b.to_string();
+    }
+    if let Some(db) = args.db {
+        cfg.database.path = db;
+    }
+    if let Some(n) = args.workers {
+        cfg.queue.workers = n as usize;
+    }
+    cfg.validate().map_err(|e| CliError::Usage(e.to_string()))?;
+    init_logging(&cfg);
+    let executor: Arc<dyn Executor> = match args.test_executor {
+        Some(ms) => {
+            tracing::warn!(
+                "running with the TEST executor (service test double), not the pipeline"
+            );
+            Arc::new(crate::worker::test_executor::TestExecutor::new(ms))
+        }
+        None => Arc::new(DefaultExecutor::new(cfg.model_dirs())),
+    };
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .thread_name("vf-http")
+        .build()
+        .map_err(|e| CliError::Other(e.into()))?;
+    rt.block_on(async move {
+        let listener = tokio::net::TcpListener::bind(&cfg.server.bind)
+            .await
+            .map_err(|e| CliError::Usage(format!("cannot listen on {}: {e}", cfg.server.bind)))?;
+        crate::server::run(cfg, executor, listener, shutdown_signal())
+            .await
+            .map_err(|e| CliError::Other(e.into()))
+    })
+}
+
+fn init_logging(cfg: &Config) {
+    use tracing_subscriber::EnvFilter;
+    let filter = EnvFilter::try_from_default_env()
+        .or_else(|_| EnvFilter::try_new(&cfg.log.level))
+        .unwrap_or_else(|_| EnvFilter::new("info"));
+    let builder = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr);
+    let _ = if cfg.log.format == "json" {
+        builder.json().try_init()
+    } else {
+        builder.try_init()
+    };
+}
+
+/// Resolves on Ctrl-C or SIGTERM.
+async fn shutdown_signal() {
+    let ctrl_c = async {
+        let _ = tokio::signal::ctrl_c().await;
+    };
+    #[cfg(unix)]
+    let term = async {
+        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+            Ok(mut s) => {
+                s.recv().await;
+            }
+            Err(_) => std::future::pending::<()>().await,
+        }
+    };
+    #[cfg(not(unix))]
+    let term = std::future::pending::<()>();
+    tokio::select! {
+        _ = ctrl_c => {},
+        _ = term => {},
+    }
+}

@@ -1,0 +1,351 @@
+//! Service configuration: `config.toml` (every key documented in the shipped file), overridden by
+//! environment variables `VECTORFUSION_<SECTION>_<KEY>` (e.g. `VECTORFUSION_SERVER_BIND`), then by
+//! command-line flags. Every setting has a default, so the service starts with no file at all.
+
+use crate::pipeline::{Limits, ModelDirs};
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// Configuration errors.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    #[error("cannot read config file {path}: {source}")]
+    Read {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("invalid config: {0}")]
+    Parse(String),
+    #[error("invalid environment override {var}: {reason}")]
+    Env { var: String, reason: String },
+    #[error("invalid setting {key}: {reason}")]
+    Invalid { key: &'static str, reason: String },
+}
+
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Config {
+    pub server: ServerConfig,
+    pub database: DatabaseConfig,
+    pub queue: QueueConfig,
+    pub limits: LimitsConfig,
+    pub models: ModelsConfig,
+    pub log: LogConfig,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ServerConfig {
+    pub bind: String,
+    pub api_key: String,
+    pub max_body_bytes: usize,
+    pub max_queue_depth: i64,
+    pub sse_heartbeat_secs: u64,
+    pub progress_interval_ms: u64,
+    pub snapshot_interval_ms: u64,
+    pub shutdown_grace_secs: u64,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct DatabaseConfig {
+    pub path: PathBuf,
+    pub max_connections: u32,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct QueueConfig {
+    pub workers: usize,
+    pub lease_secs: u64,
+    pub heartbeat_secs: u64,
+    pub poll_interval_ms: u64,
+    pub max_attempts: u32,
+    pub retry_backoff_ms: u64,
+    pub retry_backoff_max_ms: u64,
+    pub checkpoint_every_steps: u32,
+    pub max_snapshots_per_job: u32,
+    pub retention_hours: u64,
+    pub prune_interval_secs: u64,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct LimitsConfig {
+    pub max_paths: u32,
+    pub max_steps: u32,
+    pub max_samples: u32,
+    pub max_caption_chars: usize,
+    pub max_svg_bytes: usize,
+    pub max_image_side: u32,
+}
+
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ModelsConfig {
+    /// Empty = not configured.
+    pub sd_dir: String,
+    pub clip_dir: String,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct LogConfig {
+    /// `text` or `json`.
+    pub format: String,
+    /// A tracing filter, e.g. `info` or `vectorfusion=debug,info`.
+    pub level: String,
+}
+
+impl Default for ServerConfig {
+    fn default() -> Self {
+        ServerConfig {
+            bind: "127.0.0.1:8080".into(),
+            api_key: String::new(),
+            max_body_bytes: 16 * 1024 * 1024,
+            max_queue_depth: 1000,
+            sse_heartbeat_secs: 15,
+            progress_interval_ms: 250,
+            snapshot_interval_ms: 1000,
+            shutdown_grace_secs: 20,
+        }
+    }
+}
+
+impl Default for DatabaseConfig {
+    fn default() -> Self {
+        DatabaseConfig {
+            path: PathBuf::from("vectorfusion.db"),
+            max_connections: 8,
+        }
+    }
+}
+
+impl Default for QueueConfig {
+    fn default() -> Self {
+        QueueConfig {
+            workers: 2,
+            lease_secs: 30,
+            heartbeat_secs: 5,
+            poll_interval_ms: 250,
+            max_attempts: 3,
+            retry_backoff_ms: 2000,
+            retry_backoff_max_ms: 60_000,
+            checkpoint_every_steps: 25,
+            max_snapshots_per_job: 200,
+            retention_hours: 168,
+            prune_interval_secs: 3600,
+        }
+    }
+}
+
+impl Default for LimitsConfig {
+    fn default() -> Self {
+        let l = Limits::default();
+        LimitsConfig {
+            max_paths: l.max_paths,
+            max_steps: l.max_steps,
+            max_samples: l.max_samples,
+            max_caption_chars: l.max_caption_chars,
+            max_svg_bytes: l.max_svg_bytes,
+            max_image_side: l.max_image_side,
+        }
+    }
+}
+
+impl Default for LogConfig {
+    fn default() -> Self {
+        LogConfig {
+            format: "text".into(),
+            level: "info".into(),
+        }
+    }
+}
+
+const ENV_PREFIX: &str = "VECTORFUSION_";
+
+impl Config {
+    /// Loads `path` (if given) over the defaults, then applies environment overrides.
+    pub fn load(path: Option<&Path>) -> Result<Config, ConfigError> {
+        let text = match path {
+            Some(p) => std::fs::read_to_string(p).map_err(|source| ConfigError::Read {
+                path: p.to_path_buf(),
+                source,
+            })?,
+            None => String::new(),
+        };
+        Config::from_toml_and_env(&text, std::env::vars())
+    }
+
+    /// Parses TOML text and applies `VECTORFUSION_SECTION_KEY` overrides from `env`.
+    pub fn from_toml_and_env(
+        text: &str,
+        env: impl IntoIterator<Item = (String, String)>,
+    ) -> Result<Config, ConfigError> {
+        let mut table: toml::Table =
+            toml::from_str(text).map_err(|e| ConfigError::Parse(e.to_string()))?;
+        let defaults = toml::Table::try_from(Config::default())
+            .map_err(|e| ConfigError::Parse(e.to_string()))?;
+        for (var, value) in env {
+            let Some(rest) = var.strip_prefix(ENV_PREFIX) else {
+                continue;
+            };
+            let rest = rest.to_ascii_lowercase();
+            // find the section whose name is a prefix followed by `_`
+            let found = defaults.iter().find_map(|(section, keys)| {
+                let key = rest.strip_prefix(section.as_str())?.strip_prefix('_')?;
+                let default = keys.as_table()?.get(key)?;
+                Some((section.clone(), key.to_string(), default.clone()))
+            });
+            let Some((section, key, default)) = found else {
+                // Not a setting (e.g. VECTORFUSION_TEST_*): ignore.
+                continue;
+            };
+            let parsed = parse_like(&default, &value).map_err(|reason| ConfigError::Env {
+                var: var.clone(),
+                reason,
+            })?;
+            let entry = table
+                .entry(section)
+                .or_insert_with(|| toml::Value::Table(toml::Table::new()));
+            match entry.as_table_mut() {
+                Some(t) => {
+                    t.insert(key, parsed);
+                }
+                None => {
+                    return Err(ConfigError::Env {
+                        var,
+                        reason: "the config file has this section as a non-table".into(),
+                    });
+                }
+            }
+        }
+        let cfg: Config = toml::Value::Table(table)
+            .try_into()
+            .map_err(|e: toml::de::Error| ConfigError::Parse(e.to_string()))?;
+        cfg.validate()?;
+        Ok(cfg)
+    }
+
+    /// Checks value ranges that serde cannot.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        let bad = |key, reason: &str| {
+            Err(ConfigError::Invalid {
+                key,
+                reason: reason.into(),
+            })
+        };
+        if self.server.bind.parse::<std::net::SocketAddr>().is_err() {
+            return bad("server.bind", "must be ADDR:PORT, e.g. 127.0.0.1:8080");
+        }
+        if self.queue.workers == 0 {
+            return bad("queue.workers", "must be at least 1");
+        }
+        if self.queue.lease_secs == 0 || self.queue.heartbeat_secs == 0 {
+            return bad("queue.lease_secs", "lease and heartbeat must be positive");
+        }
+        if self.queue.heartbeat_secs >= self.queue.lease_secs {
+            return bad(
+                "queue.heartbeat_secs",
+                "must be shorter than queue.lease_secs (a lease must survive a heartbeat gap)",
+            );
+        }
+        if self.queue.max_attempts == 0 {
+            return bad("queue.max_attempts", "must be at least 1");
+        }
+        if !matches!(self.log.format.as_str(), "text" | "json") {
+            return bad("log.format", "must be \"text\" or \"json\"");
+        }
+        if self.server.max_queue_depth < 1 {
+            return bad("server.max_queue_depth", "must be at least 1");
+        }
+        if self.server.max_body_bytes < 1024 {
+            return bad("server.max_body_bytes", "must be at least 1024");
+        }
+        Ok(())
+    }
+
+    pub fn limits(&self) -> Limits {
+        Limits {
+            max_paths: self.limits.max_paths,
+            max_steps: self.limits.max_steps,
+            max_samples: self.limits.max_samples,
+            max_caption_chars: self.limits.max_caption_chars,
+            max_svg_bytes: self.limits.max_svg_bytes,
+            max_image_side: self.limits.max_image_side,
+        }
+    }
+
+    pub fn model_dirs(&self) -> ModelDirs {
+        let opt = |s: &str| (!s.trim().is_empty()).then(|| PathBuf::from(s));
+        ModelDirs {
+            sd_dir: opt(&self.models.sd_dir),
+            clip_dir: opt(&self.models.clip_dir),
+        }
+    }
+}
+
+fn parse_like(default: &toml::Value, value: &str) -> Result<toml::Value, String> {
+    Ok(match default {
+        toml::Value::Integer(_) => toml::Value::Integer(
+            value
+                .trim()
+                .parse()
+                .map_err(|_| format!("expected an integer, got {value:?}"))?,
+        ),
+        toml::Value::Float(_) => toml::Value::Float(
+            value
+                .trim()
+                .parse()
+                .map_err(|_| format!("expected a number, got {value:?}"))?,
+        ),
+        toml::Value::Boolean(_) => toml::Value::Boolean(
+            value
+                .trim()
+                .parse()
+                .map_err(|_| format!("expected true or false, got {value:?}"))?,
+        ),
+        _ => toml::Value::String(value.to_string()),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shipped_config_file_parses_to_the_defaults() {
+        let text = include_str!("../config.toml");
+        let cfg = Config::from_toml_and_env(text, Vec::new()).unwrap();
+        assert_eq!(cfg, Config::default());
+    }
+
+    #[test]
+    fn env_overrides_file_and_unknown_keys_are_rejected() {
+        let cfg = Config::from_toml_and_env(
+            "[queue]\nworkers = 3\n",
+            vec![
+                ("VECTORFUSION_QUEUE_WORKERS".to_string(), "5".to_string()),
+                ("VECTORFUSION_SERVER_BIND".into(), "0.0.0.0:9000".into()),
+                ("VECTORFUSION_DATABASE_PATH".into(), "/tmp/x.db".into()),
+                ("VECTORFUSION_TEST_SOMETHING".into(), "ignored".into()),
+                ("PATH".into(), "/bin".into()),
+            ],
+        )
+        .unwrap();
+        assert_eq!(cfg.queue.workers, 5);
+        assert_eq!(cfg.server.bind, "0.0.0.0:9000");
+        assert_eq!(cfg.database.path, PathBuf::from("/tmp/x.db"));
+        let err = Config::from_toml_and_env(
+            "",
+            vec![("VECTORFUSION_QUEUE_WORKERS".into(), "many".into())],
+        )
+        .unwrap_err();
+        assert!(
+            err.to_string().contains("VECTORFUSION_QUEUE_WORKERS"),
+            "{err}"
+        );
+        assert!(Config::from_toml_and_env("[queue]\nwrokers = 1\n", Vec::new()).is_err());
+        assert!(Config::from_toml_and_env("[queue]\nworkers = 0\n", Vec::new()).is_err());
+    }
+}

@@ -1,0 +1,504 @@
+//! The job-execution seam: what the service's workers call to turn a validated [`JobSpec`] into
+//! an SVG. The worker owns queueing, leases, storage and events; an [`Executor`] owns the
+//! computation and talks back only through its [`JobContext`] (progress, cancellation,
+//! checkpoints).
+//!
+//! [`DefaultExecutor`] is the production executor. Its `text` and `vectorize` entry points are
+//! where the pipeline stages are wired in; until they land they return
+//! [`PipelineError::NotImplemented`].
+
+use crate::progress::{CancelToken, NullSink, Progress, ProgressSink};
+use serde::{Deserialize, Serialize};
+use std::path::PathBuf;
+use std::sync::Arc;
+
+/// What a job produces: caption → SVG, or image → SVG.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum JobKind {
+    Text,
+    Vectorize,
+}
+
+impl JobKind {
+    pub const ALL: &[JobKind] = &[JobKind::Text, JobKind::Vectorize];
+}
+
+/// Visual style of the output.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Style {
+    #[default]
+    Iconography,
+    PixelArt,
+    Sketch,
+}
+
+impl Style {
+    pub const ALL: &[Style] = &[Style::Iconography, Style::PixelArt, Style::Sketch];
+}
+
+/// How a text job is produced (VectorFusion §4): sample+trace, sample+trace+SDS, or SDS alone.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Method {
+    Scratch,
+    SdLive,
+    #[default]
+    SdLiveSds,
+}
+
+impl Method {
+    pub const ALL: &[Method] = &[Method::Scratch, Method::SdLive, Method::SdLiveSds];
+}
+
+/// Named speed/quality trade-offs.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Preset {
+    Fast,
+    #[default]
+    Default,
+    Quality,
+}
+
+impl Preset {
+    pub const ALL: &[Preset] = &[Preset::Fast, Preset::Default, Preset::Quality];
+}
+
+/// Hard limits on a job's parameters (set from the service configuration).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Limits {
+    pub max_paths: u32,
+    pub max_steps: u32,
+    pub max_samples: u32,
+    pub max_caption_chars: usize,
+    pub max_svg_bytes: usize,
+    pub max_image_side: u32,
+}
+
+impl Default for Limits {
+    fn default() -> Self {
+        Limits {
+            max_paths: 1024,
+            max_steps: 20_000,
+            max_samples: 64,
+            max_caption_chars: 1000,
+            max_svg_bytes: 2 * 1024 * 1024,
+            max_image_side: 4096,
+        }
+    }
+}
+
+/// A validated job. Construct through the service's request validation (or fill it in directly
+/// in code and call [`JobSpec::validate`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct JobSpec {
+    pub kind: JobKind,
+    pub caption: Option<String>,
+    /// PNG or JPEG bytes (base64 in JSON).
+    #[serde(default, with = "base64_bytes")]
+    pub image: Option<Vec<u8>>,
+    /// An SVG to start from.
+    pub svg: Option<String>,
+    pub style: Style,
+    pub method: Method,
+    pub paths: u32,
+    pub steps: u32,
+    pub seed: u64,
+    pub samples: u32,
+    pub preset: Preset,
+    pub priority: i32,
+}
+
+/// Why a [`JobSpec`] is invalid: which field, and why.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("{field}: {reason}")]
+pub struct SpecError {
+    pub field: &'static str,
+    pub reason: String,
+}
+
+impl SpecError {
+    pub fn new(field: &'static str, reason: impl Into<String>) -> Self {
+        SpecError {
+            field,
+            reason: reason.into(),
+        }
+    }
+}
+
+/// Allowed priority range (higher runs first).
+pub const PRIORITY_RANGE: std::ops::RangeInclusive<i32> = -100..=100;
+
+impl JobSpec {
+    /// Checks every field against `limits` and the kind's requirements.
+    pub fn validate(&self, limits: &Limits) -> Result<(), SpecError> {
+        fn range(field: &'static str, v: u32, max: u32) -> Result<(), SpecError> {
+            if v == 0 || v > max {
+                return Err(SpecError::new(
+                    field,
+                    format!("must be between 1 and {max}, got {v}"),
+                ));
+            }
+            Ok(())
+        }
+        range("paths", self.paths, limits.max_paths)?;
+        range("steps", self.steps, limits.max_steps)?;
+        range("samples", self.samples, limits.max_samples)?;
+        if !PRIORITY_RANGE.contains(&self.priority) {
+            return Err(SpecError::new(
+                "priority",
+                format!(
+                    "must be between {} and {}, got {}",
+                    PRIORITY_RANGE.start(),
+                    PRIORITY_RANGE.end(),
+                    self.priority
+                ),
+            ));
+        }
+        if let Some(c) = &self.caption {
+            let n = c.chars().count();
+            if c.trim().is_empty() {
+                return Err(SpecError::new("caption", "must not be empty"));
+            }
+            if n > limits.max_caption_chars {
+                return Err(SpecError::new(
+                    "caption",
+                    format!(
+                        "is {n} characters, at most {} allowed",
+                        limits.max_caption_chars
+                    ),
+                ));
+            }
+            if c.chars()
+                .any(|ch| ch.is_control() && ch != '\n' && ch != '\t')
+            {
+                return Err(SpecError::new("caption", "contains control characters"));
+            }
+        }
+        if let Some(svg) = &self.svg
+            && svg.len() > limits.max_svg_bytes
+        {
+            return Err(SpecError::new(
+                "svg",
+                format!(
+                    "is {} bytes, at most {} allowed",
+                    svg.len(),
+                    limits.max_svg_bytes
+                ),
+            ));
+        }
+        match self.kind {
+            JobKind::Text => {
+                if self.caption.is_none() {
+                    return Err(SpecError::new("caption", "is required for kind \"text\""));
+                }
+                if self.image.is_some() {
+                    return Err(SpecError::new(
+                        "image",
+                        "only applies to kind \"vectorize\" (use \"svg\" to start a text job from a drawing)",
+                    ));
+                }
+            }
+            JobKind::Vectorize => {
+                if self.image.is_none() {
+                    return Err(SpecError::new(
+                        "image",
+                        "is required for kind \"vectorize\" (base64 PNG or JPEG)",
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Errors from running a job.
+#[derive(Debug, thiserror::Error)]
+pub enum PipelineError {
+    #[error("not implemented yet: {0}")]
+    NotImplemented(&'static str),
+    #[error("invalid input: {0}")]
+    InvalidInput(String),
+    #[error("models are not configured: {0}")]
+    ModelsNotConfigured(String),
+    #[error("cancelled")]
+    Cancelled,
+    /// A failure worth retrying (resource exhaustion, I/O hiccup).
+    #[error("transient failure: {0}")]
+    Transient(String),
+    #[error("{0}")]
+    Failed(String),
+}
+
+impl PipelineError {
+    /// Stable machine-readable code stored with failed jobs.
+    pub fn code(&self) -> &'static str {
+        match self {
+            PipelineError::NotImplemented(_) => "not_implemented",
+            PipelineError::InvalidInput(_) => "invalid_input",
+            PipelineError::ModelsNotConfigured(_) => "models_not_configured",
+            PipelineError::Cancelled => "cancelled",
+            PipelineError::Transient(_) => "transient",
+            PipelineError::Failed(_) => "failed",
+        }
+    }
+
+    /// Whether the worker should retry the job (with backoff).
+    pub fn is_retryable(&self) -> bool {
+        matches!(self, PipelineError::Transient(_))
+    }
+}
+
+/// The result of a job.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct JobOutput {
+    pub svg: String,
+    pub paths: usize,
+    /// Stage-specific details (scores, timings, resume information).
+    pub detail: serde_json::Value,
+}
+
+type Checkpointer = dyn Fn(serde_json::Value) -> Result<(), String> + Send + Sync;
+
+/// What an executor gets besides the spec: where to report, when to stop, how to checkpoint.
+pub struct JobContext {
+    progress: Arc<dyn ProgressSink>,
+    cancel: CancelToken,
+    checkpoint_every: u32,
+    checkpointer: Box<Checkpointer>,
+    resume: Option<serde_json::Value>,
+}
+
+impl JobContext {
+    /// A context that reports to `progress`, stops on `cancel`, saves checkpoints through
+    /// `checkpointer` (advised every `checkpoint_every` steps) and resumes from `resume`.
+    pub fn new(
+        progress: Arc<dyn ProgressSink>,
+        cancel: CancelToken,
+        checkpoint_every: u32,
+        checkpointer: Box<Checkpointer>,
+        resume: Option<serde_json::Value>,
+    ) -> Self {
+        JobContext {
+            progress,
+            cancel,
+            checkpoint_every: checkpoint_every.max(1),
+            checkpointer,
+            resume,
+        }
+    }
+
+    /// A context for running outside the service: no progress, no checkpoints.
+    pub fn detached(cancel: CancelToken) -> Self {
+        JobContext::new(
+            Arc::new(NullSink),
+            cancel,
+            u32::MAX,
+            Box::new(|_| Ok(())),
+            None,
+        )
+    }
+
+    pub fn report(&self, event: Progress) {
+        self.progress.report(event);
+    }
+
+    pub fn sink(&self) -> &dyn ProgressSink {
+        self.progress.as_ref()
+    }
+
+    pub fn cancel_token(&self) -> &CancelToken {
+        &self.cancel
+    }
+
+    pub fn is_cancelled(&self) -> bool {
+        self.cancel.is_cancelled()
+    }
+
+    /// `Err(Cancelled)` once cancellation was requested; call between steps. Executors that
+    /// checkpoint should save one when they see the cancellation, before returning
+    /// [`PipelineError::Cancelled`]: on shutdown the job resumes from it.
+    pub fn check_cancelled(&self) -> Result<(), PipelineError> {
+        if self.is_cancelled() {
+            Err(PipelineError::Cancelled)
+        } else {
+            Ok(())
+        }
+    }
+
+    /// Whether `step` (1-based) is one at which a checkpoint is due.
+    pub fn checkpoint_due(&self, step: u32) -> bool {
+        step > 0 && step % self.checkpoint_every == 0
+    }
+
+    /// Saves resumable state (current SVG, step, optimiser state). A failure to save is
+    /// reported as [`PipelineError::Transient`].
+    pub fn checkpoint(&self, state: serde_json::Value) -> Result<(), PipelineError> {
+        (self.checkpointer)(state).map_err(PipelineError::Transient)
+    }
+
+    /// State from the last checkpoint of an earlier, interrupted attempt.
+    pub fn resume_state(&self) -> Option<serde_json::Value> {
+        self.resume.clone()
+    }
+}
+
+/// Runs jobs. Called on a dedicated worker thread, never on the async runtime.
+pub trait Executor: Send + Sync {
+    fn run(&self, spec: &JobSpec, ctx: &JobContext) -> Result<JobOutput, PipelineError>;
+
+    /// `Ok` when `text` jobs can run (models configured and loadable); otherwise a message
+    /// telling the operator how to configure them. Text jobs are refused at submit time while
+    /// this is an error.
+    fn text_ready(&self) -> Result<(), String>;
+}
+
+/// Model locations (diffusers-layout directories).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct ModelDirs {
+    pub sd_dir: Option<PathBuf>,
+    pub clip_dir: Option<PathBuf>,
+}
+
+/// The production executor.
+#[derive(Clone, Debug, Default)]
+pub struct DefaultExecutor {
+    pub models: ModelDirs,
+}
+
+impl DefaultExecutor {
+    pub fn new(models: ModelDirs) -> Self {
+        DefaultExecutor { models }
+    }
+
+    /// Image (or SVG) → SVG by LIVE tracing.
+    fn vectorize(&self, _spec: &JobSpec, _ctx: &JobContext) -> Result<JobOutput, PipelineError> {
+        Err(PipelineError::NotImplemented(
+            "vectorize jobs (LIVE tracing is not wired into this build yet)",
+        ))
+    }
+
+    /// Caption → SVG (sampling, tracing, score distillation).
+    fn text(&self, _spec: &JobSpec, _ctx: &JobContext) -> Result<JobOutput, PipelineError> {
+        Err(PipelineError::NotImplemented(
+            "text jobs (the diffusion pipeline is not wired into this build yet)",
+        ))
+    }
+}
+
+impl Executor for DefaultExecutor {
+    fn run(&self, spec: &JobSpec, ctx: &JobContext) -> Result<JobOutput, PipelineError> {
+        ctx.check_cancelled()?;
+        match spec.kind {
+            JobKind::Text => self.text(spec, ctx),
+            JobKind::Vectorize => self.vectorize(spec, ctx),
+        }
+    }
+
+    fn text_ready(&self) -> Result<(), String> {
+        let Some(dir) = &self.models.sd_dir else {
+            return Err(
+                "text-to-SVG needs Stable Diffusion weights: set `sd_dir` in the [models] \
+                 section of config.toml (or the VECTORFUSION_MODELS_SD_DIR environment variable) \
+                 to a diffusers-layout model directory, then restart the server"
+                    .into(),
+            );
+        };
+        if !dir.is_dir() {
+            return Err(format!(
+                "the configured Stable Diffusion directory {} does not exist: fix `sd_dir` in the \
+                 [models] section of config.toml (or VECTORFUSION_MODELS_SD_DIR)",
+                dir.display()
+            ));
+        }
+        Err(
+            "text jobs are not available in this build yet (the diffusion pipeline is not \
+             wired in); only vectorize jobs are accepted"
+                .into(),
+        )
+    }
+}
+
+mod base64_bytes {
+    use base64::Engine;
+    use base64::engine::general_purpose::STANDARD;
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(v: &Option<Vec<u8>>, s: S) -> Result<S::Ok, S::Error> {
+        match v {
+            Some(bytes) => s.serialize_some(&STANDARD.encode(bytes)),
+            None => s.serialize_none(),
+        }
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Option<Vec<u8>>, D::Error> {
+        let v: Option<String> = Option::deserialize(d)?;
+        v.map(|s| STANDARD.decode(s).map_err(serde::de::Error::custom))
+            .transpose()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn spec() -> JobSpec {
+        JobSpec {
+            kind: JobKind::Vectorize,
+            caption: None,
+            image: Some(vec![1, 2, 3]),
+            svg: None,
+            style: Style::Iconography,
+            method: Method::SdLiveSds,
+            paths: 16,
+            steps: 100,
+            seed: u64::MAX,
+            samples: 4,
+            preset: Preset::Default,
+            priority: 0,
+        }
+    }
+
+    #[test]
+    fn spec_roundtrips_through_json_with_base64_image() {
+        let s = spec();
+        let json = serde_json::to_string(&s).unwrap();
+        assert!(json.contains("\"image\":\"AQID\""));
+        let back: JobSpec = serde_json::from_str(&json).unwrap();
+        assert_eq!(back, s);
+    }
+
+    #[test]
+    fn validation_names_the_field() {
+        let l = Limits::default();
+        assert!(spec().validate(&l).is_ok());
+        let mut s = spec();
+        s.paths = 0;
+        assert_eq!(s.validate(&l).unwrap_err().field, "paths");
+        let mut s = spec();
+        s.image = None;
+        assert_eq!(s.validate(&l).unwrap_err().field, "image");
+        let mut s = spec();
+        s.kind = JobKind::Text;
+        s.image = None;
+        assert_eq!(s.validate(&l).unwrap_err().field, "caption");
+        s.caption = Some("自転車".into());
+        assert!(s.validate(&l).is_ok());
+        s.priority = 1000;
+        assert_eq!(s.validate(&l).unwrap_err().field, "priority");
+    }
+
+    #[test]
+    fn default_executor_refuses_text_with_configuration_hint() {
+        let e = DefaultExecutor::default();
+        let msg = e.text_ready().unwrap_err();
+        assert!(msg.contains("sd_dir"), "{msg}");
+        let ctx = JobContext::detached(CancelToken::new());
+        assert!(matches!(
+            e.run(&spec(), &ctx),
+            Err(PipelineError::NotImplemented(_))
+        ));
+    }
+}

@@ -1,0 +1,219 @@
+//! The HTTP service (axum): job submission, status, listing, cancellation, results, SSE progress,
+//! health, readiness and Prometheus metrics. `openapi.yaml` at the crate root documents it; a
+//! test keeps the two in sync.
+//!
+//! [`run`] opens the store, starts the worker pool and serves until the shutdown future
+//! resolves; then it stops accepting connections, ends event streams, interrupts running jobs
+//! (they checkpoint and return to the queue) and waits for the workers.
+
+pub mod error;
+mod routes;
+mod sse;
+pub mod types;
+
+use crate::config::Config;
+use crate::pipeline::{Executor, Limits};
+use crate::store::{Store, StoreError};
+use crate::worker::events::Hub;
+use crate::worker::metrics::Metrics;
+use crate::worker::{WorkerPool, WorkerSettings};
+use axum::Router;
+use axum::extract::DefaultBodyLimit;
+use axum::http::Method;
+use axum::routing::{MethodRouter, delete, get, post};
+use std::future::Future;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicI64, Ordering};
+use std::time::Duration;
+use tokio::net::TcpListener;
+use tokio::sync::watch;
+use tracing::{info, warn};
+
+/// Errors that stop the server.
+#[derive(Debug, thiserror::Error)]
+pub enum ServerError {
+    #[error(transparent)]
+    Store(#[from] StoreError),
+    #[error("I/O error: {0}")]
+    Io(#[from] std::io::Error),
+}
+
+#[doc(hidden)]
+pub struct Inner {
+    pub store: Store,
+    pub hub: Hub,
+    pub metrics: Arc<Metrics>,
+    pub executor: Arc<dyn Executor>,
+    pub pool: WorkerPool,
+    pub cfg: Config,
+    pub limits: Limits,
+    pub shutdown: watch::Receiver<bool>,
+    /// Queued jobs as last counted plus jobs submitted since: admission control reads this and
+    /// only counts exactly (one SQL query) when it says the queue is full.
+    pub queued_estimate: AtomicI64,
+}
+
+/// Shared state of all handlers.
+#[derive(Clone)]
+pub struct AppState(Arc<Inner>);
+
+impl std::ops::Deref for AppState {
+    type Target = Inner;
+    fn deref(&self) -> &Inner {
+        &self.0
+    }
+}
+
+/// Every route of the API: (method, path, handler). The router is built from this table and the
+/// OpenAPI sync test compares it with `openapi.yaml`.
+fn route_table() -> Vec<(Method, &'static str, MethodRouter<AppState>)> {
+    vec![
+        (Method::POST, "/jobs", post(routes::submit)),
+        (Method::GET, "/jobs", get(routes::list)),
+        (Method::GET, "/jobs/{id}", get(routes::get_job)),
+        (Method::DELETE, "/jobs/{id}", delete(routes::cancel)),
+        (Method::GET, "/jobs/{id}/events", get(sse::events)),
+        (
+            Method::GET,
+            "/jobs/{id}/result.svg",
+            get(routes::result_svg),
+        ),
+        (
+            Method::GET,
+            "/jobs/{id}/result.png",
+            get(routes::result_png),
+        ),
+        (
+            Method::GET,
+            "/jobs/{id}/snapshots/{file}",
+            get(routes::snapshot),
+        ),
+        (Method::GET, "/healthz", get(routes::healthz)),
+        (Method::GET, "/readyz", get(routes::readyz)),
+        (Method::GET, "/metrics", get(routes::metrics)),
+    ]
+}
+
+/// (method, path) of every route, in OpenAPI spelling (`/jobs/{id}/snapshots/{n}.svg`).
+pub fn routes() -> Vec<(String, String)> {
+    route_table()
+        .into_iter()
+        .map(|(m, p, _)| {
+            (
+                m.as_str().to_ascii_lowercase(),
+                p.replace("{file}", "{n}.svg"),
+            )
+        })
+        .collect()
+}
+
+fn router(state: AppState) -> Router {
+    let mut r = Router::new();
+    for (_, path, handler) in route_table() {
+        r = r.route(path, handler);
+    }
+    r.method_not_allowed_fallback(routes::method_not_allowed)
+        .fallback(routes::no_route)
+        .layer(axum::middleware::from_fn_with_state(
+            state.clone(),
+            routes::auth_and_count,
+        ))
+        .layer(DefaultBodyLimit::max(state.cfg.server.max_body_bytes))
+        .with_state(state)
+}
+
+/// Serves the API on `listener` until `shutdown` resolves, then shuts down gracefully.
+pub async fn run(
+    cfg: Config,
+    executor: Arc<dyn Executor>,
+    listener: TcpListener,
+    shutdown: impl Future<Output = ()> + Send + 'static,
+) -> Result<(), ServerError> {
+    let store = Store::open(&cfg.database.path, cfg.database.max_connections).await?;
+    let hub = Hub::new();
+    let metrics = Arc::new(Metrics::default());
+    let pool = WorkerPool::start(
+        store.clone(),
+        executor.clone(),
+        hub.clone(),
+        metrics.clone(),
+        WorkerSettings::from_config(&cfg),
+        tokio::runtime::Handle::current(),
+    )?;
+    let (stop_tx, stop_rx) = watch::channel(false);
+    let state = AppState(Arc::new(Inner {
+        store: store.clone(),
+        hub,
+        metrics,
+        executor,
+        pool,
+        limits: cfg.limits(),
+        cfg,
+        shutdown: stop_rx,
+        queued_estimate: AtomicI64::new(0),
+    }));
+    let pruner = tokio::spawn(prune_loop(state.clone()));
+    let counter = tokio::spawn(depth_loop(state.clone()));
+    let app = router(state.clone());
+    let addr = listener.local_addr()?;
+    info!(%addr, workers = state.pool.workers(), db = %state.cfg.database.path.display(), "listening");
+
+    let st = state.clone();
+    let graceful = async move {
+        shutdown.await;
+        info!("shutdown requested: no new jobs are claimed, running jobs checkpoint and requeue");
+        let _ = stop_tx.send(true);
+        st.pool.begin_shutdown();
+    };
+    let served = axum::serve(listener, app)
+        .with_graceful_shutdown(graceful)
+        .await;
+    pruner.abort();
+    counter.abort();
+    // Workers finish their current step, record the interruption and exit.
+    let grace = Duration::from_secs(state.cfg.server.shutdown_grace_secs);
+    let st = state.clone();
+    let joined =
+        tokio::time::timeout(grace, tokio::task::spawn_blocking(move || st.pool.join())).await;
+    if joined.is_err() {
+        warn!(
+            "workers did not stop within {}s; their leases will expire and the jobs will be reclaimed",
+            grace.as_secs()
+        );
+    }
+    store.close().await;
+    info!("stopped");
+    served.map_err(ServerError::Io)
+}
+
+async fn prune_loop(state: AppState) {
+    let every = Duration::from_secs(state.cfg.queue.prune_interval_secs.max(1));
+    let keep_ms = (state.cfg.queue.retention_hours as i64).saturating_mul(3_600_000);
+    loop {
+        let cutoff = crate::store::now_ms().saturating_sub(keep_ms);
+        match state.store.prune(cutoff).await {
+            Ok(0) => {}
+            Ok(n) => info!(jobs = n, "pruned finished jobs past retention"),
+            Err(e) => warn!(error = %e, "pruning failed"),
+        }
+        tokio::time::sleep(every).await;
+    }
+}
+
+/// Refreshes the queue-depth estimate used for admission control, and checkpoints the WAL
+/// (off the write path) about once a second.
+async fn depth_loop(state: AppState) {
+    let mut ticks = 0u32;
+    loop {
+        ticks = ticks.wrapping_add(1);
+        if ticks % 5 == 0
+            && let Err(e) = state.store.checkpoint().await
+        {
+            warn!(error = %e, "WAL checkpoint failed");
+        }
+        if let Ok(n) = state.store.queue_depth().await {
+            state.queued_estimate.store(n, Ordering::Relaxed);
+        }
+        tokio::time::sleep(Duration::from_millis(200)).await;
+    }
+}

@@ -1,0 +1,210 @@
+//! `GET /jobs/{id}/events`: server-sent events, EventSource compatible.
+//!
+//! Stream: `state` (the stored job) first; then stored snapshots the client has not seen; then
+//! live `progress`, `snapshot` and `state` events; finally one of `done`, `failed`, `cancelled`
+//! (data = the job) and the stream ends. Snapshot events carry `id: N` (the snapshot number), so
+//! a reconnecting EventSource sends `Last-Event-ID: N` and receives every stored snapshot after
+//! N; without it only the latest snapshot is replayed. Keep-alive comments go out every
+//! `server.sse_heartbeat_secs`.
+//!
+//! Each stream is fed by its own task from a per-job broadcast channel. The worker's publish
+//! never waits; when a client reads too slowly its channel lags and the task resynchronises from
+//! the database, so slow clients cost themselves events, never the workers time.
+
+use super::AppState;
+use super::error::ApiError;
+use super::routes::{job_id, load_job};
+use super::types::JobView;
+use crate::store::{JobRow, JobStatus, SnapshotRow};
+use crate::worker::events::JobEvent;
+use axum::extract::{Path, State};
+use axum::http::HeaderMap;
+use axum::response::sse::{Event, KeepAlive, Sse};
+use futures_util::Stream;
+use std::convert::Infallible;
+use std::time::Duration;
+use tokio::sync::{broadcast, mpsc};
+
+/// Snapshots replayed at most on (re)connect.
+const REPLAY_LIMIT: i64 = 500;
+
+pub(super) async fn events(
+    State(state): State<AppState>,
+    Path(raw): Path<String>,
+    headers: HeaderMap,
+) -> Result<Sse<impl Stream<Item = Result<Event, Infallible>>>, ApiError> {
+    let id = job_id(&raw)?;
+    let last_seen: Option<i64> = headers
+        .get("last-event-id")
+        .and_then(|v| v.to_str().ok())
+        .and_then(|s| s.trim().parse().ok());
+    // Subscribe before reading the stored state so nothing falls between the two.
+    let rx = state.hub.subscribe(&id);
+    let row = load_job(&state, &id).await?;
+    let (tx, out) = mpsc::channel::<Event>(64);
+    tokio::spawn(feed(state.clone(), row, last_seen, rx, tx));
+    let stream = futures_util::stream::unfold(out, |mut out| async move {
+        out.recv().await.map(|e| (Ok(e), out))
+    });
+    let every = Duration::from_secs(state.cfg.server.sse_heartbeat_secs.max(1));
+    Ok(Sse::new(stream).keep_alive(KeepAlive::new().interval(every).text("heartbeat")))
+}
+
+fn json_event(name: &str, value: &impl serde::Serialize) -> Event {
+    let data = serde_json::to_string(value).unwrap_or_else(|_| "{}".into());
+    Event::default().event(name).data(data)
+}
+
+fn state_event(row: &JobRow) -> Event {
+    json_event("state", &JobView::from_row(row))
+}
+
+fn snapshot_event(n: i64, stage: &str, step: i64, svg: &str) -> Event {
+    json_event(
+        "snapshot",
+        &serde_json::json!({ "n": n, "stage": stage, "step": step, "svg": svg }),
+    )
+    .id(n.to_string())
+}
+
+fn terminal_event(row: &JobRow) -> Option<Event> {
+    let name = match row.status().ok()? {
+        JobStatus::Succeeded => "done",
+        JobStatus::Failed => "failed",
+        JobStatus::Cancelled => "cancelled",
+        JobStatus::Queued | JobStatus::Running => return None,
+    };
+    Some(json_event(name, &JobView::from_row(row)))
+}
+
+struct Feed {
+    state: AppState,
+    id: String,
+    tx: mpsc::Sender<Event>,
+    sent_snapshot: i64,
+}
+
+impl Feed {
+    async fn send(&self, e: Event) -> Result<(), ()> {
+        self.tx.send(e).await.map_err(|_| ())
+    }
+
+    async fn send_snapshots(&mut self, rows: Vec<SnapshotRow>) -> Result<(), ()> {
+        for s in rows {
+            if s.n > self.sent_snapshot {
+                self.send(snapshot_event(s.n, &s.stage, s.step, &s.svg))
+                    .await?;
+                self.sent_snapshot = s.n;
+            }
+        }
+        Ok(())
+    }
+
+    /// Reloads the job and sends what a lagging client missed. `Ok(true)` when the job is
+    /// finished (terminal event sent).
+    async fn resync(&mut self) -> Result<bool, ()> {
+        let Ok(Some(row)) = self.state.store.get_job(&self.id).await else {
+            return Err(());
+        };
+        self.send(state_event(&row)).await?;
+        let snaps = self
+            .state
+            .store
+            .snapshots_after(&self.id, self.sent_snapshot, REPLAY_LIMIT)
+            .await
+            .map_err(|_| ())?;
+        self.send_snapshots(snaps).await?;
+        if let Some(t) = terminal_event(&row) {
+            self.send(t).await?;
+            return Ok(true);
+        }
+        Ok(false)
+    }
+}
+
+async fn feed(
+    state: AppState,
+    row: JobRow,
+    last_seen: Option<i64>,
+    mut rx: broadcast::Receiver<JobEvent>,
+    tx: mpsc::Sender<Event>,
+) -> Result<(), ()> {
+    let mut shutdown = state.shutdown.clone();
+    let mut f = Feed {
+        id: row.id.clone(),
+        state,
+        tx,
+        sent_snapshot: last_seen.unwrap_or(0),
+    };
+    f.send(state_event(&row)).await?;
+    let replay = match last_seen {
+        Some(n) => f.state.store.snapshots_after(&f.id, n, REPLAY_LIMIT).await,
+        None => f
+            .state
+            .store
+            .latest_snapshot(&f.id)
+            .await
+            .map(|s| s.into_iter().collect()),
+    }
+    .map_err(|_| ())?;
+    f.send_snapshots(replay).await?;
+    if let Some(t) = terminal_event(&row) {
+        return f.send(t).await;
+    }
+    loop {
+        let ev = tokio::select! {
+            ev = rx.recv() => ev,
+            _ = shutdown.changed() => return Ok(()),
+            _ = f.tx.closed() => return Ok(()),
+        };
+        match ev {
+            Ok(JobEvent::Progress {
+                stage,
+                step,
+                total,
+                loss,
+                detail,
+            }) => {
+                f.send(json_event(
+                    "progress",
+                    &serde_json::json!({
+                        "stage": stage, "step": step, "total": total, "loss": loss, "detail": detail
+                    }),
+                ))
+                .await?;
+            }
+            Ok(JobEvent::Snapshot {
+                n,
+                stage,
+                step,
+                svg,
+            }) => {
+                if n > f.sent_snapshot {
+                    f.send(snapshot_event(n, &stage, step as i64, &svg)).await?;
+                    f.sent_snapshot = n;
+                }
+            }
+            Ok(JobEvent::Status(_)) => {
+                if f.resync().await? {
+                    return Ok(());
+                }
+            }
+            Ok(JobEvent::Finished(_)) | Err(broadcast::error::RecvError::Closed) => {
+                // The final snapshot may have been stored just before: resync sends it, then
+                // the terminal event.
+                if f.resync().await? {
+                    return Ok(());
+                }
+                if matches!(ev, Err(broadcast::error::RecvError::Closed)) {
+                    // Channel gone without a terminal status: resubscribe.
+                    rx = f.state.hub.subscribe(&f.id);
+                }
+            }
+            Err(broadcast::error::RecvError::Lagged(_)) => {
+                if f.resync().await? {
+                    return Ok(());
+                }
+            }
+        }
+    }
+}

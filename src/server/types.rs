@@ -1,0 +1,264 @@
+//! Request parsing/validation and response shapes of the HTTP API (see `openapi.yaml`).
+
+use super::error::ApiError;
+use crate::pipeline::{JobKind, JobSpec, Limits, Method, Preset, Style};
+use crate::store::{AttemptRow, JobRow, JobStatus};
+use base64::Engine;
+use serde::Serialize;
+use serde::de::DeserializeOwned;
+use serde_json::{Map, Value};
+
+/// Fields accepted by `POST /jobs` (anything else is rejected as unknown).
+pub const SUBMIT_FIELDS: &[&str] = &[
+    "kind", "caption", "image", "svg", "style", "method", "paths", "steps", "seed", "samples",
+    "preset", "priority",
+];
+
+/// Defaults for omitted fields.
+pub const DEFAULT_PATHS: u32 = 64;
+pub const DEFAULT_STEPS: u32 = 500;
+pub const DEFAULT_SAMPLES: u32 = 4;
+
+fn field<T: DeserializeOwned>(obj: &Map<String, Value>, name: &str) -> Result<Option<T>, ApiError> {
+    match obj.get(name) {
+        None | Some(Value::Null) => Ok(None),
+        Some(v) => T::deserialize(v)
+            .map(Some)
+            .map_err(|e| ApiError::invalid(name, e.to_string())),
+    }
+}
+
+/// Parses and validates a `POST /jobs` body into a [`JobSpec`]. `job_id_seed` seeds jobs that
+/// give no seed (so every job is reproducible from its stored spec). Image decoding is checked
+/// separately ([`check_image`]) because it is CPU work.
+pub fn parse_submit(body: &[u8], limits: &Limits, default_seed: u64) -> Result<JobSpec, ApiError> {
+    let value: Value =
+        serde_json::from_slice(body).map_err(|e| ApiError::MalformedJson(e.to_string()))?;
+    let Value::Object(obj) = value else {
+        return Err(ApiError::MalformedJson(
+            "expected a JSON object at the top level".into(),
+        ));
+    };
+    for key in obj.keys() {
+        if !SUBMIT_FIELDS.contains(&key.as_str()) {
+            return Err(ApiError::invalid(
+                key.clone(),
+                format!(
+                    "unknown field; expected one of {}",
+                    SUBMIT_FIELDS.join(", ")
+                ),
+            ));
+        }
+    }
+    let kind: JobKind = field(&obj, "kind")?
+        .ok_or_else(|| ApiError::invalid("kind", "is required: \"text\" or \"vectorize\""))?;
+    let image_b64: Option<String> = field(&obj, "image")?;
+    let image = match image_b64 {
+        Some(s) => {
+            let trimmed = s.trim();
+            let data = trimmed
+                .strip_prefix("data:")
+                .and_then(|rest| rest.split_once(";base64,").map(|(_, d)| d))
+                .unwrap_or(trimmed);
+            let bytes = base64::engine::general_purpose::STANDARD
+                .decode(data)
+                .map_err(|e| ApiError::invalid("image", format!("is not valid base64: {e}")))?;
+            if bytes.is_empty() {
+                return Err(ApiError::invalid("image", "is empty"));
+            }
+            Some(bytes)
+        }
+        None => None,
+    };
+    let method: Option<Method> = field(&obj, "method")?;
+    if kind == JobKind::Vectorize && method.is_some() {
+        return Err(ApiError::invalid("method", "only applies to kind \"text\""));
+    }
+    let spec = JobSpec {
+        kind,
+        caption: field(&obj, "caption")?,
+        image,
+        svg: field(&obj, "svg")?,
+        style: field::<Style>(&obj, "style")?.unwrap_or_default(),
+        method: method.unwrap_or_default(),
+        paths: field(&obj, "paths")?.unwrap_or(DEFAULT_PATHS),
+        steps: field(&obj, "steps")?.unwrap_or(DEFAULT_STEPS),
+        seed: field(&obj, "seed")?.unwrap_or(default_seed),
+        samples: field(&obj, "samples")?.unwrap_or(DEFAULT_SAMPLES),
+        preset: field::<Preset>(&obj, "preset")?.unwrap_or_default(),
+        priority: field(&obj, "priority")?.unwrap_or(0),
+    };
+    spec.validate(limits)
+        .map_err(|e| ApiError::invalid(e.field, e.reason))?;
+    Ok(spec)
+}
+
+/// Checks that `bytes` is a PNG or JPEG within the size limit (decodes it fully).
+pub fn check_image(bytes: &[u8], limits: &Limits) -> Result<(), ApiError> {
+    let fmt = image::guess_format(bytes).map_err(|_| {
+        ApiError::invalid("image", "is not a PNG or JPEG image (unrecognised bytes)")
+    })?;
+    if !matches!(fmt, image::ImageFormat::Png | image::ImageFormat::Jpeg) {
+        return Err(ApiError::invalid(
+            "image",
+            format!("must be PNG or JPEG, got {fmt:?}"),
+        ));
+    }
+    let reader = image::ImageReader::with_format(std::io::Cursor::new(bytes), fmt);
+    let (w, h) = reader
+        .into_dimensions()
+        .map_err(|e| ApiError::invalid("image", format!("cannot be read: {e}")))?;
+    if w.max(h) > limits.max_image_side {
+        return Err(ApiError::invalid(
+            "image",
+            format!(
+                "is {w}x{h}; the longest side may be at most {}",
+                limits.max_image_side
+            ),
+        ));
+    }
+    crate::image::Image::decode(bytes)
+        .map_err(|e| ApiError::invalid("image", format!("cannot be decoded: {e}")))?;
+    Ok(())
+}
+
+/// Checks that `svg` parses as SVG.
+pub fn check_svg(svg: &str) -> Result<(), ApiError> {
+    resvg::usvg::Tree::from_str(svg, &resvg::usvg::Options::default())
+        .map(|_| ())
+        .map_err(|e| ApiError::invalid("svg", format!("is not a valid SVG: {e}")))
+}
+
+fn rfc3339(ms: Option<i64>) -> Option<String> {
+    ms.and_then(chrono::DateTime::from_timestamp_millis)
+        .map(|t| t.to_rfc3339_opts(chrono::SecondsFormat::Millis, true))
+}
+
+#[derive(Serialize)]
+pub struct ProgressView {
+    pub stage: Option<String>,
+    pub step: i64,
+    pub total: i64,
+    pub fraction: f64,
+    pub loss: Option<f64>,
+}
+
+#[derive(Serialize)]
+pub struct ErrorView {
+    pub code: String,
+    pub message: String,
+}
+
+#[derive(Serialize)]
+pub struct ParamsView {
+    pub caption: Option<String>,
+    pub style: Style,
+    pub method: Option<Method>,
+    pub paths: u32,
+    pub steps: u32,
+    pub seed: u64,
+    pub samples: u32,
+    pub preset: Preset,
+    pub has_image: bool,
+    pub has_svg: bool,
+}
+
+#[derive(Serialize)]
+pub struct Links {
+    #[serde(rename = "self")]
+    pub this: String,
+    pub events: String,
+    pub result_svg: String,
+    pub result_png: String,
+}
+
+/// A job as returned by the API.
+#[derive(Serialize)]
+pub struct JobView {
+    pub id: String,
+    pub kind: String,
+    pub status: String,
+    pub stage: Option<String>,
+    pub progress: ProgressView,
+    pub priority: i64,
+    pub attempts: i64,
+    pub max_attempts: i64,
+    pub cancel_requested: bool,
+    pub created_at: Option<String>,
+    pub started_at: Option<String>,
+    pub finished_at: Option<String>,
+    pub updated_at: Option<String>,
+    pub queued_ms: Option<i64>,
+    pub run_ms: Option<i64>,
+    pub error: Option<ErrorView>,
+    pub params: Option<ParamsView>,
+    pub links: Links,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub attempt_history: Option<Vec<AttemptRow>>,
+}
+
+impl JobView {
+    pub fn from_row(row: &JobRow) -> JobView {
+        let spec: Option<JobSpec> = serde_json::from_str(&row.spec).ok();
+        let fraction = if row.total > 0 {
+            (row.step as f64 / row.total as f64).clamp(0.0, 1.0)
+        } else if row.status == JobStatus::Succeeded.as_str() {
+            1.0
+        } else {
+            0.0
+        };
+        let base = format!("/jobs/{}", row.id);
+        JobView {
+            id: row.id.clone(),
+            kind: row.kind.clone(),
+            status: row.status.clone(),
+            stage: row.stage.clone(),
+            progress: ProgressView {
+                stage: row.stage.clone(),
+                step: row.step,
+                total: row.total,
+                fraction,
+                loss: row.loss,
+            },
+            priority: row.priority,
+            attempts: row.attempts,
+            max_attempts: row.max_attempts,
+            cancel_requested: row.cancel_requested != 0,
+            created_at: rfc3339(Some(row.created_at)),
+            started_at: rfc3339(row.started_at),
+            finished_at: rfc3339(row.finished_at),
+            updated_at: rfc3339(Some(row.updated_at)),
+            queued_ms: row.started_at.map(|s| s - row.created_at),
+            run_ms: row.started_at.zip(row.finished_at).map(|(s, f)| f - s),
+            error: row.error_code.as_ref().map(|code| ErrorView {
+                code: code.clone(),
+                message: row.error_message.clone().unwrap_or_default(),
+            }),
+            params: spec.map(|s| ParamsView {
+                caption: s.caption,
+                style: s.style,
+                method: (s.kind == JobKind::Text).then_some(s.method),
+                paths: s.paths,
+                steps: s.steps,
+                seed: s.seed,
+                samples: s.samples,
+                preset: s.preset,
+                has_image: s.image.is_some(),
+                has_svg: s.svg.is_some(),
+            }),
+            links: Links {
+                events: format!("{base}/events"),
+                result_svg: format!("{base}/result.svg"),
+                result_png: format!("{base}/result.png"),
+                this: base,
+            },
+            attempt_history: None,
+        }
+    }
+}
+
+#[derive(Serialize)]
+pub struct JobList {
+    pub jobs: Vec<JobView>,
+    pub next_cursor: Option<String>,
+}

@@ -1,0 +1,692 @@
+//! The job store: SQLite through sqlx (WAL), schema in `migrations/`, every statement in a file
+//! under `src/store/sql/`.
+//!
+//! Jobs move `queued → running → succeeded | failed | cancelled` (a CHECK constraint keeps the
+//! status honest). A worker *claims* a job with one atomic `UPDATE … RETURNING`, which gives it a
+//! lease (`lease_owner`, `lease_expires_at`) that it extends with heartbeats. Every write a worker
+//! makes afterwards is guarded by `(lease_owner, attempts)`, so a worker that lost its lease (it
+//! stalled, the job was reclaimed) can no longer touch the job: a job completes exactly once.
+//! Each claim opens a row in `attempts`, closed with its outcome.
+
+use serde::Serialize;
+use sqlx::sqlite::{
+    SqliteConnectOptions, SqliteJournalMode, SqlitePool, SqlitePoolOptions, SqliteSynchronous,
+};
+use std::path::Path;
+use std::str::FromStr;
+use std::time::Duration;
+
+/// Errors from the store.
+#[derive(Debug, thiserror::Error)]
+pub enum StoreError {
+    #[error("database error: {0}")]
+    Db(#[from] sqlx::Error),
+    #[error("database migration failed: {0}")]
+    Migrate(#[from] sqlx::migrate::MigrateError),
+    #[error("corrupt row in database: {0}")]
+    Corrupt(String),
+}
+
+/// Job lifecycle states (mirrors the CHECK constraint in `migrations/0001_jobs.sql`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum JobStatus {
+    Queued,
+    Running,
+    Succeeded,
+    Failed,
+    Cancelled,
+}
+
+impl JobStatus {
+    pub const ALL: [JobStatus; 5] = [
+        JobStatus::Queued,
+        JobStatus::Running,
+        JobStatus::Succeeded,
+        JobStatus::Failed,
+        JobStatus::Cancelled,
+    ];
+
+    pub fn as_str(self) -> &'static str {
+        match self {
+            JobStatus::Queued => "queued",
+            JobStatus::Running => "running",
+            JobStatus::Succeeded => "succeeded",
+            JobStatus::Failed => "failed",
+            JobStatus::Cancelled => "cancelled",
+        }
+    }
+
+    pub fn is_terminal(self) -> bool {
+        matches!(
+            self,
+            JobStatus::Succeeded | JobStatus::Failed | JobStatus::Cancelled
+        )
+    }
+}
+
+impl FromStr for JobStatus {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        JobStatus::ALL
+            .into_iter()
+            .find(|st| st.as_str() == s)
+            .ok_or_else(|| format!("unknown status {s:?}"))
+    }
+}
+
+/// One row of `jobs`.
+#[derive(Clone, Debug, sqlx::FromRow)]
+pub struct JobRow {
+    pub seq: i64,
+    pub id: String,
+    pub kind: String,
+    pub spec: String,
+    pub priority: i64,
+    pub status: String,
+    pub idempotency_key: Option<String>,
+    pub request_hash: Option<String>,
+    pub stage: Option<String>,
+    pub step: i64,
+    pub total: i64,
+    pub loss: Option<f64>,
+    pub attempts: i64,
+    pub max_attempts: i64,
+    pub run_after: i64,
+    pub lease_owner: Option<String>,
+    pub lease_expires_at: Option<i64>,
+    pub heartbeat_at: Option<i64>,
+    pub cancel_requested: i64,
+    pub checkpoint: Option<String>,
+    pub checkpoint_at: Option<i64>,
+    pub error_code: Option<String>,
+    pub error_message: Option<String>,
+    pub created_at: i64,
+    pub started_at: Option<i64>,
+    pub finished_at: Option<i64>,
+    pub updated_at: i64,
+}
+
+impl JobRow {
+    pub fn status(&self) -> Result<JobStatus, StoreError> {
+        self.status.parse().map_err(StoreError::Corrupt)
+    }
+}
+
+/// One row of `attempts`.
+#[derive(Clone, Debug, Serialize, sqlx::FromRow)]
+pub struct AttemptRow {
+    pub job_id: String,
+    pub attempt: i64,
+    pub worker: String,
+    pub outcome: String,
+    pub error: Option<String>,
+    pub started_at: i64,
+    pub finished_at: Option<i64>,
+}
+
+/// One stored SVG snapshot.
+#[derive(Clone, Debug, sqlx::FromRow)]
+pub struct SnapshotRow {
+    pub job_id: String,
+    pub n: i64,
+    pub stage: String,
+    pub step: i64,
+    pub svg: String,
+    pub created_at: i64,
+}
+
+/// The final result of a job.
+#[derive(Clone, Debug, sqlx::FromRow)]
+pub struct ResultRow {
+    pub job_id: String,
+    pub svg: String,
+    pub paths: i64,
+    pub detail: String,
+    pub created_at: i64,
+}
+
+/// A job to insert.
+#[derive(Clone, Debug)]
+pub struct NewJob {
+    pub id: String,
+    pub kind: String,
+    pub spec: String,
+    pub priority: i64,
+    pub idempotency_key: Option<String>,
+    pub request_hash: Option<String>,
+    pub max_attempts: i64,
+}
+
+/// Identifies one attempt of one job held by one worker; every worker write carries it.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Lease {
+    pub job_id: String,
+    pub worker: String,
+    pub attempt: i64,
+}
+
+/// Outcome of a heartbeat.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Heartbeat {
+    /// Lease extended; `cancel` tells whether a cancel was requested.
+    Held { cancel: bool },
+    /// Another worker holds the job now, or it was finished: stop working on it.
+    Lost,
+}
+
+/// How an attempt ended.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum AttemptOutcome {
+    Succeeded,
+    Failed,
+    Retry,
+    Cancelled,
+    Interrupted,
+}
+
+impl AttemptOutcome {
+    fn as_str(self) -> &'static str {
+        match self {
+            AttemptOutcome::Succeeded => "succeeded",
+            AttemptOutcome::Failed => "failed",
+            AttemptOutcome::Retry => "retry",
+            AttemptOutcome::Cancelled => "cancelled",
+            AttemptOutcome::Interrupted => "interrupted",
+        }
+    }
+}
+
+/// Milliseconds since the Unix epoch, the time unit of the store.
+pub fn now_ms() -> i64 {
+    chrono::Utc::now().timestamp_millis()
+}
+
+/// Handle to the database; cheap to clone.
+///
+/// Writes go through a single connection (`writer`) so that in-process writers queue fairly in
+/// the pool instead of contending for SQLite's lock (whose busy handler sleeps for
+/// milliseconds); reads use a pool of connections (WAL readers never block the writer). The SQL
+/// stays safe with several processes on one file: every claim and fenced write is atomic in
+/// SQLite itself.
+#[derive(Clone, Debug)]
+pub struct Store {
+    pool: SqlitePool,
+    writer: SqlitePool,
+}
+
+impl Store {
+    /// Opens (creating if needed) the SQLite file at `path` in WAL mode and runs the migrations.
+    pub async fn open(path: &Path, max_connections: u32) -> Result<Self, StoreError> {
+        if let Some(parent) = path.parent()
+            && !parent.as_os_str().is_empty()
+        {
+            std::fs::create_dir_all(parent).map_err(|e| {
+                StoreError::Db(sqlx::Error::Configuration(
+                    format!("cannot create database directory {}: {e}", parent.display()).into(),
+                ))
+            })?;
+        }
+        let options = SqliteConnectOptions::new()
+            .filename(path)
+            .create_if_missing(true)
+            .journal_mode(SqliteJournalMode::Wal)
+            .synchronous(SqliteSynchronous::Normal)
+            .foreign_keys(true)
+            .busy_timeout(Duration::from_secs(10))
+            // No checkpoint inside a commit (it fsyncs and would stall every queued write);
+            // the owner calls `checkpoint` from a background task instead.
+            .pragma("wal_autocheckpoint", "0");
+        let writer = SqlitePoolOptions::new()
+            .max_connections(1)
+            .connect_with(options.clone())
+            .await?;
+        sqlx::migrate!("./migrations").run(&writer).await?;
+        let pool = SqlitePoolOptions::new()
+            .max_connections(max_connections.max(1))
+            .connect_with(options)
+            .await?;
+        Ok(Store { pool, writer })
+    }
+
+    pub fn pool(&self) -> &SqlitePool {
+        &self.pool
+    }
+
+    /// Closes every connection (checkpoints the WAL).
+    pub async fn close(&self) {
+        let _ = sqlx::query("PRAGMA wal_checkpoint(TRUNCATE)")
+            .execute(&self.writer)
+            .await;
+        self.pool.close().await;
+        self.writer.close().await;
+    }
+
+    /// Copies the WAL back into the database file without blocking readers or the writer
+    /// (`PRAGMA wal_checkpoint(PASSIVE)`). Automatic checkpoints are off: long-lived owners
+    /// (the server) call this periodically; [`Store::close`] truncates the WAL.
+    pub async fn checkpoint(&self) -> Result<(), StoreError> {
+        sqlx::query("PRAGMA wal_checkpoint(PASSIVE)")
+            .execute(&self.pool)
+            .await?;
+        Ok(())
+    }
+
+    /// A trivial query, for readiness checks.
+    pub async fn ping(&self) -> Result<(), StoreError> {
+        sqlx::query("SELECT 1").execute(&self.pool).await?;
+        Ok(())
+    }
+
+    /// Inserts a job. With an idempotency key already in use, returns the existing job and
+    /// `false`.
+    pub async fn insert_job(&self, job: &NewJob, now: i64) -> Result<(JobRow, bool), StoreError> {
+        let inserted: Option<JobRow> = sqlx::query_as(include_str!("sql/insert_job.sql"))
+            .bind(&job.id)
+            .bind(&job.kind)
+            .bind(&job.spec)
+            .bind(job.priority)
+            .bind(&job.idempotency_key)
+            .bind(&job.request_hash)
+            .bind(job.max_attempts)
+            .bind(now)
+            .fetch_optional(&self.writer)
+            .await?;
+        if let Some(row) = inserted {
+            return Ok((row, true));
+        }
+        let existing: Option<JobRow> = sqlx::query_as(include_str!("sql/get_job_by_key.sql"))
+            .bind(&job.idempotency_key)
+            .fetch_optional(&self.writer)
+            .await?;
+        existing
+            .map(|r| (r, false))
+            .ok_or_else(|| StoreError::Corrupt("idempotency key conflict without a row".into()))
+    }
+
+    pub async fn get_job(&self, id: &str) -> Result<Option<JobRow>, StoreError> {
+        Ok(sqlx::query_as(include_str!("sql/get_job.sql"))
+            .bind(id)
+            .fetch_optional(&self.pool)
+            .await?)
+    }
+
+    /// Newest first; `before_seq` is the cursor.
+    pub async fn list_jobs(
+        &self,
+        status: Option<JobStatus>,
+        before_seq: Option<i64>,
+        limit: i64,
+    ) -> Result<Vec<JobRow>, StoreError> {
+        Ok(sqlx::query_as(include_str!("sql/list_jobs.sql"))
+            .bind(status.map(JobStatus::as_str))
+            .bind(before_seq)
+            .bind(limit)
+            .fetch_all(&self.pool)
+            .await?)
+    }
+
+    pub async fn queue_depth(&self) -> Result<i64, StoreError> {
+        Ok(sqlx::query_scalar(include_str!("sql/queue_depth.sql"))
+            .fetch_one(&self.pool)
+            .await?)
+    }
+
+    pub async fn count_by_status(&self) -> Result<Vec<(String, i64)>, StoreError> {
+        Ok(sqlx::query_as(include_str!("sql/count_by_status.sql"))
+            .fetch_all(&self.pool)
+            .await?)
+    }
+
+    /// Cancels a queued job at once or flags a running one. `None` if the id is unknown.
+    pub async fn request_cancel(&self, id: &str, now: i64) -> Result<Option<JobRow>, StoreError> {
+        Ok(sqlx::query_as(include_str!("sql/request_cancel.sql"))
+            .bind(id)
+            .bind(now)
+            .fetch_optional(&self.writer)
+            .await?)
+    }
+
+    /// Finishes running jobs whose lease expired and that cannot be retried; returns them.
+    pub async fn reap_expired(&self, now: i64) -> Result<Vec<JobRow>, StoreError> {
+        let rows: Vec<JobRow> = sqlx::query_as(include_str!("sql/reap_expired.sql"))
+            .bind(now)
+            .fetch_all(&self.writer)
+            .await?;
+        for row in &rows {
+            sqlx::query(include_str!("sql/mark_lost_attempts.sql"))
+                .bind(&row.id)
+                .bind(i64::MAX)
+                .bind(now)
+                .execute(&self.writer)
+                .await?;
+        }
+        Ok(rows)
+    }
+
+    /// Atomically claims the next job for `worker`, with a lease of `lease_ms`.
+    pub async fn claim(
+        &self,
+        worker: &str,
+        now: i64,
+        lease_ms: i64,
+    ) -> Result<Option<(JobRow, Lease)>, StoreError> {
+        let mut tx = self.writer.begin_with("BEGIN IMMEDIATE").await?;
+        let row: Option<JobRow> = sqlx::query_as(include_str!("sql/claim.sql"))
+            .bind(worker)
+            .bind(now)
+            .bind(lease_ms)
+            .fetch_optional(&mut *tx)
+            .await?;
+        let Some(row) = row else {
+            tx.rollback().await?;
+            return Ok(None);
+        };
+        if row.attempts > 1 {
+            sqlx::query(include_str!("sql/mark_lost_attempts.sql"))
+                .bind(&row.id)
+                .bind(row.attempts)
+                .bind(now)
+                .execute(&mut *tx)
+                .await?;
+        }
+        sqlx::query(include_str!("sql/insert_attempt.sql"))
+            .bind(&row.id)
+            .bind(row.attempts)
+            .bind(worker)
+            .bind(now)
+            .execute(&mut *tx)
+            .await?;
+        tx.commit().await?;
+        let lease = Lease {
+            job_id: row.id.clone(),
+            worker: worker.to_string(),
+            attempt: row.attempts,
+        };
+        Ok(Some((row, lease)))
+    }
+
+    pub async fn heartbeat(
+        &self,
+        lease: &Lease,
+        now: i64,
+        lease_ms: i64,
+    ) -> Result<Heartbeat, StoreError> {
+        let flag: Option<i64> = sqlx::query_scalar(include_str!("sql/heartbeat.sql"))
+            .bind(&lease.job_id)
+            .bind(&lease.worker)
+            .bind(lease.attempt)
+            .bind(now)
+            .bind(lease_ms)
+            .fetch_optional(&self.writer)
+            .await?;
+        Ok(match flag {
+            Some(c) => Heartbeat::Held { cancel: c != 0 },
+            None => Heartbeat::Lost,
+        })
+    }
+
+    /// Records the latest progress; `false` if the lease is gone.
+    #[allow(clippy::too_many_arguments)]
+    pub async fn update_progress(
+        &self,
+        lease: &Lease,
+        stage: &str,
+        step: u32,
+        total: u32,
+        loss: Option<f64>,
+        now: i64,
+    ) -> Result<bool, StoreError> {
+        let r = sqlx::query(include_str!("sql/update_progress.sql"))
+            .bind(&lease.job_id)
+            .bind(&lease.worker)
+            .bind(lease.attempt)
+            .bind(stage)
+            .bind(step as i64)
+            .bind(total as i64)
+            .bind(loss.filter(|l| l.is_finite()))
+            .bind(now)
+            .execute(&self.writer)
+            .await?;
+        Ok(r.rows_affected() == 1)
+    }
+
+    /// Stores the executor's resumable state; `false` if the lease is gone.
+    pub async fn save_checkpoint(
+        &self,
+        lease: &Lease,
+        state: &str,
+        now: i64,
+    ) -> Result<bool, StoreError> {
+        let r = sqlx::query(include_str!("sql/save_checkpoint.sql"))
+            .bind(&lease.job_id)
+            .bind(&lease.worker)
+            .bind(lease.attempt)
+            .bind(state)
+            .bind(now)
+            .execute(&self.writer)
+            .await?;
+        Ok(r.rows_affected() == 1)
+    }
+
+    /// Stores a snapshot and keeps at most `keep` per job; returns its number, or `None` if
+    /// the lease is gone.
+    pub async fn add_snapshot(
+        &self,
+        lease: &Lease,
+        stage: &str,
+        step: u32,
+        svg: &str,
+        now: i64,
+        keep: i64,
+    ) -> Result<Option<i64>, StoreError> {
+        let n: Option<i64> = sqlx::query_scalar(include_str!("sql/insert_snapshot.sql"))
+            .bind(&lease.job_id)
+            .bind(&lease.worker)
+            .bind(lease.attempt)
+            .bind(stage)
+            .bind(step as i64)
+            .bind(svg)
+            .bind(now)
+            .fetch_optional(&self.writer)
+            .await?;
+        if let Some(n) = n
+            && n > keep
+        {
+            sqlx::query(include_str!("sql/trim_snapshots.sql"))
+                .bind(&lease.job_id)
+                .bind(n - keep.max(1))
+                .execute(&self.writer)
+                .await?;
+        }
+        Ok(n)
+    }
+
+    /// Marks the job succeeded and stores its result in one transaction. `false` (and nothing
+    /// written) if this lease no longer holds the job.
+    pub async fn complete(
+        &self,
+        lease: &Lease,
+        svg: &str,
+        paths: i64,
+        detail: &str,
+        now: i64,
+    ) -> Result<bool, StoreError> {
+        let mut tx = self.writer.begin_with("BEGIN IMMEDIATE").await?;
+        let r = sqlx::query(include_str!("sql/complete_job.sql"))
+            .bind(&lease.job_id)
+            .bind(&lease.worker)
+            .bind(lease.attempt)
+            .bind(now)
+            .execute(&mut *tx)
+            .await?;
+        if r.rows_affected() != 1 {
+            tx.rollback().await?;
+            return Ok(false);
+        }
+        sqlx::query(include_str!("sql/insert_result.sql"))
+            .bind(&lease.job_id)
+            .bind(svg)
+            .bind(paths)
+            .bind(detail)
+            .bind(now)
+            .execute(&mut *tx)
+            .await?;
+        finish_attempt(&mut tx, lease, AttemptOutcome::Succeeded, None, now).await?;
+        tx.commit().await?;
+        Ok(true)
+    }
+
+    /// Records a failed attempt: re-queued at `retry_at` if given, else failed for good.
+    pub async fn fail(
+        &self,
+        lease: &Lease,
+        code: &str,
+        message: &str,
+        retry_at: Option<i64>,
+        now: i64,
+    ) -> Result<Option<JobRow>, StoreError> {
+        let mut tx = self.writer.begin_with("BEGIN IMMEDIATE").await?;
+        let row: Option<JobRow> = sqlx::query_as(include_str!("sql/fail_job.sql"))
+            .bind(&lease.job_id)
+            .bind(&lease.worker)
+            .bind(lease.attempt)
+            .bind(retry_at)
+            .bind(code)
+            .bind(message)
+            .bind(now)
+            .fetch_optional(&mut *tx)
+            .await?;
+        if row.is_some() {
+            let outcome = if retry_at.is_some() {
+                AttemptOutcome::Retry
+            } else {
+                AttemptOutcome::Failed
+            };
+            finish_attempt(&mut tx, lease, outcome, Some(message), now).await?;
+        }
+        tx.commit().await?;
+        Ok(row)
+    }
+
+    /// Marks a running job cancelled (its executor stopped on request).
+    pub async fn finish_cancelled(
+        &self,
+        lease: &Lease,
+        now: i64,
+    ) -> Result<Option<JobRow>, StoreError> {
+        self.end_attempt(
+            lease,
+            include_str!("sql/finish_cancelled.sql"),
+            AttemptOutcome::Cancelled,
+            now,
+        )
+        .await
+    }
+
+    /// Hands a running job back to the queue (graceful shutdown); its checkpoint is kept.
+    pub async fn release(&self, lease: &Lease, now: i64) -> Result<Option<JobRow>, StoreError> {
+        self.end_attempt(
+            lease,
+            include_str!("sql/release_job.sql"),
+            AttemptOutcome::Interrupted,
+            now,
+        )
+        .await
+    }
+
+    async fn end_attempt(
+        &self,
+        lease: &Lease,
+        sql: &'static str,
+        outcome: AttemptOutcome,
+        now: i64,
+    ) -> Result<Option<JobRow>, StoreError> {
+        let mut tx = self.writer.begin_with("BEGIN IMMEDIATE").await?;
+        let row: Option<JobRow> = sqlx::query_as(sql)
+            .bind(&lease.job_id)
+            .bind(&lease.worker)
+            .bind(lease.attempt)
+            .bind(now)
+            .fetch_optional(&mut *tx)
+            .await?;
+        if row.is_some() {
+            finish_attempt(&mut tx, lease, outcome, None, now).await?;
+        }
+        tx.commit().await?;
+        Ok(row)
+    }
+
+    pub async fn attempts(&self, job_id: &str) -> Result<Vec<AttemptRow>, StoreError> {
+        Ok(sqlx::query_as(include_str!("sql/list_attempts.sql"))
+            .bind(job_id)
+            .fetch_all(&self.pool)
+            .await?)
+    }
+
+    pub async fn snapshots_after(
+        &self,
+        job_id: &str,
+        after: i64,
+        limit: i64,
+    ) -> Result<Vec<SnapshotRow>, StoreError> {
+        Ok(sqlx::query_as(include_str!("sql/snapshots_after.sql"))
+            .bind(job_id)
+            .bind(after)
+            .bind(limit)
+            .fetch_all(&self.pool)
+            .await?)
+    }
+
+    pub async fn latest_snapshot(&self, job_id: &str) -> Result<Option<SnapshotRow>, StoreError> {
+        Ok(sqlx::query_as(include_str!("sql/latest_snapshot.sql"))
+            .bind(job_id)
+            .fetch_optional(&self.pool)
+            .await?)
+    }
+
+    pub async fn snapshot(&self, job_id: &str, n: i64) -> Result<Option<SnapshotRow>, StoreError> {
+        Ok(sqlx::query_as(include_str!("sql/get_snapshot.sql"))
+            .bind(job_id)
+            .bind(n)
+            .fetch_optional(&self.pool)
+            .await?)
+    }
+
+    pub async fn result(&self, job_id: &str) -> Result<Option<ResultRow>, StoreError> {
+        Ok(sqlx::query_as(include_str!("sql/get_result.sql"))
+            .bind(job_id)
+            .fetch_optional(&self.pool)
+            .await?)
+    }
+
+    /// Deletes finished jobs (and their snapshots, results, attempts) finished before `before`.
+    pub async fn prune(&self, before: i64) -> Result<u64, StoreError> {
+        let r = sqlx::query(include_str!("sql/prune.sql"))
+            .bind(before)
+            .execute(&self.writer)
+            .await?;
+        Ok(r.rows_affected())
+    }
+}
+
+async fn finish_attempt(
+    tx: &mut sqlx::Transaction<'static, sqlx::Sqlite>,
+    lease: &Lease,
+    outcome: AttemptOutcome,
+    error: Option<&str>,
+    now: i64,
+) -> Result<(), StoreError> {
+    sqlx::query(include_str!("sql/finish_attempt.sql"))
+        .bind(&lease.job_id)
+        .bind(lease.attempt)
+        .bind(outcome.as_str())
+        .bind(error)
+        .bind(now)
+        .execute(&mut **tx)
+        .await?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests;

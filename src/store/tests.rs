@@ -1,0 +1,291 @@
+use super::*;
+use std::collections::HashSet;
+
+async fn temp_store(conns: u32) -> (tempfile::TempDir, Store) {
+    let dir = tempfile::tempdir().unwrap();
+    let store = Store::open(&dir.path().join("jobs.db"), conns)
+        .await
+        .unwrap();
+    (dir, store)
+}
+
+fn new_job(i: usize) -> NewJob {
+    NewJob {
+        id: uuid::Uuid::new_v4().to_string(),
+        kind: "vectorize".into(),
+        spec: format!("{{\"i\":{i}}}"),
+        priority: 0,
+        idempotency_key: None,
+        request_hash: None,
+        max_attempts: 3,
+    }
+}
+
+#[tokio::test]
+async fn wal_mode_and_status_check_constraint() {
+    let (_d, store) = temp_store(2).await;
+    let mode: String = sqlx::query_scalar("PRAGMA journal_mode")
+        .fetch_one(store.pool())
+        .await
+        .unwrap();
+    assert_eq!(mode, "wal");
+    let (row, _) = store.insert_job(&new_job(0), 1).await.unwrap();
+    let bad = sqlx::query("UPDATE jobs SET status = 'exploded' WHERE id = ?1")
+        .bind(&row.id)
+        .execute(store.pool())
+        .await;
+    assert!(bad.is_err(), "CHECK constraint must reject unknown status");
+    // running without a lease owner is rejected too
+    let bad = sqlx::query("UPDATE jobs SET status = 'running' WHERE id = ?1")
+        .bind(&row.id)
+        .execute(store.pool())
+        .await;
+    assert!(bad.is_err());
+}
+
+#[tokio::test]
+async fn idempotency_key_returns_same_job() {
+    let (_d, store) = temp_store(2).await;
+    let mut a = new_job(0);
+    a.idempotency_key = Some("k1".into());
+    let mut b = new_job(1);
+    b.idempotency_key = Some("k1".into());
+    let (ra, created_a) = store.insert_job(&a, 1).await.unwrap();
+    let (rb, created_b) = store.insert_job(&b, 2).await.unwrap();
+    assert!(created_a);
+    assert!(!created_b);
+    assert_eq!(ra.id, rb.id);
+    assert_eq!(store.queue_depth().await.unwrap(), 1);
+}
+
+#[tokio::test]
+async fn claim_order_priority_then_fifo() {
+    let (_d, store) = temp_store(2).await;
+    let low = store.insert_job(&new_job(0), 1).await.unwrap().0;
+    let mut hi = new_job(1);
+    hi.priority = 5;
+    let hi = store.insert_job(&hi, 2).await.unwrap().0;
+    let low2 = store.insert_job(&new_job(2), 3).await.unwrap().0;
+    let mut got = Vec::new();
+    while let Some((row, _)) = store.claim("w", 10, 1000).await.unwrap() {
+        got.push(row.id);
+    }
+    assert_eq!(got, vec![hi.id, low.id, low2.id]);
+}
+
+#[tokio::test]
+async fn concurrent_claims_never_share_a_job() {
+    // Several Store handles on one file = several writer connections racing in SQLite itself
+    // (as with several server processes), plus several tasks per handle.
+    let (d, store) = temp_store(8).await;
+    let mut handles_db = vec![store.clone()];
+    for _ in 0..3 {
+        handles_db.push(Store::open(&d.path().join("jobs.db"), 2).await.unwrap());
+    }
+    let n = 60;
+    for i in 0..n {
+        store.insert_job(&new_job(i), 1).await.unwrap();
+    }
+    let mut handles = Vec::new();
+    for w in 0..8 {
+        let store = handles_db[w % handles_db.len()].clone();
+        handles.push(tokio::spawn(async move {
+            let mut mine = Vec::new();
+            while let Some((row, lease)) = store.claim(&format!("w{w}"), 10, 60_000).await.unwrap()
+            {
+                assert_eq!(lease.worker, format!("w{w}"));
+                mine.push(row.id);
+                tokio::task::yield_now().await;
+            }
+            mine
+        }));
+    }
+    let mut all = Vec::new();
+    for h in handles {
+        all.extend(h.await.unwrap());
+    }
+    let unique: HashSet<_> = all.iter().collect();
+    assert_eq!(all.len(), n, "every job claimed once");
+    assert_eq!(unique.len(), n, "no job claimed twice");
+    // every claim opened exactly one attempt
+    let attempts: i64 = sqlx::query_scalar("SELECT COUNT(*) FROM attempts")
+        .fetch_one(store.pool())
+        .await
+        .unwrap();
+    assert_eq!(attempts, n as i64);
+}
+
+#[tokio::test]
+async fn expired_lease_is_reclaimed_and_old_worker_is_fenced() {
+    let (_d, store) = temp_store(2).await;
+    let job = store.insert_job(&new_job(0), 0).await.unwrap().0;
+    let (_, lease_a) = store.claim("a", 100, 1000).await.unwrap().unwrap();
+    // lease still valid: nobody else can take it
+    assert!(store.claim("b", 900, 1000).await.unwrap().is_none());
+    // a heartbeat extends it
+    assert_eq!(
+        store.heartbeat(&lease_a, 1000, 1000).await.unwrap(),
+        Heartbeat::Held { cancel: false }
+    );
+    assert!(store.claim("b", 1900, 1000).await.unwrap().is_none());
+    // worker a dies: after expiry b reclaims the job as attempt 2
+    let (row, lease_b) = store.claim("b", 2001, 1000).await.unwrap().unwrap();
+    assert_eq!(row.id, job.id);
+    assert_eq!(lease_b.attempt, 2);
+    // a comes back: every write is refused
+    assert_eq!(
+        store.heartbeat(&lease_a, 2002, 1000).await.unwrap(),
+        Heartbeat::Lost
+    );
+    assert!(!store.save_checkpoint(&lease_a, "{}", 2002).await.unwrap());
+    assert!(
+        !store
+            .complete(&lease_a, "<svg/>", 1, "{}", 2003)
+            .await
+            .unwrap()
+    );
+    assert!(
+        store
+            .complete(&lease_b, "<svg/>", 1, "{}", 2004)
+            .await
+            .unwrap()
+    );
+    // the result was written once, by b
+    assert!(
+        !store
+            .complete(&lease_b, "<svg/>", 1, "{}", 2005)
+            .await
+            .unwrap()
+    );
+    let attempts = store.attempts(&job.id).await.unwrap();
+    let outcomes: Vec<&str> = attempts.iter().map(|a| a.outcome.as_str()).collect();
+    assert_eq!(outcomes, vec!["lost", "succeeded"]);
+    let row = store.get_job(&job.id).await.unwrap().unwrap();
+    assert_eq!(row.status().unwrap(), JobStatus::Succeeded);
+}
+
+#[tokio::test]
+async fn lease_expiry_after_last_attempt_fails_job() {
+    let (_d, store) = temp_store(2).await;
+    let mut j = new_job(0);
+    j.max_attempts = 1;
+    let job = store.insert_job(&j, 0).await.unwrap().0;
+    store.claim("a", 0, 100).await.unwrap().unwrap();
+    assert!(store.claim("b", 200, 100).await.unwrap().is_none());
+    let reaped = store.reap_expired(200).await.unwrap();
+    assert_eq!(reaped.len(), 1);
+    let row = store.get_job(&job.id).await.unwrap().unwrap();
+    assert_eq!(row.status().unwrap(), JobStatus::Failed);
+    assert_eq!(row.error_code.as_deref(), Some("lease_expired"));
+    assert_eq!(store.attempts(&job.id).await.unwrap()[0].outcome, "lost");
+}
+
+#[tokio::test]
+async fn retry_with_backoff_then_fail() {
+    let (_d, store) = temp_store(2).await;
+    let mut j = new_job(0);
+    j.max_attempts = 2;
+    let job = store.insert_job(&j, 0).await.unwrap().0;
+    let (_, l1) = store.claim("a", 0, 1000).await.unwrap().unwrap();
+    let row = store
+        .fail(&l1, "transient", "boom", Some(500), 10)
+        .await
+        .unwrap()
+        .unwrap();
+    assert_eq!(row.status().unwrap(), JobStatus::Queued);
+    assert!(
+        store.claim("a", 499, 1000).await.unwrap().is_none(),
+        "backoff"
+    );
+    let (_, l2) = store.claim("a", 500, 1000).await.unwrap().unwrap();
+    let row = store
+        .fail(&l2, "transient", "boom", None, 600)
+        .await
+        .unwrap()
+        .unwrap();
+    assert_eq!(row.status().unwrap(), JobStatus::Failed);
+    let outcomes: Vec<String> = store
+        .attempts(&job.id)
+        .await
+        .unwrap()
+        .into_iter()
+        .map(|a| a.outcome)
+        .collect();
+    assert_eq!(outcomes, vec!["retry", "failed"]);
+}
+
+#[tokio::test]
+async fn cancel_queued_and_running() {
+    let (_d, store) = temp_store(2).await;
+    let a = store.insert_job(&new_job(0), 0).await.unwrap().0;
+    let (_, lease) = store.claim("w", 1, 1000).await.unwrap().unwrap();
+    let b = store.insert_job(&new_job(1), 2).await.unwrap().0;
+    let rb = store.request_cancel(&b.id, 3).await.unwrap().unwrap();
+    assert_eq!(rb.status().unwrap(), JobStatus::Cancelled);
+    let ra = store.request_cancel(&a.id, 3).await.unwrap().unwrap();
+    assert_eq!(ra.status().unwrap(), JobStatus::Running);
+    assert_eq!(
+        store.heartbeat(&lease, 4, 1000).await.unwrap(),
+        Heartbeat::Held { cancel: true }
+    );
+    let done = store.finish_cancelled(&lease, 5).await.unwrap().unwrap();
+    assert_eq!(done.status().unwrap(), JobStatus::Cancelled);
+    assert!(store.request_cancel("nope", 6).await.unwrap().is_none());
+    assert!(store.claim("w", 10, 1000).await.unwrap().is_none());
+}
+
+#[tokio::test]
+async fn snapshots_numbered_trimmed_and_fenced() {
+    let (_d, store) = temp_store(2).await;
+    let job = store.insert_job(&new_job(0), 0).await.unwrap().0;
+    let (_, lease) = store.claim("w", 1, 1000).await.unwrap().unwrap();
+    for i in 0..5u32 {
+        let n = store
+            .add_snapshot(&lease, "s", i, &format!("<svg>{i}</svg>"), 2, 3)
+            .await
+            .unwrap();
+        assert_eq!(n, Some(i as i64 + 1));
+    }
+    let snaps = store.snapshots_after(&job.id, 0, 100).await.unwrap();
+    assert_eq!(snaps.iter().map(|s| s.n).collect::<Vec<_>>(), vec![3, 4, 5]);
+    let other = Lease {
+        worker: "x".into(),
+        ..lease.clone()
+    };
+    assert_eq!(
+        store
+            .add_snapshot(&other, "s", 9, "<svg/>", 3, 3)
+            .await
+            .unwrap(),
+        None
+    );
+    // release keeps the checkpoint and re-queues
+    assert!(
+        store
+            .save_checkpoint(&lease, "{\"step\":4}", 4)
+            .await
+            .unwrap()
+    );
+    let row = store.release(&lease, 5).await.unwrap().unwrap();
+    assert_eq!(row.status().unwrap(), JobStatus::Queued);
+    assert_eq!(row.checkpoint.as_deref(), Some("{\"step\":4}"));
+}
+
+#[tokio::test]
+async fn prune_removes_old_finished_jobs() {
+    let (_d, store) = temp_store(2).await;
+    let job = store.insert_job(&new_job(0), 0).await.unwrap().0;
+    let (_, lease) = store.claim("w", 1, 1000).await.unwrap().unwrap();
+    store
+        .add_snapshot(&lease, "s", 1, "<svg/>", 2, 10)
+        .await
+        .unwrap();
+    assert!(store.complete(&lease, "<svg/>", 1, "{}", 3).await.unwrap());
+    let queued = store.insert_job(&new_job(1), 0).await.unwrap().0;
+    assert_eq!(store.prune(3).await.unwrap(), 0);
+    assert_eq!(store.prune(4).await.unwrap(), 1);
+    assert!(store.get_job(&job.id).await.unwrap().is_none());
+    assert!(store.result(&job.id).await.unwrap().is_none());
+    assert!(store.latest_snapshot(&job.id).await.unwrap().is_none());
+    assert!(store.get_job(&queued.id).await.unwrap().is_some());
+}

@@ -1,0 +1,49 @@
+//! Shared helpers for the service tests.
+#![allow(dead_code)]
+
+pub mod http;
+
+use base64::Engine;
+use std::net::SocketAddr;
+use std::time::{Duration, Instant};
+
+/// A small real PNG (checkerboard), base64-encoded.
+pub fn png_b64(side: u32) -> String {
+    let mut data = Vec::new();
+    for y in 0..side {
+        for x in 0..side {
+            let v = if (x / 2 + y / 2) % 2 == 0 { 1.0 } else { 0.2 };
+            data.extend_from_slice(&[v, v * 0.5, 0.3, 1.0]);
+        }
+    }
+    let img = vectorfusion::image::Image {
+        width: side,
+        height: side,
+        data,
+    };
+    base64::engine::general_purpose::STANDARD.encode(img.encode_png().unwrap())
+}
+
+/// Polls `GET /jobs/{id}` until its status is one of `want`.
+pub async fn wait_status(
+    addr: SocketAddr,
+    id: &str,
+    want: &[&str],
+    timeout: Duration,
+) -> serde_json::Value {
+    let deadline = Instant::now() + timeout;
+    loop {
+        let r = http::get(addr, &format!("/jobs/{id}")).await;
+        assert_eq!(r.status, 200, "{}", r.text());
+        let v = r.json();
+        let st = v["status"].as_str().unwrap_or("").to_string();
+        if want.contains(&st.as_str()) {
+            return v;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "job {id} stuck in {st}, wanted {want:?}: {v}"
+        );
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+}
