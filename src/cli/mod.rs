@@ -1,6 +1,7 @@
 //! The `vectorfusion` command line. Each subcommand lives in its own file; errors are turned
 //! into a message and an exit code in one place ([`main`]).
 
+pub mod bench_models;
 pub mod eval;
 
 use clap::{Parser, Subcommand};
@@ -27,7 +28,15 @@ pub enum Command {
     /// Evaluate generated SVGs with CLIP scorers.
     Eval(eval::EvalArgs),
     /// Benchmarks.
-    Bench(NotYet),
+    #[command(subcommand)]
+    Bench(BenchCommand),
+}
+
+/// `vectorfusion bench <what>`.
+#[derive(Subcommand, Debug)]
+pub enum BenchCommand {
+    /// Stable Diffusion / TAESD components (random weights, full size): median ms each.
+    Models(bench_models::BenchModelsArgs),
 }
 
 /// Placeholder arguments for commands that are not implemented yet.
@@ -65,7 +74,7 @@ pub fn run(cli: Cli) -> Result<(), CliError> {
         Command::Render(_) => Err(CliError::NotImplemented("render")),
         Command::Serve(_) => Err(CliError::NotImplemented("serve")),
         Command::Eval(a) => eval::run(a),
-        Command::Bench(_) => Err(CliError::NotImplemented("bench")),
+        Command::Bench(BenchCommand::Models(a)) => bench_models::run(a),
     }
 }
 
