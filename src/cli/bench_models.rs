@@ -36,6 +36,9 @@ pub struct BenchModelsArgs {
     /// UNet precision (f32 or f16; bf16 is refused on CPU).
     #[arg(long, default_value = "f32")]
     pub unet_precision: Precision,
+    /// Untimed warm-up runs before the timed ones.
+    #[arg(long, default_value_t = 1)]
+    pub warmup: usize,
     /// Only these components (comma separated: text,encoder,vjp,decoder,unet).
     #[arg(long, value_delimiter = ',')]
     pub only: Vec<String>,
@@ -67,25 +70,44 @@ fn peak_rss_mb() -> Option<f64> {
     Some(kb / 1024.0)
 }
 
+/// User + system CPU time of this process in ms (Linux; `None` elsewhere). On a shared machine
+/// this is steadier than wall time.
+fn cpu_ms() -> Option<f64> {
+    let s = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // fields after the ")" of the command name: state is field 3, utime 14, stime 15
+    let rest = s.rsplit_once(')')?.1;
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let ut: f64 = f.get(11)?.parse().ok()?;
+    let st: f64 = f.get(12)?.parse().ok()?;
+    Some((ut + st) * 10.0) // USER_HZ = 100 on Linux
+}
+
 fn reset_peak_rss() {
     // "5" resets the peak RSS counter (Linux >= 4.0); harmless if unavailable
     let _ = std::fs::write("/proc/self/clear_refs", "5");
 }
 
-/// Runs `f` once to warm up, then `reps` timed times; returns the median in ms and the peak
-/// RSS (MiB) seen during the timed runs.
-fn time_it<F>(reps: usize, mut f: F) -> Result<(f64, Option<f64>), CliError>
+/// Runs `f` `warmup` times untimed, then `reps` timed times; returns the median wall ms, the
+/// peak RSS (MiB) seen during the timed runs and the mean process CPU ms per run.
+fn time_it<F>(warmup: usize, reps: usize, mut f: F) -> Result<Timing, CliError>
 where
     F: FnMut() -> Result<(), CliError>,
 {
-    f()?;
+    for _ in 0..warmup {
+        f()?;
+    }
     reset_peak_rss();
+    let c0 = cpu_ms();
     let mut ts = Vec::with_capacity(reps.max(1));
     for _ in 0..reps.max(1) {
         let t0 = Instant::now();
         f()?;
         ts.push(t0.elapsed().as_secs_f64() * 1e3);
     }
+    let cpu = match (c0, cpu_ms()) {
+        (Some(a), Some(b)) => Some((b - a) / reps.max(1) as f64),
+        _ => None,
+    };
     ts.sort_by(f64::total_cmp);
     let n = ts.len();
     let med = if n % 2 == 1 {
@@ -93,11 +115,24 @@ where
     } else {
         0.5 * (ts[n / 2 - 1] + ts[n / 2])
     };
-    Ok((med, peak_rss_mb()))
+    Ok(Timing {
+        ms: med,
+        peak: peak_rss_mb(),
+        cpu,
+    })
+}
+
+/// One component's measurement.
+struct Timing {
+    ms: f64,
+    peak: Option<f64>,
+    cpu: Option<f64>,
 }
 
 #[derive(Debug, Default, serde::Serialize)]
 struct Report {
+    /// process CPU ms per run (user + system), per component
+    cpu_ms: std::collections::BTreeMap<String, f64>,
     arch: String,
     size: usize,
     unet_precision: String,
@@ -111,6 +146,19 @@ struct Report {
     text_ms: Option<f64>,
     encoder_fwd_peak_rss_mb: Option<f64>,
     encoder_vjp_peak_rss_mb: Option<f64>,
+}
+
+impl Report {
+    fn cpu(&mut self, key: &str, cpu: Option<f64>) {
+        if let Some(c) = cpu {
+            self.cpu_ms.insert(key.to_string(), c);
+        }
+    }
+
+    fn put(&mut self, key: &str, t: Timing) -> Option<f64> {
+        self.cpu(key, t.cpu);
+        Some(t.ms)
+    }
 }
 
 pub fn run(args: BenchModelsArgs) -> Result<(), CliError> {
@@ -146,24 +194,28 @@ pub fn run(args: BenchModelsArgs) -> Result<(), CliError> {
                 .map_err(candle_err)?;
             if want("encoder") {
                 say("encoder forward");
-                let (ms, peak) = time_it(args.reps, || {
+                let Timing { ms, peak, cpu } = time_it(args.warmup, args.reps, || {
                     t.encode(&image).map(|_| ()).map_err(model_err)
                 })?;
                 r.encoder_fwd_ms = Some(ms);
+                r.cpu("encoder_fwd", cpu);
                 r.encoder_fwd_peak_rss_mb = peak;
             }
             if want("vjp") {
                 say("encoder VJP");
-                let (ms, peak) = time_it(args.reps, || {
+                let Timing { ms, peak, cpu } = time_it(args.warmup, args.reps, || {
                     t.encode_vjp(&image, &lat).map(|_| ()).map_err(model_err)
                 })?;
                 r.encoder_vjp_ms = Some(ms);
+                r.cpu("encoder_vjp", cpu);
                 r.encoder_vjp_peak_rss_mb = peak;
             }
             if want("decoder") {
                 say("decoder");
-                r.decoder_ms =
-                    Some(time_it(args.reps, || t.decode(&lat).map(|_| ()).map_err(model_err))?.0);
+                let tm = time_it(args.warmup, args.reps, || {
+                    t.decode(&lat).map(|_| ()).map_err(model_err)
+                })?;
+                r.decoder_ms = r.put("decoder", tm);
             }
         }
         Arch::Sd15 | Arch::Sd21 => {
@@ -173,28 +225,28 @@ pub fn run(args: BenchModelsArgs) -> Result<(), CliError> {
                     .map_err(candle_err)?;
                 if want("encoder") {
                     say("encoder forward");
-                    let (ms, peak) = time_it(args.reps, || {
+                    let Timing { ms, peak, cpu } = time_it(args.warmup, args.reps, || {
                         vae.encode(&image).map(|_| ()).map_err(model_err)
                     })?;
                     r.encoder_fwd_ms = Some(ms);
+                    r.cpu("encoder_fwd", cpu);
                     r.encoder_fwd_peak_rss_mb = peak;
                 }
                 if want("vjp") {
                     say("encoder VJP");
-                    let (ms, peak) = time_it(args.reps, || {
+                    let Timing { ms, peak, cpu } = time_it(args.warmup, args.reps, || {
                         vae.encode_vjp(&image, &lat).map(|_| ()).map_err(model_err)
                     })?;
                     r.encoder_vjp_ms = Some(ms);
+                    r.cpu("encoder_vjp", cpu);
                     r.encoder_vjp_peak_rss_mb = peak;
                 }
                 if want("decoder") {
                     say("decoder");
-                    r.decoder_ms = Some(
-                        time_it(args.reps, || {
-                            vae.decode(&lat).map(|_| ()).map_err(model_err)
-                        })?
-                        .0,
-                    );
+                    let tm = time_it(args.warmup, args.reps, || {
+                        vae.decode(&lat).map(|_| ()).map_err(model_err)
+                    })?;
+                    r.decoder_ms = r.put("decoder", tm);
                 }
             }
             let text_cfg: ClipTextConfig = if sd21 {
@@ -221,12 +273,10 @@ pub fn run(args: BenchModelsArgs) -> Result<(), CliError> {
                     *id = 320 + i as u32;
                 }
                 let ids = Tensor::from_vec(ids, (1, 77), &dev).map_err(candle_err)?;
-                r.text_ms = Some(
-                    time_it(args.reps, || {
-                        text.forward(&ids).map(|_| ()).map_err(candle_err)
-                    })?
-                    .0,
-                );
+                let tm = time_it(args.warmup, args.reps, || {
+                    text.forward(&ids).map(|_| ()).map_err(candle_err)
+                })?;
+                r.text_ms = r.put("text", tm);
             }
             if want("unet") {
                 say("guided UNet step (batch 2)");
@@ -244,18 +294,16 @@ pub fn run(args: BenchModelsArgs) -> Result<(), CliError> {
                 .map_err(model_err)?;
                 let ctx = Tensor::randn(0f32, 1f32, (2, 77, cross), &dev).map_err(candle_err)?;
                 let z2 = Tensor::cat(&[&lat, &lat], 0).map_err(candle_err)?;
-                r.unet_cfg_ms = Some(
-                    time_it(args.unet_reps, || {
-                        let out = unet.forward(&z2, 500.0, &ctx).map_err(model_err)?;
-                        // the guidance combination itself
-                        let u = out.narrow(0, 0, 1).map_err(candle_err)?;
-                        let c = out.narrow(0, 1, 1).map_err(candle_err)?;
-                        let _ = (&u + ((c - &u).map_err(candle_err)? * 7.5).map_err(candle_err)?)
-                            .map_err(candle_err)?;
-                        Ok(())
-                    })?
-                    .0,
-                );
+                let tm = time_it(args.warmup, args.unet_reps, || {
+                    let out = unet.forward(&z2, 500.0, &ctx).map_err(model_err)?;
+                    // the guidance combination itself
+                    let u = out.narrow(0, 0, 1).map_err(candle_err)?;
+                    let c = out.narrow(0, 1, 1).map_err(candle_err)?;
+                    let _ = (&u + ((c - &u).map_err(candle_err)? * 7.5).map_err(candle_err)?)
+                        .map_err(candle_err)?;
+                    Ok(())
+                })?;
+                r.unet_cfg_ms = r.put("unet_cfg", tm);
             }
         }
     }
@@ -276,6 +324,7 @@ pub fn run(args: BenchModelsArgs) -> Result<(), CliError> {
         println!("  encoder_vjp_ms  {}", f(r.encoder_vjp_ms));
         println!("  decoder_ms      {}", f(r.decoder_ms));
         println!("  text_ms         {}", f(r.text_ms));
+        println!("  cpu ms per run  {:?}", r.cpu_ms);
         println!(
             "  peak RSS MiB    encoder fwd {} / vjp {}",
             f(r.encoder_fwd_peak_rss_mb),
