@@ -1,6 +1,7 @@
 //! The `vectorfusion` command line. Each subcommand lives in its own file; errors are turned
 //! into a message and an exit code in one place ([`main`]).
 
+pub mod bench_models;
 pub mod bench_vectorize;
 pub mod eval;
 pub mod generate;
@@ -31,18 +32,15 @@ pub enum Command {
     /// Evaluate generated SVGs with CLIP scorers.
     Eval(eval::EvalArgs),
     /// Benchmarks.
-    Bench(BenchArgs),
-}
-
-/// `vectorfusion bench <which>`.
-#[derive(clap::Args, Debug)]
-pub struct BenchArgs {
     #[command(subcommand)]
-    pub which: BenchCommand,
+    Bench(BenchCommand),
 }
 
+/// `vectorfusion bench <what>`.
 #[derive(Subcommand, Debug)]
 pub enum BenchCommand {
+    /// Stable Diffusion / TAESD components (random weights, full size): median ms each.
+    Models(bench_models::BenchModelsArgs),
     /// LIVE vs vtracer fidelity (PSNR, seconds, SVG bytes) on a folder of PNGs.
     Vectorize(bench_vectorize::BenchVectorizeArgs),
 }
@@ -82,9 +80,8 @@ pub fn run(cli: Cli) -> Result<(), CliError> {
         Command::Render(_) => Err(CliError::NotImplemented("render")),
         Command::Serve(args) => serve::run(args),
         Command::Eval(a) => eval::run(a),
-        Command::Bench(b) => match b.which {
-            BenchCommand::Vectorize(a) => bench_vectorize::run(a),
-        },
+        Command::Bench(BenchCommand::Models(a)) => bench_models::run(a),
+        Command::Bench(BenchCommand::Vectorize(a)) => bench_vectorize::run(a),
     }
 }
 
