@@ -1,6 +1,9 @@
 //! The `vectorfusion` command line. Each subcommand lives in its own file; errors are turned
 //! into a message and an exit code in one place ([`main`]).
 
+pub mod bench;
+pub mod render;
+
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
@@ -19,13 +22,14 @@ pub enum Command {
     /// Trace a raster image into an SVG of closed paths (LIVE).
     Vectorize(NotYet),
     /// Render an SVG through our rasteriser to PNG.
-    Render(NotYet),
+    Render(render::RenderArgs),
     /// Run the HTTP service.
     Serve(NotYet),
     /// Evaluate generated SVGs with CLIP scorers.
     Eval(NotYet),
     /// Benchmarks.
-    Bench(NotYet),
+    #[command(subcommand)]
+    Bench(bench::BenchCommand),
 }
 
 /// Placeholder arguments for commands that are not implemented yet.
@@ -60,10 +64,10 @@ pub fn run(cli: Cli) -> Result<(), CliError> {
     match cli.command {
         Command::Generate(_) => Err(CliError::NotImplemented("generate")),
         Command::Vectorize(_) => Err(CliError::NotImplemented("vectorize")),
-        Command::Render(_) => Err(CliError::NotImplemented("render")),
+        Command::Render(a) => render::run(a),
         Command::Serve(_) => Err(CliError::NotImplemented("serve")),
         Command::Eval(_) => Err(CliError::NotImplemented("eval")),
-        Command::Bench(_) => Err(CliError::NotImplemented("bench")),
+        Command::Bench(b) => bench::run(b),
     }
 }
 
