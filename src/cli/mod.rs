@@ -1,12 +1,14 @@
 //! The `vectorfusion` command line. Each subcommand lives in its own file; errors are turned
 //! into a message and an exit code in one place ([`main`]).
 
+pub mod bench;
 pub mod bench_models;
 pub mod bench_vectorize;
 pub mod eval;
 pub mod generate;
-pub mod vectorize;
+pub mod render;
 pub mod serve;
+pub mod vectorize;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
@@ -26,23 +28,14 @@ pub enum Command {
     /// Trace a raster image into an SVG of closed paths (LIVE).
     Vectorize(vectorize::VectorizeArgs),
     /// Render an SVG through our rasteriser to PNG.
-    Render(NotYet),
+    Render(render::RenderArgs),
     /// Run the HTTP service.
     Serve(serve::ServeArgs),
     /// Evaluate generated SVGs with CLIP scorers.
     Eval(eval::EvalArgs),
     /// Benchmarks.
     #[command(subcommand)]
-    Bench(BenchCommand),
-}
-
-/// `vectorfusion bench <what>`.
-#[derive(Subcommand, Debug)]
-pub enum BenchCommand {
-    /// Stable Diffusion / TAESD components (random weights, full size): median ms each.
-    Models(bench_models::BenchModelsArgs),
-    /// LIVE vs vtracer fidelity (PSNR, seconds, SVG bytes) on a folder of PNGs.
-    Vectorize(bench_vectorize::BenchVectorizeArgs),
+    Bench(bench::BenchCommand),
 }
 
 /// Placeholder arguments for commands that are not implemented yet.
@@ -77,11 +70,10 @@ pub fn run(cli: Cli) -> Result<(), CliError> {
     match cli.command {
         Command::Generate(a) => generate::run(*a),
         Command::Vectorize(a) => vectorize::run(a),
-        Command::Render(_) => Err(CliError::NotImplemented("render")),
+        Command::Render(a) => render::run(a),
         Command::Serve(args) => serve::run(args),
         Command::Eval(a) => eval::run(a),
-        Command::Bench(BenchCommand::Models(a)) => bench_models::run(a),
-        Command::Bench(BenchCommand::Vectorize(a)) => bench_vectorize::run(a),
+        Command::Bench(b) => bench::run(b),
     }
 }
 

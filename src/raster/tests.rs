@@ -40,7 +40,7 @@ fn loss_f64(sc: &SceneT<f64>, w: &[f64]) -> f64 {
 
 fn grad_f64(sc: &SceneT<f64>, w: &[f64]) -> GradT<f64> {
     let ls = geom::layers(sc);
-    let (_, tapes) = engine::forward(sc, &ls, true);
+    let (_, tapes) = engine::forward(sc, &ls, true, Vec::new());
     engine::backward(sc, &ls, &tapes, w)
 }
 
