@@ -25,8 +25,8 @@
 
 pub mod augment;
 pub mod cli;
-pub mod eval;
 pub mod config;
+pub mod eval;
 pub mod image;
 pub mod losses;
 pub mod models;
@@ -35,9 +35,9 @@ pub mod pipeline;
 pub mod progress;
 pub mod raster;
 pub mod scene;
+pub mod server;
 pub mod stages;
+pub mod store;
 pub mod svg;
 pub mod teacher;
-pub mod server;
-pub mod store;
 pub mod worker;
