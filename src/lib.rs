@@ -21,11 +21,15 @@
 
 pub mod cli;
 pub mod config;
+pub mod eval;
 pub mod image;
+pub mod models;
 pub mod optim;
 pub mod pipeline;
 pub mod progress;
+pub mod raster;
 pub mod scene;
 pub mod server;
 pub mod store;
+pub mod svg;
 pub mod worker;

@@ -1,6 +1,7 @@
 //! The `vectorfusion` command line. Each subcommand lives in its own file; errors are turned
 //! into a message and an exit code in one place ([`main`]).
 
+pub mod eval;
 pub mod serve;
 
 use clap::{Parser, Subcommand};
@@ -25,7 +26,7 @@ pub enum Command {
     /// Run the HTTP service.
     Serve(serve::ServeArgs),
     /// Evaluate generated SVGs with CLIP scorers.
-    Eval(NotYet),
+    Eval(eval::EvalArgs),
     /// Benchmarks.
     Bench(NotYet),
 }
@@ -64,7 +65,7 @@ pub fn run(cli: Cli) -> Result<(), CliError> {
         Command::Vectorize(_) => Err(CliError::NotImplemented("vectorize")),
         Command::Render(_) => Err(CliError::NotImplemented("render")),
         Command::Serve(args) => serve::run(args),
-        Command::Eval(_) => Err(CliError::NotImplemented("eval")),
+        Command::Eval(a) => eval::run(a),
         Command::Bench(_) => Err(CliError::NotImplemented("bench")),
     }
 }

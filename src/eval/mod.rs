@@ -1,0 +1,3 @@
+//! Evaluation: CLIP R-Precision and CLIP similarity (the paper's Table 1).
+
+pub mod clip;

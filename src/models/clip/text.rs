@@ -1,0 +1,367 @@
+//! The CLIP transformer encoder and text tower, as `transformers`' `CLIPTextModel` /
+//! `CLIPTextModelWithProjection` (checkpoint key names kept: `text_model.embeddings…`,
+//! `text_model.encoder.layers.N.self_attn.q_proj…`, `text_model.final_layer_norm`,
+//! `text_projection`).
+
+use super::config::{Activation, ClipTextConfig};
+use super::{ClipError, load_weights};
+use candle_core::{D, DType, Device, IndexOp, Module, Result, Tensor};
+use candle_nn::{Embedding, LayerNorm, Linear, VarBuilder, embedding, layer_norm, linear};
+
+fn activate(act: Activation, xs: &Tensor) -> Result<Tensor> {
+    match act {
+        Activation::QuickGelu => xs * candle_nn::ops::sigmoid(&(xs * 1.702)?)?,
+        Activation::Gelu => xs.gelu_erf(),
+        Activation::GeluTanh => xs.gelu(),
+    }
+}
+
+/// Shape of one encoder stack (shared by the text and vision towers).
+#[derive(Debug, Clone, Copy)]
+pub struct EncoderShape {
+    pub hidden_size: usize,
+    pub intermediate_size: usize,
+    pub num_layers: usize,
+    pub num_heads: usize,
+    pub act: Activation,
+    pub eps: f64,
+}
+
+#[derive(Debug, Clone)]
+struct Attention {
+    q: Linear,
+    k: Linear,
+    v: Linear,
+    out: Linear,
+    heads: usize,
+    head_dim: usize,
+    scale: f64,
+}
+
+impl Attention {
+    fn new(vb: VarBuilder, s: &EncoderShape) -> Result<Self> {
+        let h = s.hidden_size;
+        let head_dim = h / s.num_heads;
+        Ok(Self {
+            q: linear(h, h, vb.pp("q_proj"))?,
+            k: linear(h, h, vb.pp("k_proj"))?,
+            v: linear(h, h, vb.pp("v_proj"))?,
+            out: linear(h, h, vb.pp("out_proj"))?,
+            heads: s.num_heads,
+            head_dim,
+            scale: (head_dim as f64).powf(-0.5),
+        })
+    }
+
+    fn forward(&self, xs: &Tensor, mask: Option<&Tensor>) -> Result<Tensor> {
+        let (b, n, c) = xs.dims3()?;
+        let split = |t: Tensor| -> Result<Tensor> {
+            t.reshape((b, n, self.heads, self.head_dim))?
+                .transpose(1, 2)?
+                .contiguous()
+        };
+        let q = split((self.q.forward(xs)? * self.scale)?)?;
+        let k = split(self.k.forward(xs)?)?;
+        let v = split(self.v.forward(xs)?)?;
+        let mut w = q.matmul(&k.t()?.contiguous()?)?;
+        if let Some(m) = mask {
+            w = w.broadcast_add(m)?;
+        }
+        let w = candle_nn::ops::softmax_last_dim(&w)?;
+        let o = w.matmul(&v)?.transpose(1, 2)?.reshape((b, n, c))?;
+        self.out.forward(&o)
+    }
+}
+
+#[derive(Debug, Clone)]
+struct EncoderLayer {
+    attn: Attention,
+    ln1: LayerNorm,
+    fc1: Linear,
+    fc2: Linear,
+    ln2: LayerNorm,
+    act: Activation,
+}
+
+impl EncoderLayer {
+    fn new(vb: VarBuilder, s: &EncoderShape) -> Result<Self> {
+        Ok(Self {
+            attn: Attention::new(vb.pp("self_attn"), s)?,
+            ln1: layer_norm(s.hidden_size, s.eps, vb.pp("layer_norm1"))?,
+            fc1: linear(s.hidden_size, s.intermediate_size, vb.pp("mlp").pp("fc1"))?,
+            fc2: linear(s.intermediate_size, s.hidden_size, vb.pp("mlp").pp("fc2"))?,
+            ln2: layer_norm(s.hidden_size, s.eps, vb.pp("layer_norm2"))?,
+            act: s.act,
+        })
+    }
+
+    fn forward(&self, xs: &Tensor, mask: Option<&Tensor>) -> Result<Tensor> {
+        let h = (xs + self.attn.forward(&self.ln1.forward(xs)?, mask)?)?;
+        let m = self.fc2.forward(&activate(
+            self.act,
+            &self.fc1.forward(&self.ln2.forward(&h)?)?,
+        )?)?;
+        h + m
+    }
+}
+
+/// `CLIPEncoder`: a stack of pre-norm transformer layers (`encoder.layers.N`).
+#[derive(Debug, Clone)]
+pub struct ClipEncoder {
+    layers: Vec<EncoderLayer>,
+}
+
+impl ClipEncoder {
+    pub fn new(vb: VarBuilder, s: &EncoderShape) -> Result<Self> {
+        let vb = vb.pp("layers");
+        let layers = (0..s.num_layers)
+            .map(|i| EncoderLayer::new(vb.pp(i), s))
+            .collect::<Result<Vec<_>>>()?;
+        Ok(Self { layers })
+    }
+
+    pub fn num_layers(&self) -> usize {
+        self.layers.len()
+    }
+
+    /// Runs all layers; returns the input followed by every layer's output
+    /// (`output_hidden_states=True`), so the last entry is the final hidden state.
+    pub fn forward_all(&self, xs: &Tensor, mask: Option<&Tensor>) -> Result<Vec<Tensor>> {
+        let mut states = Vec::with_capacity(self.layers.len() + 1);
+        states.push(xs.clone());
+        let mut h = xs.clone();
+        for l in &self.layers {
+            h = l.forward(&h, mask)?;
+            states.push(h.clone());
+        }
+        Ok(states)
+    }
+
+    pub fn forward(&self, xs: &Tensor, mask: Option<&Tensor>) -> Result<Tensor> {
+        let mut h = xs.clone();
+        for l in &self.layers {
+            h = l.forward(&h, mask)?;
+        }
+        Ok(h)
+    }
+}
+
+/// Additive causal mask `(1, 1, n, n)`: 0 on and below the diagonal, -inf above.
+pub fn causal_mask(n: usize, dtype: DType, device: &Device) -> Result<Tensor> {
+    let v: Vec<f32> = (0..n)
+        .flat_map(|i| (0..n).map(move |j| if j > i { f32::NEG_INFINITY } else { 0.0 }))
+        .collect();
+    Tensor::from_vec(v, (1, 1, n, n), device)?.to_dtype(dtype)
+}
+
+/// Outputs of the text tower.
+#[derive(Debug, Clone)]
+pub struct TextOutput {
+    /// `(batch, seq, hidden)` after the final layer norm.
+    pub last_hidden_state: Tensor,
+    /// `(batch, hidden)`: `last_hidden_state` at the end-of-text token.
+    pub pooled: Tensor,
+    /// Embeddings then every layer output, before the final layer norm (`hidden_states`),
+    /// filled only by [`ClipTextTransformer::forward_with_hidden_states`].
+    pub hidden_states: Vec<Tensor>,
+}
+
+/// `CLIPTextTransformer` (the weights under `text_model.`).
+#[derive(Debug, Clone)]
+pub struct ClipTextTransformer {
+    token_embedding: Embedding,
+    position_embedding: Embedding,
+    encoder: ClipEncoder,
+    final_layer_norm: LayerNorm,
+    config: ClipTextConfig,
+}
+
+impl ClipTextTransformer {
+    /// `vb` points at the `text_model` prefix.
+    pub fn new(vb: VarBuilder, config: &ClipTextConfig) -> Result<Self> {
+        let c = config;
+        let emb = vb.pp("embeddings");
+        let shape = EncoderShape {
+            hidden_size: c.hidden_size,
+            intermediate_size: c.intermediate_size,
+            num_layers: c.num_hidden_layers,
+            num_heads: c.num_attention_heads,
+            act: c.hidden_act,
+            eps: c.layer_norm_eps,
+        };
+        Ok(Self {
+            token_embedding: embedding(c.vocab_size, c.hidden_size, emb.pp("token_embedding"))?,
+            position_embedding: embedding(
+                c.max_position_embeddings,
+                c.hidden_size,
+                emb.pp("position_embedding"),
+            )?,
+            encoder: ClipEncoder::new(vb.pp("encoder"), &shape)?,
+            final_layer_norm: layer_norm(
+                c.hidden_size,
+                c.layer_norm_eps,
+                vb.pp("final_layer_norm"),
+            )?,
+            config: c.clone(),
+        })
+    }
+
+    pub fn config(&self) -> &ClipTextConfig {
+        &self.config
+    }
+
+    fn embed(&self, input_ids: &Tensor) -> Result<(Tensor, Tensor)> {
+        let (_, n) = input_ids.dims2()?;
+        if n > self.config.max_position_embeddings {
+            candle_core::bail!(
+                "sequence length {n} exceeds max_position_embeddings {}",
+                self.config.max_position_embeddings
+            );
+        }
+        let dev = input_ids.device();
+        let pos = Tensor::arange(0u32, n as u32, dev)?;
+        let x = self
+            .token_embedding
+            .forward(input_ids)?
+            .broadcast_add(&self.position_embedding.forward(&pos)?)?;
+        let mask = causal_mask(n, x.dtype(), dev)?;
+        Ok((x, mask))
+    }
+
+    /// Index of the pooled token per row: the first `eos_token_id`, or the largest id when the
+    /// config carries the legacy `eos_token_id == 2` (as transformers does).
+    pub fn eos_positions(&self, input_ids: &Tensor) -> Result<Vec<usize>> {
+        let rows = input_ids.to_dtype(DType::U32)?.to_vec2::<u32>()?;
+        let eos = self.config.eos_token_id;
+        Ok(rows
+            .iter()
+            .map(|r| {
+                if eos == 2 {
+                    let mut best = 0;
+                    for (i, &v) in r.iter().enumerate() {
+                        if v > r[best] {
+                            best = i;
+                        }
+                    }
+                    best
+                } else {
+                    r.iter().position(|&v| v == eos).unwrap_or(0)
+                }
+            })
+            .collect())
+    }
+
+    fn pool(&self, last: &Tensor, input_ids: &Tensor) -> Result<Tensor> {
+        let pos = self.eos_positions(input_ids)?;
+        let rows = pos
+            .iter()
+            .enumerate()
+            .map(|(b, &p)| last.i((b, p)))
+            .collect::<Result<Vec<_>>>()?;
+        Tensor::stack(&rows, 0)
+    }
+
+    /// `input_ids`: `(batch, seq)` u32 ids. No attention mask: padding follows the end token
+    /// and the causal mask keeps it out of every earlier position, as Stable Diffusion uses it.
+    pub fn forward(&self, input_ids: &Tensor) -> Result<TextOutput> {
+        let (x, mask) = self.embed(input_ids)?;
+        let h = self.encoder.forward(&x, Some(&mask))?;
+        let last = self.final_layer_norm.forward(&h)?;
+        let pooled = self.pool(&last, input_ids)?;
+        Ok(TextOutput {
+            last_hidden_state: last,
+            pooled,
+            hidden_states: Vec::new(),
+        })
+    }
+
+    /// As [`Self::forward`], also returning every hidden state (for `clip_skip` /
+    /// penultimate-layer conditioning).
+    pub fn forward_with_hidden_states(&self, input_ids: &Tensor) -> Result<TextOutput> {
+        let (x, mask) = self.embed(input_ids)?;
+        let states = self.encoder.forward_all(&x, Some(&mask))?;
+        let h = states.last().cloned().unwrap_or(x);
+        let last = self.final_layer_norm.forward(&h)?;
+        let pooled = self.pool(&last, input_ids)?;
+        Ok(TextOutput {
+            last_hidden_state: last,
+            pooled,
+            hidden_states: states,
+        })
+    }
+
+    /// Applies the final layer norm (to turn a `hidden_states` entry into an embedding).
+    pub fn final_layer_norm(&self, xs: &Tensor) -> Result<Tensor> {
+        self.final_layer_norm.forward(xs)
+    }
+}
+
+/// The prefix of the text tower in a checkpoint: `text_model.` (CLIPModel and every released
+/// Stable Diffusion `text_encoder`), or none (`CLIPTextModel` saved by transformers >= 5).
+pub fn text_tower(vb: VarBuilder) -> VarBuilder {
+    if vb.contains_tensor("text_model.embeddings.token_embedding.weight") {
+        vb.pp("text_model")
+    } else {
+        vb
+    }
+}
+
+/// `CLIPTextModel` (Stable Diffusion's `text_encoder`).
+#[derive(Debug, Clone)]
+pub struct ClipTextModel {
+    pub text_model: ClipTextTransformer,
+}
+
+impl ClipTextModel {
+    /// `vb` points at the checkpoint root; the weights may sit under `text_model.` or not.
+    pub fn new(vb: VarBuilder, config: &ClipTextConfig) -> Result<Self> {
+        Ok(Self {
+            text_model: ClipTextTransformer::new(text_tower(vb), config)?,
+        })
+    }
+
+    /// Loads `config.json` and the safetensors weights from a directory (e.g. a diffusers
+    /// `text_encoder/` folder) in f32.
+    pub fn load(dir: &std::path::Path, device: &Device) -> std::result::Result<Self, ClipError> {
+        let config = ClipTextConfig::from_file(&dir.join("config.json"))?;
+        let vb = load_weights(dir, DType::F32, device)?;
+        Ok(Self::new(vb, &config)?)
+    }
+
+    pub fn forward(&self, input_ids: &Tensor) -> Result<TextOutput> {
+        self.text_model.forward(input_ids)
+    }
+}
+
+/// `CLIPTextModelWithProjection`: adds `text_projection` (no bias) on the pooled output.
+#[derive(Debug, Clone)]
+pub struct ClipTextModelWithProjection {
+    pub text_model: ClipTextTransformer,
+    pub text_projection: Linear,
+}
+
+impl ClipTextModelWithProjection {
+    pub fn new(vb: VarBuilder, config: &ClipTextConfig, projection_dim: usize) -> Result<Self> {
+        Ok(Self {
+            text_model: ClipTextTransformer::new(text_tower(vb.clone()), config)?,
+            text_projection: candle_nn::linear_no_bias(
+                config.hidden_size,
+                projection_dim,
+                vb.pp("text_projection"),
+            )?,
+        })
+    }
+
+    /// Returns `(text_embeds, output)`: the projected (not normalised) pooled output.
+    pub fn forward(&self, input_ids: &Tensor) -> Result<(Tensor, TextOutput)> {
+        let out = self.text_model.forward(input_ids)?;
+        let embeds = self.text_projection.forward(&out.pooled)?;
+        Ok((embeds, out))
+    }
+}
+
+/// Row-wise L2 normalisation over the last dimension.
+pub fn l2_normalize(xs: &Tensor) -> Result<Tensor> {
+    let n = xs.sqr()?.sum_keepdim(D::Minus1)?.sqrt()?;
+    xs.broadcast_div(&n)
+}

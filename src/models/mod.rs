@@ -1,0 +1,3 @@
+//! Neural networks on candle.
+
+pub mod clip;

@@ -1,0 +1,394 @@
+//! Banded forward and backward passes over the layers of a scene.
+//!
+//! The canvas is cut into horizontal bands that are processed in parallel (rayon); inside a
+//! band, layers are painted in order, each only over its bounding box ∩ band.
+
+use super::geom::{Layer, LayerKind, SceneT, polyline_backward};
+use super::real::Real;
+use super::stroke;
+use super::walk::{Clip, deposit, edge_grad};
+use rayon::prelude::*;
+
+/// What the forward pass remembers per band for the backward pass: for every layer touching
+/// the band, the raw accumulated winding integral `A` and the colour underneath (`dst`) over
+/// the layer's box ∩ band. Memory is proportional to the painted area.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct BandTape<T> {
+    pub recs: Vec<Rec>,
+    pub area: Vec<T>,
+    pub dst: Vec<T>,
+}
+
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Rec {
+    pub layer: u32,
+    pub clip: Clip,
+    pub offset: usize,
+}
+
+/// Row range of each band.
+pub(crate) fn bands(height: u32) -> Vec<(i32, i32)> {
+    let threads = rayon::current_num_threads().max(1) as u32;
+    let target = (threads * 4).max(1);
+    let bh = height.div_ceil(target).max(16);
+    let mut out = Vec::new();
+    let mut y = 0;
+    while y < height {
+        let y1 = (y + bh).min(height);
+        out.push((y as i32, y1 as i32));
+        y = y1;
+    }
+    out
+}
+
+fn premul_bg<T: Real>(bg: [T; 4]) -> [T; 4] {
+    [bg[0] * bg[3], bg[1] * bg[3], bg[2] * bg[3], bg[3]]
+}
+
+#[inline]
+fn coverage<T: Real>(a: T) -> T {
+    a.abs().min(T::one())
+}
+
+fn layer_clip<T>(l: &Layer<T>, y0: i32, y1: i32) -> Option<Clip> {
+    let [bx0, by0, bx1, by1] = l.bbox;
+    let c = Clip {
+        x0: bx0,
+        x1: bx1,
+        y0: by0.max(y0),
+        y1: by1.min(y1),
+    };
+    (c.x0 < c.x1 && c.y0 < c.y1).then_some(c)
+}
+
+fn for_each_edge<T: Real>(l: &Layer<T>, mut f: impl FnMut(usize, usize)) {
+    for &(start, len) in &l.contours {
+        let (s, n) = (start as usize, len as usize);
+        for k in 0..n {
+            f(s + k, s + (k + 1) % n);
+        }
+    }
+}
+
+/// Paints one band. `img` holds the band's rows (4 channels, full width).
+fn forward_band<T: Real>(
+    sc: &SceneT<T>,
+    ls: &[Layer<T>],
+    (y0, y1): (i32, i32),
+    img: &mut [T],
+    mut tape: Option<&mut BandTape<T>>,
+) {
+    let w = sc.width as usize;
+    let bg = premul_bg(sc.bg);
+    for px in img.chunks_exact_mut(4) {
+        px.copy_from_slice(&bg);
+    }
+    let mut acc: Vec<T> = Vec::new();
+    let mut vals: Vec<T> = Vec::new();
+    let mut scratch = stroke::Scratch::default();
+    for (li, l) in ls.iter().enumerate() {
+        let Some(clip) = layer_clip(l, y0, y1) else {
+            continue;
+        };
+        let cw = (clip.x1 - clip.x0) as usize;
+        let rows = (clip.y1 - clip.y0) as usize;
+        // `vals` = per-pixel value the coverage is a function of: the winding integral A for
+        // fills (coverage min(|A|, 1)), the coverage itself for strokes.
+        match l.kind {
+            LayerKind::Fill => {
+                let stride = cw + 1;
+                acc.clear();
+                acc.resize(stride * rows, T::zero());
+                for_each_edge(l, |a, b| {
+                    deposit(l.verts[a], l.verts[b], clip, &mut acc, stride)
+                });
+                vals.clear();
+                vals.reserve(cw * rows);
+                for row in 0..rows {
+                    let mut s = T::zero();
+                    for &dv in &acc[row * stride..row * stride + cw] {
+                        s += dv;
+                        vals.push(s);
+                    }
+                }
+            }
+            LayerKind::Stroke => {
+                vals.clear();
+                vals.resize(cw * rows, T::zero());
+                stroke::coverage(&l.poly, l.closed, l.radius, clip, &mut vals, &mut scratch);
+            }
+        }
+        let fill = l.kind == LayerKind::Fill;
+        let [r, g, b, ca] = l.color;
+        if let Some(t) = tape.as_deref_mut() {
+            t.recs.push(Rec {
+                layer: li as u32,
+                clip,
+                offset: t.area.len(),
+            });
+            t.area.extend_from_slice(&vals);
+            t.dst.reserve(4 * cw * rows);
+        }
+        for row in 0..rows {
+            let vrow = &vals[row * cw..(row + 1) * cw];
+            let iy = (clip.y0 - y0) as usize + row;
+            let base = 4 * (iy * w + clip.x0 as usize);
+            let prow = &mut img[base..base + 4 * cw];
+            if let Some(t) = tape.as_deref_mut() {
+                t.dst.extend_from_slice(prow);
+            }
+            for (i, &v) in vrow.iter().enumerate() {
+                let cov = if fill { coverage(v) } else { v };
+                let alpha = cov * ca;
+                if alpha > T::zero() {
+                    let keep = T::one() - alpha;
+                    let p = &mut prow[4 * i..4 * i + 4];
+                    p[0] = r * alpha + p[0] * keep;
+                    p[1] = g * alpha + p[1] * keep;
+                    p[2] = b * alpha + p[2] * keep;
+                    p[3] = alpha + p[3] * keep;
+                }
+            }
+        }
+    }
+}
+
+/// Forward over all bands; returns the premultiplied image and (optionally) the tapes.
+pub(crate) fn forward<T: Real>(
+    sc: &SceneT<T>,
+    ls: &[Layer<T>],
+    with_tape: bool,
+) -> (Vec<T>, Vec<BandTape<T>>) {
+    let w = sc.width as usize;
+    let bs = bands(sc.height);
+    let mut img = vec![T::zero(); 4 * w * sc.height as usize];
+    let mut chunks: Vec<&mut [T]> = Vec::with_capacity(bs.len());
+    let mut rest: &mut [T] = &mut img;
+    for &(y0, y1) in &bs {
+        let (head, tail) = rest.split_at_mut(4 * w * (y1 - y0) as usize);
+        chunks.push(head);
+        rest = tail;
+    }
+    let tapes: Vec<BandTape<T>> = chunks
+        .into_par_iter()
+        .zip(bs.par_iter())
+        .map(|(chunk, &band)| {
+            let mut t = BandTape::default();
+            forward_band(sc, ls, band, chunk, with_tape.then_some(&mut t));
+            t
+        })
+        .collect();
+    (img, tapes)
+}
+
+/// Per-band gradient partial sums.
+struct BandGrad<T> {
+    /// Per layer, per outline vertex.
+    dverts: Vec<Vec<[T; 2]>>,
+    /// Per layer, straight RGBA.
+    dcolor: Vec<[T; 4]>,
+    /// Per layer, stroke half-width.
+    dradius: Vec<T>,
+    dbg: [T; 4],
+}
+
+fn backward_band<T: Real>(
+    sc: &SceneT<T>,
+    ls: &[Layer<T>],
+    y0: i32,
+    tape: &BandTape<T>,
+    dimg: &[T],
+) -> BandGrad<T> {
+    let w = sc.width as usize;
+    let mut g: Vec<T> = dimg.to_vec();
+    let mut out = BandGrad {
+        dverts: vec![Vec::new(); ls.len()],
+        dcolor: vec![[T::zero(); 4]; ls.len()],
+        dradius: vec![T::zero(); ls.len()],
+        dbg: [T::zero(); 4],
+    };
+    let mut gbuf: Vec<T> = Vec::new();
+    let mut scratch = stroke::Scratch::default();
+    for rec in tape.recs.iter().rev() {
+        let li = rec.layer as usize;
+        let l = &ls[li];
+        let clip = rec.clip;
+        let cw = (clip.x1 - clip.x0) as usize;
+        let rows = (clip.y1 - clip.y0) as usize;
+        gbuf.clear();
+        gbuf.resize(cw * rows, T::zero());
+        let [cr, cg, cb, ca] = l.color;
+        let fill = l.kind == LayerKind::Fill;
+        let mut dc = [T::zero(); 4];
+        let mut any = false;
+        for row in 0..rows {
+            let iy = (clip.y0 - y0) as usize + row;
+            let base = 4 * (iy * w + clip.x0 as usize);
+            let grow = &mut g[base..base + 4 * cw];
+            let off = rec.offset + row * cw;
+            let arow = &tape.area[off..off + cw];
+            let drow = &tape.dst[4 * off..4 * (off + cw)];
+            let gb = &mut gbuf[row * cw..(row + 1) * cw];
+            for i in 0..cw {
+                let a = arow[i];
+                let cov = if fill { coverage(a) } else { a };
+                let alpha = cov * ca;
+                let gp = &mut grow[4 * i..4 * i + 4];
+                let d = &drow[4 * i..4 * i + 4];
+                let galpha = gp[0] * (cr - d[0])
+                    + gp[1] * (cg - d[1])
+                    + gp[2] * (cb - d[2])
+                    + gp[3] * (T::one() - d[3]);
+                dc[0] += gp[0] * alpha;
+                dc[1] += gp[1] * alpha;
+                dc[2] += gp[2] * alpha;
+                dc[3] += galpha * cov;
+                if !fill || a.abs() < T::one() {
+                    let dcov = galpha * ca;
+                    let v = if fill && a < T::zero() { -dcov } else { dcov };
+                    if v != T::zero() {
+                        any = true;
+                    }
+                    gb[i] = v;
+                }
+                let keep = T::one() - alpha;
+                for c in gp.iter_mut() {
+                    *c *= keep;
+                }
+            }
+        }
+        for c in 0..4 {
+            out.dcolor[li][c] += dc[c];
+        }
+        if any && !fill {
+            let dp = &mut out.dverts[li];
+            if dp.is_empty() {
+                dp.resize(l.poly.len(), [T::zero(); 2]);
+            }
+            out.dradius[li] +=
+                stroke::backward(&l.poly, l.closed, l.radius, clip, &gbuf, dp, &mut scratch);
+        } else if any {
+            let dv = &mut out.dverts[li];
+            if dv.is_empty() {
+                dv.resize(l.verts.len(), [T::zero(); 2]);
+            }
+            for_each_edge(l, |ia, ib| {
+                let (mut d0, mut d1) = ([T::zero(); 2], [T::zero(); 2]);
+                edge_grad(l.verts[ia], l.verts[ib], clip, &gbuf, cw, &mut d0, &mut d1);
+                for c in 0..2 {
+                    dv[ia][c] += d0[c];
+                    dv[ib][c] += d1[c];
+                }
+            });
+        }
+    }
+    let bg = sc.bg;
+    for gp in g.chunks_exact(4) {
+        out.dbg[0] += gp[0] * bg[3];
+        out.dbg[1] += gp[1] * bg[3];
+        out.dbg[2] += gp[2] * bg[3];
+        out.dbg[3] += gp[0] * bg[0] + gp[1] * bg[1] + gp[2] * bg[2] + gp[3];
+    }
+    out
+}
+
+/// Gradients in the layout of [`crate::scene::Params`], in the working precision.
+#[derive(Clone, Debug)]
+pub(crate) struct GradT<T> {
+    pub points: Vec<T>,
+    pub fill: Vec<T>,
+    pub stroke: Vec<T>,
+    pub width: Vec<T>,
+    pub bg: [T; 4],
+}
+
+/// Backward over all bands, then the chain rule back to scene parameters.
+pub(crate) fn backward<T: Real>(
+    sc: &SceneT<T>,
+    ls: &[Layer<T>],
+    tapes: &[BandTape<T>],
+    dimg: &[T],
+) -> GradT<T> {
+    let w = sc.width as usize;
+    let bs = bands(sc.height);
+    let parts: Vec<BandGrad<T>> = bs
+        .par_iter()
+        .zip(tapes.par_iter())
+        .map(|(&(y0, y1), tape)| {
+            let lo = 4 * w * y0 as usize;
+            let hi = 4 * w * y1 as usize;
+            backward_band(sc, ls, y0, tape, &dimg[lo..hi])
+        })
+        .collect();
+    // Reduce over bands.
+    let mut dverts: Vec<Vec<[T; 2]>> = ls
+        .iter()
+        .map(|l| vec![[T::zero(); 2]; l.verts.len().max(l.poly.len())])
+        .collect();
+    let mut dcolor = vec![[T::zero(); 4]; ls.len()];
+    let mut dradius = vec![T::zero(); ls.len()];
+    let mut dbg = [T::zero(); 4];
+    for p in &parts {
+        for (li, dv) in p.dverts.iter().enumerate() {
+            for (acc, v) in dverts[li].iter_mut().zip(dv) {
+                acc[0] += v[0];
+                acc[1] += v[1];
+            }
+            for c in 0..4 {
+                dcolor[li][c] += p.dcolor[li][c];
+            }
+            dradius[li] += p.dradius[li];
+        }
+        for c in 0..4 {
+            dbg[c] += p.dbg[c];
+        }
+    }
+    // Parameter layout offsets.
+    let mut pt_off = Vec::with_capacity(sc.shapes.len());
+    let mut fill_idx = Vec::with_capacity(sc.shapes.len());
+    let mut stroke_idx = Vec::with_capacity(sc.shapes.len());
+    let (mut np, mut nf, mut ns) = (0, 0, 0);
+    for s in &sc.shapes {
+        pt_off.push(np);
+        np += 2 * s.pts.len();
+        fill_idx.push(nf);
+        if s.fill.is_some() {
+            nf += 1;
+        }
+        stroke_idx.push(ns);
+        if s.stroke.is_some() {
+            ns += 1;
+        }
+    }
+    let mut grad = GradT {
+        points: vec![T::zero(); np],
+        fill: vec![T::zero(); 4 * nf],
+        stroke: vec![T::zero(); 4 * ns],
+        width: vec![T::zero(); ns],
+        bg: dbg,
+    };
+    for (li, l) in ls.iter().enumerate() {
+        let s = &sc.shapes[l.shape];
+        let dpts = &mut grad.points[pt_off[l.shape]..pt_off[l.shape] + 2 * s.pts.len()];
+        match l.kind {
+            LayerKind::Fill => {
+                polyline_backward(s, &dverts[li], dpts);
+                let k = 4 * fill_idx[l.shape];
+                for c in 0..4 {
+                    grad.fill[k + c] += dcolor[li][c];
+                }
+            }
+            LayerKind::Stroke => {
+                let dr = dradius[li];
+                polyline_backward(s, &dverts[li], dpts);
+                let k = stroke_idx[l.shape];
+                for c in 0..4 {
+                    grad.stroke[4 * k + c] += dcolor[li][c];
+                }
+                // r = max(w, 0) / 2; widths of valid scenes are >= 0 (right derivative at 0).
+                grad.width[k] += T::c(0.5) * dr;
+            }
+        }
+    }
+    grad
+}

@@ -1,0 +1,273 @@
+use super::*;
+use crate::scene::Rgba;
+
+fn square_scene(x: f32, y: f32, side: f32) -> Scene {
+    let mut s = Scene::new(16, 16, Rgba::TRANSPARENT).unwrap();
+    s.shapes
+        .push(Shape::square(x, y, side, Rgba::new(1.0, 0.0, 0.0, 1.0)).unwrap());
+    s
+}
+
+#[test]
+fn square_coverage_is_exact_area() {
+    let im = render(&square_scene(2.25, 3.5, 4.0));
+    // Column 2 is covered 0.75 horizontally; row 3 covered 0.5 vertically.
+    assert!(
+        (im.pixel(2, 3)[3] - 0.375).abs() < 1e-5,
+        "{:?}",
+        im.pixel(2, 3)
+    );
+    assert!((im.pixel(3, 4)[3] - 1.0).abs() < 1e-6);
+    assert!((im.pixel(6, 4)[3] - 0.25).abs() < 1e-5);
+    assert_eq!(im.pixel(7, 4)[3], 0.0);
+    assert_eq!(im.pixel(3, 8)[3], 0.0);
+    let total: f32 = im.data.chunks(4).map(|p| p[3]).sum();
+    assert!((total - 16.0).abs() < 1e-4, "{total}");
+}
+
+// ---------------------------------------------------------------------------------------------
+// Finite-difference gradient checks (f64).
+
+use super::engine::{self, GradT};
+use super::geom;
+use crate::scene::{Point, Stroke};
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+fn loss_f64(sc: &SceneT<f64>, w: &[f64]) -> f64 {
+    render_t(sc).iter().zip(w).map(|(a, b)| a * b).sum()
+}
+
+fn grad_f64(sc: &SceneT<f64>, w: &[f64]) -> GradT<f64> {
+    let ls = geom::layers(sc);
+    let (_, tapes) = engine::forward(sc, &ls, true);
+    engine::backward(sc, &ls, &tapes, w)
+}
+
+/// Mutable reference to parameter `k` of group `g` (Params layout).
+fn param(sc: &mut SceneT<f64>, g: ParamGroup, k: usize) -> &mut f64 {
+    let mut k = k;
+    match g {
+        ParamGroup::Background => &mut sc.bg[k],
+        _ => {
+            for s in &mut sc.shapes {
+                let n = match g {
+                    ParamGroup::Points => 2 * s.pts.len(),
+                    ParamGroup::Fill => 4 * s.fill.is_some() as usize,
+                    ParamGroup::Stroke => 4 * s.stroke.is_some() as usize,
+                    _ => s.stroke.is_some() as usize,
+                };
+                if k < n {
+                    return match g {
+                        ParamGroup::Points => &mut s.pts[k / 2][k % 2],
+                        ParamGroup::Fill => &mut s.fill.as_mut().unwrap()[k],
+                        ParamGroup::Stroke => &mut s.stroke.as_mut().unwrap().0[k],
+                        _ => &mut s.stroke.as_mut().unwrap().1,
+                    };
+                }
+                k -= n;
+            }
+            unreachable!("parameter index out of range")
+        }
+    }
+}
+
+fn group(g: &GradT<f64>, grp: ParamGroup) -> &[f64] {
+    match grp {
+        ParamGroup::Points => &g.points,
+        ParamGroup::Fill => &g.fill,
+        ParamGroup::Stroke => &g.stroke,
+        ParamGroup::Width => &g.width,
+        ParamGroup::Background => &g.bg,
+    }
+}
+
+/// Checks every parameter; returns (checked, mismatches, worst message).
+fn fd_check(scene: &Scene, seed: u64) -> (usize, Vec<String>) {
+    scene.validate().unwrap();
+    let sc = SceneT::<f64>::from_scene(scene, FLATTEN_TOLERANCE);
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let n = 4 * (scene.width * scene.height) as usize;
+    let w: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
+    let an = grad_f64(&sc, &w);
+    let mut bad = Vec::new();
+    let mut checked = 0;
+    for grp in ParamGroup::ALL {
+        for k in 0..group(&an, grp).len() {
+            let h = if grp == ParamGroup::Points || grp == ParamGroup::Width {
+                1e-5
+            } else {
+                1e-6
+            };
+            let mut p = sc.clone();
+            *param(&mut p, grp, k) += h;
+            let lp = loss_f64(&p, &w);
+            *param(&mut p, grp, k) -= 2.0 * h;
+            let lm = loss_f64(&p, &w);
+            let fd = (lp - lm) / (2.0 * h);
+            let a = group(&an, grp)[k];
+            assert!(a.is_finite(), "{grp:?}[{k}] not finite");
+            checked += 1;
+            if (fd - a).abs() > 1e-3 * (1.0 + fd.abs().max(a.abs())) {
+                bad.push(format!("{grp:?}[{k}]: analytic {a:.6} fd {fd:.6}"));
+            }
+        }
+    }
+    (checked, bad)
+}
+
+fn rgba(rng: &mut ChaCha8Rng) -> Rgba {
+    Rgba::new(
+        rng.random_range(0.0..1.0),
+        rng.random_range(0.0..1.0),
+        rng.random_range(0.0..1.0),
+        rng.random_range(0.3..1.0),
+    )
+}
+
+fn random_scene(seed: u64) -> Scene {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let (w, h) = (24u32, 20u32);
+    let bg = rgba(&mut rng);
+    let mut s = Scene::new(w, h, bg).unwrap();
+    let pt = |rng: &mut ChaCha8Rng, lo: f32, hi: f32| {
+        Point::new(rng.random_range(lo..hi), rng.random_range(lo..hi * 0.85))
+    };
+    // Random closed cubics: control points anywhere (self-intersecting), some off canvas.
+    for _ in 0..2 {
+        let pts = (0..9).map(|_| pt(&mut rng, -6.0, 30.0)).collect();
+        s.shapes
+            .push(Shape::closed_cubic(pts, rgba(&mut rng)).unwrap());
+    }
+    // Circle-ish blob.
+    s.shapes
+        .push(Shape::circle(12.3, 9.7, 6.1, 4, rgba(&mut rng)).unwrap());
+    // Tiny path.
+    s.shapes
+        .push(Shape::circle(5.3, 14.2, 0.35, 3, rgba(&mut rng)).unwrap());
+    // Polygon with a stroke.
+    let mut poly = Shape::polygon(
+        (0..5).map(|_| pt(&mut rng, 0.0, 24.0)).collect(),
+        rgba(&mut rng),
+    )
+    .unwrap();
+    poly.stroke = Some(Stroke {
+        color: rgba(&mut rng),
+        width: 1.7,
+    });
+    s.shapes.push(poly);
+    // Open strokes: thin, thick, partly off canvas.
+    for wdt in [0.6f32, 2.5, 4.0] {
+        let pts = (0..7).map(|_| pt(&mut rng, -4.0, 28.0)).collect();
+        s.shapes.push(
+            Shape::open_cubic(
+                pts,
+                Stroke {
+                    color: rgba(&mut rng),
+                    width: wdt,
+                },
+            )
+            .unwrap(),
+        );
+    }
+    s
+}
+
+#[test]
+fn gradients_match_finite_differences_on_random_scenes() {
+    for seed in 0..4 {
+        let s = random_scene(seed);
+        let (checked, bad) = fd_check(&s, 100 + seed);
+        // Central differences straddle the kinks of min(|A|, 1) and of the stroke profile in
+        // a handful of parameters; everything else must agree to 1e-3 relative.
+        assert!(
+            bad.len() * 50 <= checked,
+            "seed {seed}: {} of {checked} mismatched:\n{}",
+            bad.len(),
+            bad.join("\n")
+        );
+        eprintln!(
+            "seed {seed}: {checked} params, {} kink mismatches {:?}",
+            bad.len(),
+            bad
+        );
+    }
+}
+
+#[test]
+fn degenerate_scenes_have_finite_gradients() {
+    let mut s = Scene::new(12, 10, Rgba::new(0.2, 0.3, 0.4, 0.5)).unwrap();
+    let p = Point::new(4.37, 5.21);
+    s.shapes
+        .push(Shape::closed_cubic(vec![p; 6], Rgba::new(1.0, 0.0, 0.0, 1.0)).unwrap());
+    s.shapes.push(
+        Shape::open_cubic(
+            vec![p; 4],
+            Stroke {
+                color: Rgba::BLACK,
+                width: 2.0,
+            },
+        )
+        .unwrap(),
+    );
+    s.shapes.push(
+        Shape::open_cubic(
+            vec![Point::new(1.0, 1.0); 4],
+            Stroke {
+                color: Rgba::BLACK,
+                width: 0.0,
+            },
+        )
+        .unwrap(),
+    );
+    // Entirely off canvas.
+    s.shapes
+        .push(Shape::circle(-50.0, 200.0, 5.0, 4, Rgba::BLACK).unwrap());
+    let (img, tape) = render_tape(&s);
+    assert!(
+        img.data
+            .iter()
+            .all(|v| v.is_finite() && (0.0..=1.0).contains(v))
+    );
+    let d = vec![1.0f32; img.data.len()];
+    let g = backward(&s, &tape, &d);
+    assert!(g.all_finite());
+    // A zero-length stroke still draws a round dot of the given width and has gradients.
+    assert!(img.pixel(4, 4)[3] > 0.5);
+    assert!(g.get(ParamGroup::Width)[0] > 0.0, "dot grows with width");
+    // f64 check on the degenerate scene as well.
+    let (checked, bad) = fd_check(&s, 7);
+    assert!(bad.len() * 20 <= checked, "{bad:?}");
+}
+
+#[test]
+fn f32_backward_matches_f64() {
+    let s = random_scene(9);
+    let sc = SceneT::<f64>::from_scene(&s, FLATTEN_TOLERANCE);
+    let n = 4 * (s.width * s.height) as usize;
+    let mut rng = ChaCha8Rng::seed_from_u64(3);
+    let w: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
+    let g64 = grad_f64(&sc, &w);
+    let (_, tape) = render_tape(&s);
+    let w32: Vec<f32> = w.iter().map(|v| *v as f32).collect();
+    let g32 = backward(&s, &tape, &w32);
+    for grp in ParamGroup::ALL {
+        for (a, b) in g32.get(grp).iter().zip(group(&g64, grp)) {
+            assert!(
+                (*a as f64 - b).abs() <= 1e-3 * (1.0 + b.abs()),
+                "{grp:?}: {a} vs {b}"
+            );
+        }
+    }
+}
+
+#[test]
+fn backward_rejects_mismatched_tape_without_panicking() {
+    let s = random_scene(1);
+    let (_, tape) = render_tape(&s);
+    let other = square_scene(1.0, 1.0, 3.0);
+    let g = backward(&other, &tape, &vec![1.0; 4 * 16 * 16]);
+    assert_eq!(g, Params::zeros_like(&other));
+    let g = backward(&s, &tape, &[1.0; 3]);
+    assert!(g.get(ParamGroup::Points).iter().all(|v| *v == 0.0));
+}

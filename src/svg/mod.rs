@@ -1,0 +1,628 @@
+//! Scene ⇄ SVG text, plus the benchmark scene JSON format.
+//!
+//! # Export ([`to_svg`])
+//! Compact and deterministic: numbers use a fixed number of decimals ([`SvgOptions::precision`])
+//! with trailing zeros removed, one `<path>` per shape, attributes only when they differ from the
+//! SVG default. The background becomes a full-canvas `<rect>` only when it is not fully
+//! transparent. Strokes are written with `stroke-linecap="round" stroke-linejoin="round"`, which
+//! is exactly what [`crate::raster`] draws (a union of capsules), so resvg, browsers and our
+//! rasteriser agree. Colours are written as `#rrggbb` (8 bits per channel, as in every SVG
+//! renderer); opacities with the chosen precision.
+//!
+//! # Import ([`from_svg`])
+//! Parsing, CSS/style attributes, `<rect>`/`<circle>`/`<ellipse>`/`<polygon>`/`<line>`, arcs,
+//! `<use>`, groups and transforms are normalised by `usvg`; we then walk its path tree:
+//! - every point is mapped through the path's absolute transform; stroke widths are scaled by
+//!   `sqrt(|det|)` of that transform;
+//! - lines and quadratics are converted to (exactly equivalent) cubics;
+//! - **fill**: all subpaths of one `<path>` become ONE [`ShapeKind::ClosedCubic`] shape. Extra
+//!   subpaths are joined to the first one by straight "bridge" segments that are walked there and
+//!   back, so they cancel in the winding number and holes survive exactly under the nonzero rule.
+//!   For `fill-rule="evenodd"` subpaths are re-oriented by nesting depth (odd depth reversed)
+//!   first, which reproduces even-odd for properly nested outlines (the usual case: glyphs,
+//!   donuts); self-overlapping even-odd paths are approximated by nonzero.
+//! - **stroke**: a path with a single subpath keeps its stroke on the same shape (closed subpath)
+//!   or becomes an [`ShapeKind::OpenCubic`] (open subpath, no fill). With several subpaths, each
+//!   subpath gets its own stroke shape (closed ones get a transparent fill) painted after the fill.
+//!   Dashes, caps and joins other than round are drawn round.
+//! - gradients and patterns are replaced by the average colour of their stops (patterns: grey);
+//!   group opacity is multiplied into the shape opacities (exact unless children overlap);
+//!   images, text without fonts, clip paths, masks and filters are ignored.
+//! - if the first shape is a filled rectangle covering the whole canvas (what [`to_svg`] writes
+//!   for the background) it becomes the scene background.
+
+use crate::scene::{MAX_SIDE, Point, Rgba, Scene, SceneError, Shape, ShapeKind, Stroke};
+use resvg::usvg;
+use std::fmt::Write as _;
+use std::path::Path;
+
+/// Why an SVG (or scene JSON) could not be turned into a scene.
+#[derive(Debug, thiserror::Error)]
+pub enum SvgError {
+    #[error("cannot parse SVG: {0}")]
+    Parse(String),
+    #[error("SVG canvas size {0}x{1} is out of range (1..={MAX_SIDE} px)")]
+    Size(f32, f32),
+    #[error("cannot parse scene JSON: {0}")]
+    Json(String),
+    #[error("imported scene is invalid: {0}")]
+    Invalid(#[from] SceneError),
+    #[error("I/O error on {path}: {source}")]
+    Io {
+        path: String,
+        source: std::io::Error,
+    },
+}
+
+/// Export options.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SvgOptions {
+    /// Decimal places for coordinates, widths and opacities (0..=6; larger values are capped).
+    pub precision: u8,
+}
+
+impl Default for SvgOptions {
+    fn default() -> Self {
+        SvgOptions { precision: 2 }
+    }
+}
+
+fn push_num(out: &mut String, v: f32, prec: usize) {
+    let mut s = format!("{:.*}", prec, v);
+    if s.contains('.') {
+        while s.ends_with('0') {
+            s.pop();
+        }
+        if s.ends_with('.') {
+            s.pop();
+        }
+    }
+    if s == "-0" {
+        s = "0".into();
+    }
+    out.push_str(&s);
+}
+
+fn hex(c: Rgba) -> String {
+    let b = |v: f32| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
+    format!("#{:02x}{:02x}{:02x}", b(c.r), b(c.g), b(c.b))
+}
+
+fn push_path_data(out: &mut String, sh: &Shape, prec: usize) {
+    let pt = |out: &mut String, p: Point| {
+        push_num(out, p.x, prec);
+        out.push(' ');
+        push_num(out, p.y, prec);
+    };
+    match sh.kind {
+        ShapeKind::Polygon => {
+            for (i, p) in sh.points.iter().enumerate() {
+                out.push(if i == 0 { 'M' } else { 'L' });
+                pt(out, *p);
+            }
+            out.push('Z');
+        }
+        ShapeKind::ClosedCubic | ShapeKind::OpenCubic => {
+            out.push('M');
+            pt(out, sh.points[0]);
+            for i in 0..sh.num_segments() {
+                let s = sh.segment(i);
+                out.push('C');
+                pt(out, s[1]);
+                out.push(' ');
+                pt(out, s[2]);
+                out.push(' ');
+                pt(out, s[3]);
+            }
+            if sh.kind == ShapeKind::ClosedCubic {
+                out.push('Z');
+            }
+        }
+    }
+}
+
+/// Writes `scene` as a standalone SVG document (see the module docs). Never fails for a scene
+/// that passes [`Scene::validate`]; invalid values are written as they are.
+pub fn to_svg(scene: &Scene, opts: &SvgOptions) -> String {
+    let prec = opts.precision.min(6) as usize;
+    let mut out = String::with_capacity(128 + 160 * scene.shapes.len());
+    let (w, h) = (scene.width, scene.height);
+    let _ = write!(
+        out,
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" viewBox="0 0 {w} {h}">"#
+    );
+    out.push('\n');
+    let opacity = |out: &mut String, name: &str, a: f32| {
+        if a < 1.0 {
+            let _ = write!(out, r#" {name}=""#);
+            push_num(out, a, prec.max(2));
+            out.push('"');
+        }
+    };
+    if scene.background.a > 0.0 {
+        let _ = write!(
+            out,
+            r#"<rect width="{w}" height="{h}" fill="{}""#,
+            hex(scene.background)
+        );
+        opacity(&mut out, "fill-opacity", scene.background.a);
+        out.push_str("/>\n");
+    }
+    for sh in &scene.shapes {
+        out.push_str(r#"<path d=""#);
+        push_path_data(&mut out, sh, prec);
+        out.push('"');
+        match sh.fill {
+            Some(f) if sh.is_closed() && f.a > 0.0 => {
+                if hex(f) != "#000000" {
+                    let _ = write!(out, r#" fill="{}""#, hex(f));
+                }
+                opacity(&mut out, "fill-opacity", f.a);
+            }
+            _ => out.push_str(r#" fill="none""#),
+        }
+        if let Some(st) = sh.stroke
+            && st.width > 0.0
+            && st.color.a > 0.0
+        {
+            let _ = write!(out, r#" stroke="{}" stroke-width=""#, hex(st.color));
+            push_num(&mut out, st.width, prec);
+            out.push('"');
+            opacity(&mut out, "stroke-opacity", st.color.a);
+            out.push_str(r#" stroke-linecap="round" stroke-linejoin="round""#);
+        }
+        out.push_str("/>\n");
+    }
+    out.push_str("</svg>\n");
+    out
+}
+
+/// One subpath as cubic segments `[p1, p2, p3]` after a start point.
+#[derive(Clone, Debug)]
+struct SubPath {
+    start: Point,
+    segs: Vec<[Point; 3]>,
+    closed: bool,
+}
+
+impl SubPath {
+    fn end(&self) -> Point {
+        self.segs.last().map_or(self.start, |s| s[2])
+    }
+
+    fn line(a: Point, b: Point) -> [Point; 3] {
+        let l = |t: f32| Point::new(a.x + (b.x - a.x) * t, a.y + (b.y - a.y) * t);
+        [l(1.0 / 3.0), l(2.0 / 3.0), b]
+    }
+
+    /// Adds the closing straight segment if the subpath does not end at its start.
+    fn closed_segments(&self) -> Vec<[Point; 3]> {
+        let mut segs = self.segs.clone();
+        let e = self.end();
+        if e != self.start || segs.is_empty() {
+            segs.push(Self::line(e, self.start));
+        }
+        segs
+    }
+
+    fn reversed(&self) -> SubPath {
+        let segs = self.closed_segments();
+        let mut out = Vec::with_capacity(segs.len());
+        let mut anchors = vec![self.start];
+        anchors.extend(segs.iter().map(|s| s[2]));
+        for i in (0..segs.len()).rev() {
+            out.push([segs[i][1], segs[i][0], anchors[i]]);
+        }
+        SubPath {
+            start: self.start,
+            segs: out,
+            closed: true,
+        }
+    }
+
+    /// Signed area of the anchor + control polygon (orientation estimate).
+    fn signed_area(&self) -> f32 {
+        let mut pts = vec![self.start];
+        for s in self.closed_segments() {
+            pts.extend_from_slice(&s);
+        }
+        let mut a = 0.0;
+        for i in 0..pts.len() {
+            let (p, q) = (pts[i], pts[(i + 1) % pts.len()]);
+            a += p.x * q.y - q.x * p.y;
+        }
+        a * 0.5
+    }
+
+    fn polygon(&self) -> Vec<Point> {
+        let mut pts = vec![self.start];
+        for s in self.closed_segments() {
+            pts.extend_from_slice(&s);
+        }
+        pts
+    }
+}
+
+fn point_in_polygon(p: Point, poly: &[Point]) -> bool {
+    let mut inside = false;
+    let n = poly.len();
+    for i in 0..n {
+        let (a, b) = (poly[i], poly[(i + 1) % n]);
+        if (a.y > p.y) != (b.y > p.y) {
+            let x = a.x + (p.y - a.y) / (b.y - a.y) * (b.x - a.x);
+            if p.x < x {
+                inside = !inside;
+            }
+        }
+    }
+    inside
+}
+
+fn subpaths(path: &usvg::Path) -> Vec<SubPath> {
+    let ts = path.abs_transform();
+    let map = |p: usvg::tiny_skia_path::Point| {
+        let mut q = p;
+        ts.map_point(&mut q);
+        Point::new(q.x, q.y)
+    };
+    let mut out: Vec<SubPath> = Vec::new();
+    let mut cur: Option<SubPath> = None;
+    use usvg::tiny_skia_path::PathSegment as S;
+    for seg in path.data().segments() {
+        match seg {
+            S::MoveTo(p) => {
+                if let Some(c) = cur.take() {
+                    out.push(c);
+                }
+                cur = Some(SubPath {
+                    start: map(p),
+                    segs: Vec::new(),
+                    closed: false,
+                });
+            }
+            S::LineTo(p) => {
+                if let Some(c) = cur.as_mut() {
+                    let a = c.end();
+                    c.segs.push(SubPath::line(a, map(p)));
+                }
+            }
+            S::QuadTo(p1, p2) => {
+                if let Some(c) = cur.as_mut() {
+                    let a = c.end();
+                    let (q, b) = (map(p1), map(p2));
+                    let k = 2.0 / 3.0;
+                    let c1 = Point::new(a.x + k * (q.x - a.x), a.y + k * (q.y - a.y));
+                    let c2 = Point::new(b.x + k * (q.x - b.x), b.y + k * (q.y - b.y));
+                    c.segs.push([c1, c2, b]);
+                }
+            }
+            S::CubicTo(p1, p2, p3) => {
+                if let Some(c) = cur.as_mut() {
+                    c.segs.push([map(p1), map(p2), map(p3)]);
+                }
+            }
+            S::Close => {
+                if let Some(mut c) = cur.take() {
+                    c.closed = true;
+                    let start = c.start;
+                    out.push(c);
+                    // A segment after Z without MoveTo starts again at the subpath start.
+                    cur = Some(SubPath {
+                        start,
+                        segs: Vec::new(),
+                        closed: false,
+                    });
+                }
+            }
+        }
+    }
+    if let Some(c) = cur.take() {
+        out.push(c);
+    }
+    out.retain(|s| !s.segs.is_empty());
+    let finite = |p: &Point| p.x.is_finite() && p.y.is_finite();
+    out.retain(|s| finite(&s.start) && s.segs.iter().flatten().all(finite));
+    out
+}
+
+fn paint_color(paint: &usvg::Paint, opacity: f32) -> Rgba {
+    let c8 = |c: usvg::Color| {
+        [
+            c.red as f32 / 255.0,
+            c.green as f32 / 255.0,
+            c.blue as f32 / 255.0,
+        ]
+    };
+    let avg = |stops: &[usvg::Stop]| {
+        if stops.is_empty() {
+            return ([0.0; 3], 1.0);
+        }
+        let mut s = [0.0f32; 4];
+        for st in stops {
+            let c = c8(st.color());
+            s[0] += c[0];
+            s[1] += c[1];
+            s[2] += c[2];
+            s[3] += st.opacity().get();
+        }
+        let n = stops.len() as f32;
+        ([s[0] / n, s[1] / n, s[2] / n], s[3] / n)
+    };
+    let (rgb, a) = match paint {
+        usvg::Paint::Color(c) => (c8(*c), 1.0),
+        usvg::Paint::LinearGradient(g) => avg(g.stops()),
+        usvg::Paint::RadialGradient(g) => avg(g.stops()),
+        usvg::Paint::Pattern(_) => ([0.5; 3], 1.0),
+    };
+    Rgba::new(rgb[0], rgb[1], rgb[2], a * opacity).clamped()
+}
+
+fn closed_points(subs: &[SubPath]) -> Vec<Point> {
+    // Points of a closed cubic path: anchor, ctrl, ctrl per segment.
+    let mut pts = Vec::new();
+    let push_loop = |pts: &mut Vec<Point>, s: &SubPath| {
+        let mut a = s.start;
+        for seg in s.closed_segments() {
+            pts.extend_from_slice(&[a, seg[0], seg[1]]);
+            a = seg[2];
+        }
+    };
+    let first = subs[0].start;
+    push_loop(&mut pts, &subs[0]);
+    for s in &subs[1..] {
+        // Bridge first → s.start, the loop of s, and back: the bridges cancel in the winding.
+        let [c1, c2, _] = SubPath::line(first, s.start);
+        pts.extend_from_slice(&[first, c1, c2]);
+        push_loop(&mut pts, s);
+        let [c1, c2, _] = SubPath::line(s.start, first);
+        pts.extend_from_slice(&[s.start, c1, c2]);
+    }
+    pts
+}
+
+fn open_points(s: &SubPath) -> Vec<Point> {
+    let mut pts = vec![s.start];
+    for seg in &s.segs {
+        pts.extend_from_slice(seg);
+    }
+    pts
+}
+
+fn walk_group(g: &usvg::Group, opacity: f32, shapes: &mut Vec<Shape>) {
+    let opacity = opacity * g.opacity().get();
+    for node in g.children() {
+        match node {
+            usvg::Node::Group(child) => walk_group(child, opacity, shapes),
+            usvg::Node::Path(p) => {
+                if p.is_visible() {
+                    path_shapes(p, opacity, shapes);
+                }
+            }
+            usvg::Node::Image(_) => {}
+            usvg::Node::Text(t) => walk_group(t.flattened(), opacity, shapes),
+        }
+    }
+}
+
+fn path_shapes(p: &usvg::Path, opacity: f32, shapes: &mut Vec<Shape>) {
+    let mut subs = subpaths(p);
+    if subs.is_empty() {
+        return;
+    }
+    let fill = p
+        .fill()
+        .map(|f| paint_color(f.paint(), f.opacity().get() * opacity));
+    let stroke = p.stroke().and_then(|s| {
+        let ts = p.abs_transform();
+        let scale = (ts.sx * ts.sy - ts.kx * ts.ky).abs().sqrt();
+        let width = s.width().get() * scale;
+        (width.is_finite() && width > 0.0).then(|| Stroke {
+            color: paint_color(s.paint(), s.opacity().get() * opacity),
+            width,
+        })
+    });
+    if let Some(f) = fill {
+        if fill_is_evenodd(p) && subs.len() > 1 {
+            orient_even_odd(&mut subs);
+        }
+        let single_closed = subs.len() == 1 && subs[0].closed;
+        shapes.push(Shape {
+            kind: ShapeKind::ClosedCubic,
+            points: closed_points(&subs),
+            fill: Some(f),
+            stroke: if single_closed { stroke } else { None },
+        });
+        if single_closed {
+            return;
+        }
+    }
+    if let Some(st) = stroke {
+        for s in &subs {
+            if s.closed {
+                let mut pts = Vec::new();
+                let mut a = s.start;
+                for seg in s.closed_segments() {
+                    pts.extend_from_slice(&[a, seg[0], seg[1]]);
+                    a = seg[2];
+                }
+                shapes.push(Shape {
+                    kind: ShapeKind::ClosedCubic,
+                    points: pts,
+                    fill: Some(Rgba::TRANSPARENT),
+                    stroke: Some(st),
+                });
+            } else {
+                shapes.push(Shape {
+                    kind: ShapeKind::OpenCubic,
+                    points: open_points(s),
+                    fill: None,
+                    stroke: Some(st),
+                });
+            }
+        }
+    }
+}
+
+fn fill_is_evenodd(p: &usvg::Path) -> bool {
+    p.fill()
+        .is_some_and(|f| f.rule() == usvg::FillRule::EvenOdd)
+}
+
+/// Orients every subpath so that its winding contribution alternates with nesting depth.
+fn orient_even_odd(subs: &mut [SubPath]) {
+    let polys: Vec<Vec<Point>> = subs.iter().map(SubPath::polygon).collect();
+    let reference = subs[0].signed_area().signum();
+    for i in 0..subs.len() {
+        let probe = subs[i].start;
+        let depth = (0..subs.len())
+            .filter(|&j| j != i && point_in_polygon(probe, &polys[j]))
+            .count();
+        let want = if depth % 2 == 0 {
+            reference
+        } else {
+            -reference
+        };
+        if subs[i].signed_area().signum() != want {
+            subs[i] = subs[i].reversed();
+        }
+    }
+}
+
+/// Parses SVG text into a scene (see the module docs for what is kept). Bad SVG gives an error,
+/// never a panic.
+pub fn from_svg(text: &str) -> Result<Scene, SvgError> {
+    // Never read files or decode embedded images: we ignore raster images anyway.
+    let opts = usvg::Options {
+        image_href_resolver: usvg::ImageHrefResolver {
+            resolve_data: Box::new(|_, _, _| None),
+            resolve_string: Box::new(|_, _| None),
+        },
+        ..usvg::Options::default()
+    };
+    let tree = usvg::Tree::from_str(text, &opts).map_err(|e| SvgError::Parse(e.to_string()))?;
+    let size = tree.size();
+    let (fw, fh) = (size.width(), size.height());
+    let (w, h) = (fw.round(), fh.round());
+    if !(1.0..=MAX_SIDE as f32).contains(&w) || !(1.0..=MAX_SIDE as f32).contains(&h) {
+        return Err(SvgError::Size(fw, fh));
+    }
+    let mut shapes = Vec::new();
+    walk_group(tree.root(), 1.0, &mut shapes);
+    let mut background = Rgba::TRANSPARENT;
+    if let Some(first) = shapes.first()
+        && is_canvas_rect(first, w, h)
+        && let Some(f) = first.fill
+    {
+        background = f;
+        shapes.remove(0);
+    }
+    let scene = Scene {
+        width: w as u32,
+        height: h as u32,
+        background,
+        shapes,
+    };
+    scene.validate()?;
+    Ok(scene)
+}
+
+fn is_canvas_rect(s: &Shape, w: f32, h: f32) -> bool {
+    if s.stroke.is_some() || s.kind != ShapeKind::ClosedCubic || s.points.len() != 12 {
+        return false;
+    }
+    // Four straight segments along the canvas border.
+    let corners = [
+        Point::new(0.0, 0.0),
+        Point::new(w, 0.0),
+        Point::new(w, h),
+        Point::new(0.0, h),
+    ];
+    let near = |a: Point, b: Point| (a.x - b.x).abs() < 1e-3 && (a.y - b.y).abs() < 1e-3;
+    let anchors: Vec<Point> = (0..4).map(|i| s.points[3 * i]).collect();
+    let straight = (0..4).all(|i| {
+        let seg = s.segment(i);
+        let l = SubPath::line(seg[0], seg[3]);
+        near(l[0], seg[1]) && near(l[1], seg[2])
+    });
+    straight && corners.iter().all(|c| anchors.iter().any(|a| near(*a, *c)))
+}
+
+#[derive(serde::Deserialize)]
+struct JsonPath {
+    points: Vec<[f64; 2]>,
+    fill: Vec<f32>,
+    #[serde(default = "one")]
+    opacity: f32,
+}
+
+fn one() -> f32 {
+    1.0
+}
+
+#[derive(serde::Deserialize)]
+struct JsonScene {
+    width: u32,
+    height: u32,
+    #[serde(default)]
+    background: Option<[f32; 4]>,
+    paths: Vec<JsonPath>,
+}
+
+/// Loads the benchmark scene format of `shared/bench/scene64.json`: `width`, `height`,
+/// `background` RGBA, `paths` of closed cubic paths (`points` 3n pairs, `fill` RGB or RGBA,
+/// `opacity` multiplied into the alpha). Falls back to the serde form of [`Scene`].
+pub fn scene_from_json(text: &str) -> Result<Scene, SvgError> {
+    let js: JsonScene = match serde_json::from_str(text) {
+        Ok(j) => j,
+        Err(bench_err) => {
+            return match serde_json::from_str::<Scene>(text) {
+                Ok(s) => {
+                    s.validate()?;
+                    Ok(s)
+                }
+                Err(_) => Err(SvgError::Json(bench_err.to_string())),
+            };
+        }
+    };
+    let bg = js.background.unwrap_or([0.0; 4]);
+    let mut scene = Scene::new(js.width, js.height, Rgba::from_array(bg))?;
+    for (i, p) in js.paths.iter().enumerate() {
+        let (r, g, b, a) = match p.fill.as_slice() {
+            [r, g, b] => (*r, *g, *b, 1.0),
+            [r, g, b, a] => (*r, *g, *b, *a),
+            _ => {
+                return Err(SvgError::Json(format!(
+                    "path {i}: fill needs 3 or 4 channels"
+                )));
+            }
+        };
+        let pts = p
+            .points
+            .iter()
+            .map(|q| Point::new(q[0] as f32, q[1] as f32))
+            .collect();
+        let shape = Shape::closed_cubic(pts, Rgba::new(r, g, b, a * p.opacity))
+            .map_err(|e| SvgError::Json(format!("path {i}: {e}")))?;
+        scene.shapes.push(shape);
+    }
+    Ok(scene)
+}
+
+/// Loads a scene from a `.json` (bench or serde scene format) or SVG file.
+pub fn load_scene(path: &Path) -> Result<Scene, SvgError> {
+    let text = std::fs::read_to_string(path).map_err(|source| SvgError::Io {
+        path: path.display().to_string(),
+        source,
+    })?;
+    if path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("json"))
+    {
+        scene_from_json(&text)
+    } else {
+        from_svg(&text)
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,244 @@
+//! Golden-image tests: our rasteriser against resvg on the SVG our exporter writes.
+//! On failure a side-by-side PNG (ours | resvg | 8x amplified difference) is written to
+//! `$CARGO_TARGET_TMPDIR/golden_<name>.png`.
+
+use resvg::{tiny_skia, usvg};
+use vectorfusion::image::Image;
+use vectorfusion::scene::{Point, Rgba, Scene, Shape, Stroke};
+use vectorfusion::svg::{SvgOptions, scene_from_json, to_svg};
+use vectorfusion::{raster, svg};
+
+const TOL: f64 = 1.5 / 255.0;
+
+fn resvg_render(svg_text: &str) -> Image {
+    let tree = usvg::Tree::from_str(svg_text, &usvg::Options::default()).unwrap();
+    let size = tree.size().to_int_size();
+    let mut pm = tiny_skia::Pixmap::new(size.width(), size.height()).unwrap();
+    resvg::render(&tree, tiny_skia::Transform::default(), &mut pm.as_mut());
+    Image {
+        width: size.width(),
+        height: size.height(),
+        data: pm.data().iter().map(|&b| b as f32 / 255.0).collect(),
+    }
+}
+
+fn mean_abs_diff(a: &Image, b: &Image) -> f64 {
+    assert_eq!((a.width, a.height), (b.width, b.height));
+    let s: f64 = a
+        .data
+        .iter()
+        .zip(&b.data)
+        .map(|(x, y)| (*x as f64 - *y as f64).abs())
+        .sum();
+    s / a.data.len() as f64
+}
+
+fn write_diff(name: &str, ours: &Image, theirs: &Image) -> String {
+    let (w, h) = (ours.width, ours.height);
+    let mut out = Image::new(3 * w, h);
+    for y in 0..h {
+        for x in 0..w {
+            let (p, q) = (ours.pixel(x, y), theirs.pixel(x, y));
+            let row = (y * 3 * w) as usize;
+            for c in 0..4 {
+                out.data[4 * (row + x as usize) + c] = p[c];
+                out.data[4 * (row + (w + x) as usize) + c] = q[c];
+            }
+            let d = (0..4).map(|c| (p[c] - q[c]).abs()).fold(0.0, f32::max);
+            let v = (8.0 * d).min(1.0);
+            let i = 4 * (row + (2 * w + x) as usize);
+            out.data[i..i + 4].copy_from_slice(&[v, v, v, 1.0]);
+        }
+    }
+    let dir = std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR"));
+    let path = dir.join(format!("golden_{name}.png"));
+    out.save_png(&path).unwrap();
+    path.display().to_string()
+}
+
+fn check(name: &str, scene: &Scene) -> f64 {
+    scene.validate().unwrap();
+    let ours = raster::render(scene);
+    let text = to_svg(scene, &SvgOptions { precision: 4 });
+    let theirs = resvg_render(&text);
+    let d = mean_abs_diff(&ours, &theirs);
+    eprintln!("{name}: mean abs diff {:.3}/255", d * 255.0);
+    if d > TOL {
+        let p = write_diff(name, &ours, &theirs);
+        panic!(
+            "{name}: mean abs diff {:.3}/255 > 1.5/255, diff image at {p}",
+            d * 255.0
+        );
+    }
+    d
+}
+
+fn scene64() -> Scene {
+    let text = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../shared/bench/scene64.json"
+    ))
+    .unwrap();
+    scene_from_json(&text).unwrap()
+}
+
+fn st(r: f32, g: f32, b: f32, a: f32, width: f32) -> Stroke {
+    Stroke {
+        color: Rgba::new(r, g, b, a),
+        width,
+    }
+}
+
+fn pts(v: &[(f32, f32)]) -> Vec<Point> {
+    v.iter().map(|&(x, y)| Point::new(x, y)).collect()
+}
+
+#[test]
+fn golden_scene64_512_and_256() {
+    let s = scene64();
+    let d = check("scene64_512", &s);
+    eprintln!("scene64 512: {:.3}/255", d * 255.0);
+    check("scene64_256", &s.scaled_to_width(256));
+}
+
+#[test]
+fn golden_strokes() {
+    let mut s = Scene::new(128, 96, Rgba::new(0.9, 0.95, 1.0, 1.0)).unwrap();
+    let curves = [
+        ((5.0, 80.0), (30.0, 10.0), (70.0, 100.0), (120.0, 20.0), 1.0),
+        ((10.0, 10.0), (60.0, 10.0), (60.0, 60.0), (110.0, 60.0), 3.5),
+        ((20.0, 50.0), (120.0, 90.0), (0.0, 90.0), (100.0, 40.0), 7.0),
+        ((64.0, 5.0), (64.0, 5.0), (64.0, 30.0), (64.0, 30.0), 0.6),
+    ];
+    for (i, (a, b, c, d, w)) in curves.iter().enumerate() {
+        let col = [
+            (0.0, 0.0, 0.0, 1.0),
+            (0.8, 0.1, 0.1, 0.7),
+            (0.1, 0.3, 0.9, 0.5),
+            (0.0, 0.5, 0.0, 1.0),
+        ][i];
+        s.shapes.push(
+            Shape::open_cubic(pts(&[*a, *b, *c, *d]), st(col.0, col.1, col.2, col.3, *w)).unwrap(),
+        );
+    }
+    // Multi-segment open path with a sharp corner.
+    s.shapes.push(
+        Shape::open_cubic(
+            pts(&[
+                (10.0, 90.0),
+                (20.0, 70.0),
+                (30.0, 70.0),
+                (40.0, 90.0),
+                (50.0, 70.0),
+                (60.0, 70.0),
+                (70.0, 90.0),
+            ]),
+            st(0.5, 0.0, 0.5, 0.9, 2.5),
+        )
+        .unwrap(),
+    );
+    // Closed filled shape with a stroke.
+    let mut c = Shape::circle(95.0, 70.0, 15.0, 4, Rgba::new(1.0, 0.8, 0.0, 0.8)).unwrap();
+    c.stroke = Some(st(0.2, 0.2, 0.2, 1.0, 2.0));
+    s.shapes.push(c);
+    check("strokes", &s);
+}
+
+#[test]
+fn golden_polygons_pixel_art() {
+    let mut s = Scene::new(64, 64, Rgba::WHITE).unwrap();
+    for i in 0..8 {
+        for j in 0..8 {
+            let v = ((i * 7 + j * 3) % 8) as f32 / 8.0;
+            s.shapes.push(
+                Shape::square(
+                    8.0 * i as f32,
+                    8.0 * j as f32,
+                    8.0,
+                    Rgba::new(v, 1.0 - v, 0.5, 1.0),
+                )
+                .unwrap(),
+            );
+        }
+    }
+    s.shapes.push(
+        Shape::polygon(
+            pts(&[(3.3, 5.1), (60.2, 20.7), (20.4, 58.9)]),
+            Rgba::new(0.0, 0.0, 0.0, 0.6),
+        )
+        .unwrap(),
+    );
+    // Sub-pixel squares at fractional positions.
+    for k in 0..10 {
+        let x = 5.0 + 5.3 * k as f32;
+        s.shapes.push(
+            Shape::square(
+                x,
+                40.37,
+                0.4 + 0.3 * k as f32,
+                Rgba::new(0.1, 0.1, 0.9, 1.0),
+            )
+            .unwrap(),
+        );
+    }
+    check("polygons", &s);
+}
+
+#[test]
+fn golden_overlapping_self_intersecting_off_canvas() {
+    let mut s = Scene::new(100, 80, Rgba::TRANSPARENT).unwrap();
+    // Pentagram: self-intersecting, nonzero fills the centre.
+    let star: Vec<(f32, f32)> = (0..5)
+        .map(|k| {
+            let a = -std::f32::consts::FRAC_PI_2 + k as f32 * 4.0 * std::f32::consts::PI / 5.0;
+            (30.0 + 25.0 * a.cos(), 40.0 + 25.0 * a.sin())
+        })
+        .collect();
+    s.shapes
+        .push(Shape::polygon(pts(&star), Rgba::new(0.9, 0.2, 0.2, 1.0)).unwrap());
+    // Figure-eight cubic path.
+    s.shapes.push(
+        Shape::closed_cubic(
+            pts(&[
+                (55.0, 10.0),
+                (95.0, 10.0),
+                (55.0, 70.0),
+                (95.0, 70.0),
+                (55.0, 70.0),
+                (95.0, 10.0),
+            ]),
+            Rgba::new(0.1, 0.6, 0.3, 0.75),
+        )
+        .unwrap(),
+    );
+    // Overlapping translucent circles, one partly off canvas.
+    s.shapes
+        .push(Shape::circle(20.0, 20.0, 30.0, 4, Rgba::new(0.2, 0.2, 1.0, 0.5)).unwrap());
+    s.shapes
+        .push(Shape::circle(95.0, 75.0, 20.0, 5, Rgba::new(1.0, 1.0, 0.0, 0.6)).unwrap());
+    s.shapes
+        .push(Shape::circle(-30.0, 40.0, 10.0, 4, Rgba::BLACK).unwrap());
+    check("overlap", &s);
+}
+
+#[test]
+fn export_then_resvg_matches_our_render_after_import() {
+    // Import a third-party style SVG, render it ourselves and with resvg.
+    let text = r##"<svg xmlns="http://www.w3.org/2000/svg" width="80" height="60" viewBox="0 0 80 60">
+      <rect width="80" height="60" fill="#fafafa"/>
+      <g transform="rotate(10 40 30)">
+        <ellipse cx="30" cy="30" rx="20" ry="12" fill="#3366cc" fill-opacity="0.8"/>
+        <path d="M10 50 Q 40 0 70 50" fill="none" stroke="#cc3300" stroke-width="3"
+              stroke-linecap="round" stroke-linejoin="round"/>
+        <polygon points="50,10 75,20 60,35" fill="green"/>
+      </g>
+    </svg>"##;
+    let scene = svg::from_svg(text).unwrap();
+    let ours = raster::render(&scene);
+    let theirs = resvg_render(text);
+    let d = mean_abs_diff(&ours, &theirs);
+    if d > TOL {
+        let p = write_diff("import", &ours, &theirs);
+        panic!("import: mean abs diff {:.3}/255, diff at {p}", d * 255.0);
+    }
+}
