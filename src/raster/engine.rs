@@ -154,12 +154,11 @@ fn forward_band<T: Real>(
             if let Some(d) = dst_buf.as_deref_mut() {
                 d.extend_from_slice(prow);
             }
-            for (i, &v) in vrow.iter().enumerate() {
+            for (&v, p) in vrow.iter().zip(prow.chunks_exact_mut(4)) {
                 let cov = if fill { coverage(v) } else { v };
                 let alpha = cov * ca;
                 if alpha > T::zero() {
                     let keep = T::one() - alpha;
-                    let p = &mut prow[4 * i..4 * i + 4];
                     p[0] = r * alpha + p[0] * keep;
                     p[1] = g * alpha + p[1] * keep;
                     p[2] = b * alpha + p[2] * keep;
@@ -249,16 +248,18 @@ fn backward_band<T: Real>(
             let arow = &tape.area[off..off + cw];
             let drow = &tape.dst[4 * off..4 * (off + cw)];
             let gb = &mut gbuf[row * cw..(row + 1) * cw];
-            for i in 0..cw {
-                let a = arow[i];
+            for (((&a, d), gp), gbv) in arow
+                .iter()
+                .zip(drow.chunks_exact(4))
+                .zip(grow.chunks_exact_mut(4))
+                .zip(gb.iter_mut())
+            {
                 if a == T::zero() {
                     // No coverage and no edge inside: nothing flows through this layer here.
                     continue;
                 }
                 let cov = if fill { coverage(a) } else { a };
                 let alpha = cov * ca;
-                let gp = &mut grow[4 * i..4 * i + 4];
-                let d = &drow[4 * i..4 * i + 4];
                 let galpha = gp[0] * (cr - d[0])
                     + gp[1] * (cg - d[1])
                     + gp[2] * (cb - d[2])
@@ -270,10 +271,8 @@ fn backward_band<T: Real>(
                 if !fill || a.abs() < T::one() {
                     let dcov = galpha * ca;
                     let v = if fill && a < T::zero() { -dcov } else { dcov };
-                    if v != T::zero() {
-                        any = true;
-                    }
-                    gb[i] = v;
+                    any |= v != T::zero();
+                    *gbv = v;
                 }
                 let keep = T::one() - alpha;
                 for c in gp.iter_mut() {
