@@ -234,8 +234,10 @@ fn backward_band<T: Real>(
         let clip = rec.clip;
         let cw = (clip.x1 - clip.x0) as usize;
         let rows = (clip.y1 - clip.y0) as usize;
-        gbuf.clear();
-        gbuf.resize(cw * rows, T::zero());
+        // Every entry is written in the pixel loop below; only grow, never clear.
+        if gbuf.len() < cw * rows {
+            gbuf.resize(cw * rows, T::zero());
+        }
         let [cr, cg, cb, ca] = l.color;
         let fill = l.kind == LayerKind::Fill;
         let mut dc = [T::zero(); 4];
@@ -254,6 +256,7 @@ fn backward_band<T: Real>(
                 .zip(grow.chunks_exact_mut(4))
                 .zip(gb.iter_mut())
             {
+                *gbv = T::zero();
                 if a == T::zero() {
                     // No coverage and no edge inside: nothing flows through this layer here.
                     continue;
@@ -288,8 +291,15 @@ fn backward_band<T: Real>(
             if dp.is_empty() {
                 dp.resize(l.poly.len(), [T::zero(); 2]);
             }
-            out.dradius[li] +=
-                stroke::backward(&l.poly, l.closed, l.radius, clip, &gbuf, dp, &mut scratch);
+            out.dradius[li] += stroke::backward(
+                &l.poly,
+                l.closed,
+                l.radius,
+                clip,
+                &gbuf[..cw * rows],
+                dp,
+                &mut scratch,
+            );
         } else if any {
             let dv = &mut out.dverts[li];
             if dv.is_empty() {
@@ -297,7 +307,15 @@ fn backward_band<T: Real>(
             }
             for_each_edge(l, |ia, ib| {
                 let (mut d0, mut d1) = ([T::zero(); 2], [T::zero(); 2]);
-                edge_grad(l.verts[ia], l.verts[ib], clip, &gbuf, cw, &mut d0, &mut d1);
+                edge_grad(
+                    l.verts[ia],
+                    l.verts[ib],
+                    clip,
+                    &gbuf[..cw * rows],
+                    cw,
+                    &mut d0,
+                    &mut d1,
+                );
                 for c in 0..2 {
                     dv[ia][c] += d0[c];
                     dv[ib][c] += d1[c];
