@@ -86,21 +86,31 @@ fn time_ms<R>(iters: usize, mut f: impl FnMut() -> R) -> f64 {
 /// L2 loss (mean over pixels and RGB) against the ramp target and its gradient w.r.t. the
 /// premultiplied RGBA image.
 pub fn ramp_l2(img: &crate::image::Image) -> (f64, Vec<f32>) {
+    use rayon::prelude::*;
     let (w, h) = (img.width as usize, img.height as usize);
     let norm = 1.0 / (3 * w * h) as f32;
     let mut grad = vec![0.0f32; img.data.len()];
-    let mut loss = 0.0f64;
-    for y in 0..h {
-        for x in 0..w {
-            let i = 4 * (y * w + x);
-            let t = [x as f32 / w as f32, y as f32 / h as f32, 0.5];
-            for c in 0..3 {
-                let d = img.data[i + c] - t[c];
-                loss += (d * d) as f64;
-                grad[i + c] = 2.0 * d * norm;
+    let loss: f64 = grad
+        .par_chunks_mut(4 * w.max(1))
+        .zip(img.data.par_chunks(4 * w.max(1)))
+        .enumerate()
+        .map(|(y, (grow, irow))| {
+            let mut l = 0.0f64;
+            for (x, (g, p)) in grow
+                .chunks_exact_mut(4)
+                .zip(irow.chunks_exact(4))
+                .enumerate()
+            {
+                let t = [x as f32 / w as f32, y as f32 / h as f32, 0.5];
+                for c in 0..3 {
+                    let d = p[c] - t[c];
+                    l += (d * d) as f64;
+                    g[c] = 2.0 * d * norm;
+                }
             }
-        }
-    }
+            l
+        })
+        .sum();
     (loss * norm as f64, grad)
 }
 

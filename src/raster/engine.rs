@@ -154,12 +154,11 @@ fn forward_band<T: Real>(
             if let Some(d) = dst_buf.as_deref_mut() {
                 d.extend_from_slice(prow);
             }
-            for (i, &v) in vrow.iter().enumerate() {
+            for (&v, p) in vrow.iter().zip(prow.chunks_exact_mut(4)) {
                 let cov = if fill { coverage(v) } else { v };
                 let alpha = cov * ca;
                 if alpha > T::zero() {
                     let keep = T::one() - alpha;
-                    let p = &mut prow[4 * i..4 * i + 4];
                     p[0] = r * alpha + p[0] * keep;
                     p[1] = g * alpha + p[1] * keep;
                     p[2] = b * alpha + p[2] * keep;
@@ -235,8 +234,10 @@ fn backward_band<T: Real>(
         let clip = rec.clip;
         let cw = (clip.x1 - clip.x0) as usize;
         let rows = (clip.y1 - clip.y0) as usize;
-        gbuf.clear();
-        gbuf.resize(cw * rows, T::zero());
+        // Every entry is written in the pixel loop below; only grow, never clear.
+        if gbuf.len() < cw * rows {
+            gbuf.resize(cw * rows, T::zero());
+        }
         let [cr, cg, cb, ca] = l.color;
         let fill = l.kind == LayerKind::Fill;
         let mut dc = [T::zero(); 4];
@@ -249,16 +250,19 @@ fn backward_band<T: Real>(
             let arow = &tape.area[off..off + cw];
             let drow = &tape.dst[4 * off..4 * (off + cw)];
             let gb = &mut gbuf[row * cw..(row + 1) * cw];
-            for i in 0..cw {
-                let a = arow[i];
+            for (((&a, d), gp), gbv) in arow
+                .iter()
+                .zip(drow.chunks_exact(4))
+                .zip(grow.chunks_exact_mut(4))
+                .zip(gb.iter_mut())
+            {
+                *gbv = T::zero();
                 if a == T::zero() {
                     // No coverage and no edge inside: nothing flows through this layer here.
                     continue;
                 }
                 let cov = if fill { coverage(a) } else { a };
                 let alpha = cov * ca;
-                let gp = &mut grow[4 * i..4 * i + 4];
-                let d = &drow[4 * i..4 * i + 4];
                 let galpha = gp[0] * (cr - d[0])
                     + gp[1] * (cg - d[1])
                     + gp[2] * (cb - d[2])
@@ -270,10 +274,8 @@ fn backward_band<T: Real>(
                 if !fill || a.abs() < T::one() {
                     let dcov = galpha * ca;
                     let v = if fill && a < T::zero() { -dcov } else { dcov };
-                    if v != T::zero() {
-                        any = true;
-                    }
-                    gb[i] = v;
+                    any |= v != T::zero();
+                    *gbv = v;
                 }
                 let keep = T::one() - alpha;
                 for c in gp.iter_mut() {
@@ -289,8 +291,15 @@ fn backward_band<T: Real>(
             if dp.is_empty() {
                 dp.resize(l.poly.len(), [T::zero(); 2]);
             }
-            out.dradius[li] +=
-                stroke::backward(&l.poly, l.closed, l.radius, clip, &gbuf, dp, &mut scratch);
+            out.dradius[li] += stroke::backward(
+                &l.poly,
+                l.closed,
+                l.radius,
+                clip,
+                &gbuf[..cw * rows],
+                dp,
+                &mut scratch,
+            );
         } else if any {
             let dv = &mut out.dverts[li];
             if dv.is_empty() {
@@ -298,7 +307,15 @@ fn backward_band<T: Real>(
             }
             for_each_edge(l, |ia, ib| {
                 let (mut d0, mut d1) = ([T::zero(); 2], [T::zero(); 2]);
-                edge_grad(l.verts[ia], l.verts[ib], clip, &gbuf, cw, &mut d0, &mut d1);
+                edge_grad(
+                    l.verts[ia],
+                    l.verts[ib],
+                    clip,
+                    &gbuf[..cw * rows],
+                    cw,
+                    &mut d0,
+                    &mut d1,
+                );
                 for c in 0..2 {
                     dv[ia][c] += d0[c];
                     dv[ib][c] += d1[c];

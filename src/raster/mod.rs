@@ -83,6 +83,7 @@ pub(crate) fn render_t<T: real::Real>(sc: &SceneT<T>) -> Vec<T> {
 /// page-faulting tens of MB per optimisation step). Bounded by [`POOL_MAX`] band buffers.
 static POOL: std::sync::Mutex<Vec<engine::BandTape<f32>>> = std::sync::Mutex::new(Vec::new());
 const POOL_MAX: usize = 64;
+const POOL_BAND_MAX_FLOATS: usize = 16 << 20;
 
 impl Drop for Tape {
     fn drop(&mut self) {
@@ -90,7 +91,13 @@ impl Drop for Tape {
             && pool.len() < POOL_MAX
         {
             let room = POOL_MAX - pool.len();
-            pool.extend(self.bands.drain(..).take(room));
+            // Do not keep the buffers of unusually large renders alive.
+            pool.extend(
+                self.bands
+                    .drain(..)
+                    .filter(|b| b.area.capacity() + b.dst.capacity() <= POOL_BAND_MAX_FLOATS)
+                    .take(room),
+            );
         }
     }
 }
