@@ -1,7 +1,9 @@
 //! The `vectorfusion` command line. Each subcommand lives in its own file; errors are turned
 //! into a message and an exit code in one place ([`main`]).
 
+pub mod bench;
 pub mod bench_vectorize;
+pub mod render;
 pub mod vectorize;
 
 use clap::{Parser, Subcommand};
@@ -22,26 +24,14 @@ pub enum Command {
     /// Trace a raster image into an SVG of closed paths (LIVE).
     Vectorize(vectorize::VectorizeArgs),
     /// Render an SVG through our rasteriser to PNG.
-    Render(NotYet),
+    Render(render::RenderArgs),
     /// Run the HTTP service.
     Serve(NotYet),
     /// Evaluate generated SVGs with CLIP scorers.
     Eval(NotYet),
     /// Benchmarks.
-    Bench(BenchArgs),
-}
-
-/// `vectorfusion bench <which>`.
-#[derive(clap::Args, Debug)]
-pub struct BenchArgs {
     #[command(subcommand)]
-    pub which: BenchCommand,
-}
-
-#[derive(Subcommand, Debug)]
-pub enum BenchCommand {
-    /// LIVE vs vtracer fidelity (PSNR, seconds, SVG bytes) on a folder of PNGs.
-    Vectorize(bench_vectorize::BenchVectorizeArgs),
+    Bench(bench::BenchCommand),
 }
 
 /// Placeholder arguments for commands that are not implemented yet.
@@ -76,12 +66,10 @@ pub fn run(cli: Cli) -> Result<(), CliError> {
     match cli.command {
         Command::Generate(_) => Err(CliError::NotImplemented("generate")),
         Command::Vectorize(a) => vectorize::run(a),
-        Command::Render(_) => Err(CliError::NotImplemented("render")),
+        Command::Render(a) => render::run(a),
         Command::Serve(_) => Err(CliError::NotImplemented("serve")),
         Command::Eval(_) => Err(CliError::NotImplemented("eval")),
-        Command::Bench(b) => match b.which {
-            BenchCommand::Vectorize(a) => bench_vectorize::run(a),
-        },
+        Command::Bench(b) => bench::run(b),
     }
 }
 

@@ -86,14 +86,44 @@ fn forward_band<T: Real>(
     let mut acc: Vec<T> = Vec::new();
     let mut vals: Vec<T> = Vec::new();
     let mut scratch = stroke::Scratch::default();
+    if let Some(t) = tape.as_deref_mut() {
+        let total: usize = ls
+            .iter()
+            .filter_map(|l| layer_clip(l, y0, y1))
+            .map(|c| ((c.x1 - c.x0) * (c.y1 - c.y0)) as usize)
+            .sum();
+        t.recs.clear();
+        t.area.clear();
+        t.dst.clear();
+        t.area.reserve(total);
+        t.dst.reserve(4 * total);
+    }
     for (li, l) in ls.iter().enumerate() {
         let Some(clip) = layer_clip(l, y0, y1) else {
             continue;
         };
         let cw = (clip.x1 - clip.x0) as usize;
         let rows = (clip.y1 - clip.y0) as usize;
-        // `vals` = per-pixel value the coverage is a function of: the winding integral A for
-        // fills (coverage min(|A|, 1)), the coverage itself for strokes.
+        // Per-pixel value the coverage is a function of: the winding integral A for fills
+        // (coverage min(|A|, 1)), the coverage itself for strokes. Written straight into the
+        // tape when there is one.
+        let (buf, mut dst_buf) = match tape.as_deref_mut() {
+            Some(t) => {
+                t.recs.push(Rec {
+                    layer: li as u32,
+                    clip,
+                    offset: t.area.len(),
+                });
+                (&mut t.area, Some(&mut t.dst))
+            }
+            None => {
+                vals.clear();
+                (&mut vals, None)
+            }
+        };
+        let start = buf.len();
+        buf.resize(start + cw * rows, T::zero());
+        let out = &mut buf[start..];
         match l.kind {
             LayerKind::Fill => {
                 let stride = cw + 1;
@@ -102,47 +132,33 @@ fn forward_band<T: Real>(
                 for_each_edge(l, |a, b| {
                     deposit(l.verts[a], l.verts[b], clip, &mut acc, stride)
                 });
-                vals.clear();
-                vals.reserve(cw * rows);
-                for row in 0..rows {
+                for (arow, vrow) in acc.chunks_exact(stride).zip(out.chunks_exact_mut(cw)) {
                     let mut s = T::zero();
-                    for &dv in &acc[row * stride..row * stride + cw] {
+                    for (v, &dv) in vrow.iter_mut().zip(arow) {
                         s += dv;
-                        vals.push(s);
+                        *v = s;
                     }
                 }
             }
             LayerKind::Stroke => {
-                vals.clear();
-                vals.resize(cw * rows, T::zero());
-                stroke::coverage(&l.poly, l.closed, l.radius, clip, &mut vals, &mut scratch);
+                stroke::coverage(&l.poly, l.closed, l.radius, clip, out, &mut scratch);
             }
         }
         let fill = l.kind == LayerKind::Fill;
         let [r, g, b, ca] = l.color;
-        if let Some(t) = tape.as_deref_mut() {
-            t.recs.push(Rec {
-                layer: li as u32,
-                clip,
-                offset: t.area.len(),
-            });
-            t.area.extend_from_slice(&vals);
-            t.dst.reserve(4 * cw * rows);
-        }
         for row in 0..rows {
-            let vrow = &vals[row * cw..(row + 1) * cw];
+            let vrow = &out[row * cw..(row + 1) * cw];
             let iy = (clip.y0 - y0) as usize + row;
             let base = 4 * (iy * w + clip.x0 as usize);
             let prow = &mut img[base..base + 4 * cw];
-            if let Some(t) = tape.as_deref_mut() {
-                t.dst.extend_from_slice(prow);
+            if let Some(d) = dst_buf.as_deref_mut() {
+                d.extend_from_slice(prow);
             }
-            for (i, &v) in vrow.iter().enumerate() {
+            for (&v, p) in vrow.iter().zip(prow.chunks_exact_mut(4)) {
                 let cov = if fill { coverage(v) } else { v };
                 let alpha = cov * ca;
                 if alpha > T::zero() {
                     let keep = T::one() - alpha;
-                    let p = &mut prow[4 * i..4 * i + 4];
                     p[0] = r * alpha + p[0] * keep;
                     p[1] = g * alpha + p[1] * keep;
                     p[2] = b * alpha + p[2] * keep;
@@ -158,6 +174,7 @@ pub(crate) fn forward<T: Real>(
     sc: &SceneT<T>,
     ls: &[Layer<T>],
     with_tape: bool,
+    mut recycled: Vec<BandTape<T>>,
 ) -> (Vec<T>, Vec<BandTape<T>>) {
     let w = sc.width as usize;
     let bs = bands(sc.height);
@@ -169,11 +186,13 @@ pub(crate) fn forward<T: Real>(
         chunks.push(head);
         rest = tail;
     }
+    recycled.resize_with(bs.len(), BandTape::default);
+    recycled.truncate(bs.len());
     let tapes: Vec<BandTape<T>> = chunks
         .into_par_iter()
         .zip(bs.par_iter())
-        .map(|(chunk, &band)| {
-            let mut t = BandTape::default();
+        .zip(recycled.into_par_iter())
+        .map(|((chunk, &band), mut t)| {
             forward_band(sc, ls, band, chunk, with_tape.then_some(&mut t));
             t
         })
@@ -229,12 +248,18 @@ fn backward_band<T: Real>(
             let arow = &tape.area[off..off + cw];
             let drow = &tape.dst[4 * off..4 * (off + cw)];
             let gb = &mut gbuf[row * cw..(row + 1) * cw];
-            for i in 0..cw {
-                let a = arow[i];
+            for (((&a, d), gp), gbv) in arow
+                .iter()
+                .zip(drow.chunks_exact(4))
+                .zip(grow.chunks_exact_mut(4))
+                .zip(gb.iter_mut())
+            {
+                if a == T::zero() {
+                    // No coverage and no edge inside: nothing flows through this layer here.
+                    continue;
+                }
                 let cov = if fill { coverage(a) } else { a };
                 let alpha = cov * ca;
-                let gp = &mut grow[4 * i..4 * i + 4];
-                let d = &drow[4 * i..4 * i + 4];
                 let galpha = gp[0] * (cr - d[0])
                     + gp[1] * (cg - d[1])
                     + gp[2] * (cb - d[2])
@@ -246,10 +271,8 @@ fn backward_band<T: Real>(
                 if !fill || a.abs() < T::one() {
                     let dcov = galpha * ca;
                     let v = if fill && a < T::zero() { -dcov } else { dcov };
-                    if v != T::zero() {
-                        any = true;
-                    }
-                    gb[i] = v;
+                    any |= v != T::zero();
+                    *gbv = v;
                 }
                 let keep = T::one() - alpha;
                 for c in gp.iter_mut() {

@@ -76,7 +76,33 @@ impl Tape {
 
 pub(crate) fn render_t<T: real::Real>(sc: &SceneT<T>) -> Vec<T> {
     let ls = geom::layers(sc);
-    engine::forward(sc, &ls, false).0
+    engine::forward(sc, &ls, false, Vec::new()).0
+}
+
+/// Band buffers of dropped tapes, reused by the next [`render_tape`] (saves allocating and
+/// page-faulting tens of MB per optimisation step). Bounded by [`POOL_MAX`] band buffers.
+static POOL: std::sync::Mutex<Vec<engine::BandTape<f32>>> = std::sync::Mutex::new(Vec::new());
+const POOL_MAX: usize = 64;
+
+impl Drop for Tape {
+    fn drop(&mut self) {
+        if let Ok(mut pool) = POOL.lock()
+            && pool.len() < POOL_MAX
+        {
+            let room = POOL_MAX - pool.len();
+            pool.extend(self.bands.drain(..).take(room));
+        }
+    }
+}
+
+fn take_pooled(n: usize) -> Vec<engine::BandTape<f32>> {
+    match POOL.lock() {
+        Ok(mut pool) => {
+            let k = pool.len().saturating_sub(n);
+            pool.split_off(k)
+        }
+        Err(_) => Vec::new(),
+    }
 }
 
 /// Renders `scene` to a premultiplied RGBA image of the scene's size.
@@ -93,7 +119,8 @@ pub fn render(scene: &Scene) -> Image {
 pub fn render_tape(scene: &Scene) -> (Image, Tape) {
     let sc = SceneT::<f32>::from_scene(scene, FLATTEN_TOLERANCE);
     let layers = geom::layers(&sc);
-    let (data, bands) = engine::forward(&sc, &layers, true);
+    let recycled = take_pooled(engine::bands(scene.height).len());
+    let (data, bands) = engine::forward(&sc, &layers, true, recycled);
     let img = Image {
         width: scene.width,
         height: scene.height,

@@ -10,6 +10,9 @@ pub(crate) trait Real:
     fn c(v: f64) -> Self;
     fn of(v: f32) -> Self;
     fn as_f32(self) -> f32;
+    /// `floor` as an integer, saturating (NaN → 0); avoids the `floorf` libcall on baseline
+    /// x86-64.
+    fn floor_i32(self) -> i32;
 }
 
 impl Real for f32 {
@@ -25,6 +28,11 @@ impl Real for f32 {
     fn as_f32(self) -> f32 {
         self
     }
+    #[inline(always)]
+    fn floor_i32(self) -> i32 {
+        let t = self as i32;
+        t - ((t as f32) > self) as i32
+    }
 }
 
 impl Real for f64 {
@@ -39,5 +47,10 @@ impl Real for f64 {
     #[inline(always)]
     fn as_f32(self) -> f32 {
         self as f32
+    }
+    #[inline(always)]
+    fn floor_i32(self) -> i32 {
+        let t = self as i32;
+        t - ((t as f64) > self) as i32
     }
 }

@@ -40,7 +40,7 @@ fn loss_f64(sc: &SceneT<f64>, w: &[f64]) -> f64 {
 
 fn grad_f64(sc: &SceneT<f64>, w: &[f64]) -> GradT<f64> {
     let ls = geom::layers(sc);
-    let (_, tapes) = engine::forward(sc, &ls, true);
+    let (_, tapes) = engine::forward(sc, &ls, true, Vec::new());
     engine::backward(sc, &ls, &tapes, w)
 }
 
@@ -270,4 +270,81 @@ fn backward_rejects_mismatched_tape_without_panicking() {
     assert_eq!(g, Params::zeros_like(&other));
     let g = backward(&s, &tape, &[1.0; 3]);
     assert!(g.get(ParamGroup::Points).iter().all(|v| *v == 0.0));
+}
+
+#[test]
+fn flatten_shape_follows_the_curve_within_tolerance() {
+    let c = Shape::circle(50.0, 40.0, 30.0, 4, Rgba::BLACK).unwrap();
+    for tol in [0.5f32, 0.05] {
+        let polys = flatten_shape(&c, tol);
+        assert_eq!(polys.len(), 1);
+        let p = &polys[0];
+        assert!(p.len() >= 8);
+        // Vertices lie on the (cubic approximation of the) circle; chord midpoints are within
+        // tolerance (plus the cubic's own 0.03% radial error).
+        for (i, v) in p.iter().enumerate() {
+            let r = ((v.x - 50.0).powi(2) + (v.y - 40.0).powi(2)).sqrt();
+            assert!((r - 30.0).abs() < 0.02, "vertex radius {r}");
+            let w = p[(i + 1) % p.len()];
+            let m = Point::new(0.5 * (v.x + w.x), 0.5 * (v.y + w.y));
+            let rm = ((m.x - 50.0).powi(2) + (m.y - 40.0).powi(2)).sqrt();
+            assert!(30.0 - rm < tol + 0.02, "chord sag {} > {tol}", 30.0 - rm);
+        }
+    }
+    assert!(flatten_shape(&c, 0.05)[0].len() > flatten_shape(&c, 0.5)[0].len());
+    let sq = Shape::square(1.0, 2.0, 3.0, Rgba::BLACK).unwrap();
+    assert_eq!(flatten_shape(&sq, 0.1)[0], sq.points);
+}
+
+#[test]
+fn stroke_area_is_length_times_width_plus_caps() {
+    let mut s = Scene::new(64, 32, Rgba::TRANSPARENT).unwrap();
+    s.shapes.push(
+        Shape::open_cubic(
+            vec![
+                Point::new(10.0, 16.0),
+                Point::new(20.0, 16.0),
+                Point::new(40.0, 16.0),
+                Point::new(50.0, 16.0),
+            ],
+            Stroke {
+                color: Rgba::BLACK,
+                width: 4.0,
+            },
+        )
+        .unwrap(),
+    );
+    let total: f32 = render(&s).data.chunks(4).map(|p| p[3]).sum();
+    let expected = 40.0 * 4.0 + std::f32::consts::PI * 4.0;
+    assert!(
+        (total - expected).abs() < 0.02 * expected,
+        "{total} vs {expected}"
+    );
+    // Thin strokes keep their area too (no double counting at joins).
+    s.shapes[0].stroke.as_mut().unwrap().width = 0.5;
+    let total: f32 = render(&s).data.chunks(4).map(|p| p[3]).sum();
+    let expected = 40.0 * 0.5;
+    assert!(
+        (total - expected).abs() < 0.05 * expected,
+        "{total} vs {expected}"
+    );
+}
+
+#[test]
+fn render_is_deterministic_and_independent_of_thread_count() {
+    let s = random_scene(5);
+    let a = render(&s);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap();
+    let b = pool.install(|| render(&s));
+    assert_eq!(a, render(&s));
+    let max = a
+        .data
+        .iter()
+        .zip(&b.data)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f32::max);
+    assert!(max < 1e-5, "{max}");
 }

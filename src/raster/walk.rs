@@ -31,8 +31,9 @@ fn crossings<T: Real>(p: T, d: T, sa: T, sb: T, lo: i32, hi: i32) -> Crossings<T
     let va = p + sa * d;
     let vb = p + sb * d;
     let (vlo, vhi) = if va < vb { (va, vb) } else { (vb, va) };
-    let k0 = (vlo.floor().to_i64().unwrap_or(0) + 1).max(lo as i64);
-    let k1 = (vhi.ceil().to_i64().unwrap_or(0) - 1).min(hi as i64);
+    // Integers strictly inside (vlo, vhi), limited to [lo, hi].
+    let k0 = (vlo.floor_i32() as i64 + 1).max(lo as i64);
+    let k1 = (-((-vhi).floor_i32() as i64) - 1).min(hi as i64);
     if k1 < k0 {
         return Crossings::empty();
     }
@@ -195,17 +196,10 @@ fn pieces<T: Real>(
         let b = if s_next == sb { at(sb) } else { at(s_next) };
         if s_next > s_prev {
             let my = (a[1] + b[1]) * half;
-            let row = my
-                .floor()
-                .to_i32()
-                .unwrap_or(clip.y0)
-                .clamp(clip.y0, clip.y1 - 1);
+            let row = my.floor_i32().clamp(clip.y0, clip.y1 - 1);
             let col = if split_x {
                 let mx = (a[0] + b[0]) * half;
-                mx.floor()
-                    .to_i32()
-                    .unwrap_or(clip.x0)
-                    .clamp(clip.x0, clip.x1 - 1)
+                mx.floor_i32().clamp(clip.x0, clip.x1 - 1)
             } else {
                 col_override
             };

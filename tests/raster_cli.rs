@@ -1,0 +1,74 @@
+//! The `render` and `bench raster` commands, run as the real binary.
+
+use std::process::Command;
+
+const SCENE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../shared/bench/scene64.json");
+
+fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_vectorfusion"))
+}
+
+#[test]
+fn render_writes_png_of_requested_size() {
+    let dir = std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR"));
+    let svg = dir.join("cli_in.svg");
+    std::fs::write(
+        &svg,
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="40" height="20"><circle cx="10" cy="10" r="8" fill="red"/></svg>"#,
+    )
+    .unwrap();
+    let out = dir.join("cli_out.png");
+    let st = bin()
+        .args([
+            "render",
+            svg.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+            "--size",
+            "80",
+        ])
+        .status()
+        .unwrap();
+    assert!(st.success());
+    let img = vectorfusion::image::Image::open(&out).unwrap();
+    assert_eq!((img.width, img.height), (80, 40));
+    let c = img.pixel(20, 20);
+    assert!(c[0] > 0.99 && c[1] < 0.01 && c[3] > 0.99, "{c:?}");
+    assert_eq!(img.pixel(70, 20)[3], 0.0);
+
+    // Bad input: clear error and a non-zero exit code, no panic.
+    std::fs::write(&svg, "<svg").unwrap();
+    let o = bin()
+        .args(["render", svg.to_str().unwrap(), "-o", out.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("cannot parse SVG"));
+}
+
+#[test]
+fn bench_raster_prints_json_with_the_documented_keys() {
+    let o = bin()
+        .args([
+            "bench", "raster", "--scene", SCENE, "--size", "64", "--iters", "2", "--json",
+        ])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["size"], 64);
+    for k in [
+        "forward_ms",
+        "forward_backward_ms",
+        "tiny_skia_forward_ms",
+        "loss",
+    ] {
+        let x = v[k].as_f64().unwrap_or(-1.0);
+        assert!(x > 0.0 && x.is_finite(), "{k} = {x}");
+    }
+    let o = bin()
+        .args(["bench", "raster", "--scene", SCENE, "--size", "0"])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+}
