@@ -188,3 +188,53 @@ pub fn run(a: VectorizeArgs) -> Result<(), CliError> {
     );
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    fn parse(extra: &[&str]) -> VectorizeArgs {
+        let mut argv = vec!["vectorfusion", "vectorize", "in.png", "-o", "out.svg"];
+        argv.extend_from_slice(extra);
+        match crate::cli::Cli::parse_from(argv).command {
+            crate::cli::Command::Vectorize(a) => a,
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn options_map_to_config() {
+        let c = config_from_args(&parse(&[])).unwrap();
+        assert_eq!(c, LiveConfig::preset(Preset::Balanced));
+        let c = config_from_args(&parse(&["--paths", "auto", "--seed", "7"])).unwrap();
+        assert!(matches!(c.budget, PathBudget::Auto { .. }));
+        assert_eq!(c.seed, 7);
+        let c = config_from_args(&parse(&[
+            "--paths", "16", "--preset", "fast", "--size", "96", "--iters", "12", "--init",
+            "vtracer",
+        ]))
+        .unwrap();
+        assert_eq!(c.budget, PathBudget::fixed(16));
+        assert_eq!((c.size, c.iters_per_stage), (96, 12));
+        assert_eq!(c.init, InitMode::Vtracer);
+        let c = config_from_args(&parse(&["--schedule", "4,4,8", "--paths", "99"])).unwrap();
+        assert_eq!(
+            c.budget,
+            PathBudget::Schedule {
+                stages: vec![4, 4, 8]
+            }
+        );
+        for bad in [
+            &["--paths", "0"][..],
+            &["--paths", "x"],
+            &["--schedule", "4,,8"],
+            &["--size", "2"],
+        ] {
+            assert!(matches!(
+                config_from_args(&parse(bad)),
+                Err(CliError::Usage(_))
+            ));
+        }
+    }
+}
