@@ -15,13 +15,21 @@ from diffusers import AutoencoderKL, AutoencoderTiny, UNet2DConditionModel
 from transformers import CLIPTextConfig, CLIPTextModel
 
 
-def timed(fn, reps):
-    fn()
+CPU = {}
+
+
+def timed(fn, reps, key=None, warmup=1):
+    """Median wall ms; process CPU ms per run (user + system) goes to CPU[key]."""
+    for _ in range(warmup):
+        fn()
     ts = []
+    c0 = time.process_time()
     for _ in range(max(1, reps)):
         t0 = time.perf_counter()
         fn()
         ts.append((time.perf_counter() - t0) * 1e3)
+    if key:
+        CPU[key] = (time.process_time() - c0) * 1e3 / max(1, reps)
     return statistics.median(ts)
 
 
@@ -31,6 +39,7 @@ def main():
     ap.add_argument("--size", type=int, default=512)
     ap.add_argument("--reps", type=int, default=3)
     ap.add_argument("--unet-reps", type=int, default=1)
+    ap.add_argument("--warmup", type=int, default=1)
     ap.add_argument("--only", default="")
     ap.add_argument("--json", action="store_true")
     a = ap.parse_args()
@@ -62,16 +71,16 @@ def main():
 
     if want("encoder"):
         with torch.no_grad():
-            r["encoder_fwd_ms"] = timed(lambda: enc(img), a.reps)
+            r["encoder_fwd_ms"] = timed(lambda: enc(img), a.reps, "encoder_fwd", a.warmup)
     if want("vjp"):
         def vjp():
             x = img.clone().requires_grad_(True)
             (enc(x) * lat).sum().backward()
             return x.grad
-        r["encoder_vjp_ms"] = timed(vjp, a.reps)
+        r["encoder_vjp_ms"] = timed(vjp, a.reps, "encoder_vjp", a.warmup)
     if want("decoder"):
         with torch.no_grad():
-            r["decoder_ms"] = timed(lambda: dec(lat), a.reps)
+            r["decoder_ms"] = timed(lambda: dec(lat), a.reps, "decoder", a.warmup)
 
     if a.arch != "taesd":
         sd21 = a.arch == "sd21"
@@ -87,7 +96,7 @@ def main():
             ids = torch.full((1, 77), 49407, dtype=torch.long)
             ids[0, 0] = 49406
             with torch.no_grad():
-                r["text_ms"] = timed(lambda: te(ids), a.reps)
+                r["text_ms"] = timed(lambda: te(ids), a.reps, "text", a.warmup)
         if want("unet"):
             unet = UNet2DConditionModel(
                 block_out_channels=(320, 640, 1280, 1280),
@@ -105,7 +114,8 @@ def main():
                 return u + 7.5 * (c - u)
 
             with torch.no_grad():
-                r["unet_cfg_ms"] = timed(step, a.unet_reps)
+                r["unet_cfg_ms"] = timed(step, a.unet_reps, "unet_cfg", a.warmup)
+    r["cpu_ms"] = CPU
     print(json.dumps(r) if a.json else r)
 
 
