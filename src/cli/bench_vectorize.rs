@@ -113,8 +113,15 @@ fn tuning_grid() -> Vec<TracerSetting> {
 }
 
 pub fn run(a: BenchVectorizeArgs) -> Result<(), CliError> {
+    // A list of independent budgets, each at most the per-run path limit.
     let budgets = live::schedule::parse_schedule(&a.paths, usize::MAX)
         .map_err(|e| CliError::Usage(format!("--paths: {e}")))?;
+    if let Some(b) = budgets.iter().find(|&&b| b > live::MAX_PATHS) {
+        return Err(CliError::Usage(format!(
+            "--paths: budget {b} exceeds the limit of {} paths",
+            live::MAX_PATHS
+        )));
+    }
     let mut files: Vec<PathBuf> = std::fs::read_dir(&a.images)
         .map_err(|e| CliError::Usage(format!("cannot read {}: {e}", a.images.display())))?
         .filter_map(|e| e.ok().map(|e| e.path()))

@@ -69,10 +69,15 @@ pub fn strip_style(prompt: &str) -> String {
     };
     let mut cur = trim(prompt.trim());
     loop {
-        let lower = cur.to_lowercase();
         let mut changed = false;
         for suf in STYLE_SUFFIXES {
-            if let Some(head) = lower.strip_suffix(suf) {
+            // Suffixes are ASCII: compare case-insensitively on `cur` itself, so byte offsets
+            // stay valid whatever lowercasing would do to the rest of the caption.
+            let cut = cur.len().checked_sub(suf.len());
+            let head = cut
+                .filter(|&c| cur.is_char_boundary(c) && cur[c..].eq_ignore_ascii_case(suf))
+                .map(|c| &cur[..c]);
+            if let Some(head) = head {
                 // Only as a separate phrase: after punctuation (". ", ", "), never inside the
                 // caption's own words ("an artist's sketch" keeps its sketch).
                 let boundary = head.trim_end().ends_with(|c: char| ".,;:|".contains(c));
@@ -141,13 +146,20 @@ fn count_paths(g: &usvg::Group) -> usize {
 
 /// Renders SVG text with resvg over white so that its shorter side is `short_side` pixels.
 pub fn render_svg(svg: &str, short_side: u32) -> Result<RenderedSvg, String> {
-    let tree = usvg::Tree::from_str(svg, &usvg::Options::default()).map_err(|e| e.to_string())?;
+    let tree = crate::svg::parse_usvg(svg)?;
     let size = tree.size();
     let (w, h) = (size.width(), size.height());
     if !(w > 0.0 && h > 0.0) {
         return Err("SVG has no size".into());
     }
     let scale = short_side as f32 / w.min(h);
+    // Cap the long side: a hostile aspect ratio must not ask for a terabyte pixmap.
+    let long = (w.max(h) * scale).round();
+    if !long.is_finite() || long > crate::scene::MAX_SIDE as f32 {
+        return Err(format!(
+            "SVG aspect ratio {w}x{h} is too extreme to render at {short_side} px"
+        ));
+    }
     let pw = ((w * scale).round() as u32).max(1);
     let ph = ((h * scale).round() as u32).max(1);
     let mut pixmap =
@@ -342,6 +354,20 @@ pub fn format_table(r: &EvalReport) -> String {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn strip_style_survives_text_that_grows_when_lowercased() {
+        // 'İ' lowercases to two chars (3 bytes): byte offsets from a lowercased copy would
+        // not fit the original.
+        assert_eq!(super::strip_style("İİİİ. svg"), "İİİİ");
+        assert_eq!(super::strip_style("İİ cat. Vector Art"), "İİ cat");
+    }
+
+    #[test]
+    fn extreme_aspect_ratio_svg_is_an_error() {
+        let svg = r#"<svg xmlns="http://www.w3.org/2000/svg" width="0.01" height="100000"/>"#;
+        assert!(super::render_svg(svg, 224).is_err());
+    }
+
     use super::*;
 
     #[test]

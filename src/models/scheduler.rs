@@ -66,8 +66,10 @@ impl SchedulerConfig {
     /// `ᾱ_t` for `t = 0..num_train_timesteps`.
     pub fn alphas_cumprod(&self) -> std::result::Result<Vec<f64>, String> {
         let n = self.num_train_timesteps;
-        if n < 2 {
-            return Err("num_train_timesteps must be at least 2".into());
+        if !(2..=100_000).contains(&n) {
+            return Err(format!(
+                "num_train_timesteps must be in 2..=100000, got {n}"
+            ));
         }
         let lin = |a: f64, b: f64| -> Vec<f64> {
             (0..n)

@@ -342,8 +342,8 @@ const PREVIEW_MAX_SIDE: f32 = 1024.0;
 
 /// Renders `svg` to PNG with resvg, scaled so the longest side is at most [`PREVIEW_MAX_SIDE`].
 pub fn render_png(svg: &str) -> Result<Vec<u8>, String> {
-    use resvg::{tiny_skia, usvg};
-    let tree = usvg::Tree::from_str(svg, &usvg::Options::default()).map_err(|e| e.to_string())?;
+    use resvg::tiny_skia;
+    let tree = crate::svg::parse_usvg(svg)?;
     let size = tree.size();
     let scale = (PREVIEW_MAX_SIDE / size.width().max(size.height())).min(1.0);
     let w = (size.width() * scale).ceil().max(1.0) as u32;

@@ -124,7 +124,7 @@ pub fn check_image(bytes: &[u8], limits: &Limits) -> Result<(), ApiError> {
 
 /// Checks that `svg` parses as SVG.
 pub fn check_svg(svg: &str) -> Result<(), ApiError> {
-    resvg::usvg::Tree::from_str(svg, &resvg::usvg::Options::default())
+    crate::svg::parse_usvg(svg)
         .map(|_| ())
         .map_err(|e| ApiError::invalid("svg", format!("is not a valid SVG: {e}")))
 }

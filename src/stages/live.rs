@@ -183,6 +183,8 @@ impl LiveConfig {
 
     /// Checks ranges; called by [`vectorize`].
     pub fn validate(&self) -> Result<(), LiveError> {
+        /// Per-stage iteration limit: keeps step counters far from `u32` overflow.
+        const MAX_ITERS: u32 = 100_000;
         let bad = |m: &str| Err(LiveError::Config(m.to_string()));
         if !(8..=2048).contains(&self.size) {
             return bad("size must be in 8..=2048");
@@ -192,7 +194,7 @@ impl LiveConfig {
                 if stages.contains(&0) {
                     return bad("schedule stages must add at least one path");
                 }
-                if stages.iter().sum::<usize>() > MAX_PATHS {
+                if stages.iter().fold(0usize, |a, &n| a.saturating_add(n)) > MAX_PATHS {
                     return bad("schedule adds more than 1024 paths");
                 }
             }
@@ -220,6 +222,9 @@ impl LiveConfig {
         }
         if self.init_segments == 0 || self.init_segments > 64 {
             return bad("init_segments must be in 1..=64");
+        }
+        if self.iters_per_stage > MAX_ITERS || self.final_iters > MAX_ITERS {
+            return bad("iterations per stage must be at most 100000");
         }
         Ok(())
     }

@@ -488,10 +488,10 @@ fn orient_even_odd(subs: &mut [SubPath]) {
     }
 }
 
-/// Parses SVG text into a scene (see the module docs for what is kept). Bad SVG gives an error,
-/// never a panic.
-pub fn from_svg(text: &str) -> Result<Scene, SvgError> {
-    // Never read files or decode embedded images: we ignore raster images anyway.
+/// Parses untrusted SVG text with usvg. This is the only place the crate parses SVG: it never
+/// reads files or decodes embedded images (`<image href="/dev/zero">` must not be followed), so
+/// every caller — HTTP submissions, previews, evaluation, tracing — is safe on hostile input.
+pub fn parse_usvg(text: &str) -> Result<usvg::Tree, String> {
     let opts = usvg::Options {
         image_href_resolver: usvg::ImageHrefResolver {
             resolve_data: Box::new(|_, _, _| None),
@@ -499,7 +499,13 @@ pub fn from_svg(text: &str) -> Result<Scene, SvgError> {
         },
         ..usvg::Options::default()
     };
-    let tree = usvg::Tree::from_str(text, &opts).map_err(|e| SvgError::Parse(e.to_string()))?;
+    usvg::Tree::from_str(text, &opts).map_err(|e| e.to_string())
+}
+
+/// Parses SVG text into a scene (see the module docs for what is kept). Bad SVG gives an error,
+/// never a panic.
+pub fn from_svg(text: &str) -> Result<Scene, SvgError> {
+    let tree = parse_usvg(text).map_err(SvgError::Parse)?;
     let size = tree.size();
     let (fw, fh) = (size.width(), size.height());
     let (w, h) = (fw.round(), fh.round());

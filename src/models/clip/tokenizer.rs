@@ -45,6 +45,9 @@ pub fn bytes_to_unicode() -> [char; 256] {
     out
 }
 
+/// Largest context length accepted from tokenizer files (guards allocations on hostile input).
+pub const MAX_CONTEXT: usize = 4096;
+
 /// A loaded CLIP tokenizer.
 #[derive(Debug, Clone)]
 pub struct ClipTokenizer {
@@ -59,7 +62,8 @@ pub struct ClipTokenizer {
     pub eos_id: u32,
     /// Padding id.
     pub pad_id: u32,
-    /// Context length (`model_max_length`), 77 for every released CLIP.
+    /// Context length (`model_max_length`), 77 for every released CLIP; never above
+    /// [`MAX_CONTEXT`] whatever a tokenizer file claims.
     pub max_length: usize,
 }
 
@@ -196,6 +200,7 @@ impl ClipTokenizer {
         {
             tok.max_length = len as usize;
         }
+        tok.max_length = tok.max_length.min(MAX_CONTEXT);
         Ok(tok)
     }
 
@@ -240,7 +245,7 @@ impl ClipTokenizer {
             }
             if let Some(len) = v.get("model_max_length").and_then(|l| l.as_u64()) {
                 // Tokenizers without a limit store a huge sentinel; keep the CLIP context then.
-                if (2..=1_000_000).contains(&len) {
+                if (2..=MAX_CONTEXT as u64).contains(&len) {
                     self.max_length = len as usize;
                 }
             }

@@ -19,7 +19,8 @@ pub fn parse_schedule(text: &str, max_total: usize) -> Result<Vec<usize>, LiveEr
         }
         out.push(n);
     }
-    let total: usize = out.iter().sum();
+    // Saturating: absurd entries must give the error below, not an overflow.
+    let total = out.iter().fold(0usize, |a, &n| a.saturating_add(n));
     if total > max_total {
         return Err(LiveError::Config(format!(
             "schedule adds {total} paths, more than the limit of {max_total}"
@@ -65,6 +66,11 @@ pub fn auto_should_continue(
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn huge_entries_are_an_error_not_an_overflow() {
+        assert!(super::parse_schedule("18446744073709551615,1", 1024).is_err());
+    }
+
     use super::*;
 
     #[test]

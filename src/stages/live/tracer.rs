@@ -5,7 +5,7 @@
 use crate::image::Image;
 use crate::losses::polygon_area;
 use crate::scene::{Point, Rgba, Scene, Shape};
-use resvg::{tiny_skia, usvg};
+use resvg::tiny_skia;
 use visioncortex::{CompoundPathElement, PathSimplifyMode};
 
 /// A vtracer setting used as a baseline or initialiser.
@@ -92,7 +92,7 @@ pub fn trace(image: &Image, setting: &TracerSetting) -> Result<Traced, String> {
 /// Renders SVG text with resvg at `width x height` (the SVG's own size is scaled to fit) into a
 /// premultiplied image.
 pub fn render_svg(svg: &str, width: u32, height: u32) -> Result<Image, String> {
-    let tree = usvg::Tree::from_str(svg, &usvg::Options::default()).map_err(|e| e.to_string())?;
+    let tree = crate::svg::parse_usvg(svg)?;
     let mut pixmap = tiny_skia::Pixmap::new(width, height).ok_or("bad render size")?;
     let s = tree.size();
     let (kx, ky) = (width as f32 / s.width(), height as f32 / s.height());
