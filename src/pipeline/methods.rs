@@ -22,7 +22,7 @@ use crate::scene::{Rgba, Scene, Shape, ShapeKind, Stroke};
 use crate::stages::live::prune::weak_paths;
 use crate::stages::live::{self, LiveConfig, PathBudget};
 use crate::stages::sds::{RasterBackend, SdsConfig, SdsError, gaussian, run_sds};
-use crate::stages::styles::{Style, pixelate_l1};
+use crate::stages::styles::{Style, pixelate_l1, random_circle, random_stroke};
 use crate::teacher::{AnalyticTeacher, AnalyticTeacherConfig, SdTeacher, Teacher};
 use candle_core::{DType, Tensor};
 use rand::SeedableRng;
@@ -522,11 +522,29 @@ pub fn run_text(
                     let (scene, d) = trace(best_img, size, paths, &ps, req.seed, sink, cancel)?;
                     detail["live"] = d;
                     let scene = scaled(&scene, size)?;
-                    if req.style == Style::Sketch {
+                    let mut scene = if req.style == Style::Sketch {
                         outlines_as_strokes(&scene, size)?
                     } else {
                         scene
+                    };
+                    // A flat sample can trace to (almost) nothing: top the scene up with the
+                    // style's random shapes so SDS has something to move (sketches always get
+                    // their stroke count).
+                    let want = if req.style == Style::Sketch { paths } else { 1 };
+                    let mut rng = ChaCha8Rng::seed_from_u64(req.seed ^ 0x7095_0f11);
+                    let mut added = 0usize;
+                    while scene.shapes.len() < want {
+                        let shape = if req.style == Style::Sketch {
+                            random_stroke(size, &mut rng)
+                        } else {
+                            random_circle(size, &mut rng)
+                        }
+                        .map_err(|e| failed("initial scene", e))?;
+                        scene.shapes.push(shape);
+                        added += 1;
                     }
+                    detail["topped_up"] = json!(added);
+                    scene
                 }
             }
         }
