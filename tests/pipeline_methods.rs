@@ -358,3 +358,40 @@ async fn text_job_through_the_service_streams_snapshots_and_records_rerank_score
     assert_eq!(detail["method"], "sd_live_sds");
     assert!(detail["paths_needed"].as_u64().unwrap() >= 1);
 }
+
+#[test]
+fn bench_stability_reports_every_method_and_style_as_json() {
+    let st = std::process::Command::new(env!("CARGO_BIN_EXE_vectorfusion"))
+        .args([
+            "bench",
+            "stability",
+            "--seeds",
+            "2",
+            "--steps",
+            "5",
+            "--json",
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&st.stdout).unwrap();
+    let cells = v["cells"].as_array().unwrap();
+    assert_eq!(cells.len(), 9);
+    for c in cells {
+        assert_eq!(c["runs"], 2);
+        assert_eq!(c["errors"], 0, "{c}");
+        assert_eq!(c["nan"], 0, "{c}");
+        let rate = c["failure_rate"].as_f64().unwrap();
+        assert!((0.0..=1.0).contains(&rate));
+    }
+    // Sampling from the analytic teacher draws one of its targets; LIVE traces it closely.
+    let live = cells
+        .iter()
+        .find(|c| c["method"] == "sd_live" && c["style"] == "iconography")
+        .unwrap();
+    assert!(live["psnr_median"].as_f64().unwrap() > 20.0, "{live}");
+}
