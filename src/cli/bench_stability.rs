@@ -22,18 +22,22 @@ pub struct BenchStabilityArgs {
     /// Seeds per method × style.
     #[arg(long, default_value_t = 4)]
     pub seeds: u64,
-    /// SDS steps per run.
-    #[arg(long, default_value_t = 30)]
-    pub steps: u32,
-    /// Teacher input size (px).
-    #[arg(long, default_value_t = 32)]
-    pub size: u32,
-    /// Samples K for sd_live*.
-    #[arg(long, default_value_t = 2)]
-    pub samples: u32,
-    /// Paths (iconography) / strokes (sketch).
-    #[arg(long, default_value_t = 8)]
-    pub paths: usize,
+    /// Preset (draft, fast, balanced, paper): sampler and LIVE settings, and the defaults of
+    /// the four options below.
+    #[arg(long, default_value = "draft")]
+    pub preset: String,
+    /// SDS steps per run [default: 30 for draft, else the preset's].
+    #[arg(long)]
+    pub steps: Option<u32>,
+    /// Teacher input size (px) [default: the preset's].
+    #[arg(long)]
+    pub size: Option<u32>,
+    /// Samples K for sd_live* [default: the preset's].
+    #[arg(long)]
+    pub samples: Option<u32>,
+    /// Paths (iconography) / strokes (sketch) [default: the preset's].
+    #[arg(long)]
+    pub paths: Option<usize>,
     /// `analytic:DIR` (PNG targets); default: built-in synthetic targets.
     #[arg(long, conflicts_with = "model")]
     pub teacher: Option<String>,
@@ -73,10 +77,23 @@ pub struct StabilityCell {
 #[derive(Clone, Debug, Serialize)]
 pub struct StabilityReport {
     pub teacher: String,
+    pub preset: Preset,
     pub seeds: u64,
     pub steps: u32,
     pub size: u32,
     pub cells: Vec<StabilityCell>,
+}
+
+struct Resolved {
+    seeds: u64,
+    steps: u32,
+    size: u32,
+    samples: u32,
+    paths: usize,
+    teacher: Option<String>,
+    model: Option<PathBuf>,
+    scorer: Option<PathBuf>,
+    json: bool,
 }
 
 /// Two flat icons on white (a red disc, a blue square) as analytic-teacher targets.
@@ -161,7 +178,24 @@ pub const PSNR_CAP: f64 = 99.0;
 /// Collapsed: the render is (nearly) one flat colour.
 pub const COLLAPSED_SPREAD: f64 = 0.01;
 
-pub fn run(a: BenchStabilityArgs) -> Result<(), CliError> {
+pub fn run(args: BenchStabilityArgs) -> Result<(), CliError> {
+    let preset: Preset = args.preset.parse().map_err(CliError::Usage)?;
+    let ps = preset.settings();
+    let a = Resolved {
+        seeds: args.seeds,
+        steps: args.steps.unwrap_or(if preset == Preset::Draft {
+            30
+        } else {
+            ps.steps
+        }),
+        size: args.size.unwrap_or(ps.size),
+        samples: args.samples.unwrap_or(ps.samples),
+        paths: args.paths.unwrap_or(ps.paths),
+        teacher: args.teacher,
+        model: args.model,
+        scorer: args.scorer,
+        json: args.json,
+    };
     if a.seeds == 0 || a.steps == 0 || a.samples == 0 || a.paths == 0 {
         return Err(CliError::Usage(
             "--seeds, --steps, --samples and --paths must be positive".into(),
@@ -222,7 +256,7 @@ pub fn run(a: BenchStabilityArgs) -> Result<(), CliError> {
                     caption: "an icon".into(),
                     style,
                     method: *method,
-                    preset: Preset::Draft,
+                    preset,
                     paths: (style != Style::PixelArt).then_some(a.paths),
                     steps: Some(a.steps),
                     samples: Some(a.samples),
@@ -295,6 +329,7 @@ pub fn run(a: BenchStabilityArgs) -> Result<(), CliError> {
     }
     let report = StabilityReport {
         teacher: models.teacher().name(),
+        preset,
         seeds: a.seeds,
         steps: a.steps,
         size: a.size,
