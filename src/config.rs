@@ -281,6 +281,7 @@ impl Config {
         ModelDirs {
             sd_dir: opt(&self.models.sd_dir),
             clip_dir: opt(&self.models.clip_dir),
+            ..ModelDirs::default()
         }
     }
 }

@@ -760,13 +760,18 @@ async fn text_jobs_refused_at_submit_when_models_are_missing() {
             .len(),
         0
     );
-    // vectorize jobs are accepted and fail with an honest "not implemented" until LIVE is wired
-    let r = post_json(srv.addr, "/jobs", &vectorize_body(4, 10, 1)).await;
+    // vectorize jobs need no models: accepted and traced with LIVE by the real executor
+    let mut body = vectorize_body(4, 10, 1);
+    body["preset"] = json!("draft");
+    let r = post_json(srv.addr, "/jobs", &body).await;
     assert_eq!(r.status, 202);
     let id = r.json()["id"].as_str().unwrap().to_string();
-    let v = wait_status(srv.addr, &id, &["failed"], Duration::from_secs(10)).await;
-    assert_eq!(v["error"]["code"], "not_implemented");
-    assert_eq!(v["attempts"], 1, "not retried: not a transient error");
+    let v = wait_status(srv.addr, &id, &["succeeded"], Duration::from_secs(60)).await;
+    assert_eq!(v["attempts"], 1);
+    let svg = get(srv.addr, &format!("/jobs/{id}/result.svg"))
+        .await
+        .text();
+    assert!(svg.starts_with("<svg"), "{svg}");
     srv.stop().await;
 }
 

@@ -20,6 +20,8 @@ pub enum BenchCommand {
     Models(super::bench_models::BenchModelsArgs),
     /// LIVE vs vtracer fidelity (PSNR, seconds, SVG bytes) on a folder of PNGs.
     Vectorize(super::bench_vectorize::BenchVectorizeArgs),
+    /// Failure rate, quality spread and time of every method x style over seeds.
+    Stability(super::bench_stability::BenchStabilityArgs),
 }
 
 #[derive(clap::Args, Debug)]
@@ -43,6 +45,7 @@ pub fn run(cmd: BenchCommand) -> Result<(), CliError> {
         BenchCommand::Raster(a) => raster_bench(a),
         BenchCommand::Models(a) => super::bench_models::run(a),
         BenchCommand::Vectorize(a) => super::bench_vectorize::run(a),
+        BenchCommand::Stability(a) => super::bench_stability::run(a),
     }
 }
 

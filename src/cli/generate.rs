@@ -5,6 +5,8 @@
 //! Diffusion diffusers directory (local files only) as the teacher.
 
 use super::CliError;
+use crate::pipeline::methods::{self, Models, Start, TextRequest};
+use crate::pipeline::{Method, PipelineError, Preset};
 use crate::progress::{CancelToken, Progress};
 use crate::stages::sds::{RasterBackend, SdsConfig, run_sds};
 use crate::stages::styles::Style;
@@ -18,9 +20,26 @@ use std::path::PathBuf;
 pub struct GenerateArgs {
     /// The caption (with the analytic test teacher it is only recorded).
     pub caption: String,
-    /// Generation method (only `scratch` so far).
+    /// Generation method: scratch, sd_live or sd_live_sds.
     #[arg(long, default_value = "scratch")]
     pub method: String,
+    /// Preset: draft, fast, balanced or paper (resolution, steps, paths, samples). Any of
+    /// --preset, --scorer, --samples, --image, --svg or a method other than scratch runs the
+    /// shared pipeline (the one the service runs).
+    #[arg(long)]
+    pub preset: Option<String>,
+    /// CLIP scorer directory used to keep the best of the sampled images.
+    #[arg(long)]
+    pub scorer: Option<PathBuf>,
+    /// Images sampled for sd_live / sd_live_sds (K).
+    #[arg(long)]
+    pub samples: Option<u32>,
+    /// Start from this PNG/JPEG: trace it with LIVE, then fine-tune it to the caption with SDS.
+    #[arg(long, conflicts_with = "svg")]
+    pub image: Option<PathBuf>,
+    /// Start from this SVG: import it, then fine-tune it to the caption with SDS.
+    #[arg(long)]
+    pub svg: Option<PathBuf>,
     /// Style: iconography, pixel-art or sketch.
     #[arg(long, default_value = "iconography")]
     pub style: String,
@@ -30,11 +49,13 @@ pub struct GenerateArgs {
     /// `analytic:DIR`: the analytic TEST teacher built from the PNG targets in DIR.
     #[arg(long)]
     pub teacher: Option<String>,
-    /// Teacher input size in pixels (the SVG is written at this width).
-    #[arg(long, default_value_t = 64)]
-    pub size: u32,
-    #[arg(long, default_value_t = 500)]
-    pub steps: u32,
+    /// Teacher input size in pixels (the SVG is written at this width) [default: the preset's,
+    /// 64 for plain scratch].
+    #[arg(long)]
+    pub size: Option<u32>,
+    /// SDS steps [default: the preset's, 500 for plain scratch].
+    #[arg(long)]
+    pub steps: Option<u32>,
     /// Number of paths (iconography, sketch; pixel art is always a 32x32 grid).
     #[arg(long)]
     pub paths: Option<usize>,
@@ -72,23 +93,29 @@ pub struct GenerateArgs {
 }
 
 pub fn run(args: GenerateArgs) -> Result<(), CliError> {
-    if args.method != "scratch" {
-        return Err(CliError::NotImplemented(
-            "generate --method other than scratch (sd_live, sd_live_sds come with the pipeline)",
-        ));
+    let method: Method = args.method.parse().map_err(CliError::Usage)?;
+    if method != Method::Scratch
+        || args.preset.is_some()
+        || args.scorer.is_some()
+        || args.samples.is_some()
+        || args.image.is_some()
+        || args.svg.is_some()
+    {
+        return run_pipeline(args, method);
     }
     let style: Style = args.style.parse().map_err(CliError::Usage)?;
-    if args.size < 8 || args.size > 2048 {
+    let size = args.size.unwrap_or(64);
+    let steps = args.steps.unwrap_or(500);
+    if !(8..=2048).contains(&size) {
         return Err(CliError::Usage(format!(
-            "--size {} out of range 8..=2048",
-            args.size
+            "--size {size} out of range 8..=2048"
         )));
     }
-    if args.steps == 0 {
+    if steps == 0 {
         return Err(CliError::Usage("--steps must be positive".into()));
     }
     let teacher: Box<dyn Teacher> = if let Some(dir) = &args.model {
-        Box::new(SdTeacher::load(dir, args.size).map_err(|e| match e {
+        Box::new(SdTeacher::load(dir, size).map_err(|e| match e {
             TeacherError::Setup(m) => CliError::Usage(m),
             other => CliError::Other(anyhow::Error::new(other).context("loading the model")),
         })?)
@@ -102,8 +129,8 @@ pub fn run(args: GenerateArgs) -> Result<(), CliError> {
                 "unknown teacher {spec:?}: the only test teacher is analytic:DIR"
             ))
         })?;
-        let pool = if args.size >= 64 && args.size % 64 == 0 {
-            args.size / 64
+        let pool = if size >= 64 && size % 64 == 0 {
+            size / 64
         } else {
             1
         };
@@ -111,7 +138,7 @@ pub fn run(args: GenerateArgs) -> Result<(), CliError> {
             AnalyticTeacher::from_dir(
                 std::path::Path::new(dir),
                 AnalyticTeacherConfig {
-                    image_size: args.size,
+                    image_size: size,
                     pool,
                     num_train_timesteps: 1000,
                 },
@@ -121,7 +148,7 @@ pub fn run(args: GenerateArgs) -> Result<(), CliError> {
     };
     eprintln!("teacher: {}", teacher.name());
 
-    let mut cfg = SdsConfig::for_style(style, &args.caption, args.steps, args.size);
+    let mut cfg = SdsConfig::for_style(style, &args.caption, steps, size);
     cfg.seed = args.seed;
     cfg.guidance = args.guidance;
     cfg.snapshot_every = if args.snapshots.is_some() {
@@ -139,7 +166,7 @@ pub fn run(args: GenerateArgs) -> Result<(), CliError> {
     if args.no_augment {
         cfg.augment = None;
     }
-    let render = cfg.render_size(args.size);
+    let render = cfg.render_size(size);
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(args.seed ^ 0x5eed_1a17);
     let paths = args.paths.unwrap_or(style.default_paths());
     if paths == 0 || paths > 4096 {
@@ -153,7 +180,7 @@ pub fn run(args: GenerateArgs) -> Result<(), CliError> {
         std::fs::create_dir_all(d)
             .with_context(|| format!("cannot create snapshot directory {}", d.display()))?;
     }
-    let bar = ProgressBar::new(args.steps as u64);
+    let bar = ProgressBar::new(steps as u64);
     bar.set_style(
         ProgressStyle::with_template("sds [{bar:40}] {pos}/{len} {msg} ({eta})")
             .unwrap_or_else(|_| ProgressStyle::default_bar())
@@ -191,7 +218,7 @@ pub fn run(args: GenerateArgs) -> Result<(), CliError> {
     if let Ok(Some(e)) = snap_err.into_inner() {
         eprintln!("warning: could not write a snapshot: {e}");
     }
-    let final_scene = out.scene.scaled_to_width(args.size);
+    let final_scene = out.scene.scaled_to_width(size);
     let svg = RasterBackend::svg_text(&final_scene);
     std::fs::write(&args.output, svg)
         .with_context(|| format!("cannot write {}", args.output.display()))?;
@@ -202,6 +229,111 @@ pub fn run(args: GenerateArgs) -> Result<(), CliError> {
         out.stats.skipped_nonfinite,
         out.stats.lr_halvings,
         out.stats.reinits
+    );
+    Ok(())
+}
+
+fn pipeline_err(e: PipelineError) -> CliError {
+    match e {
+        PipelineError::InvalidInput(m) | PipelineError::ModelsNotConfigured(m) => {
+            CliError::Usage(m)
+        }
+        other => CliError::Other(anyhow::Error::new(other)),
+    }
+}
+
+/// The shared pipeline ([`crate::pipeline::methods`]): every method, presets, starts from an
+/// image or SVG, rerank, pruning.
+fn run_pipeline(args: GenerateArgs, method: Method) -> Result<(), CliError> {
+    let style: Style = args.style.parse().map_err(CliError::Usage)?;
+    let preset: Preset = match &args.preset {
+        Some(p) => p.parse().map_err(CliError::Usage)?,
+        None => Preset::default(),
+    };
+    let size = args.size.unwrap_or(preset.settings().size);
+    if !(8..=2048).contains(&size) {
+        return Err(CliError::Usage(format!(
+            "--size {size} out of range 8..=2048"
+        )));
+    }
+    if args.steps == Some(0) || args.samples == Some(0) || args.paths == Some(0) {
+        return Err(CliError::Usage(
+            "--steps, --samples and --paths must be positive".into(),
+        ));
+    }
+    let models = if let Some(dir) = &args.model {
+        Models::load_sd(dir, args.scorer.as_deref(), size).map_err(pipeline_err)?
+    } else {
+        let spec = args
+            .teacher
+            .as_deref()
+            .ok_or_else(|| CliError::Usage("give --model DIR or --teacher analytic:DIR".into()))?;
+        let dir = spec.strip_prefix("analytic:").ok_or_else(|| {
+            CliError::Usage(format!(
+                "unknown teacher {spec:?}: the only test teacher is analytic:DIR"
+            ))
+        })?;
+        Models::load_analytic(std::path::Path::new(dir), args.scorer.as_deref(), size)
+            .map_err(pipeline_err)?
+    };
+    eprintln!("teacher: {}", models.teacher().name());
+    let start = if let Some(p) = &args.image {
+        Start::Image(
+            crate::image::Image::open(p)
+                .map_err(|e| CliError::Usage(format!("{}: {e}", p.display())))?,
+        )
+    } else if let Some(p) = &args.svg {
+        let text = std::fs::read_to_string(p)
+            .map_err(|e| CliError::Usage(format!("{}: {e}", p.display())))?;
+        Start::Svg(
+            crate::svg::from_svg(&text)
+                .map_err(|e| CliError::Usage(format!("{}: {e}", p.display())))?,
+        )
+    } else {
+        Start::Method
+    };
+    let req = TextRequest {
+        caption: args.caption.clone(),
+        style,
+        method,
+        preset,
+        paths: args.paths,
+        steps: args.steps,
+        samples: args.samples,
+        seed: args.seed,
+        start,
+    };
+    if let Some(d) = &args.snapshots {
+        std::fs::create_dir_all(d)
+            .with_context(|| format!("cannot create snapshot directory {}", d.display()))?;
+    }
+    let snap_dir = args.snapshots.clone();
+    let sink = |p: Progress| {
+        if let Some(l) = p.loss
+            && p.step % 10 == 0
+        {
+            eprintln!("{} {}/{} loss {l:.4}", p.stage, p.step, p.total);
+        }
+        if let Some(d) = &p.detail
+            && p.stage == "rerank"
+        {
+            eprintln!("rerank: {d}");
+        }
+        if let (Some(dir), Some(svg)) = (&snap_dir, &p.svg) {
+            let path = dir.join(format!("{}_{:05}.svg", p.stage, p.step));
+            if let Err(e) = std::fs::write(&path, svg) {
+                eprintln!("warning: could not write {}: {e}", path.display());
+            }
+        }
+    };
+    let out = methods::run_text(&models, &req, &sink, &CancelToken::new()).map_err(pipeline_err)?;
+    std::fs::write(&args.output, &out.svg)
+        .with_context(|| format!("cannot write {}", args.output.display()))?;
+    eprintln!(
+        "wrote {} ({} paths; detail {})",
+        args.output.display(),
+        out.paths,
+        out.detail
     );
     Ok(())
 }

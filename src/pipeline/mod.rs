@@ -7,10 +7,14 @@
 //! where the pipeline stages are wired in; until they land they return
 //! [`PipelineError::NotImplemented`].
 
+pub mod methods;
+
 use crate::progress::{CancelToken, NullSink, Progress, ProgressSink};
 use serde::{Deserialize, Serialize};
+use std::collections::HashMap;
 use std::path::PathBuf;
 use std::sync::Arc;
+use std::sync::Mutex;
 
 /// What a job produces: caption → SVG, or image → SVG.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -52,18 +56,23 @@ impl Method {
     pub const ALL: &[Method] = &[Method::Scratch, Method::SdLive, Method::SdLiveSds];
 }
 
-/// Named speed/quality trade-offs.
+/// Named speed/quality trade-offs (resolution, steps, paths, samples, encoder; see
+/// [`Preset::settings`]). `default` and `quality` are accepted as older names of `balanced` and
+/// `paper`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Preset {
+    Draft,
     Fast,
     #[default]
-    Default,
-    Quality,
+    #[serde(alias = "default")]
+    Balanced,
+    #[serde(alias = "quality")]
+    Paper,
 }
 
 impl Preset {
-    pub const ALL: &[Preset] = &[Preset::Fast, Preset::Default, Preset::Quality];
+    pub const ALL: &[Preset] = &[Preset::Draft, Preset::Fast, Preset::Balanced, Preset::Paper];
 }
 
 /// Hard limits on a job's parameters (set from the service configuration).
@@ -359,32 +368,132 @@ pub trait Executor: Send + Sync {
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct ModelDirs {
     pub sd_dir: Option<PathBuf>,
+    /// CLIP scorer for reranking samples (optional: without it the first sample is kept).
     pub clip_dir: Option<PathBuf>,
+    /// TAESD encoder (optional; recorded, not yet used by the SDS teacher).
+    #[serde(default)]
+    pub taesd_dir: Option<PathBuf>,
+    /// Testing only: a directory of PNG targets for the analytic TEST teacher, used when no
+    /// `sd_dir` is set.
+    #[serde(default)]
+    pub analytic_dir: Option<PathBuf>,
 }
 
-/// The production executor.
-#[derive(Clone, Debug, Default)]
+/// The production executor: LIVE for vectorize jobs, the methods of [`methods`] for text jobs.
+/// Models are loaded on first use and kept per teacher input size.
+#[derive(Clone, Default)]
 pub struct DefaultExecutor {
     pub models: ModelDirs,
+    cache: Arc<Mutex<HashMap<u32, Arc<methods::Models>>>>,
+}
+
+impl std::fmt::Debug for DefaultExecutor {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("DefaultExecutor")
+            .field("models", &self.models)
+            .finish_non_exhaustive()
+    }
 }
 
 impl DefaultExecutor {
     pub fn new(models: ModelDirs) -> Self {
-        DefaultExecutor { models }
+        DefaultExecutor {
+            models,
+            cache: Arc::default(),
+        }
     }
 
-    /// Image (or SVG) → SVG by LIVE tracing.
-    fn vectorize(&self, _spec: &JobSpec, _ctx: &JobContext) -> Result<JobOutput, PipelineError> {
-        Err(PipelineError::NotImplemented(
-            "vectorize jobs (LIVE tracing is not wired into this build yet)",
-        ))
+    /// The models for `size` px teacher inputs (loaded once).
+    pub fn load_models(&self, size: u32) -> Result<Arc<methods::Models>, PipelineError> {
+        self.text_ready()
+            .map_err(PipelineError::ModelsNotConfigured)?;
+        let mut cache = self
+            .cache
+            .lock()
+            .map_err(|_| PipelineError::Failed("model cache poisoned".into()))?;
+        if let Some(m) = cache.get(&size) {
+            return Ok(m.clone());
+        }
+        let scorer = self.models.clip_dir.as_deref();
+        let m = match (&self.models.sd_dir, &self.models.analytic_dir) {
+            (Some(sd), _) => methods::Models::load_sd(sd, scorer, size)?,
+            (None, Some(dir)) => methods::Models::load_analytic(dir, scorer, size)?,
+            (None, None) => {
+                return Err(PipelineError::ModelsNotConfigured("no sd_dir".into()));
+            }
+        };
+        let m = Arc::new(m);
+        cache.insert(size, m.clone());
+        Ok(m)
     }
 
-    /// Caption → SVG (sampling, tracing, score distillation).
-    fn text(&self, _spec: &JobSpec, _ctx: &JobContext) -> Result<JobOutput, PipelineError> {
-        Err(PipelineError::NotImplemented(
-            "text jobs (the diffusion pipeline is not wired into this build yet)",
-        ))
+    fn run_text(
+        &self,
+        spec: &JobSpec,
+        start: methods::Start,
+        ctx: &JobContext,
+    ) -> Result<JobOutput, PipelineError> {
+        let caption = spec
+            .caption
+            .clone()
+            .ok_or_else(|| PipelineError::InvalidInput("caption is required".into()))?;
+        let models = self.load_models(spec.preset.settings().size)?;
+        let req = methods::TextRequest {
+            caption,
+            style: methods::stage_style(spec.style),
+            method: spec.method,
+            preset: spec.preset,
+            paths: Some(spec.paths as usize),
+            steps: Some(spec.steps),
+            samples: Some(spec.samples),
+            seed: spec.seed,
+            start,
+        };
+        let out = methods::run_text(&models, &req, ctx.sink(), ctx.cancel_token())?;
+        Ok(JobOutput {
+            svg: out.svg,
+            paths: out.paths,
+            detail: out.detail,
+        })
+    }
+
+    /// Image → SVG by LIVE tracing; with a caption and text models configured, the trace is then
+    /// fine-tuned to the caption with SDS.
+    fn vectorize(&self, spec: &JobSpec, ctx: &JobContext) -> Result<JobOutput, PipelineError> {
+        let bytes = spec
+            .image
+            .as_deref()
+            .ok_or_else(|| PipelineError::InvalidInput("image is required".into()))?;
+        let image = crate::image::Image::decode(bytes)
+            .map_err(|e| PipelineError::InvalidInput(format!("image: {e}")))?;
+        if spec.caption.is_some() && self.text_ready().is_ok() {
+            return self.run_text(spec, methods::Start::Image(image), ctx);
+        }
+        let out = methods::run_vectorize(
+            &image,
+            spec.preset,
+            spec.paths as usize,
+            spec.seed,
+            ctx.sink(),
+            ctx.cancel_token(),
+        )?;
+        Ok(JobOutput {
+            svg: out.svg,
+            paths: out.paths,
+            detail: out.detail,
+        })
+    }
+
+    /// Caption → SVG (sampling, tracing, score distillation), or SDS fine-tuning of `svg`.
+    fn text(&self, spec: &JobSpec, ctx: &JobContext) -> Result<JobOutput, PipelineError> {
+        let start = match &spec.svg {
+            Some(svg) => methods::Start::Svg(
+                crate::svg::from_svg(svg)
+                    .map_err(|e| PipelineError::InvalidInput(format!("svg: {e}")))?,
+            ),
+            None => methods::Start::Method,
+        };
+        self.run_text(spec, start, ctx)
     }
 }
 
@@ -398,6 +507,18 @@ impl Executor for DefaultExecutor {
     }
 
     fn text_ready(&self) -> Result<(), String> {
+        if self.models.sd_dir.is_none()
+            && let Some(dir) = &self.models.analytic_dir
+        {
+            return if dir.is_dir() {
+                Ok(())
+            } else {
+                Err(format!(
+                    "the analytic test teacher directory {} does not exist",
+                    dir.display()
+                ))
+            };
+        }
         let Some(dir) = &self.models.sd_dir else {
             return Err(
                 "text-to-SVG needs Stable Diffusion weights: set `sd_dir` in the [models] \
@@ -406,18 +527,24 @@ impl Executor for DefaultExecutor {
                     .into(),
             );
         };
-        if !dir.is_dir() {
+        if !dir.join("unet").join("config.json").is_file() {
             return Err(format!(
-                "the configured Stable Diffusion directory {} does not exist: fix `sd_dir` in the \
-                 [models] section of config.toml (or VECTORFUSION_MODELS_SD_DIR)",
+                "the configured Stable Diffusion directory {} does not exist or is not a \
+                 diffusers layout (no unet/config.json): fix `sd_dir` in the [models] section of \
+                 config.toml (or VECTORFUSION_MODELS_SD_DIR)",
                 dir.display()
             ));
         }
-        Err(
-            "text jobs are not available in this build yet (the diffusion pipeline is not \
-             wired in); only vectorize jobs are accepted"
-                .into(),
-        )
+        if let Some(c) = &self.models.clip_dir
+            && !c.is_dir()
+        {
+            return Err(format!(
+                "the configured CLIP scorer directory {} does not exist: fix `clip_dir` in the \
+                 [models] section of config.toml",
+                c.display()
+            ));
+        }
+        Ok(())
     }
 }
 
@@ -456,7 +583,7 @@ mod tests {
             steps: 100,
             seed: u64::MAX,
             samples: 4,
-            preset: Preset::Default,
+            preset: Preset::Balanced,
             priority: 0,
         }
     }
@@ -496,9 +623,10 @@ mod tests {
         let msg = e.text_ready().unwrap_err();
         assert!(msg.contains("sd_dir"), "{msg}");
         let ctx = JobContext::detached(CancelToken::new());
+        // The spec's image bytes are not an image: a clear input error, not a panic.
         assert!(matches!(
             e.run(&spec(), &ctx),
-            Err(PipelineError::NotImplemented(_))
+            Err(PipelineError::InvalidInput(_))
         ));
     }
 }

@@ -1,0 +1,349 @@
+//! `vectorfusion bench stability`: where the methods fail. Runs seeds × method × style through
+//! the shared pipeline ([`crate::pipeline::methods`]) with the analytic TEST teacher (built-in
+//! targets, or `--teacher analytic:DIR`) or real weights (`--model DIR`), and reports per
+//! method × style: failure rate (error/NaN, empty or collapsed SVG, oversaturation, diverged
+//! loss), final quality spread (PSNR of the render against the nearest teacher target, analytic
+//! teacher only) and seconds per run.
+
+use super::CliError;
+use crate::image::{Image, psnr};
+use crate::pipeline::methods::{Models, Start, TeacherModel, TextRequest, run_text};
+use crate::pipeline::{Method, Preset};
+use crate::progress::{CancelToken, NullSink};
+use crate::scene::{Rgba, Scene, Shape};
+use crate::stages::styles::Style;
+use crate::teacher::{AnalyticTeacher, AnalyticTeacherConfig};
+use serde::Serialize;
+use std::path::PathBuf;
+use std::time::Instant;
+
+#[derive(clap::Args, Debug)]
+pub struct BenchStabilityArgs {
+    /// Seeds per method × style.
+    #[arg(long, default_value_t = 4)]
+    pub seeds: u64,
+    /// Preset (draft, fast, balanced, paper): sampler and LIVE settings, and the defaults of
+    /// the four options below.
+    #[arg(long, default_value = "draft")]
+    pub preset: String,
+    /// SDS steps per run [default: 30 for draft, else the preset's].
+    #[arg(long)]
+    pub steps: Option<u32>,
+    /// Teacher input size (px) [default: the preset's].
+    #[arg(long)]
+    pub size: Option<u32>,
+    /// Samples K for sd_live* [default: the preset's].
+    #[arg(long)]
+    pub samples: Option<u32>,
+    /// Paths (iconography) / strokes (sketch) [default: the preset's].
+    #[arg(long)]
+    pub paths: Option<usize>,
+    /// `analytic:DIR` (PNG targets); default: built-in synthetic targets.
+    #[arg(long, conflicts_with = "model")]
+    pub teacher: Option<String>,
+    /// Stable Diffusion directory (real weights) instead of the analytic teacher.
+    #[arg(long)]
+    pub model: Option<PathBuf>,
+    /// CLIP scorer directory for reranking.
+    #[arg(long)]
+    pub scorer: Option<PathBuf>,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// One method × style cell.
+#[derive(Clone, Debug, Serialize)]
+pub struct StabilityCell {
+    pub method: Method,
+    pub style: Style,
+    pub runs: u64,
+    pub errors: u64,
+    pub nan: u64,
+    pub collapsed: u64,
+    pub oversaturated: u64,
+    pub diverged: u64,
+    /// Runs with any failure.
+    pub failed: u64,
+    pub failure_rate: f64,
+    /// PSNR (dB) of the final render against the nearest target: min, median, max.
+    pub psnr_min: Option<f64>,
+    pub psnr_median: Option<f64>,
+    pub psnr_max: Option<f64>,
+    pub seconds_median: f64,
+    pub paths_needed_median: f64,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct StabilityReport {
+    pub teacher: String,
+    pub preset: Preset,
+    pub seeds: u64,
+    pub steps: u32,
+    pub size: u32,
+    pub cells: Vec<StabilityCell>,
+}
+
+struct Resolved {
+    seeds: u64,
+    steps: u32,
+    size: u32,
+    samples: u32,
+    paths: usize,
+    teacher: Option<String>,
+    model: Option<PathBuf>,
+    scorer: Option<PathBuf>,
+    json: bool,
+}
+
+/// Two flat icons on white (a red disc, a blue square) as analytic-teacher targets.
+pub fn builtin_targets(size: u32) -> Result<Vec<(String, Image)>, CliError> {
+    let s = size as f32;
+    let mk = |shape: Result<Shape, crate::scene::SceneError>| -> Result<Image, CliError> {
+        let mut scene =
+            Scene::new(size, size, Rgba::WHITE).map_err(|e| CliError::Other(e.into()))?;
+        scene
+            .shapes
+            .push(shape.map_err(|e| CliError::Other(e.into()))?);
+        Ok(crate::raster::render(&scene))
+    };
+    Ok(vec![
+        (
+            "disc".into(),
+            mk(Shape::circle(
+                0.5 * s,
+                0.5 * s,
+                0.3 * s,
+                8,
+                Rgba::new(0.9, 0.2, 0.1, 1.0),
+            ))?,
+        ),
+        (
+            "square".into(),
+            mk(Shape::square(
+                0.25 * s,
+                0.25 * s,
+                0.5 * s,
+                Rgba::new(0.1, 0.3, 0.8, 1.0),
+            ))?,
+        ),
+    ])
+}
+
+fn median(mut v: Vec<f64>) -> Option<f64> {
+    v.retain(|x| x.is_finite());
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    (n > 0).then(|| {
+        if n % 2 == 1 {
+            v[n / 2]
+        } else {
+            0.5 * (v[n / 2 - 1] + v[n / 2])
+        }
+    })
+}
+
+/// Render over white: mean absolute deviation from its mean colour (0 = one flat colour).
+fn spread(im: &Image) -> f64 {
+    let o = im.over([1.0, 1.0, 1.0]);
+    let n = o.len_pixels().max(1) as f64;
+    let mut mean = [0.0f64; 3];
+    for p in o.data.chunks_exact(4) {
+        for c in 0..3 {
+            mean[c] += p[c] as f64 / n;
+        }
+    }
+    o.data
+        .chunks_exact(4)
+        .map(|p| (0..3).map(|c| (p[c] as f64 - mean[c]).abs()).sum::<f64>() / 3.0)
+        .sum::<f64>()
+        / n
+}
+
+/// Mean chroma `max(rgb) − min(rgb)` over white.
+fn chroma(im: &Image) -> f64 {
+    let o = im.over([1.0, 1.0, 1.0]);
+    let n = o.len_pixels().max(1) as f64;
+    o.data
+        .chunks_exact(4)
+        .map(|p| (p[0].max(p[1]).max(p[2]) - p[0].min(p[1]).min(p[2])) as f64)
+        .sum::<f64>()
+        / n
+}
+
+/// Oversaturated: mean chroma above this (flat icons on white stay far below).
+pub const OVERSATURATED_CHROMA: f64 = 0.6;
+/// PSNR of identical images is reported as this (dB).
+pub const PSNR_CAP: f64 = 99.0;
+/// Collapsed: the render is (nearly) one flat colour.
+pub const COLLAPSED_SPREAD: f64 = 0.01;
+
+pub fn run(args: BenchStabilityArgs) -> Result<(), CliError> {
+    let preset: Preset = args.preset.parse().map_err(CliError::Usage)?;
+    let ps = preset.settings();
+    let a = Resolved {
+        seeds: args.seeds,
+        steps: args.steps.unwrap_or(if preset == Preset::Draft {
+            30
+        } else {
+            ps.steps
+        }),
+        size: args.size.unwrap_or(ps.size),
+        samples: args.samples.unwrap_or(ps.samples),
+        paths: args.paths.unwrap_or(ps.paths),
+        teacher: args.teacher,
+        model: args.model,
+        scorer: args.scorer,
+        json: args.json,
+    };
+    if a.seeds == 0 || a.steps == 0 || a.samples == 0 || a.paths == 0 {
+        return Err(CliError::Usage(
+            "--seeds, --steps, --samples and --paths must be positive".into(),
+        ));
+    }
+    if !(8..=512).contains(&a.size) {
+        return Err(CliError::Usage("--size must be in 8..=512".into()));
+    }
+    let usage = |e: crate::pipeline::PipelineError| CliError::Usage(e.to_string());
+    let models = if let Some(dir) = &a.model {
+        Models::load_sd(dir, a.scorer.as_deref(), a.size).map_err(usage)?
+    } else if let Some(spec) = &a.teacher {
+        let dir = spec.strip_prefix("analytic:").ok_or_else(|| {
+            CliError::Usage(format!("unknown teacher {spec:?}: use analytic:DIR"))
+        })?;
+        Models::load_analytic(std::path::Path::new(dir), a.scorer.as_deref(), a.size)
+            .map_err(usage)?
+    } else {
+        let cfg = AnalyticTeacherConfig {
+            image_size: a.size,
+            pool: 1,
+            num_train_timesteps: 1000,
+        };
+        let t = AnalyticTeacher::new(cfg, builtin_targets(a.size)?)
+            .map_err(|e| CliError::Usage(e.to_string()))?;
+        Models {
+            teacher: TeacherModel::Analytic(t),
+            scorer: None,
+        }
+    };
+    let targets: Vec<Image> = match &models.teacher {
+        TeacherModel::Analytic(t) => t.targets().to_vec(),
+        TeacherModel::Sd(_) => Vec::new(),
+    };
+    let mut cells = Vec::new();
+    for method in Method::ALL {
+        for style in Style::ALL {
+            let mut cell = StabilityCell {
+                method: *method,
+                style,
+                runs: a.seeds,
+                errors: 0,
+                nan: 0,
+                collapsed: 0,
+                oversaturated: 0,
+                diverged: 0,
+                failed: 0,
+                failure_rate: 0.0,
+                psnr_min: None,
+                psnr_median: None,
+                psnr_max: None,
+                seconds_median: 0.0,
+                paths_needed_median: 0.0,
+            };
+            let (mut psnrs, mut secs, mut paths) = (Vec::new(), Vec::new(), Vec::new());
+            for seed in 0..a.seeds {
+                let req = TextRequest {
+                    caption: "an icon".into(),
+                    style,
+                    method: *method,
+                    preset,
+                    paths: (style != Style::PixelArt).then_some(a.paths),
+                    steps: Some(a.steps),
+                    samples: Some(a.samples),
+                    seed,
+                    start: Start::Method,
+                };
+                let t0 = Instant::now();
+                let r = run_text(&models, &req, &NullSink, &CancelToken::new());
+                secs.push(t0.elapsed().as_secs_f64());
+                let out = match r {
+                    Ok(o) => o,
+                    Err(e) => {
+                        eprintln!("{method:?} {style} seed {seed}: error: {e}");
+                        cell.errors += 1;
+                        cell.failed += 1;
+                        continue;
+                    }
+                };
+                let img = crate::raster::render(&out.scene);
+                let nan = out.svg.contains("NaN") || img.data.iter().any(|v| !v.is_finite());
+                let collapsed = out.paths == 0 || spread(&img) < COLLAPSED_SPREAD;
+                let over = chroma(&img) > OVERSATURATED_CHROMA;
+                let sds = &out.detail["sds"];
+                let diverged = !sds.is_null()
+                    && (sds["lr_halvings"].as_u64().unwrap_or(0) > 0
+                        || !sds["last_loss"].as_f64().is_some_and(f64::is_finite)
+                        || sds["skipped_nonfinite"].as_u64().unwrap_or(0) > (a.steps / 4) as u64);
+                cell.nan += nan as u64;
+                cell.collapsed += collapsed as u64;
+                cell.oversaturated += over as u64;
+                cell.diverged += diverged as u64;
+                cell.failed += (nan || collapsed || over || diverged) as u64;
+                paths.push(out.paths as f64);
+                if let Some(best) = targets
+                    .iter()
+                    .filter(|t| t.width == img.width && t.height == img.height)
+                    .map(|t| psnr(&img, t).min(PSNR_CAP))
+                    .max_by(f64::total_cmp)
+                {
+                    psnrs.push(best);
+                }
+            }
+            cell.failure_rate = cell.failed as f64 / a.seeds as f64;
+            cell.psnr_min = psnrs.iter().copied().min_by(f64::total_cmp);
+            cell.psnr_max = psnrs.iter().copied().max_by(f64::total_cmp);
+            cell.psnr_median = median(psnrs);
+            cell.seconds_median = median(secs).unwrap_or(f64::NAN);
+            cell.paths_needed_median = median(paths).unwrap_or(0.0);
+            if !a.json {
+                println!(
+                    "{:<12} {:<12} fail {}/{} (err {} nan {} collapsed {} oversat {} diverged {})  psnr {} / {} / {}  {:.2}s  paths {}",
+                    format!("{method:?}"),
+                    style.to_string(),
+                    cell.failed,
+                    cell.runs,
+                    cell.errors,
+                    cell.nan,
+                    cell.collapsed,
+                    cell.oversaturated,
+                    cell.diverged,
+                    fmt_opt(cell.psnr_min),
+                    fmt_opt(cell.psnr_median),
+                    fmt_opt(cell.psnr_max),
+                    cell.seconds_median,
+                    cell.paths_needed_median
+                );
+            }
+            cells.push(cell);
+        }
+    }
+    let report = StabilityReport {
+        teacher: models.teacher().name(),
+        preset,
+        seeds: a.seeds,
+        steps: a.steps,
+        size: a.size,
+        cells,
+    };
+    if a.json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&report).map_err(|e| CliError::Other(e.into()))?
+        );
+    }
+    Ok(())
+}
+
+fn fmt_opt(v: Option<f64>) -> String {
+    v.map_or_else(|| "-".into(), |x| format!("{x:.1}"))
+}

@@ -1,0 +1,661 @@
+//! The paper's methods joined from the stages, shared by `vectorfusion generate` and the
+//! service's [`super::DefaultExecutor`]:
+//!
+//! - `scratch`: SDS from a random init of the style ([`crate::stages::sds`]);
+//! - `sd_live`: sample K images with the style suffix, keep the best by CLIP
+//!   ([`ClipScorer::best_of`]), trace it with LIVE ([`crate::stages::live`]); pixel art is the
+//!   L1 pixelation of the best sample instead, sketch the traced outlines as strokes;
+//! - `sd_live_sds`: `sd_live`, then SDS without augmentation, re-initialising faint paths and
+//!   paths with area below 64 px² (at 512 px, scaled to the working size);
+//! - a user image (traced with LIVE first) or SVG (imported) as the start of SDS fine-tuning.
+//!
+//! At the end, iconography paths that stayed faint or tiny are pruned and the number of paths
+//! the scene needed is reported in the output `detail`.
+
+use super::{PipelineError, Preset};
+use crate::image::Image;
+use crate::image::ops::resize;
+use crate::models::clip::ClipScorer;
+use crate::models::scheduler::SamplerKind;
+use crate::progress::{CancelToken, Progress, ProgressSink};
+use crate::scene::{Rgba, Scene, Shape, ShapeKind, Stroke};
+use crate::stages::live::prune::weak_paths;
+use crate::stages::live::{self, LiveConfig, PathBudget};
+use crate::stages::sds::{RasterBackend, SdsConfig, SdsError, gaussian, run_sds};
+use crate::stages::styles::{Style, pixelate_l1, random_circle, random_stroke};
+use crate::teacher::{AnalyticTeacher, AnalyticTeacherConfig, SdTeacher, Teacher};
+use candle_core::{DType, Tensor};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use serde::Serialize;
+use serde_json::json;
+use std::path::Path;
+
+pub use super::Method;
+
+/// What a preset sets. Explicit `paths`/`steps`/`samples` in a request override it.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct PresetSettings {
+    /// Teacher input side in pixels (the SVG is written at this width).
+    pub size: u32,
+    /// SDS steps.
+    pub steps: u32,
+    /// Paths (iconography) or strokes (sketch); pixel art is always a 32x32 grid.
+    pub paths: usize,
+    /// Images sampled for `sd_live*` (K).
+    pub samples: u32,
+    /// Sampler steps per image.
+    pub sample_steps: usize,
+    /// LIVE iterations per stage (and for the final pass).
+    pub live_iters: u32,
+    /// SVG snapshot period of the SDS and LIVE stages.
+    pub snapshot_every: u32,
+    /// Encoder for SDS: `"taesd"` when a TAESD directory is configured and the preset allows it,
+    /// otherwise `"vae"`.
+    pub prefer_taesd: bool,
+}
+
+impl Preset {
+    /// The settings of this preset.
+    pub fn settings(self) -> PresetSettings {
+        match self {
+            Preset::Draft => PresetSettings {
+                size: 32,
+                steps: 8,
+                paths: 8,
+                samples: 2,
+                sample_steps: 3,
+                live_iters: 8,
+                snapshot_every: 4,
+                prefer_taesd: true,
+            },
+            Preset::Fast => PresetSettings {
+                size: 64,
+                steps: 100,
+                paths: 16,
+                samples: 4,
+                sample_steps: 10,
+                live_iters: 40,
+                snapshot_every: 20,
+                prefer_taesd: true,
+            },
+            Preset::Balanced => PresetSettings {
+                size: 256,
+                steps: 500,
+                paths: 64,
+                samples: 8,
+                sample_steps: 25,
+                live_iters: 100,
+                snapshot_every: 50,
+                prefer_taesd: true,
+            },
+            Preset::Paper => PresetSettings {
+                size: 512,
+                steps: 1000,
+                paths: 128,
+                samples: 64,
+                sample_steps: 50,
+                live_iters: 200,
+                snapshot_every: 100,
+                prefer_taesd: false,
+            },
+        }
+    }
+
+    /// The LIVE preset used for vectorize jobs.
+    pub fn live(self) -> live::Preset {
+        match self {
+            Preset::Draft | Preset::Fast => live::Preset::Fast,
+            Preset::Balanced => live::Preset::Balanced,
+            Preset::Paper => live::Preset::Quality,
+        }
+    }
+}
+
+impl std::str::FromStr for Preset {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s.to_ascii_lowercase().as_str() {
+            "draft" => Ok(Preset::Draft),
+            "fast" => Ok(Preset::Fast),
+            "balanced" | "default" => Ok(Preset::Balanced),
+            "paper" | "quality" => Ok(Preset::Paper),
+            other => Err(format!(
+                "unknown preset {other:?} (expected draft, fast, balanced or paper)"
+            )),
+        }
+    }
+}
+
+impl std::str::FromStr for Method {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s.to_ascii_lowercase().replace('-', "_").as_str() {
+            "scratch" => Ok(Method::Scratch),
+            "sd_live" => Ok(Method::SdLive),
+            "sd_live_sds" => Ok(Method::SdLiveSds),
+            other => Err(format!(
+                "unknown method {other:?} (expected scratch, sd_live or sd_live_sds)"
+            )),
+        }
+    }
+}
+
+/// The service's style enum as the stages' style.
+pub fn stage_style(s: super::Style) -> Style {
+    match s {
+        super::Style::Iconography => Style::Iconography,
+        super::Style::PixelArt => Style::PixelArt,
+        super::Style::Sketch => Style::Sketch,
+    }
+}
+
+/// The diffusion model behind a run.
+pub enum TeacherModel {
+    /// Stable Diffusion: samples images and is the SDS teacher.
+    Sd(Box<SdTeacher>),
+    /// The analytic TEST teacher: its exact distribution is uniform over its target images, so
+    /// "sampling" draws targets; SDS distils towards them.
+    Analytic(AnalyticTeacher),
+}
+
+/// Everything a text run needs, loaded once per teacher size.
+pub struct Models {
+    pub teacher: TeacherModel,
+    pub scorer: Option<ClipScorer>,
+}
+
+impl std::fmt::Debug for Models {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Models")
+            .field("teacher", &self.teacher().name())
+            .field(
+                "scorer",
+                &self.scorer.as_ref().map(|s| s.name().to_string()),
+            )
+            .finish()
+    }
+}
+
+fn failed(what: &str, e: impl std::fmt::Display) -> PipelineError {
+    PipelineError::Failed(format!("{what}: {e}"))
+}
+
+impl Models {
+    /// Loads Stable Diffusion from `sd_dir` for `size` px inputs and, when given, the CLIP scorer.
+    pub fn load_sd(sd_dir: &Path, scorer: Option<&Path>, size: u32) -> Result<Self, PipelineError> {
+        let teacher = SdTeacher::load(sd_dir, size).map_err(|e| {
+            PipelineError::ModelsNotConfigured(format!(
+                "cannot load Stable Diffusion from {}: {e}",
+                sd_dir.display()
+            ))
+        })?;
+        Ok(Models {
+            teacher: TeacherModel::Sd(Box::new(teacher)),
+            scorer: load_scorer(scorer)?,
+        })
+    }
+
+    /// The analytic test teacher over the PNG targets in `dir`.
+    pub fn load_analytic(
+        dir: &Path,
+        scorer: Option<&Path>,
+        size: u32,
+    ) -> Result<Self, PipelineError> {
+        let pool = if size >= 64 && size % 64 == 0 {
+            size / 64
+        } else {
+            1
+        };
+        let teacher = AnalyticTeacher::from_dir(
+            dir,
+            AnalyticTeacherConfig {
+                image_size: size,
+                pool,
+                num_train_timesteps: 1000,
+            },
+        )
+        .map_err(|e| PipelineError::ModelsNotConfigured(e.to_string()))?;
+        Ok(Models {
+            teacher: TeacherModel::Analytic(teacher),
+            scorer: load_scorer(scorer)?,
+        })
+    }
+
+    pub fn teacher(&self) -> &dyn Teacher {
+        match &self.teacher {
+            TeacherModel::Sd(t) => t.as_ref(),
+            TeacherModel::Analytic(t) => t,
+        }
+    }
+
+    /// Samples `k` images for `prompt` (seeded), reporting stage `"sample"` progress.
+    pub fn sample(
+        &self,
+        prompt: &str,
+        k: u32,
+        sample_steps: usize,
+        seed: u64,
+        sink: &dyn ProgressSink,
+        cancel: &CancelToken,
+    ) -> Result<Vec<Image>, PipelineError> {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x5a3b_1e00);
+        let mut out = Vec::with_capacity(k as usize);
+        match &self.teacher {
+            TeacherModel::Sd(t) => {
+                let sd = t.model();
+                let (cond, uncond) = sd
+                    .text_embeddings(prompt)
+                    .map_err(|e| failed("text encoder", e))?;
+                let [c, h, w] = t.latent_shape();
+                for i in 0..k {
+                    if cancel.is_cancelled() {
+                        return Err(PipelineError::Cancelled);
+                    }
+                    let noise: Vec<f32> = (0..c * h * w).map(|_| gaussian(&mut rng)).collect();
+                    let noise = Tensor::from_vec(noise, (1, c, h, w), sd.device())
+                        .map_err(|e| failed("noise", e))?;
+                    let traj = sd
+                        .sample(&noise, &cond, &uncond, 7.5, sample_steps, SamplerKind::Ddim)
+                        .map_err(|e| failed("sampling", e))?;
+                    let z = traj
+                        .last()
+                        .ok_or_else(|| failed("sampling", "no sampler steps"))?;
+                    let img = sd.decode(z).map_err(|e| failed("VAE decode", e))?;
+                    out.push(tensor_to_image(&img)?);
+                    sink.report(Progress::new("sample", i + 1, k));
+                }
+            }
+            TeacherModel::Analytic(t) => {
+                use rand::RngExt;
+                let targets = t.targets();
+                if targets.is_empty() {
+                    return Err(failed("sampling", "the test teacher has no targets"));
+                }
+                for i in 0..k {
+                    let j = rng.random_range(0..targets.len());
+                    out.push(targets[j].clone());
+                    sink.report(Progress::new("sample", i + 1, k));
+                }
+            }
+        }
+        Ok(out)
+    }
+}
+
+fn load_scorer(dir: Option<&Path>) -> Result<Option<ClipScorer>, PipelineError> {
+    dir.map(|d| {
+        ClipScorer::load(d).map_err(|e| {
+            PipelineError::ModelsNotConfigured(format!(
+                "cannot load the CLIP scorer from {}: {e}",
+                d.display()
+            ))
+        })
+    })
+    .transpose()
+}
+
+/// `[1, 3, H, W]` in `[0, 1]` → opaque [`Image`]; non-finite values become an error.
+fn tensor_to_image(t: &Tensor) -> Result<Image, PipelineError> {
+    let dims = t.dims().to_vec();
+    let (h, w) = match dims.as_slice() {
+        [1, 3, h, w] => (*h, *w),
+        _ => return Err(failed("VAE decode", format!("unexpected shape {dims:?}"))),
+    };
+    let v: Vec<f32> = t
+        .to_dtype(DType::F32)
+        .and_then(|x| x.flatten_all())
+        .and_then(|x| x.to_vec1())
+        .map_err(|e| failed("VAE decode", e))?;
+    if v.iter().any(|x| !x.is_finite()) {
+        return Err(failed("VAE decode", "non-finite pixels"));
+    }
+    let mut im = Image::new(w as u32, h as u32);
+    for p in 0..h * w {
+        for c in 0..3 {
+            im.data[4 * p + c] = v[c * h * w + p].clamp(0.0, 1.0);
+        }
+        im.data[4 * p + 3] = 1.0;
+    }
+    Ok(im)
+}
+
+/// Where a text run starts.
+#[derive(Clone, Debug, Default)]
+pub enum Start {
+    /// From the method (random init or sampled image).
+    #[default]
+    Method,
+    /// Trace this image with LIVE, then fine-tune with SDS.
+    Image(Image),
+    /// Fine-tune this imported scene with SDS.
+    Svg(Scene),
+}
+
+/// A caption → SVG request.
+#[derive(Clone, Debug)]
+pub struct TextRequest {
+    pub caption: String,
+    pub style: Style,
+    pub method: Method,
+    pub preset: Preset,
+    pub paths: Option<usize>,
+    pub steps: Option<u32>,
+    pub samples: Option<u32>,
+    pub seed: u64,
+    pub start: Start,
+}
+
+/// The result of a run.
+#[derive(Clone, Debug)]
+pub struct MethodOutput {
+    pub scene: Scene,
+    pub svg: String,
+    /// Paths in the final scene.
+    pub paths: usize,
+    pub detail: serde_json::Value,
+}
+
+/// Paths below this area (px² at 512 px) are re-initialised in `sd_live_sds` and pruned at the
+/// end (paper: 64 px²).
+pub const MIN_AREA_512: f32 = 64.0;
+/// Paths with fill opacity below this are faint.
+pub const MIN_OPACITY: f32 = 0.05;
+
+fn min_area_at(size: u32) -> f32 {
+    let k = size as f32 / 512.0;
+    MIN_AREA_512 * k * k
+}
+
+fn live_cfg(size: u32, paths: usize, iters: u32, seed: u64, snapshot_every: u32) -> LiveConfig {
+    LiveConfig {
+        size,
+        budget: PathBudget::fixed(paths.clamp(1, 1024)),
+        iters_per_stage: iters,
+        final_iters: iters,
+        seed,
+        snapshot_every,
+        ..LiveConfig::preset(live::Preset::Fast)
+    }
+}
+
+fn trace(
+    image: &Image,
+    size: u32,
+    paths: usize,
+    ps: &PresetSettings,
+    seed: u64,
+    sink: &dyn ProgressSink,
+    cancel: &CancelToken,
+) -> Result<(Scene, serde_json::Value), PipelineError> {
+    let cfg = live_cfg(size, paths, ps.live_iters, seed, ps.snapshot_every);
+    let img = if image.width.max(image.height) > size {
+        let k = size as f32 / image.width.max(image.height) as f32;
+        resize(
+            image,
+            ((image.width as f32 * k).round() as u32).max(1),
+            ((image.height as f32 * k).round() as u32).max(1),
+        )
+    } else {
+        image.clone()
+    };
+    let r = live::vectorize(&img, &cfg, sink, cancel).map_err(|e| match e {
+        live::LiveError::Cancelled => PipelineError::Cancelled,
+        other => failed("LIVE", other),
+    })?;
+    let detail = json!({"paths": r.paths, "psnr": r.psnr, "pruned": r.pruned, "steps": r.steps});
+    Ok((r.scene, detail))
+}
+
+/// Sketch from a trace: every closed outline becomes an open black stroke.
+fn outlines_as_strokes(scene: &Scene, size: u32) -> Result<Scene, PipelineError> {
+    let mut out =
+        Scene::new(scene.width, scene.height, Rgba::WHITE).map_err(|e| failed("scene", e))?;
+    for s in &scene.shapes {
+        if s.kind != ShapeKind::ClosedCubic || s.points.is_empty() {
+            continue;
+        }
+        let mut pts = s.points.clone();
+        pts.push(s.points[0]);
+        let stroke = Stroke {
+            color: Rgba::BLACK,
+            width: Style::stroke_width(size),
+        };
+        out.shapes
+            .push(Shape::open_cubic(pts, stroke).map_err(|e| failed("scene", e))?);
+    }
+    Ok(out)
+}
+
+fn scaled(scene: &Scene, width: u32) -> Result<Scene, PipelineError> {
+    if scene.width == width {
+        return Ok(scene.clone());
+    }
+    Ok(scene.scaled_to_width(width))
+}
+
+/// Runs `req` with `models`: progress (with SVG snapshots) goes to `sink`, `cancel` is polled
+/// between steps.
+pub fn run_text(
+    models: &Models,
+    req: &TextRequest,
+    sink: &dyn ProgressSink,
+    cancel: &CancelToken,
+) -> Result<MethodOutput, PipelineError> {
+    let ps = req.preset.settings();
+    let teacher = models.teacher();
+    let size = teacher.image_size();
+    let steps = req.steps.unwrap_or(ps.steps).max(1);
+    let paths = req.paths.unwrap_or(match req.style {
+        Style::Iconography => ps.paths,
+        Style::PixelArt => req.style.default_paths(),
+        Style::Sketch => ps.paths.min(Style::Sketch.default_paths()),
+    });
+    if paths == 0 || paths > 1024 {
+        return Err(PipelineError::InvalidInput(format!(
+            "paths must be in 1..=1024, got {paths}"
+        )));
+    }
+    let k = req.samples.unwrap_or(ps.samples).max(1);
+    let prompt = req.style.prompt(&req.caption);
+    let mut detail = json!({
+        "method": req.method,
+        "style": req.style,
+        "preset": req.preset,
+        "teacher": teacher.name(),
+        "encoder": "vae",
+        "size": size,
+        "prompt": prompt,
+    });
+    let t0 = std::time::Instant::now();
+
+    // 1. The starting scene, and whether SDS (with augmentation) follows.
+    let mut sds_after = req.method != Method::SdLive;
+    let mut augment = true;
+    let start_scene: Scene = match &req.start {
+        Start::Svg(scene) => {
+            sds_after = true;
+            augment = false;
+            scaled(scene, size)?
+        }
+        Start::Image(image) => {
+            sds_after = true;
+            augment = false;
+            let (scene, d) = trace(image, size, paths, &ps, req.seed, sink, cancel)?;
+            detail["live"] = d;
+            scaled(&scene, size)?
+        }
+        Start::Method if req.method == Method::Scratch => {
+            let cfg = SdsConfig::for_style(req.style, &req.caption, steps, size);
+            let mut rng = ChaCha8Rng::seed_from_u64(req.seed ^ 0x5eed_1a17);
+            req.style
+                .init_scene(cfg.render_size(size), paths, &mut rng)
+                .map_err(|e| failed("initial scene", e))?
+        }
+        Start::Method => {
+            augment = false;
+            let images = models.sample(&prompt, k, ps.sample_steps, req.seed, sink, cancel)?;
+            let (best, scores) = match &models.scorer {
+                Some(scorer) => scorer
+                    .best_of(&images, &req.caption)
+                    .map_err(|e| failed("CLIP rerank", e))?,
+                None => (0, Vec::new()),
+            };
+            let rerank = json!({
+                "scorer": models.scorer.as_ref().map(|s| s.name().to_string()),
+                "scores": scores,
+                "best": best,
+                "samples": k,
+            });
+            let mut ev = Progress::new("rerank", 1, 1);
+            ev.detail = Some(rerank.clone());
+            sink.report(ev);
+            detail["rerank"] = rerank;
+            let best_img = images
+                .get(best)
+                .ok_or_else(|| failed("rerank", "best index out of range"))?;
+            match req.style {
+                Style::PixelArt => {
+                    pixelate_l1(best_img, size).map_err(|e| failed("pixelation", e))?
+                }
+                Style::Iconography | Style::Sketch => {
+                    let (scene, d) = trace(best_img, size, paths, &ps, req.seed, sink, cancel)?;
+                    detail["live"] = d;
+                    let scene = scaled(&scene, size)?;
+                    let mut scene = if req.style == Style::Sketch {
+                        outlines_as_strokes(&scene, size)?
+                    } else {
+                        scene
+                    };
+                    // A flat sample can trace to (almost) nothing: top the scene up with the
+                    // style's random shapes so SDS has something to move (sketches always get
+                    // their stroke count).
+                    let want = if req.style == Style::Sketch { paths } else { 1 };
+                    let mut rng = ChaCha8Rng::seed_from_u64(req.seed ^ 0x7095_0f11);
+                    let mut added = 0usize;
+                    while scene.shapes.len() < want {
+                        let shape = if req.style == Style::Sketch {
+                            random_stroke(size, &mut rng)
+                        } else {
+                            random_circle(size, &mut rng)
+                        }
+                        .map_err(|e| failed("initial scene", e))?;
+                        scene.shapes.push(shape);
+                        added += 1;
+                    }
+                    detail["topped_up"] = json!(added);
+                    scene
+                }
+            }
+        }
+    };
+    if cancel.is_cancelled() {
+        return Err(PipelineError::Cancelled);
+    }
+
+    // 2. Score distillation.
+    let mut scene = start_scene;
+    if sds_after {
+        let mut cfg = SdsConfig::for_style(req.style, &req.caption, steps, size);
+        cfg.seed = req.seed;
+        cfg.snapshot_every = ps.snapshot_every;
+        if !augment {
+            cfg.augment = None;
+            if let Some(r) = cfg.reinit.as_mut() {
+                r.min_area = Some(min_area_at(size));
+            }
+        }
+        let render = cfg.render_size(size);
+        let scene_in = scaled(&scene, render)?;
+        let out =
+            run_sds(&RasterBackend, teacher, scene_in, &cfg, sink, cancel).map_err(
+                |e| match e {
+                    SdsError::Config(m) => PipelineError::InvalidInput(m),
+                    other => failed("score distillation", other),
+                },
+            )?;
+        if out.stats.cancelled {
+            return Err(PipelineError::Cancelled);
+        }
+        detail["sds"] = serde_json::to_value(&out.stats).unwrap_or_default();
+        detail["sds"]["augment"] = json!(augment);
+        scene = scaled(&out.scene, size)?;
+    }
+
+    // 3. Prune faint/tiny paths (filled free-form paths only).
+    let before = scene.shapes.len();
+    let mut pruned = 0usize;
+    if req.style == Style::Iconography {
+        let weak = weak_paths(&scene, MIN_OPACITY, min_area_at(size));
+        if weak.len() < scene.shapes.len() {
+            for &i in weak.iter().rev() {
+                scene.shapes.remove(i);
+            }
+            pruned = weak.len();
+        }
+    }
+    detail["paths_initial"] = json!(before);
+    detail["paths_pruned"] = json!(pruned);
+    detail["paths_needed"] = json!(scene.shapes.len());
+    detail["seconds"] = json!(t0.elapsed().as_secs_f64());
+    scene.validate().map_err(|e| failed("final scene", e))?;
+    let svg = RasterBackend::svg_text(&scene);
+    let mut done = Progress::new("done", 1, 1);
+    done.svg = Some(svg.clone());
+    sink.report(done);
+    Ok(MethodOutput {
+        paths: scene.shapes.len(),
+        scene,
+        svg,
+        detail,
+    })
+}
+
+/// Image → SVG with LIVE (vectorize jobs), with an `auto` path budget capped at `max_paths`.
+pub fn run_vectorize(
+    image: &Image,
+    preset: Preset,
+    max_paths: usize,
+    seed: u64,
+    sink: &dyn ProgressSink,
+    cancel: &CancelToken,
+) -> Result<MethodOutput, PipelineError> {
+    let mut cfg = LiveConfig::preset(preset.live());
+    cfg.seed = seed;
+    if let PathBudget::Auto { max_paths: m, .. } = &mut cfg.budget {
+        *m = max_paths.clamp(1, 1024);
+    } else {
+        cfg.budget = PathBudget::Auto {
+            stage: 8.min(max_paths.max(1)),
+            max_paths: max_paths.clamp(1, 1024),
+            min_gain_db_per_path: 0.05,
+            prune_tolerance: 2e-5,
+        };
+    }
+    if preset == Preset::Draft {
+        cfg.iters_per_stage = 20;
+        cfg.final_iters = 10;
+        cfg.size = 64;
+    }
+    let r = live::vectorize(image, &cfg, sink, cancel).map_err(|e| match e {
+        live::LiveError::Cancelled => PipelineError::Cancelled,
+        live::LiveError::Target(m) => PipelineError::InvalidInput(m),
+        other => failed("LIVE", other),
+    })?;
+    let svg = RasterBackend::svg_text(&r.scene);
+    let detail = json!({
+        "method": "live",
+        "preset": preset,
+        "psnr": r.psnr,
+        "paths_needed": r.paths,
+        "paths_pruned": r.pruned,
+        "steps": r.steps,
+        "stages": r.stages,
+    });
+    Ok(MethodOutput {
+        paths: r.scene.shapes.len(),
+        scene: r.scene,
+        svg,
+        detail,
+    })
+}

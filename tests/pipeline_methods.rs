@@ -1,0 +1,397 @@
+//! The shared pipeline (`pipeline::methods`) on the tiny Stable Diffusion and CLIP fixtures:
+//! every method × style, starts from an image or SVG, the `generate` binary, the real
+//! `DefaultExecutor` on vectorize and text jobs, and a text job through the real service.
+
+mod common;
+
+use common::http::{get, post_json, sse};
+use common::wait_status;
+use serde_json::json;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Duration;
+use vectorfusion::image::Image;
+use vectorfusion::pipeline::methods::{Models, Start, TextRequest, run_text};
+use vectorfusion::pipeline::{
+    DefaultExecutor, Executor, JobContext, JobKind, JobSpec, Method, ModelDirs, Preset, Style,
+};
+use vectorfusion::progress::{CancelToken, NullSink, Progress};
+use vectorfusion::stages::styles::Style as StageStyle;
+
+fn fixture(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/fixtures")
+        .join(name)
+}
+
+fn models() -> Models {
+    Models::load_sd(&fixture("sd-tiny"), Some(&fixture("clip-tiny")), 32).unwrap()
+}
+
+fn assert_finite_svg(svg: &str) {
+    assert!(svg.starts_with("<svg"), "{svg}");
+    assert!(!svg.contains("NaN") && !svg.contains("inf"), "{svg}");
+    let scene = vectorfusion::svg::from_svg(svg).unwrap();
+    scene.validate().unwrap();
+    resvg::usvg::Tree::from_str(svg, &resvg::usvg::Options::default()).unwrap();
+}
+
+fn req(method: Method, style: StageStyle, start: Start) -> TextRequest {
+    TextRequest {
+        caption: "a crown".into(),
+        style,
+        method,
+        preset: Preset::Draft,
+        paths: None,
+        steps: Some(4),
+        samples: Some(2),
+        seed: 7,
+        start,
+    }
+}
+
+#[test]
+fn every_method_and_style_runs_on_the_tiny_model_without_nan() {
+    let m = models();
+    for method in Method::ALL {
+        for style in StageStyle::ALL {
+            let out = run_text(
+                &m,
+                &req(*method, style, Start::Method),
+                &NullSink,
+                &CancelToken::new(),
+            )
+            .unwrap_or_else(|e| panic!("{method:?} {style:?}: {e}"));
+            assert_finite_svg(&out.svg);
+            assert!(out.paths > 0, "{method:?} {style:?}: empty scene");
+            assert_eq!(out.scene.width, 32);
+            for s in &out.scene.shapes {
+                assert!(s.points.iter().all(|p| p.x.is_finite() && p.y.is_finite()));
+            }
+            let d = &out.detail;
+            assert_eq!(d["paths_needed"], out.paths);
+            match method {
+                Method::Scratch => {
+                    assert!(d["rerank"].is_null());
+                    assert_eq!(d["sds"]["steps_done"], 4);
+                    assert_eq!(d["sds"]["augment"], true);
+                }
+                Method::SdLive => {
+                    assert_eq!(d["rerank"]["scores"].as_array().unwrap().len(), 2);
+                    assert!(d["sds"].is_null(), "sd_live has no SDS: {d}");
+                }
+                Method::SdLiveSds => {
+                    assert_eq!(d["rerank"]["scores"].as_array().unwrap().len(), 2);
+                    assert_eq!(d["sds"]["augment"], false);
+                    assert_eq!(d["sds"]["steps_done"], 4);
+                }
+            }
+            if style == StageStyle::PixelArt {
+                assert_eq!(out.paths, 32 * 32, "pixel art keeps its grid");
+            }
+        }
+    }
+}
+
+#[test]
+fn rerank_keeps_the_highest_clip_score() {
+    let m = models();
+    let out = run_text(
+        &m,
+        &TextRequest {
+            samples: Some(3),
+            ..req(Method::SdLive, StageStyle::Iconography, Start::Method)
+        },
+        &NullSink,
+        &CancelToken::new(),
+    )
+    .unwrap();
+    let scores: Vec<f64> = out.detail["rerank"]["scores"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    let best = out.detail["rerank"]["best"].as_u64().unwrap() as usize;
+    assert_eq!(scores.len(), 3);
+    assert!(scores.iter().all(|s| *s <= scores[best]), "{scores:?}");
+}
+
+#[test]
+fn same_seed_same_svg() {
+    let m = models();
+    let r = req(Method::SdLiveSds, StageStyle::Iconography, Start::Method);
+    let a = run_text(&m, &r, &NullSink, &CancelToken::new()).unwrap();
+    let b = run_text(&m, &r, &NullSink, &CancelToken::new()).unwrap();
+    assert_eq!(a.svg, b.svg);
+}
+
+fn disc_image(side: u32) -> Image {
+    let mut im = Image::filled(side, side, [1.0, 1.0, 1.0, 1.0]);
+    let c = side as f32 / 2.0;
+    for y in 0..side {
+        for x in 0..side {
+            let (dx, dy) = (x as f32 + 0.5 - c, y as f32 + 0.5 - c);
+            if dx * dx + dy * dy < (side as f32 * 0.3).powi(2) {
+                let i = 4 * (y * side + x) as usize;
+                im.data[i..i + 4].copy_from_slice(&[0.9, 0.2, 0.1, 1.0]);
+            }
+        }
+    }
+    im
+}
+
+#[test]
+fn starts_from_a_user_image_or_svg() {
+    let m = models();
+    let out = run_text(
+        &m,
+        &req(
+            Method::SdLiveSds,
+            StageStyle::Iconography,
+            Start::Image(disc_image(48)),
+        ),
+        &NullSink,
+        &CancelToken::new(),
+    )
+    .unwrap();
+    assert_finite_svg(&out.svg);
+    assert!(out.detail["live"]["psnr"].as_f64().unwrap() > 10.0);
+    assert!(out.detail["rerank"].is_null(), "no sampling from an image");
+    assert_eq!(out.detail["sds"]["steps_done"], 4);
+
+    let svg = r##"<svg xmlns="http://www.w3.org/2000/svg" width="64" height="64">
+        <rect width="64" height="64" fill="#ffffff"/>
+        <path d="M10 10 L50 10 L50 50 L10 50 Z" fill="#3366cc"/></svg>"##;
+    let scene = vectorfusion::svg::from_svg(svg).unwrap();
+    let out = run_text(
+        &m,
+        &req(Method::Scratch, StageStyle::Iconography, Start::Svg(scene)),
+        &NullSink,
+        &CancelToken::new(),
+    )
+    .unwrap();
+    assert_finite_svg(&out.svg);
+    assert_eq!(out.scene.width, 32, "scaled to the teacher size");
+    assert_eq!(out.paths, 1);
+}
+
+#[test]
+fn cancellation_stops_a_run() {
+    let m = models();
+    let cancel = CancelToken::new();
+    let c2 = cancel.clone();
+    let sink = move |p: Progress| {
+        if p.stage == "sample" {
+            c2.cancel();
+        }
+    };
+    let r = run_text(
+        &m,
+        &req(Method::SdLiveSds, StageStyle::Iconography, Start::Method),
+        &sink,
+        &cancel,
+    );
+    assert!(
+        matches!(r, Err(vectorfusion::pipeline::PipelineError::Cancelled)),
+        "{r:?}"
+    );
+}
+
+#[test]
+fn generate_binary_sd_live_sds_writes_a_valid_svg() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("crown.svg");
+    let st = std::process::Command::new(env!("CARGO_BIN_EXE_vectorfusion"))
+        .args(["generate", "a crown", "--method", "sd_live_sds"])
+        .args([
+            "--style",
+            "iconography",
+            "--preset",
+            "draft",
+            "--steps",
+            "4",
+        ])
+        .arg("--model")
+        .arg(fixture("sd-tiny"))
+        .arg("--scorer")
+        .arg(fixture("clip-tiny"))
+        .arg("-o")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    let svg = std::fs::read_to_string(&out).unwrap();
+    assert_finite_svg(&svg);
+    let err = String::from_utf8_lossy(&st.stderr);
+    assert!(err.contains("rerank"), "{err}");
+
+    // A bad method is a usage error (exit code 2), not a crash.
+    let st = std::process::Command::new(env!("CARGO_BIN_EXE_vectorfusion"))
+        .args(["generate", "x", "--method", "diffuse", "-o"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert_eq!(st.status.code(), Some(2), "{st:?}");
+}
+
+fn spec(kind: JobKind) -> JobSpec {
+    JobSpec {
+        kind,
+        caption: None,
+        image: None,
+        svg: None,
+        style: Style::Iconography,
+        method: Method::SdLiveSds,
+        paths: 8,
+        steps: 4,
+        seed: 3,
+        samples: 2,
+        preset: Preset::Draft,
+        priority: 0,
+    }
+}
+
+#[test]
+fn default_executor_vectorizes_an_image() {
+    let exec = DefaultExecutor::default();
+    let mut s = spec(JobKind::Vectorize);
+    s.image = Some(disc_image(32).encode_png().unwrap());
+    let out = exec
+        .run(&s, &JobContext::detached(CancelToken::new()))
+        .unwrap();
+    assert_finite_svg(&out.svg);
+    assert!(out.paths >= 1 && out.paths <= 8, "{}", out.paths);
+    assert!(
+        out.detail["psnr"].as_f64().unwrap() > 15.0,
+        "{}",
+        out.detail
+    );
+    // Text jobs are refused with a hint while no models are configured.
+    assert!(exec.text_ready().unwrap_err().contains("sd_dir"));
+}
+
+#[test]
+fn default_executor_text_ready_follows_the_model_config() {
+    let exec = DefaultExecutor::new(ModelDirs {
+        sd_dir: Some(fixture("sd-tiny")),
+        clip_dir: Some(fixture("clip-tiny")),
+        ..ModelDirs::default()
+    });
+    exec.text_ready().unwrap();
+    let missing = DefaultExecutor::new(ModelDirs {
+        sd_dir: Some(fixture("no-such-model")),
+        ..ModelDirs::default()
+    });
+    assert!(missing.text_ready().unwrap_err().contains("no-such-model"));
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn text_job_through_the_service_streams_snapshots_and_records_rerank_scores() {
+    let dir = tempfile::tempdir().unwrap();
+    let db = dir.path().join("jobs.db");
+    let mut cfg = vectorfusion::config::Config::default();
+    cfg.database.path = db.clone();
+    cfg.queue.workers = 1;
+    cfg.queue.poll_interval_ms = 20;
+    cfg.server.progress_interval_ms = 0;
+    cfg.server.snapshot_interval_ms = 0;
+    cfg.server.shutdown_grace_secs = 5;
+    cfg.models.sd_dir = fixture("sd-tiny").display().to_string();
+    cfg.models.clip_dir = fixture("clip-tiny").display().to_string();
+    let exec: Arc<dyn Executor> = Arc::new(DefaultExecutor::new(cfg.model_dirs()));
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let a = listener.local_addr().unwrap();
+    let (tx, rx) = tokio::sync::oneshot::channel::<()>();
+    let task = tokio::spawn(vectorfusion::server::run(cfg, exec, listener, async move {
+        let _ = rx.await;
+    }));
+
+    let r = get(a, "/readyz").await;
+    assert!(r.text().contains("ready"), "{}", r.text());
+    let body = json!({"kind": "text", "caption": "a crown", "style": "iconography",
+        "method": "sd_live_sds", "preset": "draft", "paths": 8, "steps": 6, "samples": 2,
+        "seed": 5});
+    let r = post_json(a, "/jobs", &body).await;
+    assert_eq!(r.status, 202, "{}", r.text());
+    let id = r.json()["id"].as_str().unwrap().to_string();
+    let (status, events) = sse(
+        a,
+        &format!("/jobs/{id}/events"),
+        &[],
+        Duration::from_secs(120),
+        |e| e.event == "done" || e.event == "failed",
+    )
+    .await;
+    assert_eq!(status, 200);
+    let names: Vec<&str> = events.iter().map(|e| e.event.as_str()).collect();
+    assert_eq!(*names.last().unwrap(), "done", "{names:?}");
+    let snaps: Vec<_> = events.iter().filter(|e| e.event == "snapshot").collect();
+    assert!(!snaps.is_empty(), "{names:?}");
+    for s in &snaps {
+        assert!(s.json()["svg"].as_str().unwrap().starts_with("<svg"));
+    }
+    wait_status(a, &id, &["succeeded"], Duration::from_secs(10)).await;
+    let r = get(a, &format!("/jobs/{id}/result.svg")).await;
+    assert_eq!(r.status, 200);
+    assert_finite_svg(&r.text());
+
+    let _ = tx.send(());
+    tokio::time::timeout(Duration::from_secs(20), task)
+        .await
+        .unwrap()
+        .unwrap()
+        .unwrap();
+    // The stored result detail holds the rerank scores.
+    let store = vectorfusion::store::Store::open(&db, 1).await.unwrap();
+    let res = store.result(&id).await.unwrap().unwrap();
+    let detail: serde_json::Value = serde_json::from_str(&res.detail).unwrap();
+    assert_eq!(
+        detail["rerank"]["scores"].as_array().unwrap().len(),
+        2,
+        "{detail}"
+    );
+    assert_eq!(detail["method"], "sd_live_sds");
+    assert!(detail["paths_needed"].as_u64().unwrap() >= 1);
+}
+
+#[test]
+fn bench_stability_reports_every_method_and_style_as_json() {
+    let st = std::process::Command::new(env!("CARGO_BIN_EXE_vectorfusion"))
+        .args([
+            "bench",
+            "stability",
+            "--seeds",
+            "2",
+            "--steps",
+            "5",
+            "--json",
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&st.stdout).unwrap();
+    let cells = v["cells"].as_array().unwrap();
+    assert_eq!(cells.len(), 9);
+    for c in cells {
+        assert_eq!(c["runs"], 2);
+        assert_eq!(c["errors"], 0, "{c}");
+        assert_eq!(c["nan"], 0, "{c}");
+        let rate = c["failure_rate"].as_f64().unwrap();
+        assert!((0.0..=1.0).contains(&rate));
+    }
+    // Sampling from the analytic teacher draws one of its targets; LIVE traces it closely.
+    let live = cells
+        .iter()
+        .find(|c| c["method"] == "sd_live" && c["style"] == "iconography")
+        .unwrap();
+    assert!(live["psnr_median"].as_f64().unwrap() > 20.0, "{live}");
+}
