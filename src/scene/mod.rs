@@ -74,8 +74,8 @@ impl Rgba {
     }
 }
 
-/// A stroke: colour and width in pixels (butt caps, round joins are not modelled: segments are
-/// stroked as a union of per-segment capsules, see `raster`).
+/// A stroke: colour and width in pixels. Strokes are drawn (and exported) with round caps and
+/// round joins: the covered area is the union of per-segment capsules, see `raster`.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Stroke {
     pub color: Rgba,
