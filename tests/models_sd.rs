@@ -159,7 +159,18 @@ fn encoder_vjp_matches_finite_differences() {
     let r = refs("sd-tiny");
     let x = r["vae.image"].to_dtype(DType::F64).unwrap();
     let d = &r["vjp.d_latents"];
-    let v = Tensor::randn(0f32, 1f32, x.dims(), &Device::Cpu).unwrap();
+    // A fixed pseudo-random direction (unseeded `Tensor::randn` made this test flaky).
+    let n = x.elem_count();
+    let mut state = 0x9e37_79b9_7f4a_7c15u64;
+    let vals: Vec<f32> = (0..n)
+        .map(|_| {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((state >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
+        })
+        .collect();
+    let v = Tensor::from_vec(vals, x.dims(), &Device::Cpu).unwrap();
     let g = sd.encode_vjp(&x.to_dtype(DType::F32).unwrap(), d).unwrap();
     let analytic = (&g * &v)
         .unwrap()
@@ -178,7 +189,10 @@ fn encoder_vjp_matches_finite_differences() {
             .to_scalar::<f32>()
             .unwrap() as f64
     };
-    let numeric = (f(h) - f(-h)) / (2.0 * h);
+    // Richardson extrapolation of two central differences cancels the O(h²) truncation error,
+    // which at h = 1e-2 alone reached several per cent on this tiny (strongly nonlinear) VAE.
+    let central = |h: f64| (f(h) - f(-h)) / (2.0 * h);
+    let numeric = (4.0 * central(h / 2.0) - central(h)) / 3.0;
     let rel = (analytic - numeric).abs() / numeric.abs().max(1e-3);
     assert!(rel < 2e-2, "analytic {analytic} vs numeric {numeric}");
 }
