@@ -61,7 +61,8 @@ pub struct RasterBench {
     pub threads: usize,
 }
 
-fn median(mut v: Vec<f64>) -> f64 {
+/// Median of `v` (mean of the middle two for even lengths); NaN when empty.
+pub(super) fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
     let n = v.len();
     if n == 0 {

@@ -108,15 +108,8 @@ where
         (Some(a), Some(b)) => Some((b - a) / reps.max(1) as f64),
         _ => None,
     };
-    ts.sort_by(f64::total_cmp);
-    let n = ts.len();
-    let med = if n % 2 == 1 {
-        ts[n / 2]
-    } else {
-        0.5 * (ts[n / 2 - 1] + ts[n / 2])
-    };
     Ok(Timing {
-        ms: med,
+        ms: super::bench::median(ts),
         peak: peak_rss_mb(),
         cpu,
     })
@@ -161,6 +154,39 @@ impl Report {
     }
 }
 
+/// Times one autoencoder's (VAE or TAESD) encoder forward, encoder VJP and decoder, each when
+/// selected by `--only`, and records them (with CPU time and peak RSS) in `r`.
+fn time_autoencoder(
+    r: &mut Report,
+    args: &BenchModelsArgs,
+    want: &dyn Fn(&str) -> bool,
+    say: &dyn Fn(&str),
+    mut encode: impl FnMut() -> Result<(), CliError>,
+    mut vjp: impl FnMut() -> Result<(), CliError>,
+    mut decode: impl FnMut() -> Result<(), CliError>,
+) -> Result<(), CliError> {
+    if want("encoder") {
+        say("encoder forward");
+        let Timing { ms, peak, cpu } = time_it(args.warmup, args.reps, &mut encode)?;
+        r.encoder_fwd_ms = Some(ms);
+        r.cpu("encoder_fwd", cpu);
+        r.encoder_fwd_peak_rss_mb = peak;
+    }
+    if want("vjp") {
+        say("encoder VJP");
+        let Timing { ms, peak, cpu } = time_it(args.warmup, args.reps, &mut vjp)?;
+        r.encoder_vjp_ms = Some(ms);
+        r.cpu("encoder_vjp", cpu);
+        r.encoder_vjp_peak_rss_mb = peak;
+    }
+    if want("decoder") {
+        say("decoder");
+        let tm = time_it(args.warmup, args.reps, &mut decode)?;
+        r.decoder_ms = r.put("decoder", tm);
+    }
+    Ok(())
+}
+
 pub fn run(args: BenchModelsArgs) -> Result<(), CliError> {
     if args.size == 0 || args.size % 64 != 0 {
         return Err(CliError::Usage(format!(
@@ -192,62 +218,30 @@ pub fn run(args: BenchModelsArgs) -> Result<(), CliError> {
         Arch::Taesd => {
             let t = Taesd::new(random_var_builder(DType::F32, &dev), TaesdConfig::taesd())
                 .map_err(candle_err)?;
-            if want("encoder") {
-                say("encoder forward");
-                let Timing { ms, peak, cpu } = time_it(args.warmup, args.reps, || {
-                    t.encode(&image).map(|_| ()).map_err(model_err)
-                })?;
-                r.encoder_fwd_ms = Some(ms);
-                r.cpu("encoder_fwd", cpu);
-                r.encoder_fwd_peak_rss_mb = peak;
-            }
-            if want("vjp") {
-                say("encoder VJP");
-                let Timing { ms, peak, cpu } = time_it(args.warmup, args.reps, || {
-                    t.encode_vjp(&image, &lat).map(|_| ()).map_err(model_err)
-                })?;
-                r.encoder_vjp_ms = Some(ms);
-                r.cpu("encoder_vjp", cpu);
-                r.encoder_vjp_peak_rss_mb = peak;
-            }
-            if want("decoder") {
-                say("decoder");
-                let tm = time_it(args.warmup, args.reps, || {
-                    t.decode(&lat).map(|_| ()).map_err(model_err)
-                })?;
-                r.decoder_ms = r.put("decoder", tm);
-            }
+            time_autoencoder(
+                &mut r,
+                &args,
+                &want,
+                &say,
+                || t.encode(&image).map(|_| ()).map_err(model_err),
+                || t.encode_vjp(&image, &lat).map(|_| ()).map_err(model_err),
+                || t.decode(&lat).map(|_| ()).map_err(model_err),
+            )?;
         }
         Arch::Sd15 | Arch::Sd21 => {
             let sd21 = args.arch == Arch::Sd21;
             if want("encoder") || want("vjp") || want("decoder") {
                 let vae = AutoencoderKl::new(random_var_builder(DType::F32, &dev), VaeConfig::sd())
                     .map_err(candle_err)?;
-                if want("encoder") {
-                    say("encoder forward");
-                    let Timing { ms, peak, cpu } = time_it(args.warmup, args.reps, || {
-                        vae.encode(&image).map(|_| ()).map_err(model_err)
-                    })?;
-                    r.encoder_fwd_ms = Some(ms);
-                    r.cpu("encoder_fwd", cpu);
-                    r.encoder_fwd_peak_rss_mb = peak;
-                }
-                if want("vjp") {
-                    say("encoder VJP");
-                    let Timing { ms, peak, cpu } = time_it(args.warmup, args.reps, || {
-                        vae.encode_vjp(&image, &lat).map(|_| ()).map_err(model_err)
-                    })?;
-                    r.encoder_vjp_ms = Some(ms);
-                    r.cpu("encoder_vjp", cpu);
-                    r.encoder_vjp_peak_rss_mb = peak;
-                }
-                if want("decoder") {
-                    say("decoder");
-                    let tm = time_it(args.warmup, args.reps, || {
-                        vae.decode(&lat).map(|_| ()).map_err(model_err)
-                    })?;
-                    r.decoder_ms = r.put("decoder", tm);
-                }
+                time_autoencoder(
+                    &mut r,
+                    &args,
+                    &want,
+                    &say,
+                    || vae.encode(&image).map(|_| ()).map_err(model_err),
+                    || vae.encode_vjp(&image, &lat).map(|_| ()).map_err(model_err),
+                    || vae.decode(&lat).map(|_| ()).map_err(model_err),
+                )?;
             }
             let text_cfg: ClipTextConfig = if sd21 {
                 serde_json::from_value(serde_json::json!({

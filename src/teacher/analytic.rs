@@ -86,7 +86,7 @@ impl AnalyticTeacher {
             images.push(resize_bilinear(&im, config.image_size, config.image_size));
             names.push(name);
         }
-        let alphas = sd_alphas_cumprod(config.num_train_timesteps);
+        let alphas = sd_alphas_cumprod(config.num_train_timesteps)?;
         let mut t = Self {
             config,
             names,

@@ -117,23 +117,15 @@ pub trait Teacher: Send + Sync {
     ) -> Result<Latent, TeacherError>;
 }
 
-/// The scaled-linear `ᾱ` schedule of Stable Diffusion (β from 0.00085 to 0.012 over 1000 steps,
-/// linear in √β), computed in f64.
-pub fn sd_alphas_cumprod(num_train_timesteps: usize) -> Vec<f32> {
-    let (b0, b1) = (0.00085f64.sqrt(), 0.012f64.sqrt());
-    let n = num_train_timesteps.max(1);
-    let mut acc = 1.0f64;
-    (0..n)
-        .map(|i| {
-            let s = if n == 1 {
-                b0
-            } else {
-                b0 + (b1 - b0) * i as f64 / (n - 1) as f64
-            };
-            acc *= 1.0 - s * s;
-            acc as f32
-        })
-        .collect()
+/// The scaled-linear `ᾱ` schedule of Stable Diffusion (β from 0.00085 to 0.012, linear in √β),
+/// as `models::scheduler` computes it for SD's default scheduler config.
+pub fn sd_alphas_cumprod(num_train_timesteps: usize) -> Result<Vec<f32>, TeacherError> {
+    let cfg = crate::models::scheduler::SchedulerConfig {
+        num_train_timesteps,
+        ..crate::models::scheduler::SchedulerConfig::sd()
+    };
+    let a = cfg.alphas_cumprod().map_err(TeacherError::Setup)?;
+    Ok(a.into_iter().map(|v| v as f32).collect())
 }
 
 #[cfg(test)]
@@ -142,7 +134,7 @@ mod tests {
 
     #[test]
     fn sd_schedule_endpoints() {
-        let a = sd_alphas_cumprod(1000);
+        let a = sd_alphas_cumprod(1000).unwrap();
         assert_eq!(a.len(), 1000);
         assert!((a[0] - (1.0 - 0.00085)).abs() < 1e-6);
         // diffusers' final ᾱ for SD 1.x is ≈ 0.0047.
