@@ -50,6 +50,26 @@ pub struct BenchStabilityArgs {
     /// Print one JSON object instead of text.
     #[arg(long)]
     pub json: bool,
+    /// Write every run's final SVG and its render (`<method>-<style>-s<seed>.svg/.png`) here,
+    /// and list the runs (with their failure kinds) in the report.
+    #[arg(long)]
+    pub save: Option<PathBuf>,
+}
+
+/// One run, listed in the report when `--save` is given.
+#[derive(Clone, Debug, Serialize)]
+pub struct StabilityRun {
+    pub method: Method,
+    pub style: Style,
+    pub seed: u64,
+    pub seconds: f64,
+    pub paths: usize,
+    pub psnr: Option<f64>,
+    /// Failure kinds: `error`, `nan`, `collapsed`, `oversaturated`, `diverged` (empty = ok).
+    pub failures: Vec<&'static str>,
+    /// File stem under the `--save` directory (no file on error).
+    pub file: Option<String>,
+    pub error: Option<String>,
 }
 
 /// One method × style cell.
@@ -82,6 +102,9 @@ pub struct StabilityReport {
     pub steps: u32,
     pub size: u32,
     pub cells: Vec<StabilityCell>,
+    /// Every run, when `--save` was given.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub runs: Vec<StabilityRun>,
 }
 
 struct Resolved {
@@ -94,6 +117,7 @@ struct Resolved {
     model: Option<PathBuf>,
     scorer: Option<PathBuf>,
     json: bool,
+    save: Option<PathBuf>,
 }
 
 /// Two flat icons on white (a red disc, a blue square) as analytic-teacher targets.
@@ -195,6 +219,7 @@ pub fn run(args: BenchStabilityArgs) -> Result<(), CliError> {
         model: args.model,
         scorer: args.scorer,
         json: args.json,
+        save: args.save,
     };
     if a.seeds == 0 || a.steps == 0 || a.samples == 0 || a.paths == 0 {
         return Err(CliError::Usage(
@@ -230,7 +255,12 @@ pub fn run(args: BenchStabilityArgs) -> Result<(), CliError> {
         TeacherModel::Analytic(t) => t.targets().to_vec(),
         TeacherModel::Sd(_) => Vec::new(),
     };
+    if let Some(dir) = &a.save {
+        std::fs::create_dir_all(dir)
+            .map_err(|e| CliError::Usage(format!("--save {}: {e}", dir.display())))?;
+    }
     let mut cells = Vec::new();
+    let mut runs = Vec::new();
     for method in Method::ALL {
         for style in Style::ALL {
             let mut cell = StabilityCell {
@@ -265,13 +295,30 @@ pub fn run(args: BenchStabilityArgs) -> Result<(), CliError> {
                 };
                 let t0 = Instant::now();
                 let r = run_text(&models, &req, &NullSink, &CancelToken::new());
-                secs.push(t0.elapsed().as_secs_f64());
+                let seconds = t0.elapsed().as_secs_f64();
+                secs.push(seconds);
+                let mut run = StabilityRun {
+                    method: *method,
+                    style,
+                    seed,
+                    seconds,
+                    paths: 0,
+                    psnr: None,
+                    failures: Vec::new(),
+                    file: None,
+                    error: None,
+                };
                 let out = match r {
                     Ok(o) => o,
                     Err(e) => {
                         eprintln!("{method:?} {style} seed {seed}: error: {e}");
                         cell.errors += 1;
                         cell.failed += 1;
+                        if a.save.is_some() {
+                            run.failures.push("error");
+                            run.error = Some(e.to_string());
+                            runs.push(run);
+                        }
                         continue;
                     }
                 };
@@ -290,13 +337,32 @@ pub fn run(args: BenchStabilityArgs) -> Result<(), CliError> {
                 cell.diverged += diverged as u64;
                 cell.failed += (nan || collapsed || over || diverged) as u64;
                 paths.push(out.paths as f64);
-                if let Some(best) = targets
+                let best = targets
                     .iter()
                     .filter(|t| t.width == img.width && t.height == img.height)
                     .map(|t| psnr(&img, t).min(PSNR_CAP))
-                    .max_by(f64::total_cmp)
-                {
-                    psnrs.push(best);
+                    .max_by(f64::total_cmp);
+                psnrs.extend(best);
+                if let Some(dir) = &a.save {
+                    let stem = format!("{}-{style}-s{seed}", method_name(*method));
+                    let io = |e: std::io::Error| CliError::Other(e.into());
+                    std::fs::write(dir.join(format!("{stem}.svg")), &out.svg).map_err(io)?;
+                    img.save_png(&dir.join(format!("{stem}.png")))
+                        .map_err(|e| CliError::Other(e.into()))?;
+                    for (hit, kind) in [
+                        (nan, "nan"),
+                        (collapsed, "collapsed"),
+                        (over, "oversaturated"),
+                        (diverged, "diverged"),
+                    ] {
+                        if hit {
+                            run.failures.push(kind);
+                        }
+                    }
+                    run.paths = out.paths;
+                    run.psnr = best;
+                    run.file = Some(stem);
+                    runs.push(run);
                 }
             }
             cell.failure_rate = cell.failed as f64 / a.seeds as f64;
@@ -334,6 +400,7 @@ pub fn run(args: BenchStabilityArgs) -> Result<(), CliError> {
         steps: a.steps,
         size: a.size,
         cells,
+        runs,
     };
     if a.json {
         println!(
@@ -342,6 +409,14 @@ pub fn run(args: BenchStabilityArgs) -> Result<(), CliError> {
         );
     }
     Ok(())
+}
+
+fn method_name(m: Method) -> &'static str {
+    match m {
+        Method::Scratch => "scratch",
+        Method::SdLive => "sd_live",
+        Method::SdLiveSds => "sd_live_sds",
+    }
 }
 
 fn fmt_opt(v: Option<f64>) -> String {
