@@ -49,6 +49,16 @@ fn bert_model_type_gives_bert_conditioning_of_length_32() {
 }
 
 #[test]
+fn bert_runs_in_f32_even_when_f16_is_asked_for() {
+    let enc = TextEncoder::load(&fixture(), Precision::F16, &Device::Cpu).unwrap();
+    let r =
+        candle_core::safetensors::load(fixture().join("refs.safetensors"), &Device::Cpu).unwrap();
+    let cond = enc.embed("a red bicycle", &Device::Cpu).unwrap();
+    let d = max_abs(&cond, &r["last_hidden_state"].narrow(0, 0, 1).unwrap());
+    assert!(d < 1e-4, "{d}");
+}
+
+#[test]
 fn clip_model_type_still_loads_clip() {
     let sd = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/sd-tiny");
     let enc = TextEncoder::load(&sd, Precision::F32, &Device::Cpu).unwrap();

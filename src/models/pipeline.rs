@@ -7,7 +7,7 @@ use super::scheduler::{PredictionType, Sampler, SamplerKind, SchedulerConfig, sp
 use super::unet::{Unet, UnetConfig};
 use super::vae::{AutoencoderKl, VaeConfig};
 use super::{ModelError, Result};
-use candle_core::{Device, Tensor};
+use candle_core::{DType, Device, Tensor};
 use std::path::Path;
 
 /// candle has no bf16 matmul on CPU: refuse it up front instead of failing mid-forward.
@@ -94,7 +94,9 @@ impl TextEncoder {
         let dir = root.join("text_encoder");
         let cfg: serde_json::Value = loader::read_config(&dir.join("config.json"))?;
         if cfg.get("model_type").and_then(|t| t.as_str()) == Some("bert") {
-            let enc = BertTextEncoder::load(root, precision.dtype(), device, allow_download)?;
+            // BERT runs in f32 whatever the precision: candle's BERT builds its attention mask
+            // from f32::MIN, which overflows to -inf (and 0·-inf = NaN) in f16; MiniLM is small.
+            let enc = BertTextEncoder::load(root, DType::F32, device, allow_download)?;
             return Ok(Self::Bert(enc));
         }
         let tokenizer = ClipTokenizer::from_dir(&root.join("tokenizer"))?;
