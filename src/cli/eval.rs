@@ -2,7 +2,7 @@
 
 use super::CliError;
 use crate::eval::clip::{EvalError, evaluate_svg_dir, format_table, read_prompts};
-use crate::models::clip::ClipScorer;
+use crate::models::scorer::Scorer;
 use std::path::PathBuf;
 
 /// Evaluate SVGs generated from a caption file with one or more CLIP scorers.
@@ -17,8 +17,9 @@ pub struct EvalArgs {
     /// Evaluate already generated SVGs `0001.svg`, `0002.svg`, ... in this directory.
     #[arg(long)]
     pub svgs: Option<PathBuf>,
-    /// CLIP model directory (transformers or OpenCLIP layout) or hub repo id (`org/name`,
-    /// from the HF cache, downloaded when online); repeat for several scorers.
+    /// CLIP model directory (transformers or OpenCLIP layout), hub repo id (`org/name`,
+    /// from the HF cache, downloaded when online), or an IconClip model directory such as
+    /// `models/vf-icon` (its `scorer/`); repeat for several scorers.
     #[arg(long = "scorer", required = true)]
     pub scorers: Vec<String>,
     /// Print JSON instead of the table.
@@ -32,6 +33,7 @@ pub struct EvalArgs {
 fn map_err(e: EvalError) -> CliError {
     match e {
         EvalError::Clip(c) => CliError::Other(anyhow::Error::new(c)),
+        EvalError::Scorer(c) => CliError::Other(anyhow::Error::new(c)),
         other => CliError::Usage(other.to_string()),
     }
 }
@@ -45,7 +47,7 @@ pub fn run(args: EvalArgs) -> Result<(), CliError> {
     };
     let mut scorers = Vec::with_capacity(args.scorers.len());
     for s in &args.scorers {
-        let sc = ClipScorer::load_source(s, true).map_err(|e| CliError::Other(e.into()))?;
+        let sc = Scorer::load_source(s, true).map_err(|e| CliError::Other(e.into()))?;
         scorers.push(sc);
     }
     let report = evaluate_svg_dir(&captions, &dir, &scorers).map_err(map_err)?;

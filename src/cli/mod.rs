@@ -9,6 +9,7 @@ pub mod eval;
 pub mod generate;
 pub mod render;
 pub mod serve;
+pub mod setup;
 pub mod vectorize;
 
 use clap::{Parser, Subcommand};
@@ -34,6 +35,8 @@ pub enum Command {
     Serve(serve::ServeArgs),
     /// Evaluate generated SVGs with CLIP scorers.
     Eval(eval::EvalArgs),
+    /// Install the embedded model's MiniLM weights into the cache (once; fast when cached).
+    Setup(setup::SetupArgs),
     /// Benchmarks.
     #[command(subcommand)]
     Bench(bench::BenchCommand),
@@ -74,6 +77,7 @@ pub fn run(cli: Cli) -> Result<(), CliError> {
         Command::Render(a) => render::run(a),
         Command::Serve(args) => serve::run(args),
         Command::Eval(a) => eval::run(a),
+        Command::Setup(a) => setup::run(a),
         Command::Bench(b) => bench::run(b),
     }
 }

@@ -9,8 +9,9 @@
 //! stripped from the reference text ([`strip_style`]).
 
 use crate::image::Image;
+use crate::models::clip::ClipError;
 use crate::models::clip::scorer::dot;
-use crate::models::clip::{ClipError, ClipScorer};
+use crate::models::scorer::{ImageTextScorer, ScorerError};
 use resvg::{tiny_skia, usvg};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -37,6 +38,8 @@ pub enum EvalError {
     CountMismatch(usize, usize),
     #[error(transparent)]
     Clip(#[from] ClipError),
+    #[error(transparent)]
+    Scorer(#[from] ScorerError),
 }
 
 /// Style modifiers VectorFusion (and common text-to-SVG prompts) append to captions.
@@ -262,8 +265,8 @@ pub fn score_embeddings(scorer: &str, images: &[Vec<f32>], captions: &[Vec<f32>]
 }
 
 /// Evaluates images (index i generated from caption i) with one scorer.
-pub fn evaluate(
-    scorer: &ClipScorer,
+pub fn evaluate<S: ImageTextScorer + ?Sized>(
+    scorer: &S,
     captions: &[String],
     images: &[Image],
 ) -> Result<ScorerResult, EvalError> {
@@ -292,10 +295,10 @@ pub struct EvalReport {
 
 /// Evaluates `dir/0001.svg`… against the captions with every scorer (each renders at its own
 /// input size).
-pub fn evaluate_svg_dir(
+pub fn evaluate_svg_dir<S: ImageTextScorer>(
     captions: &[String],
     dir: &Path,
-    scorers: &[ClipScorer],
+    scorers: &[S],
 ) -> Result<EvalReport, EvalError> {
     let mut results = Vec::with_capacity(scorers.len());
     let mut mean_paths = 0.0;

@@ -10,16 +10,20 @@
 //! | [`vae`] | `AutoencoderKL`: encode, decode and the encoder VJP without weight gradients |
 //! | [`taesd`] | `AutoencoderTiny` (madebyollin/taesd layout): encode (+VJP) and decode |
 //! | [`scheduler`] | noise schedules (`alphas_cumprod`), DDIM and Euler samplers |
+//! | [`bert`] | BERT/MiniLM text encoder (WordPiece tokenizer, `BertModel`, MiniLM weight fetch) |
 //! | [`clip`] | CLIP text/vision towers and BPE tokenizer (text encoder of SD 1.x/2.x) |
+//! | [`scorer`] | one scorer abstraction over CLIP and the embedded IconClip (rerank, eval) |
 //! | [`nn`] | small layers with hand-written input-only backward passes |
 //!
 //! [`StableDiffusion`] ties them together behind the small API the SDS and sampling stages use.
 
+pub mod bert;
 pub mod clip;
 pub mod loader;
 pub mod nn;
 pub mod pipeline;
 pub mod scheduler;
+pub mod scorer;
 pub mod taesd;
 pub mod unet;
 pub mod vae;
@@ -74,6 +78,9 @@ pub enum ModelError {
     /// The text encoder or tokenizer failed to load or run.
     #[error("text encoder: {0}")]
     Clip(#[from] clip::ClipError),
+    /// The BERT text encoder or its tokenizer failed to load or run.
+    #[error("text encoder: {0}")]
+    Bert(#[from] bert::BertError),
     #[error("not implemented: {0}")]
     NotImplemented(&'static str),
 }

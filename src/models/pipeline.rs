@@ -1,12 +1,13 @@
 //! [`StableDiffusion`]: the components SDS and sampling need, behind one small API.
 
+use super::bert::BertTextEncoder;
 use super::clip::{ClipTextConfig, ClipTextModel, ClipTokenizer};
 use super::loader::{self, LoadOptions, ModelSource, Precision, UNET_WEIGHTS};
 use super::scheduler::{PredictionType, Sampler, SamplerKind, SchedulerConfig, split_prediction};
 use super::unet::{Unet, UnetConfig};
 use super::vae::{AutoencoderKl, VaeConfig};
 use super::{ModelError, Result};
-use candle_core::{Device, Tensor};
+use candle_core::{DType, Device, Tensor};
 use std::path::Path;
 
 /// candle has no bf16 matmul on CPU: refuse it up front instead of failing mid-forward.
@@ -60,37 +61,71 @@ pub fn load_scheduler(dir: &Path) -> Result<SchedulerConfig> {
     Ok(cfg)
 }
 
-/// SD's text conditioning: the CLIP tokenizer and `CLIPTextModel` (`last_hidden_state`).
-#[derive(Debug, Clone)]
-pub struct TextEncoder {
-    pub tokenizer: ClipTokenizer,
-    pub model: ClipTextModel,
+/// The text conditioning, chosen by `text_encoder/config.json` `model_type`: CLIP
+/// (`clip_text_model`, SD 1.x/2.x: `[1, 77, d]` `last_hidden_state`) or BERT (`bert`, the
+/// embedded model's MiniLM: `[1, L, 384]` `last_hidden_state` over all `L =
+/// tokenizer.model_max_length` positions, padding included, see `docs/EMBEDDED.md`).
+#[derive(Debug)]
+#[allow(clippy::large_enum_variant)] // one per loaded model
+pub enum TextEncoder {
+    Clip {
+        tokenizer: ClipTokenizer,
+        model: ClipTextModel,
+    },
+    Bert(BertTextEncoder),
 }
 
 impl TextEncoder {
-    /// Loads `root/tokenizer/` and `root/text_encoder/` (config + safetensors).
+    /// Loads `root/tokenizer/` and `root/text_encoder/` (config + safetensors). The MiniLM
+    /// weights of a BERT encoder may be fetched (see [`crate::models::bert::weights`]; not when
+    /// `VF_OFFLINE` is set).
     pub fn load(root: &Path, precision: Precision, device: &Device) -> Result<Self> {
+        Self::load_with(root, precision, device, true)
+    }
+
+    /// [`TextEncoder::load`] with explicit control over the MiniLM download.
+    pub fn load_with(
+        root: &Path,
+        precision: Precision,
+        device: &Device,
+        allow_download: bool,
+    ) -> Result<Self> {
         check_precision("text_encoder", precision, device)?;
-        let tokenizer = ClipTokenizer::from_dir(&root.join("tokenizer"))?;
         let dir = root.join("text_encoder");
+        let cfg: serde_json::Value = loader::read_config(&dir.join("config.json"))?;
+        if cfg.get("model_type").and_then(|t| t.as_str()) == Some("bert") {
+            // BERT runs in f32 whatever the precision: candle's BERT builds its attention mask
+            // from f32::MIN, which overflows to -inf (and 0·-inf = NaN) in f16; MiniLM is small.
+            let enc = BertTextEncoder::load(root, DType::F32, device, allow_download)?;
+            return Ok(Self::Bert(enc));
+        }
+        let tokenizer = ClipTokenizer::from_dir(&root.join("tokenizer"))?;
         let config = ClipTextConfig::from_file(&dir.join("config.json"))?;
         let w = loader::find_weights(&dir, loader::TEXT_WEIGHTS)?;
         let vb = loader::var_builder(&w, precision.dtype(), device)?;
         let model =
             ClipTextModel::new(vb, &config).map_err(loader::mismatch("text_encoder", &w))?;
-        Ok(Self { tokenizer, model })
+        Ok(Self::Clip { tokenizer, model })
     }
 
-    /// Token ids padded to the context length (`[1, 77]`, u32).
+    /// Token ids padded to the context length (`[1, L]`, u32).
     pub fn ids(&self, prompt: &str, device: &Device) -> Result<Tensor> {
-        let ids = self.tokenizer.encode_padded(prompt);
+        let ids = match self {
+            Self::Clip { tokenizer, .. } => tokenizer.encode_padded(prompt),
+            Self::Bert(b) => b.tokenizer.encode(prompt, b.tokenizer.max_length)?.ids,
+        };
         Ok(Tensor::from_vec(ids.clone(), (1, ids.len()), device)?)
     }
 
-    /// `[1, 77, hidden]` f32 embeddings of a prompt (`""` gives the unconditional ones).
+    /// `[1, L, hidden]` f32 embeddings of a prompt (`""` gives the unconditional ones).
     pub fn embed(&self, prompt: &str, device: &Device) -> Result<Tensor> {
-        let out = self.model.forward(&self.ids(prompt, device)?)?;
-        Ok(out.last_hidden_state.to_dtype(candle_core::DType::F32)?)
+        let out = match self {
+            Self::Clip { model, .. } => {
+                model.forward(&self.ids(prompt, device)?)?.last_hidden_state
+            }
+            Self::Bert(b) => b.last_hidden_state(&[prompt], b.tokenizer.max_length)?,
+        };
+        Ok(out.to_dtype(candle_core::DType::F32)?)
     }
 }
 

@@ -3,7 +3,7 @@
 //!
 //! - `scratch`: SDS from a random init of the style ([`crate::stages::sds`]);
 //! - `sd_live`: sample K images with the style suffix, keep the best by CLIP
-//!   ([`ClipScorer::best_of`]), trace it with LIVE ([`crate::stages::live`]); pixel art is the
+//!   ([`ImageTextScorer::best_of`]), trace it with LIVE ([`crate::stages::live`]); pixel art is the
 //!   L1 pixelation of the best sample instead, sketch the traced outlines as strokes;
 //! - `sd_live_sds`: `sd_live`, then SDS without augmentation, re-initialising faint paths and
 //!   paths with area below 64 px² (at 512 px, scaled to the working size);
@@ -15,8 +15,8 @@
 use super::{PipelineError, Preset};
 use crate::image::Image;
 use crate::image::ops::resize;
-use crate::models::clip::ClipScorer;
 use crate::models::scheduler::SamplerKind;
+use crate::models::scorer::{ImageTextScorer, Scorer};
 use crate::progress::{CancelToken, Progress, ProgressSink};
 use crate::scene::{Rgba, Scene, Shape, ShapeKind, Stroke};
 use crate::stages::live::prune::weak_paths;
@@ -162,7 +162,7 @@ pub enum TeacherModel {
 /// Everything a text run needs, loaded once per teacher size.
 pub struct Models {
     pub teacher: TeacherModel,
-    pub scorer: Option<ClipScorer>,
+    pub scorer: Option<Scorer>,
 }
 
 impl std::fmt::Debug for Models {
@@ -283,11 +283,11 @@ impl Models {
     }
 }
 
-fn load_scorer(dir: Option<&Path>) -> Result<Option<ClipScorer>, PipelineError> {
+fn load_scorer(dir: Option<&Path>) -> Result<Option<Scorer>, PipelineError> {
     dir.map(|d| {
-        ClipScorer::load(d).map_err(|e| {
+        Scorer::load(d).map_err(|e| {
             PipelineError::ModelsNotConfigured(format!(
-                "cannot load the CLIP scorer from {}: {e}",
+                "cannot load the scorer from {}: {e}",
                 d.display()
             ))
         })

@@ -170,15 +170,8 @@ impl ClipScorer {
     /// Index and score of the best image for the caption (rejection sampling), plus all scores.
     pub fn best_of(&self, images: &[Image], caption: &str) -> Result<(usize, Vec<f32>), ClipError> {
         let scores = self.score_images(images, caption)?;
-        let best = scores
-            .iter()
-            .enumerate()
-            .fold(None, |acc: Option<(usize, f32)>, (i, &s)| match acc {
-                Some((_, b)) if b >= s => acc,
-                _ => Some((i, s)),
-            })
-            .map(|(i, _)| i)
-            .ok_or_else(|| ClipError::Input("no images to choose from".into()))?;
+        let best =
+            argmax(&scores).ok_or_else(|| ClipError::Input("no images to choose from".into()))?;
         Ok((best, scores))
     }
 }
@@ -279,6 +272,18 @@ fn resolve_hub(repo: &str, allow_download: bool) -> Result<PathBuf, ClipError> {
              or pass a local directory"
         ),
     })
+}
+
+/// Index of the largest score (the first one on ties), `None` when empty.
+pub fn argmax(scores: &[f32]) -> Option<usize> {
+    scores
+        .iter()
+        .enumerate()
+        .fold(None, |acc: Option<(usize, f32)>, (i, &s)| match acc {
+            Some((_, b)) if b >= s => acc,
+            _ => Some((i, s)),
+        })
+        .map(|(i, _)| i)
 }
 
 /// Dot product (cosine similarity of unit vectors).
