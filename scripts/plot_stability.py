@@ -12,7 +12,7 @@ import json, math, sys
 out, files = sys.argv[1], sys.argv[2:]
 reports = [json.load(open(f)) for f in files]
 colours = {"scratch": "#1f77b4", "sd_live": "#ff7f0e", "sd_live_sds": "#d62728"}
-styles = ["iconography", "pixel-art", "sketch"]
+styles = ["iconography", "pixel_art", "sketch"]
 rows = []
 for r in reports:
     for c in r["cells"]:
