@@ -304,6 +304,14 @@ impl Store {
             .ok_or_else(|| StoreError::Corrupt("idempotency key conflict without a row".into()))
     }
 
+    /// The job submitted with this idempotency key, if any.
+    pub async fn get_job_by_key(&self, key: &str) -> Result<Option<JobRow>, StoreError> {
+        Ok(sqlx::query_as(include_str!("sql/get_job_by_key.sql"))
+            .bind(key)
+            .fetch_optional(&self.pool)
+            .await?)
+    }
+
     pub async fn get_job(&self, id: &str) -> Result<Option<JobRow>, StoreError> {
         Ok(sqlx::query_as(include_str!("sql/get_job.sql"))
             .bind(id)
