@@ -3,9 +3,14 @@
 //! that state (a restarted worker) skips sampling, rerank and tracing, resumes at the saved step
 //! and ends with exactly the SVG an uninterrupted run gives. Tiny random SD + CLIP fixtures.
 
-use serde_json::Value;
+mod common;
+
+use common::http::{get, post_json};
+use common::wait_status;
+use serde_json::{Value, json};
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
 use vectorfusion::pipeline::{
     DefaultExecutor, Executor, JobContext, JobKind, JobOutput, JobSpec, Method, ModelDirs,
     PipelineError, Preset, Style,
@@ -182,4 +187,106 @@ fn a_checkpoint_of_another_request_is_ignored() {
         None,
     );
     assert_eq!(junk.out.unwrap().svg, fresh.svg);
+}
+
+/// Starts the real service with the tiny models on `db`.
+async fn serve(
+    db: &std::path::Path,
+) -> (
+    std::net::SocketAddr,
+    tokio::sync::oneshot::Sender<()>,
+    tokio::task::JoinHandle<Result<(), vectorfusion::server::ServerError>>,
+) {
+    let mut cfg = vectorfusion::config::Config::default();
+    cfg.database.path = db.to_path_buf();
+    cfg.queue.workers = 1;
+    cfg.queue.poll_interval_ms = 20;
+    cfg.queue.checkpoint_every_steps = 5;
+    cfg.server.progress_interval_ms = 0;
+    cfg.server.snapshot_interval_ms = 0;
+    cfg.server.shutdown_grace_secs = 30;
+    cfg.models.sd_dir = fixture("sd-tiny").display().to_string();
+    cfg.models.clip_dir = fixture("clip-tiny").display().to_string();
+    let exec: Arc<dyn Executor> = Arc::new(DefaultExecutor::new(cfg.model_dirs()));
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let addr = listener.local_addr().unwrap();
+    let (tx, rx) = tokio::sync::oneshot::channel::<()>();
+    let task = tokio::spawn(vectorfusion::server::run(cfg, exec, listener, async move {
+        let _ = rx.await;
+    }));
+    (addr, tx, task)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn service_shutdown_mid_sds_and_restart_resumes_from_the_stored_checkpoint() {
+    let dir = tempfile::tempdir().unwrap();
+    let db = dir.path().join("jobs.db");
+    let (a, stop, task) = serve(&db).await;
+    let body = json!({"kind": "text", "caption": "a crown", "method": "sd_live_sds",
+        "preset": "draft", "paths": 6, "steps": 120, "samples": 2, "seed": 9});
+    let r = post_json(a, "/jobs", &body).await;
+    assert_eq!(r.status, 202, "{}", r.text());
+    let id = r.json()["id"].as_str().unwrap().to_string();
+    // Wait until SDS is past a few checkpoints, then shut the server down (SIGTERM path).
+    let deadline = Instant::now() + Duration::from_secs(120);
+    loop {
+        let j = get(a, &format!("/jobs/{id}")).await.json();
+        if j["stage"] == "sds" && j["progress"]["step"].as_u64().unwrap_or(0) >= 12 {
+            break;
+        }
+        assert!(
+            j["status"] != "succeeded",
+            "finished before the shutdown: {j}"
+        );
+        assert!(Instant::now() < deadline, "{j}");
+        tokio::time::sleep(Duration::from_millis(10)).await;
+    }
+    // While it runs, the rerank scores come from its stored checkpoint.
+    let running = get(a, &format!("/jobs/{id}")).await.json();
+    assert_eq!(running["status"], "running");
+    assert_eq!(
+        running["rerank"]["scores"].as_array().unwrap().len(),
+        2,
+        "{running}"
+    );
+    let _ = stop.send(());
+    tokio::time::timeout(Duration::from_secs(60), task)
+        .await
+        .unwrap()
+        .unwrap()
+        .unwrap();
+    let store = vectorfusion::store::Store::open(&db, 1).await.unwrap();
+    let row = store.get_job(&id).await.unwrap().unwrap();
+    assert_eq!(row.status, "queued");
+    let ck: Value = serde_json::from_str(row.checkpoint.as_deref().unwrap()).unwrap();
+    let saved = step_of(&ck);
+    assert!((12..120).contains(&saved), "{saved}");
+    store.close().await;
+
+    // Restart: the job resumes at the saved step and succeeds.
+    let (a, stop, task) = serve(&db).await;
+    let job = wait_status(a, &id, &["succeeded", "failed"], Duration::from_secs(180)).await;
+    assert_eq!(job["status"], "succeeded", "{job}");
+    let job = get(a, &format!("/jobs/{id}")).await.json();
+    assert_eq!(job["result"]["detail"]["resumed_from"], saved, "{job}");
+    assert_eq!(job["result"]["detail"]["sds"]["steps_done"], 120);
+    assert_eq!(job["rerank"]["scores"].as_array().unwrap().len(), 2);
+    let outcomes: Vec<&str> = job["attempt_history"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|a| a["outcome"].as_str().unwrap())
+        .collect();
+    assert_eq!(outcomes, ["interrupted", "succeeded"]);
+    let svg = get(a, &format!("/jobs/{id}/result.svg")).await.text();
+    vectorfusion::svg::from_svg(&svg)
+        .unwrap()
+        .validate()
+        .unwrap();
+    let _ = stop.send(());
+    tokio::time::timeout(Duration::from_secs(60), task)
+        .await
+        .unwrap()
+        .unwrap()
+        .unwrap();
 }

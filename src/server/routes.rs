@@ -218,6 +218,8 @@ pub(super) async fn get_job(
         && let Some(result) = state.store.result(&id).await?
     {
         view = view.with_result(&result);
+    } else if let Some(ck) = &row.checkpoint {
+        view = view.with_checkpoint(ck);
     }
     view.attempt_history = Some(state.store.attempts(&id).await?);
     Ok(Json(view))

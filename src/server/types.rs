@@ -226,7 +226,8 @@ pub struct JobView {
     pub links: Links,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub attempt_history: Option<Vec<AttemptRow>>,
-    /// Rejection sampling of a succeeded `sd_live*` text job (`GET /jobs/{id}` only).
+    /// Rejection sampling of an `sd_live*` text job: once it succeeded, or from its last
+    /// checkpoint while it runs (`GET /jobs/{id}` only).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub rerank: Option<RerankView>,
     /// Summary of a succeeded job's result (`GET /jobs/{id}` only).
@@ -258,24 +259,42 @@ impl JobView {
     /// Adds the stored result (paths, detail, rerank scores) of a succeeded job.
     pub fn with_result(mut self, result: &crate::store::ResultRow) -> JobView {
         let detail: Value = serde_json::from_str(&result.detail).unwrap_or(Value::Null);
-        self.rerank = detail.get("rerank").and_then(|r| {
-            Some(RerankView {
-                scorer: r.get("scorer")?.as_str().map(str::to_string),
-                scores: r
-                    .get("scores")?
-                    .as_array()?
-                    .iter()
-                    .filter_map(Value::as_f64)
-                    .collect(),
-                chosen: r.get("best")?.as_u64()?,
-                samples: r.get("samples")?.as_u64()?,
-            })
-        });
+        self.rerank = detail.get("rerank").and_then(RerankView::from_detail);
         self.result = Some(ResultView {
             paths: result.paths,
             detail,
         });
         self
+    }
+
+    /// Adds the rerank scores of an unfinished job from its last checkpoint (text jobs save
+    /// them with their SDS state).
+    pub fn with_checkpoint(mut self, checkpoint: &str) -> JobView {
+        self.rerank = serde_json::from_str::<Value>(checkpoint)
+            .ok()
+            .and_then(|c| {
+                c.get("detail")?
+                    .get("rerank")
+                    .and_then(RerankView::from_detail)
+            });
+        self
+    }
+}
+
+impl RerankView {
+    /// From the `rerank` object of a run's detail.
+    fn from_detail(r: &Value) -> Option<RerankView> {
+        Some(RerankView {
+            scorer: r.get("scorer")?.as_str().map(str::to_string),
+            scores: r
+                .get("scores")?
+                .as_array()?
+                .iter()
+                .filter_map(Value::as_f64)
+                .collect(),
+            chosen: r.get("best")?.as_u64()?,
+            samples: r.get("samples")?.as_u64()?,
+        })
     }
 }
 
