@@ -69,10 +69,14 @@ fn eval_method_generates_then_scores_every_method() {
         .args(["--method", "scratch", "--preset", "draft", "--steps", "2"])
         .args(["--limit", "2", "--model", s(&fixture("sd-tiny"))])
         .args(["--scorer", s(&fixture("clip-tiny"))])
-        .args(["--out-dir", s(&out_dir)])
+        .args(["--out-dir", s(&out_dir), "--json", s(&report)])
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // `--json OUT` writes the report and still prints the table.
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    assert_eq!(v["methods"][0]["method"], "scratch");
     let table = String::from_utf8_lossy(&o.stdout);
     let lines: Vec<&str> = table.lines().collect();
     assert!(

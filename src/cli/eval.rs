@@ -39,9 +39,10 @@ pub struct EvalArgs {
     /// from the HF cache, downloaded when online); repeat for several scorers.
     #[arg(long = "scorer", required = true)]
     pub scorers: Vec<String>,
-    /// Print JSON instead of the table.
-    #[arg(long)]
-    pub json: bool,
+    /// `--json`: print JSON instead of the table; `--json OUT`: write the JSON report to OUT
+    /// (and print the table).
+    #[arg(long, num_args = 0..=1, value_name = "OUT")]
+    pub json: Option<Option<PathBuf>>,
     /// Also write the JSON report to this file.
     #[arg(long)]
     pub out: Option<PathBuf>,
@@ -129,11 +130,11 @@ pub fn run(args: EvalArgs) -> Result<(), CliError> {
             (to_json(&report)?, format_methods_table(&report))
         }
     };
-    if let Some(out) = &args.out {
-        std::fs::write(out, &json)
-            .map_err(|e| CliError::Other(anyhow::anyhow!("{}: {e}", out.display())))?;
+    let json_file = args.json.as_ref().and_then(Option::as_ref);
+    for out in args.out.iter().chain(json_file) {
+        write(out, &json)?;
     }
-    if args.json {
+    if matches!(args.json, Some(None)) {
         println!("{json}");
     } else {
         print!("{table}");
