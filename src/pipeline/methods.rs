@@ -574,7 +574,7 @@ pub fn run_text_resumable(
     });
     let t0 = std::time::Instant::now();
     let key = checkpoint_key(req, &teacher.name(), size);
-    let resumed = ctx
+    let mut resumed = ctx
         .and_then(JobContext::resume_state)
         .and_then(|v| serde_json::from_value::<TextCheckpoint>(v).ok())
         .filter(|c| c.key == key);
@@ -583,89 +583,92 @@ pub fn run_text_resumable(
     let mut sds_after = req.method != Method::SdLive;
     let mut augment = true;
     let mut resume_sds = None;
-    let start_scene: Scene = if let Some(r) = resumed {
-        sds_after = true;
-        augment = r.augment;
-        detail = r.detail;
-        detail["resumed_from"] = json!(r.sds.step);
-        let scene = r.sds.scene.clone();
-        resume_sds = Some(r.sds);
-        scene
-    } else {
-        match &req.start {
-            Start::Svg(scene) => {
-                sds_after = true;
-                augment = false;
-                scaled(scene, size)?
-            }
-            Start::Image(image) => {
-                sds_after = true;
-                augment = false;
-                let (scene, d) = trace(image, size, paths, &ps, req.seed, sink, cancel)?;
-                detail["live"] = d;
-                scaled(&scene, size)?
-            }
-            Start::Method if req.method == Method::Scratch => {
-                let cfg = SdsConfig::for_style(req.style, &req.caption, steps, size);
-                let mut rng = ChaCha8Rng::seed_from_u64(req.seed ^ 0x5eed_1a17);
-                req.style
-                    .init_scene(cfg.render_size(size), paths, &mut rng)
-                    .map_err(|e| failed("initial scene", e))?
-            }
-            Start::Method => {
-                augment = false;
-                let images = models.sample(&prompt, k, ps.sample_steps, req.seed, sink, cancel)?;
-                let (best, scores) = match &models.scorer {
-                    Some(scorer) => scorer
-                        .best_of(&images, &req.caption)
-                        .map_err(|e| failed("CLIP rerank", e))?,
-                    None => (0, Vec::new()),
-                };
-                let rerank = json!({
-                    "scorer": models.scorer.as_ref().map(|s| s.name().to_string()),
-                    "scores": scores,
-                    "best": best,
-                    "samples": k,
-                });
-                let mut ev = Progress::new("rerank", 1, 1);
-                ev.detail = Some(rerank.clone());
-                sink.report(ev);
-                detail["rerank"] = rerank;
-                let best_img = images
-                    .get(best)
-                    .ok_or_else(|| failed("rerank", "best index out of range"))?;
-                match req.style {
-                    Style::PixelArt => {
-                        pixelate_l1(best_img, size).map_err(|e| failed("pixelation", e))?
-                    }
-                    Style::Iconography | Style::Sketch => {
-                        let (scene, d) = trace(best_img, size, paths, &ps, req.seed, sink, cancel)?;
-                        detail["live"] = d;
-                        let scene = scaled(&scene, size)?;
-                        let mut scene = if req.style == Style::Sketch {
-                            outlines_as_strokes(&scene, size)?
-                        } else {
-                            scene
-                        };
-                        // A flat sample can trace to (almost) nothing: top the scene up with the
-                        // style's random shapes so SDS has something to move (sketches always get
-                        // their stroke count).
-                        let want = if req.style == Style::Sketch { paths } else { 1 };
-                        let mut rng = ChaCha8Rng::seed_from_u64(req.seed ^ 0x7095_0f11);
-                        let mut added = 0usize;
-                        while scene.shapes.len() < want {
-                            let shape = if req.style == Style::Sketch {
-                                random_stroke(size, &mut rng)
-                            } else {
-                                random_circle(size, &mut rng)
-                            }
-                            .map_err(|e| failed("initial scene", e))?;
-                            scene.shapes.push(shape);
-                            added += 1;
-                        }
-                        detail["topped_up"] = json!(added);
+    let start_scene: Scene = match &req.start {
+        // A restarted job: the SDS state and the detail of the stages before it.
+        _ if resumed.is_some() => {
+            let r = resumed
+                .take()
+                .ok_or_else(|| failed("resume", "no saved state"))?;
+            sds_after = true;
+            augment = r.augment;
+            detail = r.detail;
+            detail["resumed_from"] = json!(r.sds.step);
+            let scene = r.sds.scene.clone();
+            resume_sds = Some(r.sds);
+            scene
+        }
+        Start::Svg(scene) => {
+            sds_after = true;
+            augment = false;
+            scaled(scene, size)?
+        }
+        Start::Image(image) => {
+            sds_after = true;
+            augment = false;
+            let (scene, d) = trace(image, size, paths, &ps, req.seed, sink, cancel)?;
+            detail["live"] = d;
+            scaled(&scene, size)?
+        }
+        Start::Method if req.method == Method::Scratch => {
+            let cfg = SdsConfig::for_style(req.style, &req.caption, steps, size);
+            let mut rng = ChaCha8Rng::seed_from_u64(req.seed ^ 0x5eed_1a17);
+            req.style
+                .init_scene(cfg.render_size(size), paths, &mut rng)
+                .map_err(|e| failed("initial scene", e))?
+        }
+        Start::Method => {
+            augment = false;
+            let images = models.sample(&prompt, k, ps.sample_steps, req.seed, sink, cancel)?;
+            let (best, scores) = match &models.scorer {
+                Some(scorer) => scorer
+                    .best_of(&images, &req.caption)
+                    .map_err(|e| failed("CLIP rerank", e))?,
+                None => (0, Vec::new()),
+            };
+            let rerank = json!({
+                "scorer": models.scorer.as_ref().map(|s| s.name().to_string()),
+                "scores": scores,
+                "best": best,
+                "samples": k,
+            });
+            let mut ev = Progress::new("rerank", 1, 1);
+            ev.detail = Some(rerank.clone());
+            sink.report(ev);
+            detail["rerank"] = rerank;
+            let best_img = images
+                .get(best)
+                .ok_or_else(|| failed("rerank", "best index out of range"))?;
+            match req.style {
+                Style::PixelArt => {
+                    pixelate_l1(best_img, size).map_err(|e| failed("pixelation", e))?
+                }
+                Style::Iconography | Style::Sketch => {
+                    let (scene, d) = trace(best_img, size, paths, &ps, req.seed, sink, cancel)?;
+                    detail["live"] = d;
+                    let scene = scaled(&scene, size)?;
+                    let mut scene = if req.style == Style::Sketch {
+                        outlines_as_strokes(&scene, size)?
+                    } else {
                         scene
+                    };
+                    // A flat sample can trace to (almost) nothing: top the scene up with the
+                    // style's random shapes so SDS has something to move (sketches always get
+                    // their stroke count).
+                    let want = if req.style == Style::Sketch { paths } else { 1 };
+                    let mut rng = ChaCha8Rng::seed_from_u64(req.seed ^ 0x7095_0f11);
+                    let mut added = 0usize;
+                    while scene.shapes.len() < want {
+                        let shape = if req.style == Style::Sketch {
+                            random_stroke(size, &mut rng)
+                        } else {
+                            random_circle(size, &mut rng)
+                        }
+                        .map_err(|e| failed("initial scene", e))?;
+                        scene.shapes.push(shape);
+                        added += 1;
                     }
+                    detail["topped_up"] = json!(added);
+                    scene
                 }
             }
         }
