@@ -336,6 +336,32 @@ async fn text_job_through_the_service_streams_snapshots_and_records_rerank_score
         assert!(s.json()["svg"].as_str().unwrap().starts_with("<svg"));
     }
     wait_status(a, &id, &["succeeded"], Duration::from_secs(10)).await;
+    // GET /jobs/{id} shows the rejection sampling: one CLIP score per sample, the kept index.
+    let job = get(a, &format!("/jobs/{id}")).await.json();
+    let rerank = &job["rerank"];
+    let scores: Vec<f64> = rerank["scores"]
+        .as_array()
+        .unwrap_or_else(|| panic!("{job}"))
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    assert_eq!(scores.len(), 2, "{job}");
+    assert!(
+        scores.iter().all(|s| (-1.0..=1.0).contains(s)),
+        "{scores:?}"
+    );
+    let chosen = rerank["chosen"].as_u64().unwrap() as usize;
+    assert!(scores.iter().all(|s| *s <= scores[chosen]), "{rerank}");
+    assert_eq!(rerank["samples"], 2);
+    assert!(rerank["scorer"].is_string(), "{rerank}");
+    assert!(job["result"]["paths"].as_u64().unwrap() >= 1, "{job}");
+    // The SSE rerank progress event carried the same scores.
+    let live: Vec<_> = events
+        .iter()
+        .filter(|e| e.event == "progress" && e.json()["stage"] == "rerank")
+        .collect();
+    assert_eq!(live.len(), 1, "{names:?}");
+    assert_eq!(live[0].json()["detail"]["scores"], rerank["scores"]);
     let r = get(a, &format!("/jobs/{id}/result.svg")).await;
     assert_eq!(r.status, 200);
     assert_finite_svg(&r.text());

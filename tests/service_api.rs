@@ -792,21 +792,90 @@ async fn full_queue_answers_429_with_retry_after() {
         Duration::from_secs(5),
     )
     .await;
-    for i in 0..2 {
-        assert_eq!(
-            post_json(srv.addr, "/jobs", &vectorize_body(2, 10, i))
-                .await
-                .status,
-            202
-        );
-    }
+    assert_eq!(
+        post_json(srv.addr, "/jobs", &vectorize_body(2, 10, 0))
+            .await
+            .status,
+        202
+    );
+    let keyed = |key: &'static str| {
+        [
+            ("Content-Type", "application/json"),
+            ("Idempotency-Key", key),
+        ]
+    };
+    let body = serde_json::to_vec(&vectorize_body(2, 10, 1)).unwrap();
+    let kept = request(srv.addr, "POST", "/jobs", &keyed("k-1"), Some(&body)).await;
+    assert_eq!(kept.status, 202);
     let r = post_json(srv.addr, "/jobs", &vectorize_body(2, 10, 9)).await;
     assert_eq!(r.status, 429, "{}", r.text());
     assert_eq!(r.json()["error"]["code"], "queue_full");
     assert!(r.header("retry-after").is_some());
+    // A retry with a known Idempotency-Key gets its job back although the queue is full; the
+    // same key with another body is still a conflict, and a new key is still refused.
+    let again = request(srv.addr, "POST", "/jobs", &keyed("k-1"), Some(&body)).await;
+    assert_eq!(again.status, 202, "{}", again.text());
+    assert_eq!(again.json()["id"], kept.json()["id"]);
+    assert_eq!(again.header("idempotent-replayed"), Some("true"));
+    let other = serde_json::to_vec(&vectorize_body(2, 10, 2)).unwrap();
+    let r = request(srv.addr, "POST", "/jobs", &keyed("k-1"), Some(&other)).await;
+    assert_eq!(r.status, 409, "{}", r.text());
+    let r = request(srv.addr, "POST", "/jobs", &keyed("k-2"), Some(&other)).await;
+    assert_eq!(r.status, 429, "{}", r.text());
     let m = get(srv.addr, "/metrics").await.text();
-    assert!(m.contains("vectorfusion_jobs_rejected_total 1"), "{m}");
+    assert!(m.contains("vectorfusion_jobs_rejected_total 2"), "{m}");
     assert!(m.contains("vectorfusion_queue_depth 2"), "{m}");
+    srv.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn omitted_paths_steps_samples_are_the_presets_and_are_recorded() {
+    let srv = TestServer::start(Arc::new(TestExecutor::new(1)), |c| {
+        c.limits.max_steps = 600;
+    })
+    .await;
+    let params = |body: Value| async move {
+        let r = post_json(srv.addr, "/jobs", &body).await;
+        assert_eq!(r.status, 202, "{}", r.text());
+        let id = r.json()["id"].as_str().unwrap().to_string();
+        let job = get(srv.addr, &format!("/jobs/{id}")).await.json();
+        let p = &job["params"];
+        (p["paths"].clone(), p["steps"].clone(), p["samples"].clone())
+    };
+    // The same resolution as `generate --preset` (Preset::resolve).
+    let text = |preset: &str, style: &str| json!({"kind": "text", "caption": "a crown", "preset": preset, "style": style});
+    assert_eq!(
+        params(text("draft", "iconography")).await,
+        (json!(8), json!(8), json!(2))
+    );
+    assert_eq!(
+        params(text("fast", "iconography")).await,
+        (json!(16), json!(100), json!(4))
+    );
+    assert_eq!(
+        params(text("fast", "pixel_art")).await,
+        (json!(1024), json!(100), json!(4))
+    );
+    assert_eq!(
+        params(text("balanced", "sketch")).await,
+        (json!(16), json!(500), json!(8))
+    );
+    // Explicit values win, one at a time.
+    let mut b = text("fast", "iconography");
+    b["steps"] = json!(3);
+    assert_eq!(params(b).await, (json!(16), json!(3), json!(4)));
+    // No preset: the default (balanced).
+    let no_preset = json!({"kind": "text", "caption": "a crown"});
+    assert_eq!(params(no_preset).await, (json!(64), json!(500), json!(8)));
+    // Vectorize: the preset's LIVE budget.
+    let v = json!({"kind": "vectorize", "image": png_b64(8), "preset": "fast"});
+    assert_eq!(params(v).await.0, json!(64));
+    // A preset value above this server's limit names the preset.
+    let r = post_json(srv.addr, "/jobs", &text("paper", "iconography")).await;
+    assert_eq!(r.status, 400, "{}", r.text());
+    assert_eq!(r.json()["error"]["field"], "steps");
+    let reason = r.json()["error"]["reason"].as_str().unwrap().to_string();
+    assert!(reason.contains("preset paper"), "{reason}");
     srv.stop().await;
 }
 

@@ -185,10 +185,24 @@ fn submit_request_fields_and_enums_match_the_code() {
             .parse()
             .unwrap()
     };
-    use vectorfusion::server::types::{DEFAULT_PATHS, DEFAULT_SAMPLES, DEFAULT_STEPS};
-    assert_eq!(num("paths", "default"), DEFAULT_PATHS as i64);
-    assert_eq!(num("steps", "default"), DEFAULT_STEPS as i64);
-    assert_eq!(num("samples", "default"), DEFAULT_SAMPLES as i64);
+    // Omitted paths/steps/samples are the preset's: no fixed default may be documented.
+    for f in vectorfusion::server::types::PRESET_FIELDS {
+        assert!(
+            props.path(&[f]).get("default").is_none(),
+            "{f} has a documented default, but the preset decides"
+        );
+        let d = props.path(&[f, "description"]).value.clone().unwrap();
+        assert!(d.contains("preset"), "{f}: {d}");
+    }
+    assert_eq!(
+        props.path(&["preset", "default"]).value.as_deref(),
+        Some(
+            serde_names(&[Preset::default()])
+                .pop_first()
+                .unwrap()
+                .as_str()
+        )
+    );
     let limits = vectorfusion::pipeline::Limits::default();
     assert_eq!(num("paths", "maximum"), limits.max_paths as i64);
     assert_eq!(num("steps", "maximum"), limits.max_steps as i64);

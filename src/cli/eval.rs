@@ -1,9 +1,22 @@
 //! `vectorfusion eval`: CLIP R-Precision and CLIP similarity of generated SVGs (Table 1).
+//!
+//! `--svgs DIR` scores SVGs generated elsewhere; `--method M` (repeatable) first generates one
+//! SVG per caption with the shared pipeline ([`DefaultExecutor`], exactly what `generate` and
+//! the service run), writing `OUT_DIR/M/0001.svg`…, then scores that directory the same way and
+//! adds the mean generation seconds per SVG.
 
 use super::CliError;
-use crate::eval::clip::{EvalError, evaluate_svg_dir, format_table, read_prompts};
+use crate::eval::clip::{
+    EvalError, EvalReport, evaluate_svg_dir, format_table, read_prompts, svg_name,
+};
 use crate::models::scorer::Scorer;
-use std::path::PathBuf;
+use crate::pipeline::{
+    DefaultExecutor, Executor, JobContext, JobKind, JobSpec, Limits, Method, ModelDirs,
+    PipelineError, Preset, Style,
+};
+use crate::progress::CancelToken;
+use serde::Serialize;
+use std::path::{Path, PathBuf};
 
 /// Evaluate SVGs generated from a caption file with one or more CLIP scorers.
 #[derive(clap::Args, Debug)]
@@ -11,9 +24,14 @@ pub struct EvalArgs {
     /// Caption file, one caption per line (line N ↔ NNNN.svg).
     #[arg(long)]
     pub prompts: PathBuf,
-    /// Generate with this method, then evaluate.
-    #[arg(long, conflicts_with = "svgs", required_unless_present = "svgs")]
-    pub method: Option<String>,
+    /// Generate with this method (scratch, sd_live, sd_live_sds), then evaluate; repeat for
+    /// several methods (one table row each).
+    #[arg(
+        long = "method",
+        conflicts_with = "svgs",
+        required_unless_present = "svgs"
+    )]
+    pub methods: Vec<String>,
     /// Evaluate already generated SVGs `0001.svg`, `0002.svg`, ... in this directory.
     #[arg(long)]
     pub svgs: Option<PathBuf>,
@@ -22,12 +40,47 @@ pub struct EvalArgs {
     /// `models/vf-icon` (its `scorer/`); repeat for several scorers.
     #[arg(long = "scorer", required = true)]
     pub scorers: Vec<String>,
-    /// Print JSON instead of the table.
-    #[arg(long)]
-    pub json: bool,
+    /// `--json`: print JSON instead of the table; `--json OUT`: write the JSON report to OUT
+    /// (and print the table).
+    #[arg(long, num_args = 0..=1, value_name = "OUT")]
+    pub json: Option<Option<PathBuf>>,
     /// Also write the JSON report to this file.
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Only the first N captions.
+    #[arg(long)]
+    pub limit: Option<usize>,
+    /// --method: where the SVGs go (OUT_DIR/METHOD/0001.svg, ...).
+    #[arg(long, default_value = "eval-out")]
+    pub out_dir: PathBuf,
+    /// --method: style (iconography, pixel-art, sketch).
+    #[arg(long, default_value = "iconography")]
+    pub style: String,
+    /// --method: preset (draft, fast, balanced, paper); omitted steps/paths/samples are its.
+    #[arg(long, default_value = "balanced")]
+    pub preset: String,
+    /// --method: Stable Diffusion model directory (diffusers layout).
+    #[arg(long, conflicts_with = "teacher")]
+    pub model: Option<PathBuf>,
+    /// --method: `analytic:DIR`, the analytic TEST teacher over the PNG targets in DIR.
+    #[arg(long)]
+    pub teacher: Option<String>,
+    /// --method: CLIP directory used to keep the best of the K samples (sd_live*); without it
+    /// the first sample is kept. (Not one of the evaluation scorers, to keep the metric fair.)
+    #[arg(long)]
+    pub rerank_scorer: Option<PathBuf>,
+    /// --method: SDS steps [default: the preset's].
+    #[arg(long)]
+    pub steps: Option<u32>,
+    /// --method: paths [default: the preset's].
+    #[arg(long)]
+    pub paths: Option<u32>,
+    /// --method: samples K [default: the preset's].
+    #[arg(long)]
+    pub samples: Option<u32>,
+    /// --method: seed of caption line N is SEED + N - 1.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
 }
 
 fn map_err(e: EvalError) -> CliError {
@@ -38,28 +91,228 @@ fn map_err(e: EvalError) -> CliError {
     }
 }
 
+fn pipeline_err(e: PipelineError) -> CliError {
+    match e {
+        PipelineError::InvalidInput(m) | PipelineError::ModelsNotConfigured(m) => {
+            CliError::Usage(m)
+        }
+        other => CliError::Other(anyhow::Error::new(other)),
+    }
+}
+
+/// `--method` output: one report per method.
+#[derive(Debug, Serialize)]
+pub struct MethodsReport {
+    pub prompts: usize,
+    pub style: Style,
+    pub preset: Preset,
+    pub methods: Vec<EvalReport>,
+}
+
 pub fn run(args: EvalArgs) -> Result<(), CliError> {
-    let captions = read_prompts(&args.prompts).map_err(map_err)?;
-    let Some(dir) = args.svgs else {
-        return Err(CliError::NotImplemented(
-            "eval --method (generation is not wired into eval yet; generate SVGs and pass --svgs DIR)",
-        ));
-    };
+    let mut captions = read_prompts(&args.prompts).map_err(map_err)?;
+    if let Some(n) = args.limit {
+        if n == 0 {
+            return Err(CliError::Usage("--limit must be positive".into()));
+        }
+        captions.truncate(n);
+    }
     let mut scorers = Vec::with_capacity(args.scorers.len());
     for s in &args.scorers {
         let sc = Scorer::load_source(s, true).map_err(|e| CliError::Other(e.into()))?;
         scorers.push(sc);
     }
-    let report = evaluate_svg_dir(&captions, &dir, &scorers).map_err(map_err)?;
-    let json = serde_json::to_string_pretty(&report).map_err(|e| CliError::Other(e.into()))?;
-    if let Some(out) = &args.out {
-        std::fs::write(out, &json)
-            .map_err(|e| CliError::Other(anyhow::anyhow!("{}: {e}", out.display())))?;
+    let (json, table) = match &args.svgs {
+        Some(dir) => {
+            let report = evaluate_svg_dir(&captions, dir, &scorers).map_err(map_err)?;
+            (to_json(&report)?, format_table(&report))
+        }
+        None => {
+            let report = generate_and_evaluate(&args, &captions, &scorers)?;
+            (to_json(&report)?, format_methods_table(&report))
+        }
+    };
+    let json_file = args.json.as_ref().and_then(Option::as_ref);
+    for out in args.out.iter().chain(json_file) {
+        write(out, &json)?;
     }
-    if args.json {
+    if matches!(args.json, Some(None)) {
         println!("{json}");
     } else {
-        print!("{}", format_table(&report));
+        print!("{table}");
     }
     Ok(())
+}
+
+fn to_json<T: Serialize>(v: &T) -> Result<String, CliError> {
+    serde_json::to_string_pretty(v).map_err(|e| CliError::Other(e.into()))
+}
+
+fn parse_enum<T: serde::de::DeserializeOwned>(what: &str, s: &str) -> Result<T, CliError> {
+    serde_json::from_value(serde_json::Value::String(
+        s.to_ascii_lowercase().replace('-', "_"),
+    ))
+    .map_err(|_| CliError::Usage(format!("unknown {what} {s:?}")))
+}
+
+/// Generates `dir/0001.svg`… for every method with the shared pipeline, then scores each
+/// directory like `--svgs`.
+fn generate_and_evaluate(
+    args: &EvalArgs,
+    captions: &[String],
+    scorers: &[Scorer],
+) -> Result<MethodsReport, CliError> {
+    let methods: Vec<Method> = args
+        .methods
+        .iter()
+        .map(|m| m.parse().map_err(CliError::Usage))
+        .collect::<Result<_, _>>()?;
+    let style: Style = parse_enum("style", &args.style)?;
+    let preset: Preset = args.preset.parse().map_err(CliError::Usage)?;
+    let analytic_dir = match &args.teacher {
+        None => None,
+        Some(t) => Some(PathBuf::from(t.strip_prefix("analytic:").ok_or_else(
+            || {
+                CliError::Usage(format!(
+                    "unknown teacher {t:?}: the only test teacher is analytic:DIR"
+                ))
+            },
+        )?)),
+    };
+    if args.model.is_none() && analytic_dir.is_none() {
+        return Err(CliError::Usage(
+            "--method generates SVGs: give --model DIR (Stable Diffusion) or --teacher analytic:DIR"
+                .into(),
+        ));
+    }
+    let exec = DefaultExecutor::new(ModelDirs {
+        sd_dir: args.model.clone(),
+        clip_dir: args.rerank_scorer.clone(),
+        taesd_dir: None,
+        analytic_dir,
+    });
+    exec.text_ready().map_err(CliError::Usage)?;
+    let mut reports = Vec::with_capacity(methods.len());
+    for (method, name) in methods.iter().zip(&args.methods) {
+        let name = name.to_ascii_lowercase().replace('-', "_");
+        let dir = args.out_dir.join(&name);
+        std::fs::create_dir_all(&dir)
+            .map_err(|e| CliError::Other(anyhow::anyhow!("{}: {e}", dir.display())))?;
+        let mut seconds = 0.0;
+        for (i, caption) in captions.iter().enumerate() {
+            let line = i + 1;
+            let spec = job_spec(args, *method, style, preset, caption, line)?;
+            let t0 = std::time::Instant::now();
+            let out = exec
+                .run(&spec, &JobContext::detached(CancelToken::new()))
+                .map_err(pipeline_err)?;
+            // The pipeline's own time (model loading excluded); wall time as a fallback.
+            let secs = out.detail["seconds"]
+                .as_f64()
+                .unwrap_or_else(|| t0.elapsed().as_secs_f64());
+            seconds += secs;
+            let path = dir.join(svg_name(line));
+            write(&path, &out.svg)?;
+            eprintln!(
+                "{name} {line}/{}: {} paths, {secs:.1} s -> {}",
+                captions.len(),
+                out.paths,
+                path.display()
+            );
+        }
+        let mut report = evaluate_svg_dir(captions, &dir, scorers).map_err(map_err)?;
+        report.method = name;
+        report.mean_seconds = Some(seconds / captions.len().max(1) as f64);
+        reports.push(report);
+    }
+    Ok(MethodsReport {
+        prompts: captions.len(),
+        style,
+        preset,
+        methods: reports,
+    })
+}
+
+fn job_spec(
+    args: &EvalArgs,
+    method: Method,
+    style: Style,
+    preset: Preset,
+    caption: &str,
+    line: usize,
+) -> Result<JobSpec, CliError> {
+    let r = preset.resolve(
+        crate::pipeline::methods::stage_style(style),
+        args.paths.map(|p| p as usize),
+        args.steps,
+        args.samples,
+    );
+    let spec = JobSpec {
+        kind: JobKind::Text,
+        caption: Some(caption.to_string()),
+        image: None,
+        svg: None,
+        style,
+        method,
+        paths: u32::try_from(r.paths).unwrap_or(u32::MAX),
+        steps: r.steps,
+        seed: args.seed.wrapping_add(line as u64 - 1),
+        samples: r.samples,
+        preset,
+        priority: 0,
+    };
+    spec.validate(&Limits::default())
+        .map_err(|e| CliError::Usage(format!("line {line}: {e}")))?;
+    Ok(spec)
+}
+
+fn write(path: &Path, text: &str) -> Result<(), CliError> {
+    std::fs::write(path, text)
+        .map_err(|e| CliError::Other(anyhow::anyhow!("{}: {e}", path.display())))
+}
+
+/// Table 1: one row per method (paths and seconds per SVG, then R-Precision and similarity per
+/// scorer).
+pub fn format_methods_table(r: &MethodsReport) -> String {
+    let mut s = format!("{} prompts\n", r.prompts);
+    let w = r
+        .methods
+        .iter()
+        .map(|m| m.method.chars().count())
+        .max()
+        .unwrap_or(6)
+        .max(6);
+    s.push_str(&format!(
+        "{:<w$}  {:>9}  {:>7}",
+        "method", "paths/SVG", "s/SVG"
+    ));
+    let names: Vec<&str> = r
+        .methods
+        .first()
+        .map(|m| m.scorers.iter().map(|x| x.scorer.as_str()).collect())
+        .unwrap_or_default();
+    for n in &names {
+        s.push_str(&format!(
+            "  {:>14}  {:>10}",
+            format!("R-Prec {n}"),
+            "CLIP sim"
+        ));
+    }
+    s.push('\n');
+    for m in &r.methods {
+        let secs = m.mean_seconds.map_or("n/a".into(), |v| format!("{v:.1}"));
+        s.push_str(&format!(
+            "{:<w$}  {:>9.1}  {:>7}",
+            m.method, m.mean_paths, secs
+        ));
+        for x in &m.scorers {
+            s.push_str(&format!(
+                "  {:>13.1}%  {:>10.2}",
+                100.0 * x.r_precision,
+                x.mean_similarity
+            ));
+        }
+        s.push('\n');
+    }
+    s
 }

@@ -233,7 +233,7 @@ pub fn run(args: GenerateArgs) -> Result<(), CliError> {
     Ok(())
 }
 
-fn pipeline_err(e: PipelineError) -> CliError {
+pub(crate) fn pipeline_err(e: PipelineError) -> CliError {
     match e {
         PipelineError::InvalidInput(m) | PipelineError::ModelsNotConfigured(m) => {
             CliError::Usage(m)

@@ -173,6 +173,14 @@ impl Adam {
         self.v = fresh.v;
     }
 
+    /// Whether the moment buffers have the layout of `like` (e.g. after loading a checkpoint).
+    pub fn fits(&self, like: &Params) -> bool {
+        ParamGroup::ALL.iter().all(|&g| {
+            let n = like.get(g).len();
+            self.m.get(g).len() == n && self.v.get(g).len() == n
+        })
+    }
+
     /// One Adam update of `params` with `grad` (minimisation). Frozen groups are untouched.
     pub fn step(&mut self, params: &mut Params, grad: &Params) -> StepOutcome {
         let active = |g: ParamGroup| self.trainable.contains(g);

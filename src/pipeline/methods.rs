@@ -12,7 +12,7 @@
 //! At the end, iconography paths that stayed faint or tiny are pruned and the number of paths
 //! the scene needed is reported in the output `detail`.
 
-use super::{PipelineError, Preset};
+use super::{JobContext, PipelineError, Preset};
 use crate::image::Image;
 use crate::image::ops::resize;
 use crate::models::scheduler::SamplerKind;
@@ -21,13 +21,15 @@ use crate::progress::{CancelToken, Progress, ProgressSink};
 use crate::scene::{Rgba, Scene, Shape, ShapeKind, Stroke};
 use crate::stages::live::prune::weak_paths;
 use crate::stages::live::{self, LiveConfig, PathBudget};
-use crate::stages::sds::{RasterBackend, SdsConfig, SdsError, gaussian, run_sds};
+use crate::stages::sds::{
+    RasterBackend, SdsCheckpoint, SdsConfig, SdsError, SdsState, gaussian, run_sds_resumable,
+};
 use crate::stages::styles::{Style, pixelate_l1, random_circle, random_stroke};
 use crate::teacher::{AnalyticTeacher, AnalyticTeacherConfig, SdTeacher, Teacher};
 use candle_core::{DType, Tensor};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use serde_json::json;
 use std::path::Path;
 
@@ -102,6 +104,37 @@ impl Preset {
         }
     }
 
+    /// Explicit `paths`/`steps`/`samples` win; omitted ones are the preset's (paths per style:
+    /// iconography the preset's, pixel art its grid, sketch at most its stroke count). The one
+    /// resolution shared by `generate`, `eval --method`, the service and [`run_text`].
+    pub fn resolve(
+        self,
+        style: Style,
+        paths: Option<usize>,
+        steps: Option<u32>,
+        samples: Option<u32>,
+    ) -> Resolved {
+        let ps = self.settings();
+        Resolved {
+            paths: paths.unwrap_or(match style {
+                Style::Iconography => ps.paths,
+                Style::PixelArt => style.default_paths(),
+                Style::Sketch => ps.paths.min(Style::Sketch.default_paths()),
+            }),
+            steps: steps.unwrap_or(ps.steps),
+            samples: samples.unwrap_or(ps.samples),
+        }
+    }
+
+    /// The path budget of a vectorize job when the request names none: the total of this
+    /// preset's LIVE budget.
+    pub fn vectorize_paths(self) -> usize {
+        match LiveConfig::preset(self.live()).budget {
+            PathBudget::Schedule { stages } => stages.iter().sum(),
+            PathBudget::Auto { max_paths, .. } => max_paths,
+        }
+    }
+
     /// The LIVE preset used for vectorize jobs.
     pub fn live(self) -> live::Preset {
         match self {
@@ -110,6 +143,14 @@ impl Preset {
             Preset::Paper => live::Preset::Quality,
         }
     }
+}
+
+/// Paths, steps and samples of a run after [`Preset::resolve`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub struct Resolved {
+    pub paths: usize,
+    pub steps: u32,
+    pub samples: u32,
 }
 
 impl std::str::FromStr for Preset {
@@ -442,21 +483,85 @@ pub fn run_text(
     sink: &dyn ProgressSink,
     cancel: &CancelToken,
 ) -> Result<MethodOutput, PipelineError> {
+    run_text_resumable(models, req, sink, cancel, None)
+}
+
+/// What a text run checkpoints (the service stores it with the job): the SDS loop's state and
+/// what the stages before it produced, so a resumed run skips sampling, rerank and tracing.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct TextCheckpoint {
+    /// The request the state belongs to ([`checkpoint_key`]); another request ignores it.
+    pub key: String,
+    pub augment: bool,
+    /// The run's `detail` when SDS started (rerank scores, LIVE statistics).
+    pub detail: serde_json::Value,
+    pub sds: SdsState,
+}
+
+/// Identifies the run a checkpoint belongs to: everything that shapes the SDS stage.
+pub fn checkpoint_key(req: &TextRequest, teacher: &str, size: u32) -> String {
+    let start = match &req.start {
+        Start::Method => "method",
+        Start::Image(_) => "image",
+        Start::Svg(_) => "svg",
+    };
+    format!(
+        "v1|{:?}|{:?}|{:?}|{:?}|{:?}|{:?}|{:?}|{}|{start}|{teacher}|{size}",
+        req.method, req.style, req.preset, req.paths, req.steps, req.samples, req.caption, req.seed
+    )
+}
+
+struct JobCheckpoints<'a> {
+    ctx: &'a JobContext,
+    key: &'a str,
+    augment: bool,
+    detail: &'a serde_json::Value,
+}
+
+impl SdsCheckpoint for JobCheckpoints<'_> {
+    fn due(&self, step: u32) -> bool {
+        self.ctx.checkpoint_due(step)
+    }
+
+    fn save(&self, state: &SdsState) -> Result<(), String> {
+        let value = serde_json::to_value(TextCheckpoint {
+            key: self.key.to_string(),
+            augment: self.augment,
+            detail: self.detail.clone(),
+            sds: state.clone(),
+        })
+        .map_err(|e| e.to_string())?;
+        self.ctx.checkpoint(value).map_err(|e| e.to_string())
+    }
+}
+
+/// [`run_text`] for a service job: checkpoints the SDS stage through `ctx` every
+/// `ctx.checkpoint_due` steps (and when cancelled), and resumes from `ctx.resume_state()` when
+/// it holds a [`TextCheckpoint`] of the same request, skipping the stages before SDS. A resumed
+/// run ends with the same SVG as an uninterrupted one; `detail.resumed_from` is the step.
+pub fn run_text_resumable(
+    models: &Models,
+    req: &TextRequest,
+    sink: &dyn ProgressSink,
+    cancel: &CancelToken,
+    ctx: Option<&JobContext>,
+) -> Result<MethodOutput, PipelineError> {
     let ps = req.preset.settings();
     let teacher = models.teacher();
     let size = teacher.image_size();
-    let steps = req.steps.unwrap_or(ps.steps).max(1);
-    let paths = req.paths.unwrap_or(match req.style {
-        Style::Iconography => ps.paths,
-        Style::PixelArt => req.style.default_paths(),
-        Style::Sketch => ps.paths.min(Style::Sketch.default_paths()),
-    });
+    let Resolved {
+        paths,
+        steps,
+        samples: k,
+    } = req
+        .preset
+        .resolve(req.style, req.paths, req.steps, req.samples);
+    let (steps, k) = (steps.max(1), k.max(1));
     if paths == 0 || paths > 1024 {
         return Err(PipelineError::InvalidInput(format!(
             "paths must be in 1..=1024, got {paths}"
         )));
     }
-    let k = req.samples.unwrap_or(ps.samples).max(1);
     let prompt = req.style.prompt(&req.caption);
     let mut detail = json!({
         "method": req.method,
@@ -468,11 +573,30 @@ pub fn run_text(
         "prompt": prompt,
     });
     let t0 = std::time::Instant::now();
+    let key = checkpoint_key(req, &teacher.name(), size);
+    let mut resumed = ctx
+        .and_then(JobContext::resume_state)
+        .and_then(|v| serde_json::from_value::<TextCheckpoint>(v).ok())
+        .filter(|c| c.key == key);
 
     // 1. The starting scene, and whether SDS (with augmentation) follows.
     let mut sds_after = req.method != Method::SdLive;
     let mut augment = true;
+    let mut resume_sds = None;
     let start_scene: Scene = match &req.start {
+        // A restarted job: the SDS state and the detail of the stages before it.
+        _ if resumed.is_some() => {
+            let r = resumed
+                .take()
+                .ok_or_else(|| failed("resume", "no saved state"))?;
+            sds_after = true;
+            augment = r.augment;
+            detail = r.detail;
+            detail["resumed_from"] = json!(r.sds.step);
+            let scene = r.sds.scene.clone();
+            resume_sds = Some(r.sds);
+            scene
+        }
         Start::Svg(scene) => {
             sds_after = true;
             augment = false;
@@ -566,14 +690,30 @@ pub fn run_text(
             }
         }
         let render = cfg.render_size(size);
-        let scene_in = scaled(&scene, render)?;
-        let out =
-            run_sds(&RasterBackend, teacher, scene_in, &cfg, sink, cancel).map_err(
-                |e| match e {
-                    SdsError::Config(m) => PipelineError::InvalidInput(m),
-                    other => failed("score distillation", other),
-                },
-            )?;
+        let state = match resume_sds {
+            Some(s) => s,
+            None => SdsState::start(scaled(&scene, render)?, &cfg),
+        };
+        let checkpoints = ctx.map(|ctx| JobCheckpoints {
+            ctx,
+            key: &key,
+            augment,
+            detail: &detail,
+        });
+        let out = run_sds_resumable(
+            &RasterBackend,
+            teacher,
+            state,
+            &cfg,
+            sink,
+            cancel,
+            checkpoints.as_ref().map(|c| c as &dyn SdsCheckpoint),
+        )
+        .map_err(|e| match e {
+            SdsError::Config(m) => PipelineError::InvalidInput(m),
+            SdsError::Checkpoint(m) => PipelineError::Transient(m),
+            other => failed("score distillation", other),
+        })?;
         if out.stats.cancelled {
             return Err(PipelineError::Cancelled);
         }

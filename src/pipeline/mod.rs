@@ -449,7 +449,8 @@ impl DefaultExecutor {
             seed: spec.seed,
             start,
         };
-        let out = methods::run_text(&models, &req, ctx.sink(), ctx.cancel_token())?;
+        let out =
+            methods::run_text_resumable(&models, &req, ctx.sink(), ctx.cancel_token(), Some(ctx))?;
         Ok(JobOutput {
             svg: out.svg,
             paths: out.paths,

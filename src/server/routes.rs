@@ -140,8 +140,18 @@ pub(super) async fn submit(
     {
         return Err(ApiError::ModelsNotConfigured(msg));
     }
+    let hash = key
+        .as_ref()
+        .map(|_| format!("{:x}", sha2::Sha256::digest(&body)));
     let max_depth = state.cfg.server.max_queue_depth;
     if state.queued_estimate.load(Ordering::Relaxed) >= max_depth {
+        // A retried submit (known Idempotency-Key) gets its job back even when the queue is
+        // full: it adds nothing to the queue.
+        if let Some(k) = &key
+            && let Some(row) = state.store.get_job_by_key(k).await?
+        {
+            return replay(row, &hash);
+        }
         let depth = state.store.queue_depth().await?;
         state.queued_estimate.store(depth, Ordering::Relaxed);
         if depth >= max_depth {
@@ -153,9 +163,6 @@ pub(super) async fn submit(
         }
     }
     let spec_json = serde_json::to_string(&spec).map_err(|e| ApiError::Internal(e.to_string()))?;
-    let hash = key
-        .as_ref()
-        .map(|_| format!("{:x}", sha2::Sha256::digest(&body)));
     let new = NewJob {
         id: id.hyphenated().to_string(),
         kind: match spec.kind {
@@ -169,23 +176,34 @@ pub(super) async fn submit(
         max_attempts: state.cfg.queue.max_attempts as i64,
     };
     let (row, created) = state.store.insert_job(&new, now_ms()).await?;
-    if !created && row.request_hash != hash {
-        return Err(ApiError::IdempotencyConflict);
+    if !created {
+        return replay(row, &hash);
     }
-    if created {
-        Metrics::inc(&state.metrics.jobs_submitted);
-        state.queued_estimate.fetch_add(1, Ordering::Relaxed);
-        state.pool.notify();
-        tracing::info!(job = %row.id, kind = %row.kind, "job submitted");
-    }
-    let mut resp = (StatusCode::ACCEPTED, Json(JobView::from_row(&row))).into_response();
+    Metrics::inc(&state.metrics.jobs_submitted);
+    state.queued_estimate.fetch_add(1, Ordering::Relaxed);
+    state.pool.notify();
+    tracing::info!(job = %row.id, kind = %row.kind, "job submitted");
+    Ok(accepted(&row))
+}
+
+/// 202 with the job and its `Location`.
+fn accepted(row: &JobRow) -> Response {
+    let mut resp = (StatusCode::ACCEPTED, Json(JobView::from_row(row))).into_response();
     if let Ok(loc) = HeaderValue::from_str(&format!("/jobs/{}", row.id)) {
         resp.headers_mut().insert(header::LOCATION, loc);
     }
-    if !created {
-        resp.headers_mut()
-            .insert("idempotent-replayed", HeaderValue::from_static("true"));
+    resp
+}
+
+/// The answer to a submit whose Idempotency-Key is known: the same job (marked replayed), or a
+/// conflict when the body differs.
+fn replay(row: JobRow, hash: &Option<String>) -> Result<Response, ApiError> {
+    if row.request_hash != *hash {
+        return Err(ApiError::IdempotencyConflict);
     }
+    let mut resp = accepted(&row);
+    resp.headers_mut()
+        .insert("idempotent-replayed", HeaderValue::from_static("true"));
     Ok(resp)
 }
 
@@ -196,6 +214,13 @@ pub(super) async fn get_job(
     let id = job_id(&raw)?;
     let row = load_job(&state, &id).await?;
     let mut view = JobView::from_row(&row);
+    if row.status == JobStatus::Succeeded.as_str()
+        && let Some(result) = state.store.result(&id).await?
+    {
+        view = view.with_result(&result);
+    } else if let Some(ck) = &row.checkpoint {
+        view = view.with_checkpoint(ck);
+    }
     view.attempt_history = Some(state.store.attempts(&id).await?);
     Ok(Json(view))
 }

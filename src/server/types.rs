@@ -14,10 +14,9 @@ pub const SUBMIT_FIELDS: &[&str] = &[
     "preset", "priority",
 ];
 
-/// Defaults for omitted fields.
-pub const DEFAULT_PATHS: u32 = 64;
-pub const DEFAULT_STEPS: u32 = 500;
-pub const DEFAULT_SAMPLES: u32 = 4;
+/// Fields whose omission means "the preset decides" ([`Preset::resolve`]); the resolved values
+/// are stored in the job.
+pub const PRESET_FIELDS: &[&str] = &["paths", "steps", "samples"];
 
 fn field<T: DeserializeOwned>(obj: &Map<String, Value>, name: &str) -> Result<Option<T>, ApiError> {
     match obj.get(name) {
@@ -74,22 +73,54 @@ pub fn parse_submit(body: &[u8], limits: &Limits, default_seed: u64) -> Result<J
     if kind == JobKind::Vectorize && method.is_some() {
         return Err(ApiError::invalid("method", "only applies to kind \"text\""));
     }
+    let style = field::<Style>(&obj, "style")?.unwrap_or_default();
+    let preset = field::<Preset>(&obj, "preset")?.unwrap_or_default();
+    let paths: Option<u32> = field(&obj, "paths")?;
+    let steps: Option<u32> = field(&obj, "steps")?;
+    let samples: Option<u32> = field(&obj, "samples")?;
+    // Omitted paths/steps/samples are the preset's, resolved exactly as the CLI resolves them.
+    let resolved = preset.resolve(
+        crate::pipeline::methods::stage_style(style),
+        paths.map(|p| p as usize),
+        steps,
+        samples,
+    );
+    let preset_paths = match kind {
+        JobKind::Text => resolved.paths,
+        JobKind::Vectorize => preset.vectorize_paths(),
+    };
     let spec = JobSpec {
         kind,
         caption: field(&obj, "caption")?,
         image,
         svg: field(&obj, "svg")?,
-        style: field::<Style>(&obj, "style")?.unwrap_or_default(),
+        style,
         method: method.unwrap_or_default(),
-        paths: field(&obj, "paths")?.unwrap_or(DEFAULT_PATHS),
-        steps: field(&obj, "steps")?.unwrap_or(DEFAULT_STEPS),
+        paths: paths.unwrap_or(u32::try_from(preset_paths).unwrap_or(u32::MAX)),
+        steps: resolved.steps,
         seed: field(&obj, "seed")?.unwrap_or(default_seed),
-        samples: field(&obj, "samples")?.unwrap_or(DEFAULT_SAMPLES),
-        preset: field::<Preset>(&obj, "preset")?.unwrap_or_default(),
+        samples: resolved.samples,
+        preset,
         priority: field(&obj, "priority")?.unwrap_or(0),
     };
-    spec.validate(limits)
-        .map_err(|e| ApiError::invalid(e.field, e.reason))?;
+    spec.validate(limits).map_err(|e| {
+        let from_preset =
+            PRESET_FIELDS.contains(&e.field) && obj.get(e.field).is_none_or(Value::is_null);
+        let reason = if from_preset {
+            format!(
+                "{} (the value of preset {}; pass {} explicitly or choose a smaller preset)",
+                e.reason,
+                serde_json::to_value(preset)
+                    .ok()
+                    .and_then(|v| v.as_str().map(str::to_string))
+                    .unwrap_or_default(),
+                e.field
+            )
+        } else {
+            e.reason
+        };
+        ApiError::invalid(e.field, reason)
+    })?;
     Ok(spec)
 }
 
@@ -195,6 +226,76 @@ pub struct JobView {
     pub links: Links,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub attempt_history: Option<Vec<AttemptRow>>,
+    /// Rejection sampling of an `sd_live*` text job: once it succeeded, or from its last
+    /// checkpoint while it runs (`GET /jobs/{id}` only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub rerank: Option<RerankView>,
+    /// Summary of a succeeded job's result (`GET /jobs/{id}` only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub result: Option<ResultView>,
+}
+
+/// The CLIP rerank of the K sampled images: one score per sample, the index kept.
+#[derive(Serialize)]
+pub struct RerankView {
+    /// Scorer name; `null` when no scorer is configured (the first sample is kept).
+    pub scorer: Option<String>,
+    /// Cosine similarity of each sample with the caption (empty without a scorer).
+    pub scores: Vec<f64>,
+    /// Index of the kept sample.
+    pub chosen: u64,
+    pub samples: u64,
+}
+
+/// What a succeeded job produced besides the SVG.
+#[derive(Serialize)]
+pub struct ResultView {
+    pub paths: i64,
+    /// The executor's details (method, preset, timings, per-stage statistics).
+    pub detail: Value,
+}
+
+impl JobView {
+    /// Adds the stored result (paths, detail, rerank scores) of a succeeded job.
+    pub fn with_result(mut self, result: &crate::store::ResultRow) -> JobView {
+        let detail: Value = serde_json::from_str(&result.detail).unwrap_or(Value::Null);
+        self.rerank = detail.get("rerank").and_then(RerankView::from_detail);
+        self.result = Some(ResultView {
+            paths: result.paths,
+            detail,
+        });
+        self
+    }
+
+    /// Adds the rerank scores of an unfinished job from its last checkpoint (text jobs save
+    /// them with their SDS state).
+    pub fn with_checkpoint(mut self, checkpoint: &str) -> JobView {
+        self.rerank = serde_json::from_str::<Value>(checkpoint)
+            .ok()
+            .and_then(|c| {
+                c.get("detail")?
+                    .get("rerank")
+                    .and_then(RerankView::from_detail)
+            });
+        self
+    }
+}
+
+impl RerankView {
+    /// From the `rerank` object of a run's detail.
+    fn from_detail(r: &Value) -> Option<RerankView> {
+        Some(RerankView {
+            scorer: r.get("scorer")?.as_str().map(str::to_string),
+            scores: r
+                .get("scores")?
+                .as_array()?
+                .iter()
+                .filter_map(Value::as_f64)
+                .collect(),
+            chosen: r.get("best")?.as_u64()?,
+            samples: r.get("samples")?.as_u64()?,
+        })
+    }
 }
 
 impl JobView {
@@ -253,6 +354,8 @@ impl JobView {
                 this: base,
             },
             attempt_history: None,
+            rerank: None,
+            result: None,
         }
     }
 }

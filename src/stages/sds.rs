@@ -76,6 +76,10 @@ pub enum SdsError {
     Scene(#[from] SceneError),
     #[error("invalid SDS settings: {0}")]
     Config(String),
+    #[error("cannot resume SDS: {0}")]
+    Resume(String),
+    #[error("saving an SDS checkpoint failed: {0}")]
+    Checkpoint(String),
 }
 
 /// The weighting `w(t)` of the SDS gradient.
@@ -238,6 +242,51 @@ pub struct SdsStats {
 pub struct SdsOutcome {
     pub scene: Scene,
     pub stats: SdsStats,
+}
+
+/// The SDS loop's whole state at a step boundary: resuming from it continues the run exactly
+/// as if it had never stopped (same scene, optimiser moments, learning-rate scale, counters and
+/// random stream). Serde, so service checkpoints can hold it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SdsState {
+    /// Steps completed.
+    pub step: u32,
+    /// The scene after `step` steps (at the render size).
+    pub scene: Scene,
+    pub adam: Adam,
+    /// Position of the loop's ChaCha8 stream (seeded with [`SdsConfig::seed`]), in 32-bit words.
+    pub rng_word_pos: u64,
+    /// Learning-rate scale after non-finite roll-backs (halved each time).
+    pub lr_scale: f32,
+    pub stats: SdsStats,
+}
+
+impl SdsState {
+    /// The state before the first step of a run of `cfg` on `scene`.
+    pub fn start(scene: Scene, cfg: &SdsConfig) -> Self {
+        let params = Params::from_scene(&scene);
+        SdsState {
+            step: 0,
+            adam: Adam::new(
+                &params,
+                cfg.adam.clone(),
+                cfg.schedules.clone(),
+                cfg.trainable,
+            ),
+            scene,
+            rng_word_pos: 0,
+            lr_scale: 1.0,
+            stats: SdsStats::default(),
+        }
+    }
+}
+
+/// Where [`run_sds_resumable`] saves its state.
+pub trait SdsCheckpoint {
+    /// Whether a checkpoint is due after `step` (1-based) completed steps.
+    fn due(&self, step: u32) -> bool;
+    /// Saves the state; called when due and once more when the run is cancelled.
+    fn save(&self, state: &SdsState) -> Result<(), String>;
 }
 
 /// Standard normal sample (Box–Muller).
@@ -419,26 +468,66 @@ fn reinit_faint<R: Rng>(
 pub fn run_sds<B: Backend>(
     backend: &B,
     teacher: &dyn Teacher,
-    mut scene: Scene,
+    scene: Scene,
     cfg: &SdsConfig,
     sink: &dyn ProgressSink,
     cancel: &CancelToken,
 ) -> Result<SdsOutcome, SdsError> {
+    let start = SdsState::start(scene, cfg);
+    run_sds_resumable(backend, teacher, start, cfg, sink, cancel, None)
+}
+
+/// [`run_sds`] from a saved [`SdsState`] (or [`SdsState::start`]), saving the state through
+/// `checkpoint` when it is due and when cancelled. Resuming a state saved by a run of the same
+/// `cfg` gives exactly the scene an uninterrupted run gives.
+pub fn run_sds_resumable<B: Backend>(
+    backend: &B,
+    teacher: &dyn Teacher,
+    state: SdsState,
+    cfg: &SdsConfig,
+    sink: &dyn ProgressSink,
+    cancel: &CancelToken,
+    checkpoint: Option<&dyn SdsCheckpoint>,
+) -> Result<SdsOutcome, SdsError> {
+    let SdsState {
+        step: first_step,
+        mut scene,
+        mut adam,
+        rng_word_pos,
+        mut lr_scale,
+        mut stats,
+    } = state;
     scene.validate()?;
     let alphas = teacher.alphas_cumprod().to_vec();
     cfg.validate(alphas.len())?;
+    let mut params = Params::from_scene(&scene);
+    if first_step > cfg.steps || !adam.fits(&params) || !(lr_scale > 0.0 && lr_scale <= 1.0) {
+        return Err(SdsError::Resume(format!(
+            "the saved state (step {first_step} of {}) does not fit this run",
+            cfg.steps
+        )));
+    }
     let cond = teacher.condition(&cfg.prompt, &cfg.negative_prompt)?;
     let size = teacher.image_size();
     let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);
-    let mut params = Params::from_scene(&scene);
-    let mut adam = Adam::new(
-        &params,
-        cfg.adam.clone(),
-        cfg.schedules.clone(),
-        cfg.trainable,
-    );
-    let mut lr_scale = 1.0f32;
-    let mut stats = SdsStats::default();
+    rng.set_word_pos(u128::from(rng_word_pos));
+    let snapshot_state = |step: u32,
+                          scene: &Scene,
+                          adam: &Adam,
+                          rng: &ChaCha8Rng,
+                          lr_scale: f32,
+                          stats: &SdsStats|
+     -> Result<SdsState, SdsError> {
+        Ok(SdsState {
+            step,
+            scene: scene.clone(),
+            adam: adam.clone(),
+            rng_word_pos: u64::try_from(rng.get_word_pos())
+                .map_err(|_| SdsError::Checkpoint("random stream position overflow".into()))?,
+            lr_scale,
+            stats: stats.clone(),
+        })
+    };
     // Deterministic resize when not augmenting and the render is not the teacher's size.
     let identity = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
     let resize =
@@ -463,8 +552,16 @@ pub fn run_sds<B: Backend>(
         .map_or(0, |r| (r.until_fraction * cfg.steps as f32) as u32);
     let latent_len: usize = teacher.latent_shape().iter().product();
 
-    for step in 0..cfg.steps {
+    for step in first_step..cfg.steps {
         if cancel.is_cancelled() {
+            // Save the work done so far (a shutdown resumes from here). A failed save only
+            // means a later attempt resumes from the previous checkpoint.
+            if let Some(c) = checkpoint
+                && step > first_step
+                && let Ok(st) = snapshot_state(step, &scene, &adam, &rng, lr_scale, &stats)
+            {
+                let _ = c.save(&st);
+            }
             stats.cancelled = true;
             break;
         }
@@ -557,6 +654,13 @@ pub fn run_sds<B: Backend>(
             }));
         }
         sink.report(ev);
+        if let Some(c) = checkpoint
+            && step + 1 < cfg.steps
+            && c.due(step + 1)
+        {
+            let st = snapshot_state(step + 1, &scene, &adam, &rng, lr_scale, &stats)?;
+            c.save(&st).map_err(SdsError::Checkpoint)?;
+        }
     }
     scene.validate()?;
     let mut ev = Progress::new("sds", stats.steps_done, cfg.steps);

@@ -304,6 +304,14 @@ impl Store {
             .ok_or_else(|| StoreError::Corrupt("idempotency key conflict without a row".into()))
     }
 
+    /// The job submitted with this idempotency key, if any.
+    pub async fn get_job_by_key(&self, key: &str) -> Result<Option<JobRow>, StoreError> {
+        Ok(sqlx::query_as(include_str!("sql/get_job_by_key.sql"))
+            .bind(key)
+            .fetch_optional(&self.pool)
+            .await?)
+    }
+
     pub async fn get_job(&self, id: &str) -> Result<Option<JobRow>, StoreError> {
         Ok(sqlx::query_as(include_str!("sql/get_job.sql"))
             .bind(id)
@@ -364,46 +372,29 @@ impl Store {
         Ok(rows)
     }
 
-    /// Atomically claims the next job for `worker`, with a lease of `lease_ms`.
+    /// Atomically claims the next job for `worker`, with a lease of `lease_ms`. One statement:
+    /// the trigger of `migrations/0002_claim_opens_attempt.sql` opens the attempt row (and marks
+    /// earlier running attempts lost) inside it.
     pub async fn claim(
         &self,
         worker: &str,
         now: i64,
         lease_ms: i64,
     ) -> Result<Option<(JobRow, Lease)>, StoreError> {
-        let mut tx = self.writer.begin_with("BEGIN IMMEDIATE").await?;
         let row: Option<JobRow> = sqlx::query_as(include_str!("sql/claim.sql"))
             .bind(worker)
             .bind(now)
             .bind(lease_ms)
-            .fetch_optional(&mut *tx)
+            .fetch_optional(&self.writer)
             .await?;
-        let Some(row) = row else {
-            tx.rollback().await?;
-            return Ok(None);
-        };
-        if row.attempts > 1 {
-            sqlx::query(include_str!("sql/mark_lost_attempts.sql"))
-                .bind(&row.id)
-                .bind(row.attempts)
-                .bind(now)
-                .execute(&mut *tx)
-                .await?;
-        }
-        sqlx::query(include_str!("sql/insert_attempt.sql"))
-            .bind(&row.id)
-            .bind(row.attempts)
-            .bind(worker)
-            .bind(now)
-            .execute(&mut *tx)
-            .await?;
-        tx.commit().await?;
-        let lease = Lease {
-            job_id: row.id.clone(),
-            worker: worker.to_string(),
-            attempt: row.attempts,
-        };
-        Ok(Some((row, lease)))
+        Ok(row.map(|row| {
+            let lease = Lease {
+                job_id: row.id.clone(),
+                worker: worker.to_string(),
+                attempt: row.attempts,
+            };
+            (row, lease)
+        }))
     }
 
     pub async fn heartbeat(

@@ -1,0 +1,292 @@
+//! Checkpoint/resume of real pipeline jobs: the SDS stage of `DefaultExecutor` text jobs saves
+//! its state through the `JobContext` (every N steps and on cancellation); a second run with
+//! that state (a restarted worker) skips sampling, rerank and tracing, resumes at the saved step
+//! and ends with exactly the SVG an uninterrupted run gives. Tiny random SD + CLIP fixtures.
+
+mod common;
+
+use common::http::{get, post_json};
+use common::wait_status;
+use serde_json::{Value, json};
+use std::path::PathBuf;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+use vectorfusion::pipeline::{
+    DefaultExecutor, Executor, JobContext, JobKind, JobOutput, JobSpec, Method, ModelDirs,
+    PipelineError, Preset, Style,
+};
+use vectorfusion::progress::{CancelToken, Progress};
+
+fn fixture(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/fixtures")
+        .join(name)
+}
+
+fn exec() -> DefaultExecutor {
+    DefaultExecutor::new(ModelDirs {
+        sd_dir: Some(fixture("sd-tiny")),
+        clip_dir: Some(fixture("clip-tiny")),
+        ..ModelDirs::default()
+    })
+}
+
+fn spec(method: Method, style: Style) -> JobSpec {
+    JobSpec {
+        kind: JobKind::Text,
+        caption: Some("a crown".into()),
+        image: None,
+        svg: None,
+        style,
+        method,
+        paths: 6,
+        steps: 8,
+        seed: 11,
+        samples: 2,
+        preset: Preset::Draft,
+        priority: 0,
+    }
+}
+
+/// One attempt: progress events, the checkpoints it saved (through JSON text, as the store
+/// keeps them), and its outcome. `cancel_at` cancels after that SDS step.
+struct Attempt {
+    events: Vec<Progress>,
+    checkpoints: Vec<Value>,
+    out: Result<JobOutput, PipelineError>,
+}
+
+fn attempt(
+    exec: &DefaultExecutor,
+    spec: &JobSpec,
+    every: u32,
+    resume: Option<Value>,
+    cancel_at: Option<u32>,
+) -> Attempt {
+    let events = Arc::new(Mutex::new(Vec::new()));
+    let saved = Arc::new(Mutex::new(Vec::new()));
+    let cancel = CancelToken::new();
+    let (ev, tok) = (events.clone(), cancel.clone());
+    let sink = move |p: Progress| {
+        if p.stage == "sds" && Some(p.step) == cancel_at {
+            tok.cancel();
+        }
+        ev.lock().unwrap().push(p);
+    };
+    let s2 = saved.clone();
+    let ctx = JobContext::new(
+        Arc::new(sink),
+        cancel,
+        every,
+        Box::new(move |v: Value| {
+            let text = serde_json::to_string(&v).map_err(|e| e.to_string())?;
+            s2.lock()
+                .unwrap()
+                .push(serde_json::from_str(&text).unwrap());
+            Ok(())
+        }),
+        resume,
+    );
+    let out = exec.run(spec, &ctx);
+    Attempt {
+        events: events.lock().unwrap().clone(),
+        checkpoints: saved.lock().unwrap().clone(),
+        out,
+    }
+}
+
+fn step_of(ckpt: &Value) -> u64 {
+    ckpt["sds"]["step"].as_u64().unwrap()
+}
+
+#[test]
+fn sds_checkpoints_and_a_restart_resumes_to_the_same_svg() {
+    let exec = exec();
+    let spec = spec(Method::SdLiveSds, Style::Iconography);
+    // Uninterrupted, checkpointing every 3 steps: at 3 and 6 (not after the last step).
+    let full = attempt(&exec, &spec, 3, None, None);
+    let full_out = full.out.unwrap();
+    let steps: Vec<u64> = full.checkpoints.iter().map(step_of).collect();
+    assert_eq!(steps, [3, 6]);
+    let ck = &full.checkpoints[0];
+    assert!(ck["sds"]["adam"].is_object() && ck["sds"]["scene"]["shapes"].is_array());
+    assert_eq!(
+        ck["detail"]["rerank"]["scores"].as_array().unwrap().len(),
+        2
+    );
+    assert!(full_out.detail["resumed_from"].is_null());
+
+    // A restart from the step-3 checkpoint: no sampling/rerank/LIVE, SDS from step 4, same SVG.
+    let resumed = attempt(&exec, &spec, 3, Some(ck.clone()), None);
+    let out = resumed.out.unwrap();
+    assert_eq!(out.detail["resumed_from"], 3, "{}", out.detail);
+    assert!(
+        resumed
+            .events
+            .iter()
+            .all(|p| !["sample", "rerank", "live"].contains(&p.stage.as_str())),
+        "{:?}",
+        resumed.events.iter().map(|p| &p.stage).collect::<Vec<_>>()
+    );
+    let first_sds = resumed.events.iter().find(|p| p.stage == "sds").unwrap();
+    assert_eq!(first_sds.step, 4);
+    // The rerank scores of the first attempt are kept in the result.
+    assert_eq!(out.detail["rerank"], full_out.detail["rerank"]);
+    assert_eq!(
+        out.svg, full_out.svg,
+        "resumed run differs from the uninterrupted one"
+    );
+    assert_eq!(out.paths, full_out.paths);
+    let scene = vectorfusion::svg::from_svg(&out.svg).unwrap();
+    scene.validate().unwrap();
+    // Its own later checkpoint continues the count.
+    assert_eq!(
+        resumed.checkpoints.iter().map(step_of).collect::<Vec<_>>(),
+        [6]
+    );
+}
+
+#[test]
+fn cancellation_saves_a_checkpoint_that_resumes_exactly() {
+    let exec = exec();
+    for (method, style) in [
+        (Method::Scratch, Style::Iconography),
+        (Method::SdLiveSds, Style::PixelArt),
+    ] {
+        let spec = spec(method, style);
+        let full = attempt(&exec, &spec, 100, None, None).out.unwrap();
+        // Shutdown after step 5: the job stops with Cancelled and saves step 5.
+        let stopped = attempt(&exec, &spec, 100, None, Some(5));
+        assert!(matches!(stopped.out, Err(PipelineError::Cancelled)));
+        let last = stopped.checkpoints.last().expect("checkpoint on cancel");
+        assert_eq!(step_of(last), 5);
+        let resumed = attempt(&exec, &spec, 100, Some(last.clone()), None);
+        let out = resumed.out.unwrap();
+        assert_eq!(out.detail["resumed_from"], 5);
+        assert_eq!(out.svg, full.svg, "{method:?} {style:?}");
+    }
+}
+
+#[test]
+fn a_checkpoint_of_another_request_is_ignored() {
+    let exec = exec();
+    let spec_a = spec(Method::Scratch, Style::Iconography);
+    let ck = attempt(&exec, &spec_a, 2, None, None).checkpoints[0].clone();
+    let mut spec_b = spec_a.clone();
+    spec_b.seed = 12;
+    let fresh = attempt(&exec, &spec_b, 100, None, None).out.unwrap();
+    let with_foreign = attempt(&exec, &spec_b, 100, Some(ck), None).out.unwrap();
+    assert!(with_foreign.detail["resumed_from"].is_null());
+    assert_eq!(with_foreign.svg, fresh.svg);
+    // Garbage resume state is ignored too (runs from the start).
+    let junk = attempt(
+        &exec,
+        &spec_b,
+        100,
+        Some(serde_json::json!({"step": 3})),
+        None,
+    );
+    assert_eq!(junk.out.unwrap().svg, fresh.svg);
+}
+
+/// Starts the real service with the tiny models on `db`.
+async fn serve(
+    db: &std::path::Path,
+) -> (
+    std::net::SocketAddr,
+    tokio::sync::oneshot::Sender<()>,
+    tokio::task::JoinHandle<Result<(), vectorfusion::server::ServerError>>,
+) {
+    let mut cfg = vectorfusion::config::Config::default();
+    cfg.database.path = db.to_path_buf();
+    cfg.queue.workers = 1;
+    cfg.queue.poll_interval_ms = 20;
+    cfg.queue.checkpoint_every_steps = 5;
+    cfg.server.progress_interval_ms = 0;
+    cfg.server.snapshot_interval_ms = 0;
+    cfg.server.shutdown_grace_secs = 30;
+    cfg.models.sd_dir = fixture("sd-tiny").display().to_string();
+    cfg.models.clip_dir = fixture("clip-tiny").display().to_string();
+    let exec: Arc<dyn Executor> = Arc::new(DefaultExecutor::new(cfg.model_dirs()));
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let addr = listener.local_addr().unwrap();
+    let (tx, rx) = tokio::sync::oneshot::channel::<()>();
+    let task = tokio::spawn(vectorfusion::server::run(cfg, exec, listener, async move {
+        let _ = rx.await;
+    }));
+    (addr, tx, task)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn service_shutdown_mid_sds_and_restart_resumes_from_the_stored_checkpoint() {
+    let dir = tempfile::tempdir().unwrap();
+    let db = dir.path().join("jobs.db");
+    let (a, stop, task) = serve(&db).await;
+    let body = json!({"kind": "text", "caption": "a crown", "method": "sd_live_sds",
+        "preset": "draft", "paths": 6, "steps": 120, "samples": 2, "seed": 9});
+    let r = post_json(a, "/jobs", &body).await;
+    assert_eq!(r.status, 202, "{}", r.text());
+    let id = r.json()["id"].as_str().unwrap().to_string();
+    // Wait until SDS is past a few checkpoints, then shut the server down (SIGTERM path).
+    let deadline = Instant::now() + Duration::from_secs(120);
+    loop {
+        let j = get(a, &format!("/jobs/{id}")).await.json();
+        if j["stage"] == "sds" && j["progress"]["step"].as_u64().unwrap_or(0) >= 12 {
+            break;
+        }
+        assert!(
+            j["status"] != "succeeded",
+            "finished before the shutdown: {j}"
+        );
+        assert!(Instant::now() < deadline, "{j}");
+        tokio::time::sleep(Duration::from_millis(10)).await;
+    }
+    // While it runs, the rerank scores come from its stored checkpoint.
+    let running = get(a, &format!("/jobs/{id}")).await.json();
+    assert_eq!(running["status"], "running");
+    assert_eq!(
+        running["rerank"]["scores"].as_array().unwrap().len(),
+        2,
+        "{running}"
+    );
+    let _ = stop.send(());
+    tokio::time::timeout(Duration::from_secs(60), task)
+        .await
+        .unwrap()
+        .unwrap()
+        .unwrap();
+    let store = vectorfusion::store::Store::open(&db, 1).await.unwrap();
+    let row = store.get_job(&id).await.unwrap().unwrap();
+    assert_eq!(row.status, "queued");
+    let ck: Value = serde_json::from_str(row.checkpoint.as_deref().unwrap()).unwrap();
+    let saved = step_of(&ck);
+    assert!((12..120).contains(&saved), "{saved}");
+    store.close().await;
+
+    // Restart: the job resumes at the saved step and succeeds.
+    let (a, stop, task) = serve(&db).await;
+    let job = wait_status(a, &id, &["succeeded", "failed"], Duration::from_secs(180)).await;
+    assert_eq!(job["status"], "succeeded", "{job}");
+    let job = get(a, &format!("/jobs/{id}")).await.json();
+    assert_eq!(job["result"]["detail"]["resumed_from"], saved, "{job}");
+    assert_eq!(job["result"]["detail"]["sds"]["steps_done"], 120);
+    assert_eq!(job["rerank"]["scores"].as_array().unwrap().len(), 2);
+    let outcomes: Vec<&str> = job["attempt_history"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|a| a["outcome"].as_str().unwrap())
+        .collect();
+    assert_eq!(outcomes, ["interrupted", "succeeded"]);
+    let svg = get(a, &format!("/jobs/{id}/result.svg")).await.text();
+    vectorfusion::svg::from_svg(&svg)
+        .unwrap()
+        .validate()
+        .unwrap();
+    let _ = stop.send(());
+    tokio::time::timeout(Duration::from_secs(60), task)
+        .await
+        .unwrap()
+        .unwrap()
+        .unwrap();
+}
