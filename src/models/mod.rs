@@ -8,6 +8,7 @@
 //! | [`loader`] | diffusers directory / Hugging Face hub resolution, safetensors, precision |
 //! | [`unet`] | `UNet2DConditionModel` (config → candle-transformers UNet), classifier-free guidance |
 //! | [`vae`] | `AutoencoderKL`: encode, decode and the encoder VJP without weight gradients |
+//! | [`codec`] | the image ↔ latent map: VAE, TAESD or pixel space (models without `vae/`) |
 //! | [`taesd`] | `AutoencoderTiny` (madebyollin/taesd layout): encode (+VJP) and decode |
 //! | [`scheduler`] | noise schedules (`alphas_cumprod`), DDIM and Euler samplers |
 //! | [`clip`] | CLIP text/vision towers and BPE tokenizer (text encoder of SD 1.x/2.x) |
@@ -16,6 +17,7 @@
 //! [`StableDiffusion`] ties them together behind the small API the SDS and sampling stages use.
 
 pub mod clip;
+pub mod codec;
 pub mod loader;
 pub mod nn;
 pub mod pipeline;

@@ -53,6 +53,9 @@ pub struct PresetSettings {
     /// Encoder for SDS: `"taesd"` when a TAESD directory is configured and the preset allows it,
     /// otherwise `"vae"`.
     pub prefer_taesd: bool,
+    /// Canvas side LIVE traces the best sample at (pixel-space samples, 32 px, are upscaled to
+    /// it first); the traced scene is then scaled to `size`.
+    pub trace_size: u32,
 }
 
 impl Preset {
@@ -68,6 +71,7 @@ impl Preset {
                 live_iters: 8,
                 snapshot_every: 4,
                 prefer_taesd: true,
+                trace_size: 32,
             },
             Preset::Fast => PresetSettings {
                 size: 64,
@@ -78,6 +82,7 @@ impl Preset {
                 live_iters: 40,
                 snapshot_every: 20,
                 prefer_taesd: true,
+                trace_size: 64,
             },
             Preset::Balanced => PresetSettings {
                 size: 256,
@@ -88,6 +93,7 @@ impl Preset {
                 live_iters: 100,
                 snapshot_every: 50,
                 prefer_taesd: true,
+                trace_size: 256,
             },
             Preset::Paper => PresetSettings {
                 size: 512,
@@ -98,6 +104,64 @@ impl Preset {
                 live_iters: 200,
                 snapshot_every: 100,
                 prefer_taesd: false,
+                trace_size: 512,
+            },
+        }
+    }
+
+    /// The settings of this preset for a model of the given kind: Stable Diffusion (latent
+    /// space, [`Preset::settings`]) or a small pixel-space prior (`pixel_space`, e.g. the
+    /// embedded 32 px `models/vf-icon`): SDS renders at 64–256 px that the encoder area-resizes
+    /// to the prior's size, samples traced at 64–256 px, and step counts sized so that the
+    /// default (`balanced`) run of `generate` finishes in about a minute on 2 CPU cores.
+    pub fn settings_for(self, pixel_space: bool) -> PresetSettings {
+        if !pixel_space {
+            return self.settings();
+        }
+        match self {
+            Preset::Draft => PresetSettings {
+                size: 64,
+                steps: 20,
+                paths: 8,
+                samples: 2,
+                sample_steps: 10,
+                live_iters: 10,
+                snapshot_every: 10,
+                prefer_taesd: false,
+                trace_size: 64,
+            },
+            Preset::Fast => PresetSettings {
+                size: 128,
+                steps: 60,
+                paths: 16,
+                samples: 4,
+                sample_steps: 20,
+                live_iters: 25,
+                snapshot_every: 20,
+                prefer_taesd: false,
+                trace_size: 128,
+            },
+            Preset::Balanced => PresetSettings {
+                size: 128,
+                steps: 150,
+                paths: 24,
+                samples: 4,
+                sample_steps: 25,
+                live_iters: 40,
+                snapshot_every: 25,
+                prefer_taesd: false,
+                trace_size: 128,
+            },
+            Preset::Paper => PresetSettings {
+                size: 256,
+                steps: 500,
+                paths: 64,
+                samples: 16,
+                sample_steps: 50,
+                live_iters: 100,
+                snapshot_every: 50,
+                prefer_taesd: false,
+                trace_size: 256,
             },
         }
     }
@@ -184,7 +248,18 @@ fn failed(what: &str, e: impl std::fmt::Display) -> PipelineError {
 impl Models {
     /// Loads Stable Diffusion from `sd_dir` for `size` px inputs and, when given, the CLIP scorer.
     pub fn load_sd(sd_dir: &Path, scorer: Option<&Path>, size: u32) -> Result<Self, PipelineError> {
-        let teacher = SdTeacher::load(sd_dir, size).map_err(|e| {
+        Self::load_sd_with(sd_dir, scorer, size, None)
+    }
+
+    /// [`Models::load_sd`] with TAESD (`taesd`) as the SDS encoder instead of the VAE (see
+    /// [`super::EncoderChoice`]); pixel-space models ignore it.
+    pub fn load_sd_with(
+        sd_dir: &Path,
+        scorer: Option<&Path>,
+        size: u32,
+        taesd: Option<&Path>,
+    ) -> Result<Self, PipelineError> {
+        let teacher = SdTeacher::load_with(sd_dir, size, taesd).map_err(|e| {
             PipelineError::ModelsNotConfigured(format!(
                 "cannot load Stable Diffusion from {}: {e}",
                 sd_dir.display()
@@ -220,6 +295,14 @@ impl Models {
             teacher: TeacherModel::Analytic(teacher),
             scorer: load_scorer(scorer)?,
         })
+    }
+
+    /// Whether the teacher is a pixel-space model (presets differ: [`Preset::settings_for`]).
+    pub fn is_pixel_space(&self) -> bool {
+        match &self.teacher {
+            TeacherModel::Sd(t) => t.model().is_pixel_space(),
+            TeacherModel::Analytic(_) => false,
+        }
     }
 
     pub fn teacher(&self) -> &dyn Teacher {
@@ -261,7 +344,7 @@ impl Models {
                     let z = traj
                         .last()
                         .ok_or_else(|| failed("sampling", "no sampler steps"))?;
-                    let img = sd.decode(z).map_err(|e| failed("VAE decode", e))?;
+                    let img = sd.decode(z).map_err(|e| failed("decode", e))?;
                     out.push(tensor_to_image(&img)?);
                     sink.report(Progress::new("sample", i + 1, k));
                 }
@@ -442,7 +525,7 @@ pub fn run_text(
     sink: &dyn ProgressSink,
     cancel: &CancelToken,
 ) -> Result<MethodOutput, PipelineError> {
-    let ps = req.preset.settings();
+    let ps = req.preset.settings_for(models.is_pixel_space());
     let teacher = models.teacher();
     let size = teacher.image_size();
     let steps = req.steps.unwrap_or(ps.steps).max(1);
@@ -463,7 +546,7 @@ pub fn run_text(
         "style": req.style,
         "preset": req.preset,
         "teacher": teacher.name(),
-        "encoder": "vae",
+        "encoder": teacher.encoder(),
         "size": size,
         "prompt": prompt,
     });
@@ -519,7 +602,22 @@ pub fn run_text(
                     pixelate_l1(best_img, size).map_err(|e| failed("pixelation", e))?
                 }
                 Style::Iconography | Style::Sketch => {
-                    let (scene, d) = trace(best_img, size, paths, &ps, req.seed, sink, cancel)?;
+                    // Small samples (a 32 px pixel-space prior) are upscaled to the trace canvas.
+                    let side = best_img.width.max(best_img.height);
+                    let upscaled;
+                    let best_img = if side < ps.trace_size {
+                        let k = ps.trace_size as f32 / side as f32;
+                        upscaled = resize(
+                            best_img,
+                            ((best_img.width as f32 * k).round() as u32).max(1),
+                            ((best_img.height as f32 * k).round() as u32).max(1),
+                        );
+                        &upscaled
+                    } else {
+                        best_img
+                    };
+                    let (scene, d) =
+                        trace(best_img, ps.trace_size, paths, &ps, req.seed, sink, cancel)?;
                     detail["live"] = d;
                     let scene = scaled(&scene, size)?;
                     let mut scene = if req.style == Style::Sketch {
