@@ -10,7 +10,8 @@
 use super::CliError;
 use crate::pipeline::methods::{self, Models, Start, TextRequest};
 use crate::pipeline::{
-    EncoderChoice, Method, PipelineError, Preset, default_model_dir, is_model_dir, resolve_encoder,
+    EncoderChoice, Method, PipelineError, Preset, default_model_dir, is_pixel_model,
+    resolve_encoder,
 };
 use crate::progress::{CancelToken, Progress};
 use crate::stages::sds::{RasterBackend, SdsConfig, run_sds};
@@ -137,9 +138,7 @@ pub fn run(mut args: GenerateArgs) -> Result<(), CliError> {
     if args.scorer.is_none() {
         args.scorer = default_scorer;
     }
-    let pixel = args.model.as_deref().is_some_and(|d| {
-        is_model_dir(d) && crate::models::codec::is_pixel_space(d).unwrap_or(false)
-    });
+    let pixel = args.model.as_deref().is_some_and(is_pixel_model);
     if pixel
         || method != Method::Scratch
         || args.preset.is_some()

@@ -415,7 +415,7 @@ pub fn resolve_encoder(
     model: &Path,
     configured: Option<&Path>,
 ) -> Result<Option<PathBuf>, PipelineError> {
-    if crate::models::codec::is_pixel_space(model).unwrap_or(false) {
+    if is_pixel_model(model) {
         return Ok(None);
     }
     match choice {
@@ -440,6 +440,12 @@ pub const EMBEDDED_MODEL: &str = "models/vf-icon";
 /// Whether `dir` looks like a diffusers model directory (has `unet/config.json`).
 pub fn is_model_dir(dir: &Path) -> bool {
     dir.join("unet").join("config.json").is_file()
+}
+
+/// Whether `dir` is a pixel-space model directory (a model directory without `vae/`; see
+/// [`crate::models::codec::is_pixel_space`]).
+pub fn is_pixel_model(dir: &Path) -> bool {
+    is_model_dir(dir) && crate::models::codec::is_pixel_space(dir).unwrap_or(false)
 }
 
 /// The default model directory: `env_value` (from [`DEFAULT_MODEL_ENV`]) when set — an error if
@@ -518,9 +524,7 @@ impl ModelDirs {
 
     /// Whether the configured model works in pixel space (presets differ).
     pub fn is_pixel_space(&self) -> bool {
-        self.sd_dir
-            .as_deref()
-            .is_some_and(|d| crate::models::codec::is_pixel_space(d).unwrap_or(false))
+        self.sd_dir.as_deref().is_some_and(is_pixel_model)
     }
 }
 
