@@ -713,6 +713,19 @@ impl Executor for DefaultExecutor {
                 dir.display()
             ));
         }
+        let te = dir.join("text_encoder");
+        if te.is_dir()
+            && !crate::models::loader::TEXT_WEIGHTS
+                .iter()
+                .any(|n| te.join(n).is_file())
+        {
+            return Err(format!(
+                "the model {} has no text encoder weights ({} is empty; the embedded model's \
+                 MiniLM weights are not committed: see docs/EMBEDDED.md, \"MiniLM weights\")",
+                dir.display(),
+                te.display()
+            ));
+        }
         if let Some(c) = &self.models.clip_dir
             && !c.is_dir()
         {
@@ -898,7 +911,18 @@ mod tests {
         }
         .or_default_model(Some(model.clone()));
         assert_eq!(with_clip.clip_dir, Some(root.join("clip")));
-        assert_eq!(with_clip.sd_dir, Some(model));
+        assert_eq!(with_clip.sd_dir, Some(model.clone()));
+        // a text_encoder/ folder without weights (the embedded model before its MiniLM weights
+        // are fetched) is refused at submit time with a pointer to the docs
+        std::fs::create_dir_all(model.join("text_encoder")).unwrap();
+        let dirs = ModelDirs::default().or_default_model(Some(model.clone()));
+        let msg = DefaultExecutor::new(dirs.clone()).text_ready().unwrap_err();
+        assert!(
+            msg.contains("MiniLM") && msg.contains("EMBEDDED.md"),
+            "{msg}"
+        );
+        std::fs::write(model.join("text_encoder/model.safetensors"), b"x").unwrap();
+        assert!(DefaultExecutor::new(dirs).text_ready().is_ok());
         // absent default: still the configuration hint
         let none = ModelDirs::default().or_default_model(None);
         let msg = DefaultExecutor::new(none).text_ready().unwrap_err();
