@@ -2,7 +2,7 @@
 //! environment variables `VECTORFUSION_<SECTION>_<KEY>` (e.g. `VECTORFUSION_SERVER_BIND`), then by
 //! command-line flags. Every setting has a default, so the service starts with no file at all.
 
-use crate::pipeline::{Limits, ModelDirs};
+use crate::pipeline::{EncoderChoice, Limits, ModelDirs};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -80,12 +80,27 @@ pub struct LimitsConfig {
     pub max_image_side: u32,
 }
 
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct ModelsConfig {
-    /// Empty = not configured.
+    /// Empty = the embedded default model, if present.
     pub sd_dir: String,
     pub clip_dir: String,
+    /// TAESD for the SDS encoder; empty = a `taesd/` folder in or beside `sd_dir`.
+    pub taesd_dir: String,
+    /// `auto`, `vae` or `taesd`.
+    pub encoder: String,
+}
+
+impl Default for ModelsConfig {
+    fn default() -> Self {
+        ModelsConfig {
+            sd_dir: String::new(),
+            clip_dir: String::new(),
+            taesd_dir: String::new(),
+            encoder: "auto".into(),
+        }
+    }
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -259,6 +274,12 @@ impl Config {
         if self.server.max_queue_depth < 1 {
             return bad("server.max_queue_depth", "must be at least 1");
         }
+        if let Err(e) = self.models.encoder.parse::<EncoderChoice>() {
+            return Err(ConfigError::Invalid {
+                key: "models.encoder",
+                reason: e,
+            });
+        }
         if self.server.max_body_bytes < 1024 {
             return bad("server.max_body_bytes", "must be at least 1024");
         }
@@ -276,11 +297,15 @@ impl Config {
         }
     }
 
+    /// The configured model directories (no default applied: see
+    /// [`ModelDirs::or_default_model`]).
     pub fn model_dirs(&self) -> ModelDirs {
         let opt = |s: &str| (!s.trim().is_empty()).then(|| PathBuf::from(s));
         ModelDirs {
             sd_dir: opt(&self.models.sd_dir),
             clip_dir: opt(&self.models.clip_dir),
+            taesd_dir: opt(&self.models.taesd_dir),
+            encoder: self.models.encoder.parse().unwrap_or_default(),
             ..ModelDirs::default()
         }
     }

@@ -93,7 +93,7 @@ fn v_prediction_unet_from_fp16_file_matches() {
         unet,
         StableDiffusion::load(&fixture("sd-tiny"), &LoadOptions::default())
             .unwrap()
-            .vae,
+            .codec,
         sched,
         Device::Cpu,
     )
@@ -119,10 +119,10 @@ fn v_prediction_unet_from_fp16_file_matches() {
 fn vae_encode_decode_match_diffusers() {
     let sd = sd();
     let r = refs("sd-tiny");
-    let d = sd.vae.encode_dist(&r["vae.image"]).unwrap();
+    let d = sd.vae().unwrap().encode_dist(&r["vae.image"]).unwrap();
     assert_close("mean", &d.mean, &r["vae.mean"], 1e-4);
     assert_close("logvar", &d.logvar, &r["vae.logvar"], 1e-4);
-    let dec = sd.vae.decode_raw(&r["vae.z"]).unwrap();
+    let dec = sd.vae().unwrap().decode_raw(&r["vae.z"]).unwrap();
     assert_close("decode", &dec, &r["vae.decoded"], 1e-4);
     let img = sd.decode(&r["vae.z"]).unwrap();
     let lo = img

@@ -204,7 +204,12 @@ pub const COLLAPSED_SPREAD: f64 = 0.01;
 
 pub fn run(args: BenchStabilityArgs) -> Result<(), CliError> {
     let preset: Preset = args.preset.parse().map_err(CliError::Usage)?;
-    let ps = preset.settings();
+    // Pixel-space models (no vae/) have their own presets.
+    let pixel = args
+        .model
+        .as_deref()
+        .is_some_and(crate::pipeline::is_pixel_model);
+    let ps = preset.settings_for(pixel);
     let a = Resolved {
         seeds: args.seeds,
         steps: args.steps.unwrap_or(if preset == Preset::Draft {

@@ -179,18 +179,23 @@ fn generate_and_evaluate(
             },
         )?)),
     };
-    if args.model.is_none() && analytic_dir.is_none() {
-        return Err(CliError::Usage(
-            "--method generates SVGs: give --model DIR (Stable Diffusion) or --teacher analytic:DIR"
-                .into(),
-        ));
-    }
-    let exec = DefaultExecutor::new(ModelDirs {
+    // Without --model / --teacher: the embedded default model (and its scorer for reranking).
+    let dirs = ModelDirs {
         sd_dir: args.model.clone(),
         clip_dir: args.rerank_scorer.clone(),
         taesd_dir: None,
+        encoder: Default::default(),
         analytic_dir,
-    });
+    }
+    .or_default_model(crate::pipeline::default_model_dir().map_err(CliError::Usage)?);
+    if dirs.sd_dir.is_none() && dirs.analytic_dir.is_none() {
+        return Err(CliError::Usage(
+            "--method generates SVGs: give --model DIR (Stable Diffusion) or --teacher analytic:DIR \
+             (the embedded default model was not found)"
+                .into(),
+        ));
+    }
+    let exec = DefaultExecutor::new(dirs);
     exec.text_ready().map_err(CliError::Usage)?;
     let mut reports = Vec::with_capacity(methods.len());
     for (method, name) in methods.iter().zip(&args.methods) {
@@ -201,7 +206,7 @@ fn generate_and_evaluate(
         let mut seconds = 0.0;
         for (i, caption) in captions.iter().enumerate() {
             let line = i + 1;
-            let spec = job_spec(args, *method, style, preset, caption, line)?;
+            let spec = job_spec(args, exec.pixel_space(), *method, style, preset, caption, line)?;
             let t0 = std::time::Instant::now();
             let out = exec
                 .run(&spec, &JobContext::detached(CancelToken::new()))
@@ -235,6 +240,7 @@ fn generate_and_evaluate(
 
 fn job_spec(
     args: &EvalArgs,
+    pixel_space: bool,
     method: Method,
     style: Style,
     preset: Preset,
@@ -242,6 +248,7 @@ fn job_spec(
     line: usize,
 ) -> Result<JobSpec, CliError> {
     let r = preset.resolve(
+        pixel_space,
         crate::pipeline::methods::stage_style(style),
         args.paths.map(|p| p as usize),
         args.steps,

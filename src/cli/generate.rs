@@ -2,11 +2,17 @@
 //!
 //! `--teacher analytic:DIR` uses the analytic TEST teacher (the exact denoiser of the PNG targets
 //! in DIR; the caption is only recorded and may name a target). `--model DIR` loads a Stable
-//! Diffusion diffusers directory (local files only) as the teacher.
+//! Diffusion diffusers directory (local files only) as the teacher. Without either (and without
+//! `VECTORFUSION_MODELS_SD_DIR`), the embedded default model is used ([`default_model_dir`]:
+//! `VF_DEFAULT_MODEL`, else `models/vf-icon`), with its `scorer/` as the default scorer.
+//! Pixel-space models always run the shared pipeline with their own presets.
 
 use super::CliError;
 use crate::pipeline::methods::{self, Models, Start, TextRequest};
-use crate::pipeline::{Method, PipelineError, Preset};
+use crate::pipeline::{
+    EncoderChoice, Method, PipelineError, Preset, default_model_dir, is_pixel_model,
+    resolve_encoder,
+};
 use crate::progress::{CancelToken, Progress};
 use crate::stages::sds::{RasterBackend, SdsConfig, run_sds};
 use crate::stages::styles::Style;
@@ -49,6 +55,14 @@ pub struct GenerateArgs {
     /// `analytic:DIR`: the analytic TEST teacher built from the PNG targets in DIR.
     #[arg(long)]
     pub teacher: Option<String>,
+    /// SDS encoder of Stable Diffusion models: vae, taesd or auto (TAESD when --taesd or a
+    /// taesd/ folder in or beside the model exists and the preset is not paper). Pixel-space
+    /// models ignore it.
+    #[arg(long, default_value = "auto")]
+    pub encoder: String,
+    /// TAESD directory (`madebyollin/taesd` diffusers layout) for `--encoder taesd|auto`.
+    #[arg(long)]
+    pub taesd: Option<PathBuf>,
     /// Teacher input size in pixels (the SVG is written at this width) [default: the preset's,
     /// 64 for plain scratch].
     #[arg(long)]
@@ -92,16 +106,48 @@ pub struct GenerateArgs {
     pub snapshot_every: u32,
 }
 
-pub fn run(args: GenerateArgs) -> Result<(), CliError> {
+/// `--model`, else `VECTORFUSION_MODELS_SD_DIR` (and `..._CLIP_DIR` as the scorer), else the
+/// embedded default model (with its `scorer/`), unless `--teacher` is given. Returns the model
+/// directory and the default scorer that goes with it.
+fn model_and_scorer(args: &GenerateArgs) -> Result<(Option<PathBuf>, Option<PathBuf>), CliError> {
+    if args.model.is_some() || args.teacher.is_some() {
+        return Ok((args.model.clone(), None));
+    }
+    let cfg = crate::config::Config::load(None).map_err(|e| CliError::Usage(e.to_string()))?;
+    let mut dirs = cfg.model_dirs();
+    if dirs.sd_dir.is_none() {
+        dirs = dirs.or_default_model(default_model_dir().map_err(CliError::Usage)?);
+    }
+    Ok((dirs.sd_dir, dirs.clip_dir))
+}
+
+fn no_model() -> CliError {
+    CliError::Usage(format!(
+        "give --model DIR or --teacher analytic:DIR (the embedded default model {} was not \
+         found here or in the source tree; set {} to its directory)",
+        crate::pipeline::EMBEDDED_MODEL,
+        crate::pipeline::DEFAULT_MODEL_ENV
+    ))
+}
+
+pub fn run(mut args: GenerateArgs) -> Result<(), CliError> {
     let method: Method = args.method.parse().map_err(CliError::Usage)?;
-    if method != Method::Scratch
+    let encoder: EncoderChoice = args.encoder.parse().map_err(CliError::Usage)?;
+    let (model, default_scorer) = model_and_scorer(&args)?;
+    args.model = model;
+    if args.scorer.is_none() {
+        args.scorer = default_scorer;
+    }
+    let pixel = args.model.as_deref().is_some_and(is_pixel_model);
+    if pixel
+        || method != Method::Scratch
         || args.preset.is_some()
         || args.scorer.is_some()
         || args.samples.is_some()
         || args.image.is_some()
         || args.svg.is_some()
     {
-        return run_pipeline(args, method);
+        return run_pipeline(args, method, encoder, pixel);
     }
     let style: Style = args.style.parse().map_err(CliError::Usage)?;
     let size = args.size.unwrap_or(64);
@@ -115,15 +161,16 @@ pub fn run(args: GenerateArgs) -> Result<(), CliError> {
         return Err(CliError::Usage("--steps must be positive".into()));
     }
     let teacher: Box<dyn Teacher> = if let Some(dir) = &args.model {
-        Box::new(SdTeacher::load(dir, size).map_err(|e| match e {
-            TeacherError::Setup(m) => CliError::Usage(m),
-            other => CliError::Other(anyhow::Error::new(other).context("loading the model")),
-        })?)
+        let taesd =
+            resolve_encoder(encoder, true, dir, args.taesd.as_deref()).map_err(pipeline_err)?;
+        Box::new(
+            SdTeacher::load_with(dir, size, taesd.as_deref()).map_err(|e| match e {
+                TeacherError::Setup(m) => CliError::Usage(m),
+                other => CliError::Other(anyhow::Error::new(other).context("loading the model")),
+            })?,
+        )
     } else {
-        let spec = args
-            .teacher
-            .as_deref()
-            .ok_or_else(|| CliError::Usage("give --model DIR or --teacher analytic:DIR".into()))?;
+        let spec = args.teacher.as_deref().ok_or_else(no_model)?;
         let dir = spec.strip_prefix("analytic:").ok_or_else(|| {
             CliError::Usage(format!(
                 "unknown teacher {spec:?}: the only test teacher is analytic:DIR"
@@ -244,13 +291,19 @@ pub(crate) fn pipeline_err(e: PipelineError) -> CliError {
 
 /// The shared pipeline ([`crate::pipeline::methods`]): every method, presets, starts from an
 /// image or SVG, rerank, pruning.
-fn run_pipeline(args: GenerateArgs, method: Method) -> Result<(), CliError> {
+fn run_pipeline(
+    args: GenerateArgs,
+    method: Method,
+    encoder: EncoderChoice,
+    pixel: bool,
+) -> Result<(), CliError> {
     let style: Style = args.style.parse().map_err(CliError::Usage)?;
     let preset: Preset = match &args.preset {
         Some(p) => p.parse().map_err(CliError::Usage)?,
         None => Preset::default(),
     };
-    let size = args.size.unwrap_or(preset.settings().size);
+    let ps = preset.settings_for(pixel);
+    let size = args.size.unwrap_or(ps.size);
     if !(8..=2048).contains(&size) {
         return Err(CliError::Usage(format!(
             "--size {size} out of range 8..=2048"
@@ -262,12 +315,12 @@ fn run_pipeline(args: GenerateArgs, method: Method) -> Result<(), CliError> {
         ));
     }
     let models = if let Some(dir) = &args.model {
-        Models::load_sd(dir, args.scorer.as_deref(), size).map_err(pipeline_err)?
+        let taesd = resolve_encoder(encoder, ps.prefer_taesd, dir, args.taesd.as_deref())
+            .map_err(pipeline_err)?;
+        Models::load_sd_with(dir, args.scorer.as_deref(), size, taesd.as_deref())
+            .map_err(pipeline_err)?
     } else {
-        let spec = args
-            .teacher
-            .as_deref()
-            .ok_or_else(|| CliError::Usage("give --model DIR or --teacher analytic:DIR".into()))?;
+        let spec = args.teacher.as_deref().ok_or_else(no_model)?;
         let dir = spec.strip_prefix("analytic:").ok_or_else(|| {
             CliError::Usage(format!(
                 "unknown teacher {spec:?}: the only test teacher is analytic:DIR"

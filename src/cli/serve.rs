@@ -49,7 +49,14 @@ pub fn run(args: ServeArgs) -> Result<(), CliError> {
             );
             Arc::new(crate::worker::test_executor::TestExecutor::new(ms))
         }
-        None => Arc::new(DefaultExecutor::new(cfg.model_dirs())),
+        None => {
+            let mut dirs = cfg.model_dirs();
+            if dirs.sd_dir.is_none() {
+                let default = crate::pipeline::default_model_dir().map_err(CliError::Usage)?;
+                dirs = dirs.or_default_model(default);
+            }
+            Arc::new(DefaultExecutor::new(dirs))
+        }
     };
     let rt = tokio::runtime::Builder::new_multi_thread()
         .enable_all()

@@ -70,6 +70,9 @@ pub struct LoadOptions {
     pub unet: Precision,
     pub vae: Precision,
     pub text: Precision,
+    /// Use this TAESD directory (`AutoencoderTiny` layout) as the codec instead of the model's
+    /// VAE (precision `vae`); ignored by pixel-space models.
+    pub taesd: Option<PathBuf>,
     /// Allow downloading missing files from the hub (otherwise only the local cache is used).
     pub allow_download: bool,
 }
@@ -81,6 +84,7 @@ impl Default for LoadOptions {
             unet: Precision::F32,
             vae: Precision::F32,
             text: Precision::F32,
+            taesd: None,
             allow_download: true,
         }
     }

@@ -8,6 +8,7 @@
 //! | [`loader`] | diffusers directory / Hugging Face hub resolution, safetensors, precision |
 //! | [`unet`] | `UNet2DConditionModel` (config → candle-transformers UNet), classifier-free guidance |
 //! | [`vae`] | `AutoencoderKL`: encode, decode and the encoder VJP without weight gradients |
+//! | [`codec`] | the image ↔ latent map: VAE, TAESD or pixel space (models without `vae/`) |
 //! | [`taesd`] | `AutoencoderTiny` (madebyollin/taesd layout): encode (+VJP) and decode |
 //! | [`scheduler`] | noise schedules (`alphas_cumprod`), DDIM and Euler samplers |
 //! | [`bert`] | BERT/MiniLM text encoder (WordPiece tokenizer, `BertModel`, MiniLM weight fetch) |
@@ -19,6 +20,7 @@
 
 pub mod bert;
 pub mod clip;
+pub mod codec;
 pub mod loader;
 pub mod nn;
 pub mod pipeline;

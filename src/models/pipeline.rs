@@ -2,8 +2,10 @@
 
 use super::bert::BertTextEncoder;
 use super::clip::{ClipTextConfig, ClipTextModel, ClipTokenizer};
+use super::codec::{self, Codec, CodecKind};
 use super::loader::{self, LoadOptions, ModelSource, Precision, UNET_WEIGHTS};
 use super::scheduler::{PredictionType, Sampler, SamplerKind, SchedulerConfig, split_prediction};
+use super::taesd::Taesd;
 use super::unet::{Unet, UnetConfig};
 use super::vae::{AutoencoderKl, VaeConfig};
 use super::{ModelError, Result};
@@ -129,12 +131,15 @@ impl TextEncoder {
     }
 }
 
-/// Text encoder + UNet + VAE + noise schedule of a Stable Diffusion checkpoint.
+/// Text encoder + UNet + image codec (VAE, TAESD or pixel space) + noise schedule of a
+/// diffusion checkpoint.
 #[derive(Debug)]
 pub struct StableDiffusion {
     pub text: Option<TextEncoder>,
     pub unet: Unet,
-    pub vae: AutoencoderKl,
+    /// The image ↔ latent map: the VAE, TAESD in its place ([`LoadOptions::taesd`]), or pixel
+    /// space for models without `vae/`.
+    pub codec: Codec,
     pub scheduler: SchedulerConfig,
     alphas_cumprod: Vec<f64>,
     device: Device,
@@ -146,14 +151,23 @@ impl StableDiffusion {
         Self::load_source(&ModelSource::Dir(dir.to_path_buf()), opts)
     }
 
-    /// Loads from a directory or a hub repo (fetched into the HF cache when online).
+    /// Loads from a directory or a hub repo (fetched into the HF cache when online). A
+    /// directory without `vae/` (and no `"vae"` in `model_index.json`) is a pixel-space model;
+    /// otherwise `opts.taesd`, when set, replaces the VAE as the codec.
     pub fn load_source(source: &ModelSource, opts: &LoadOptions) -> Result<Self> {
         let root = loader::resolve(source, opts.allow_download)?;
         let unet = load_unet(&root.join("unet"), opts.unet, &opts.device)?;
-        let vae = load_vae(&root.join("vae"), opts.vae, &opts.device)?;
+        let codec: Codec = if codec::is_pixel_space(&root)? {
+            codec::pixel_space_for(&unet.config, &root)?.into()
+        } else if let Some(dir) = &opts.taesd {
+            check_precision("taesd", opts.vae, &opts.device)?;
+            Taesd::load(dir, opts.vae, &opts.device)?.into()
+        } else {
+            load_vae(&root.join("vae"), opts.vae, &opts.device)?.into()
+        };
         let scheduler = load_scheduler(&root.join("scheduler"))?;
         let text = TextEncoder::load(&root, opts.text, &opts.device)?;
-        let mut sd = Self::from_parts(unet, vae, scheduler, opts.device.clone())?;
+        let mut sd = Self::from_parts(unet, codec, scheduler, opts.device.clone())?;
         sd.text = Some(text);
         Ok(sd)
     }
@@ -161,10 +175,19 @@ impl StableDiffusion {
     /// Assembles already built components (benchmarks use random-weight ones).
     pub fn from_parts(
         unet: Unet,
-        vae: AutoencoderKl,
+        codec: impl Into<Codec>,
         scheduler: SchedulerConfig,
         device: Device,
     ) -> Result<Self> {
+        let codec = codec.into();
+        if codec.latent_channels() != unet.config.in_channels {
+            return Err(ModelError::InvalidInput(format!(
+                "the {} gives {}-channel latents but the UNet takes {} channels",
+                codec.kind().as_str(),
+                codec.latent_channels(),
+                unet.config.in_channels
+            )));
+        }
         let alphas_cumprod = scheduler
             .alphas_cumprod()
             .map_err(|reason| ModelError::Config {
@@ -174,7 +197,7 @@ impl StableDiffusion {
         Ok(Self {
             text: None,
             unet,
-            vae,
+            codec,
             scheduler,
             alphas_cumprod,
             device,
@@ -207,19 +230,39 @@ impl StableDiffusion {
         self.scheduler.prediction_type
     }
 
-    /// Images `[b, 3, H, W]` in `[0, 1]` → scaled latents `[b, 4, H/8, W/8]`.
+    /// The VAE, when the codec is one.
+    pub fn vae(&self) -> Option<&AutoencoderKl> {
+        match &self.codec {
+            Codec::Vae(v) => Some(v),
+            _ => None,
+        }
+    }
+
+    /// Whether the UNet works on RGB pixels (no VAE).
+    pub fn is_pixel_space(&self) -> bool {
+        self.codec.kind() == CodecKind::Pixel
+    }
+
+    /// Side of the latent for a square image of side `image_side` (SD: `image_side / 8`; pixel
+    /// space: the UNet's `sample_size`).
+    pub fn latent_side(&self, image_side: usize) -> std::result::Result<usize, String> {
+        self.codec.latent_side(image_side)
+    }
+
+    /// Images `[b, 3, H, W]` in `[0, 1]` → latents (VAE/TAESD: scaled latents `[b, 4, H/8,
+    /// W/8]`; pixel space: `[b, 3, s, s]` in `[-1, 1]`).
     pub fn encode(&self, image: &Tensor) -> Result<Tensor> {
-        self.vae.encode(image)
+        self.codec.encode(image)
     }
 
     /// `J_encode^T · d_latents` with respect to the `[0, 1]` image (no weight gradients).
     pub fn encode_vjp(&self, image: &Tensor, d_latents: &Tensor) -> Result<Tensor> {
-        Ok(self.vae.encode_vjp(image, d_latents)?.1)
+        self.codec.encode_vjp(image, d_latents)
     }
 
-    /// Scaled latents → images in `[0, 1]`.
+    /// Latents → images in `[0, 1]` (pixel space: at the latent size; callers upscale).
     pub fn decode(&self, latents: &Tensor) -> Result<Tensor> {
-        self.vae.decode(latents)
+        self.codec.decode(latents)
     }
 
     fn guided_raw(

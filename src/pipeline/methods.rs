@@ -55,6 +55,9 @@ pub struct PresetSettings {
     /// Encoder for SDS: `"taesd"` when a TAESD directory is configured and the preset allows it,
     /// otherwise `"vae"`.
     pub prefer_taesd: bool,
+    /// Canvas side LIVE traces the best sample at (pixel-space samples, 32 px, are upscaled to
+    /// it first); the traced scene is then scaled to `size`.
+    pub trace_size: u32,
 }
 
 impl Preset {
@@ -70,6 +73,7 @@ impl Preset {
                 live_iters: 8,
                 snapshot_every: 4,
                 prefer_taesd: true,
+                trace_size: 32,
             },
             Preset::Fast => PresetSettings {
                 size: 64,
@@ -80,6 +84,7 @@ impl Preset {
                 live_iters: 40,
                 snapshot_every: 20,
                 prefer_taesd: true,
+                trace_size: 64,
             },
             Preset::Balanced => PresetSettings {
                 size: 256,
@@ -90,6 +95,7 @@ impl Preset {
                 live_iters: 100,
                 snapshot_every: 50,
                 prefer_taesd: true,
+                trace_size: 256,
             },
             Preset::Paper => PresetSettings {
                 size: 512,
@@ -100,6 +106,67 @@ impl Preset {
                 live_iters: 200,
                 snapshot_every: 100,
                 prefer_taesd: false,
+                trace_size: 512,
+            },
+        }
+    }
+
+    /// The settings of this preset for a model of the given kind: Stable Diffusion (latent
+    /// space, [`Preset::settings`]) or a small pixel-space prior (`pixel_space`, e.g. the
+    /// embedded 32 px `models/vf-icon`): SDS renders at 64–256 px that the encoder area-resizes
+    /// to the prior's size, samples traced at 64–256 px, and step counts sized so that the
+    /// default (`balanced`) run of `generate` finishes in about a minute on 2 CPU cores.
+    pub fn settings_for(self, pixel_space: bool) -> PresetSettings {
+        if !pixel_space {
+            return self.settings();
+        }
+        match self {
+            // One SDS step or one sampler step is one classifier-free-guided UNet call (batch
+            // 2); for a ~3.4M-parameter UNet at 32 px that costs 1.2-1.7 CPU-seconds here
+            // (docs/BENCHMARKS.md), so the balanced preset budgets ~75 calls in all.
+            Preset::Draft => PresetSettings {
+                size: 64,
+                steps: 10,
+                paths: 8,
+                samples: 1,
+                sample_steps: 5,
+                live_iters: 10,
+                snapshot_every: 5,
+                prefer_taesd: false,
+                trace_size: 64,
+            },
+            Preset::Fast => PresetSettings {
+                size: 128,
+                steps: 25,
+                paths: 16,
+                samples: 2,
+                sample_steps: 8,
+                live_iters: 20,
+                snapshot_every: 5,
+                prefer_taesd: false,
+                trace_size: 128,
+            },
+            Preset::Balanced => PresetSettings {
+                size: 128,
+                steps: 50,
+                paths: 24,
+                samples: 2,
+                sample_steps: 12,
+                live_iters: 30,
+                snapshot_every: 10,
+                prefer_taesd: false,
+                trace_size: 128,
+            },
+            Preset::Paper => PresetSettings {
+                size: 256,
+                steps: 300,
+                paths: 64,
+                samples: 8,
+                sample_steps: 25,
+                live_iters: 100,
+                snapshot_every: 50,
+                prefer_taesd: false,
+                trace_size: 256,
             },
         }
     }
@@ -109,12 +176,13 @@ impl Preset {
     /// resolution shared by `generate`, `eval --method`, the service and [`run_text`].
     pub fn resolve(
         self,
+        pixel_space: bool,
         style: Style,
         paths: Option<usize>,
         steps: Option<u32>,
         samples: Option<u32>,
     ) -> Resolved {
-        let ps = self.settings();
+        let ps = self.settings_for(pixel_space);
         Resolved {
             paths: paths.unwrap_or(match style {
                 Style::Iconography => ps.paths,
@@ -225,7 +293,18 @@ fn failed(what: &str, e: impl std::fmt::Display) -> PipelineError {
 impl Models {
     /// Loads Stable Diffusion from `sd_dir` for `size` px inputs and, when given, the CLIP scorer.
     pub fn load_sd(sd_dir: &Path, scorer: Option<&Path>, size: u32) -> Result<Self, PipelineError> {
-        let teacher = SdTeacher::load(sd_dir, size).map_err(|e| {
+        Self::load_sd_with(sd_dir, scorer, size, None)
+    }
+
+    /// [`Models::load_sd`] with TAESD (`taesd`) as the SDS encoder instead of the VAE (see
+    /// [`super::EncoderChoice`]); pixel-space models ignore it.
+    pub fn load_sd_with(
+        sd_dir: &Path,
+        scorer: Option<&Path>,
+        size: u32,
+        taesd: Option<&Path>,
+    ) -> Result<Self, PipelineError> {
+        let teacher = SdTeacher::load_with(sd_dir, size, taesd).map_err(|e| {
             PipelineError::ModelsNotConfigured(format!(
                 "cannot load Stable Diffusion from {}: {e}",
                 sd_dir.display()
@@ -261,6 +340,14 @@ impl Models {
             teacher: TeacherModel::Analytic(teacher),
             scorer: load_scorer(scorer)?,
         })
+    }
+
+    /// Whether the teacher is a pixel-space model (presets differ: [`Preset::settings_for`]).
+    pub fn is_pixel_space(&self) -> bool {
+        match &self.teacher {
+            TeacherModel::Sd(t) => t.model().is_pixel_space(),
+            TeacherModel::Analytic(_) => false,
+        }
     }
 
     pub fn teacher(&self) -> &dyn Teacher {
@@ -302,7 +389,7 @@ impl Models {
                     let z = traj
                         .last()
                         .ok_or_else(|| failed("sampling", "no sampler steps"))?;
-                    let img = sd.decode(z).map_err(|e| failed("VAE decode", e))?;
+                    let img = sd.decode(z).map_err(|e| failed("decode", e))?;
                     out.push(tensor_to_image(&img)?);
                     sink.report(Progress::new("sample", i + 1, k));
                 }
@@ -546,7 +633,7 @@ pub fn run_text_resumable(
     cancel: &CancelToken,
     ctx: Option<&JobContext>,
 ) -> Result<MethodOutput, PipelineError> {
-    let ps = req.preset.settings();
+    let ps = req.preset.settings_for(models.is_pixel_space());
     let teacher = models.teacher();
     let size = teacher.image_size();
     let Resolved {
@@ -555,7 +642,7 @@ pub fn run_text_resumable(
         samples: k,
     } = req
         .preset
-        .resolve(req.style, req.paths, req.steps, req.samples);
+        .resolve(models.is_pixel_space(), req.style, req.paths, req.steps, req.samples);
     let (steps, k) = (steps.max(1), k.max(1));
     if paths == 0 || paths > 1024 {
         return Err(PipelineError::InvalidInput(format!(
@@ -568,7 +655,7 @@ pub fn run_text_resumable(
         "style": req.style,
         "preset": req.preset,
         "teacher": teacher.name(),
-        "encoder": "vae",
+        "encoder": teacher.encoder(),
         "size": size,
         "prompt": prompt,
     });
@@ -643,7 +730,22 @@ pub fn run_text_resumable(
                     pixelate_l1(best_img, size).map_err(|e| failed("pixelation", e))?
                 }
                 Style::Iconography | Style::Sketch => {
-                    let (scene, d) = trace(best_img, size, paths, &ps, req.seed, sink, cancel)?;
+                    // Small samples (a 32 px pixel-space prior) are upscaled to the trace canvas.
+                    let side = best_img.width.max(best_img.height);
+                    let upscaled;
+                    let best_img = if side < ps.trace_size {
+                        let k = ps.trace_size as f32 / side as f32;
+                        upscaled = resize(
+                            best_img,
+                            ((best_img.width as f32 * k).round() as u32).max(1),
+                            ((best_img.height as f32 * k).round() as u32).max(1),
+                        );
+                        &upscaled
+                    } else {
+                        best_img
+                    };
+                    let (scene, d) =
+                        trace(best_img, ps.trace_size, paths, &ps, req.seed, sink, cancel)?;
                     detail["live"] = d;
                     let scene = scaled(&scene, size)?;
                     let mut scene = if req.style == Style::Sketch {

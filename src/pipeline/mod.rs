@@ -12,7 +12,7 @@ pub mod methods;
 use crate::progress::{CancelToken, NullSink, Progress, ProgressSink};
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::Mutex;
 
@@ -362,6 +362,134 @@ pub trait Executor: Send + Sync {
     /// telling the operator how to configure them. Text jobs are refused at submit time while
     /// this is an error.
     fn text_ready(&self) -> Result<(), String>;
+
+    /// Whether text jobs run on a pixel-space model, whose presets differ
+    /// ([`methods::PresetSettings`]); the service resolves omitted fields with it.
+    fn pixel_space(&self) -> bool {
+        false
+    }
+}
+
+/// Which encoder turns renders into latents for SDS with a latent (Stable Diffusion) model.
+/// Pixel-space models have no encoder to choose and ignore it.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum EncoderChoice {
+    /// TAESD when a TAESD directory is configured or found beside the model and the preset
+    /// prefers it (every preset but `paper`), else the VAE.
+    #[default]
+    Auto,
+    /// The model's VAE encoder (exact, slow on a CPU).
+    Vae,
+    /// TAESD (`madebyollin/taesd` layout): ~10× cheaper, approximate; needs its directory.
+    Taesd,
+}
+
+impl std::str::FromStr for EncoderChoice {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s.to_ascii_lowercase().as_str() {
+            "auto" => Ok(EncoderChoice::Auto),
+            "vae" => Ok(EncoderChoice::Vae),
+            "taesd" => Ok(EncoderChoice::Taesd),
+            other => Err(format!(
+                "unknown encoder {other:?} (expected vae, taesd or auto)"
+            )),
+        }
+    }
+}
+
+/// A TAESD directory (`config.json` + weights) for `model`: `configured` if given, else a
+/// `taesd/` folder inside the model directory, else a `taesd/` folder beside it.
+pub fn find_taesd(model: &Path, configured: Option<&Path>) -> Option<PathBuf> {
+    if let Some(c) = configured {
+        return Some(c.to_path_buf());
+    }
+    let inside = model.join("taesd");
+    let beside = model.parent().map(|p| p.join("taesd"));
+    [Some(inside), beside]
+        .into_iter()
+        .flatten()
+        .find(|d| d.join("config.json").is_file())
+}
+
+/// The TAESD directory to use as the SDS encoder of `model` (`None` = the VAE), or why the
+/// choice cannot be honoured. Pixel-space models never use one.
+pub fn resolve_encoder(
+    choice: EncoderChoice,
+    prefer_taesd: bool,
+    model: &Path,
+    configured: Option<&Path>,
+) -> Result<Option<PathBuf>, PipelineError> {
+    if is_pixel_model(model) {
+        return Ok(None);
+    }
+    match choice {
+        EncoderChoice::Vae => Ok(None),
+        EncoderChoice::Auto if !prefer_taesd => Ok(None),
+        EncoderChoice::Auto => Ok(find_taesd(model, configured)),
+        EncoderChoice::Taesd => find_taesd(model, configured).map(Some).ok_or_else(|| {
+            PipelineError::InvalidInput(format!(
+                "encoder taesd needs a TAESD directory: pass --taesd DIR (or set models.taesd_dir), \
+                 or put one at {}/taesd",
+                model.display()
+            ))
+        }),
+    }
+}
+
+/// Environment variable naming the default (embedded) model directory.
+pub const DEFAULT_MODEL_ENV: &str = "VF_DEFAULT_MODEL";
+/// The embedded model, relative to the working directory or the crate root.
+pub const EMBEDDED_MODEL: &str = "models/vf-icon";
+
+/// Whether `dir` looks like a diffusers model directory (has `unet/config.json`).
+pub fn is_model_dir(dir: &Path) -> bool {
+    dir.join("unet").join("config.json").is_file()
+}
+
+/// Whether `dir` is a pixel-space model directory (a model directory without `vae/`; see
+/// [`crate::models::codec::is_pixel_space`]).
+pub fn is_pixel_model(dir: &Path) -> bool {
+    is_model_dir(dir) && crate::models::codec::is_pixel_space(dir).unwrap_or(false)
+}
+
+/// The default model directory: `env_value` (from [`DEFAULT_MODEL_ENV`]) when set — an error if
+/// it is not a model directory — else [`EMBEDDED_MODEL`] under `cwd`, then under `crate_root`.
+/// `Ok(None)` when none is present.
+pub fn resolve_default_model(
+    env_value: Option<&std::ffi::OsStr>,
+    cwd: Option<&Path>,
+    crate_root: &Path,
+) -> Result<Option<PathBuf>, String> {
+    if let Some(v) = env_value.filter(|v| !v.is_empty()) {
+        let dir = PathBuf::from(v);
+        return if is_model_dir(&dir) {
+            Ok(Some(dir))
+        } else {
+            Err(format!(
+                "{DEFAULT_MODEL_ENV}={} is not a model directory (no unet/config.json)",
+                dir.display()
+            ))
+        };
+    }
+    Ok([
+        cwd.map(|c| c.join(EMBEDDED_MODEL)),
+        Some(crate_root.join(EMBEDDED_MODEL)),
+    ]
+    .into_iter()
+    .flatten()
+    .find(|d| is_model_dir(d)))
+}
+
+/// [`resolve_default_model`] for this process (environment, current directory, this crate's
+/// source tree).
+pub fn default_model_dir() -> Result<Option<PathBuf>, String> {
+    resolve_default_model(
+        std::env::var_os(DEFAULT_MODEL_ENV).as_deref(),
+        std::env::current_dir().ok().as_deref(),
+        Path::new(env!("CARGO_MANIFEST_DIR")),
+    )
 }
 
 /// Model locations (diffusers-layout directories).
@@ -370,21 +498,51 @@ pub struct ModelDirs {
     pub sd_dir: Option<PathBuf>,
     /// CLIP scorer for reranking samples (optional: without it the first sample is kept).
     pub clip_dir: Option<PathBuf>,
-    /// TAESD encoder (optional; recorded, not yet used by the SDS teacher).
+    /// TAESD encoder (optional; used for SDS per `encoder`).
     #[serde(default)]
     pub taesd_dir: Option<PathBuf>,
+    /// SDS encoder of latent models (`auto`: TAESD when available and the preset prefers it).
+    #[serde(default)]
+    pub encoder: EncoderChoice,
     /// Testing only: a directory of PNG targets for the analytic TEST teacher, used when no
     /// `sd_dir` is set.
     #[serde(default)]
     pub analytic_dir: Option<PathBuf>,
 }
 
+impl ModelDirs {
+    /// With no model configured (neither `sd_dir` nor `analytic_dir`), `default` (the embedded
+    /// model, see [`default_model_dir`]) becomes `sd_dir` and its `scorer/` folder, when present
+    /// and no `clip_dir` is set, the scorer.
+    pub fn or_default_model(mut self, default: Option<PathBuf>) -> Self {
+        if self.sd_dir.is_some() || self.analytic_dir.is_some() {
+            return self;
+        }
+        if let Some(dir) = default {
+            let scorer = dir.join("scorer");
+            if self.clip_dir.is_none() && scorer.join("config.json").is_file() {
+                self.clip_dir = Some(scorer);
+            }
+            self.sd_dir = Some(dir);
+        }
+        self
+    }
+
+    /// Whether the configured model works in pixel space (presets differ).
+    pub fn is_pixel_space(&self) -> bool {
+        self.sd_dir.as_deref().is_some_and(is_pixel_model)
+    }
+}
+
+/// Loaded models per (teacher input size, TAESD directory used as the encoder).
+type ModelCache = HashMap<(u32, Option<PathBuf>), Arc<methods::Models>>;
+
 /// The production executor: LIVE for vectorize jobs, the methods of [`methods`] for text jobs.
 /// Models are loaded on first use and kept per teacher input size.
 #[derive(Clone, Default)]
 pub struct DefaultExecutor {
     pub models: ModelDirs,
-    cache: Arc<Mutex<HashMap<u32, Arc<methods::Models>>>>,
+    cache: Arc<Mutex<ModelCache>>,
 }
 
 impl std::fmt::Debug for DefaultExecutor {
@@ -403,27 +561,52 @@ impl DefaultExecutor {
         }
     }
 
-    /// The models for `size` px teacher inputs (loaded once).
+    /// The settings of `preset` for the configured model (pixel-space models have their own).
+    pub fn settings(&self, preset: Preset) -> methods::PresetSettings {
+        preset.settings_for(self.models.is_pixel_space())
+    }
+
+    /// The models for `size` px teacher inputs with the VAE (loaded once).
     pub fn load_models(&self, size: u32) -> Result<Arc<methods::Models>, PipelineError> {
+        self.load_models_for(size, false)
+    }
+
+    /// The models for `size` px teacher inputs; `prefer_taesd` (the preset's) lets
+    /// [`EncoderChoice::Auto`] pick TAESD. Loaded once per size and encoder.
+    pub fn load_models_for(
+        &self,
+        size: u32,
+        prefer_taesd: bool,
+    ) -> Result<Arc<methods::Models>, PipelineError> {
         self.text_ready()
             .map_err(PipelineError::ModelsNotConfigured)?;
+        let taesd = match &self.models.sd_dir {
+            Some(sd) => resolve_encoder(
+                self.models.encoder,
+                prefer_taesd,
+                sd,
+                self.models.taesd_dir.as_deref(),
+            )?,
+            None => None,
+        };
         let mut cache = self
             .cache
             .lock()
             .map_err(|_| PipelineError::Failed("model cache poisoned".into()))?;
-        if let Some(m) = cache.get(&size) {
+        let key = (size, taesd.clone());
+        if let Some(m) = cache.get(&key) {
             return Ok(m.clone());
         }
         let scorer = self.models.clip_dir.as_deref();
         let m = match (&self.models.sd_dir, &self.models.analytic_dir) {
-            (Some(sd), _) => methods::Models::load_sd(sd, scorer, size)?,
+            (Some(sd), _) => methods::Models::load_sd_with(sd, scorer, size, taesd.as_deref())?,
             (None, Some(dir)) => methods::Models::load_analytic(dir, scorer, size)?,
             (None, None) => {
                 return Err(PipelineError::ModelsNotConfigured("no sd_dir".into()));
             }
         };
         let m = Arc::new(m);
-        cache.insert(size, m.clone());
+        cache.insert(key, m.clone());
         Ok(m)
     }
 
@@ -437,7 +620,8 @@ impl DefaultExecutor {
             .caption
             .clone()
             .ok_or_else(|| PipelineError::InvalidInput("caption is required".into()))?;
-        let models = self.load_models(spec.preset.settings().size)?;
+        let ps = self.settings(spec.preset);
+        let models = self.load_models_for(ps.size, ps.prefer_taesd)?;
         let req = methods::TextRequest {
             caption,
             style: methods::stage_style(spec.style),
@@ -507,6 +691,10 @@ impl Executor for DefaultExecutor {
         }
     }
 
+    fn pixel_space(&self) -> bool {
+        self.models.is_pixel_space()
+    }
+
     fn text_ready(&self) -> Result<(), String> {
         if self.models.sd_dir.is_none()
             && let Some(dir) = &self.models.analytic_dir
@@ -521,12 +709,12 @@ impl Executor for DefaultExecutor {
             };
         }
         let Some(dir) = &self.models.sd_dir else {
-            return Err(
-                "text-to-SVG needs Stable Diffusion weights: set `sd_dir` in the [models] \
+            return Err(format!(
+                "text-to-SVG needs a diffusion model: the embedded {EMBEDDED_MODEL} was not found \
+                 (set {DEFAULT_MODEL_ENV} to its directory), or set `sd_dir` in the [models] \
                  section of config.toml (or the VECTORFUSION_MODELS_SD_DIR environment variable) \
                  to a diffusers-layout model directory, then restart the server"
-                    .into(),
-            );
+            ));
         };
         if !dir.join("unet").join("config.json").is_file() {
             return Err(format!(
@@ -534,6 +722,19 @@ impl Executor for DefaultExecutor {
                  diffusers layout (no unet/config.json): fix `sd_dir` in the [models] section of \
                  config.toml (or VECTORFUSION_MODELS_SD_DIR)",
                 dir.display()
+            ));
+        }
+        let te = dir.join("text_encoder");
+        if te.is_dir()
+            && !crate::models::loader::TEXT_WEIGHTS
+                .iter()
+                .any(|n| te.join(n).is_file())
+        {
+            return Err(format!(
+                "the model {} has no text encoder weights ({} is empty; the embedded model's \
+                 MiniLM weights are not committed: see docs/EMBEDDED.md, \"MiniLM weights\")",
+                dir.display(),
+                te.display()
             ));
         }
         if let Some(c) = &self.models.clip_dir
@@ -616,6 +817,198 @@ mod tests {
         assert!(s.validate(&l).is_ok());
         s.priority = 1000;
         assert_eq!(s.validate(&l).unwrap_err().field, "priority");
+    }
+
+    /// A fresh temp directory for one test.
+    fn tmp(name: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("vf-pipeline-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).unwrap();
+        d
+    }
+
+    /// A stand-in model directory (only what the resolution looks at).
+    fn fake_model(dir: &Path, pixel: bool, scorer: bool) {
+        std::fs::create_dir_all(dir.join("unet")).unwrap();
+        std::fs::write(dir.join("unet/config.json"), "{}").unwrap();
+        if !pixel {
+            std::fs::create_dir_all(dir.join("vae")).unwrap();
+        }
+        if scorer {
+            std::fs::create_dir_all(dir.join("scorer")).unwrap();
+            std::fs::write(dir.join("scorer/config.json"), "{}").unwrap();
+        }
+    }
+
+    #[test]
+    fn default_model_resolution_order() {
+        let root = tmp("default-model");
+        let (cwd, crate_root, env) = (root.join("cwd"), root.join("crate"), root.join("env"));
+        for d in [&cwd, &crate_root] {
+            std::fs::create_dir_all(d).unwrap();
+        }
+        // nothing anywhere
+        assert_eq!(
+            resolve_default_model(None, Some(&cwd), &crate_root),
+            Ok(None)
+        );
+        // the crate root's copy is found from any working directory
+        fake_model(&crate_root.join(EMBEDDED_MODEL), true, true);
+        assert_eq!(
+            resolve_default_model(None, Some(&cwd), &crate_root),
+            Ok(Some(crate_root.join(EMBEDDED_MODEL)))
+        );
+        assert_eq!(
+            resolve_default_model(None, None, &crate_root),
+            Ok(Some(crate_root.join(EMBEDDED_MODEL)))
+        );
+        // the working directory's copy wins over the crate root's
+        fake_model(&cwd.join(EMBEDDED_MODEL), true, false);
+        assert_eq!(
+            resolve_default_model(None, Some(&cwd), &crate_root),
+            Ok(Some(cwd.join(EMBEDDED_MODEL)))
+        );
+        // the environment variable wins over both; a bad value is an error, an empty one unset
+        fake_model(&env, false, false);
+        assert_eq!(
+            resolve_default_model(Some(env.as_os_str()), Some(&cwd), &crate_root),
+            Ok(Some(env.clone()))
+        );
+        let missing = root.join("missing");
+        let e =
+            resolve_default_model(Some(missing.as_os_str()), Some(&cwd), &crate_root).unwrap_err();
+        assert!(
+            e.contains(DEFAULT_MODEL_ENV) && e.contains("missing"),
+            "{e}"
+        );
+        assert_eq!(
+            resolve_default_model(Some(std::ffi::OsStr::new("")), Some(&cwd), &crate_root),
+            Ok(Some(cwd.join(EMBEDDED_MODEL)))
+        );
+        let _ = std::fs::remove_dir_all(&root);
+    }
+
+    #[test]
+    fn default_model_fills_unconfigured_dirs_and_passes_the_submit_check() {
+        let root = tmp("default-dirs");
+        let model = root.join("vf-icon");
+        fake_model(&model, true, true);
+        let dirs = ModelDirs::default().or_default_model(Some(model.clone()));
+        assert_eq!(dirs.sd_dir.as_deref(), Some(model.as_path()));
+        assert_eq!(dirs.clip_dir, Some(model.join("scorer")));
+        assert!(dirs.is_pixel_space());
+        assert!(DefaultExecutor::new(dirs.clone()).text_ready().is_ok());
+        // the pixel-space presets apply
+        let e = DefaultExecutor::new(dirs);
+        assert_eq!(
+            e.settings(Preset::Balanced),
+            Preset::Balanced.settings_for(true)
+        );
+        assert_ne!(e.settings(Preset::Balanced), Preset::Balanced.settings());
+        // configured models are kept; a configured scorer is not replaced
+        let sd = root.join("sd");
+        fake_model(&sd, false, false);
+        let configured = ModelDirs {
+            sd_dir: Some(sd.clone()),
+            ..ModelDirs::default()
+        };
+        assert_eq!(
+            configured.clone().or_default_model(Some(model.clone())),
+            configured
+        );
+        let with_clip = ModelDirs {
+            clip_dir: Some(root.join("clip")),
+            ..ModelDirs::default()
+        }
+        .or_default_model(Some(model.clone()));
+        assert_eq!(with_clip.clip_dir, Some(root.join("clip")));
+        assert_eq!(with_clip.sd_dir, Some(model.clone()));
+        // a text_encoder/ folder without weights (the embedded model before its MiniLM weights
+        // are fetched) is refused at submit time with a pointer to the docs
+        std::fs::create_dir_all(model.join("text_encoder")).unwrap();
+        let dirs = ModelDirs::default().or_default_model(Some(model.clone()));
+        let msg = DefaultExecutor::new(dirs.clone()).text_ready().unwrap_err();
+        assert!(
+            msg.contains("MiniLM") && msg.contains("EMBEDDED.md"),
+            "{msg}"
+        );
+        std::fs::write(model.join("text_encoder/model.safetensors"), b"x").unwrap();
+        assert!(DefaultExecutor::new(dirs).text_ready().is_ok());
+        // absent default: still the configuration hint
+        let none = ModelDirs::default().or_default_model(None);
+        let msg = DefaultExecutor::new(none).text_ready().unwrap_err();
+        assert!(
+            msg.contains("sd_dir") && msg.contains(EMBEDDED_MODEL),
+            "{msg}"
+        );
+        let _ = std::fs::remove_dir_all(&root);
+    }
+
+    #[test]
+    fn encoder_choice_resolution() {
+        let root = tmp("encoder");
+        let sd = root.join("sd");
+        fake_model(&sd, false, false);
+        let taesd = root.join("my-taesd");
+        let r = |c, prefer, conf: Option<&Path>| resolve_encoder(c, prefer, &sd, conf);
+        assert_eq!(r(EncoderChoice::Vae, true, Some(&taesd)).unwrap(), None);
+        assert_eq!(r(EncoderChoice::Auto, true, None).unwrap(), None);
+        let e = r(EncoderChoice::Taesd, true, None).unwrap_err();
+        assert!(matches!(e, PipelineError::InvalidInput(_)) && e.to_string().contains("--taesd"));
+        assert_eq!(
+            r(EncoderChoice::Taesd, false, Some(&taesd)).unwrap(),
+            Some(taesd.clone())
+        );
+        assert_eq!(
+            r(EncoderChoice::Auto, true, Some(&taesd)).unwrap(),
+            Some(taesd)
+        );
+        assert_eq!(r(EncoderChoice::Auto, false, None).unwrap(), None);
+        // a taesd/ folder beside the model is found; one inside wins
+        std::fs::create_dir_all(root.join("taesd")).unwrap();
+        std::fs::write(root.join("taesd/config.json"), "{}").unwrap();
+        assert_eq!(
+            r(EncoderChoice::Auto, true, None).unwrap(),
+            Some(root.join("taesd"))
+        );
+        std::fs::create_dir_all(sd.join("taesd")).unwrap();
+        std::fs::write(sd.join("taesd/config.json"), "{}").unwrap();
+        assert_eq!(
+            r(EncoderChoice::Taesd, true, None).unwrap(),
+            Some(sd.join("taesd"))
+        );
+        assert_eq!(
+            r(EncoderChoice::Auto, false, None).unwrap(),
+            None,
+            "paper keeps the VAE"
+        );
+        // pixel-space models have no encoder to choose
+        let px = root.join("px");
+        fake_model(&px, true, false);
+        assert_eq!(
+            resolve_encoder(EncoderChoice::Taesd, true, &px, None).unwrap(),
+            None
+        );
+        assert_eq!("TAESD".parse::<EncoderChoice>(), Ok(EncoderChoice::Taesd));
+        assert!("fast".parse::<EncoderChoice>().is_err());
+        let _ = std::fs::remove_dir_all(&root);
+    }
+
+    #[test]
+    fn pixel_presets_suit_a_small_prior() {
+        for p in Preset::ALL {
+            let (sd, px) = (p.settings(), p.settings_for(true));
+            assert_eq!(
+                sd.trace_size, sd.size,
+                "{p:?}: SD traces at the teacher size"
+            );
+            assert!((64..=256).contains(&px.size), "{p:?}");
+            assert!((64..=256).contains(&px.trace_size), "{p:?}");
+            assert!(px.steps <= sd.steps.max(20), "{p:?}");
+            assert!(!px.prefer_taesd);
+        }
+        let b = Preset::default().settings_for(true);
+        assert_eq!((b.size, b.trace_size), (128, 128));
     }
 
     #[test]

@@ -30,7 +30,12 @@ fn field<T: DeserializeOwned>(obj: &Map<String, Value>, name: &str) -> Result<Op
 /// Parses and validates a `POST /jobs` body into a [`JobSpec`]. `job_id_seed` seeds jobs that
 /// give no seed (so every job is reproducible from its stored spec). Image decoding is checked
 /// separately ([`check_image`]) because it is CPU work.
-pub fn parse_submit(body: &[u8], limits: &Limits, default_seed: u64) -> Result<JobSpec, ApiError> {
+pub fn parse_submit(
+    body: &[u8],
+    limits: &Limits,
+    default_seed: u64,
+    pixel_space: bool,
+) -> Result<JobSpec, ApiError> {
     let value: Value =
         serde_json::from_slice(body).map_err(|e| ApiError::MalformedJson(e.to_string()))?;
     let Value::Object(obj) = value else {
@@ -80,6 +85,7 @@ pub fn parse_submit(body: &[u8], limits: &Limits, default_seed: u64) -> Result<J
     let samples: Option<u32> = field(&obj, "samples")?;
     // Omitted paths/steps/samples are the preset's, resolved exactly as the CLI resolves them.
     let resolved = preset.resolve(
+        pixel_space,
         crate::pipeline::methods::stage_style(style),
         paths.map(|p| p as usize),
         steps,

@@ -87,6 +87,12 @@ pub trait Teacher: Send + Sync {
         false
     }
 
+    /// The encoder in front of the model (`"vae"`, `"taesd"`, `"pixel"`; test teachers say
+    /// what they use).
+    fn encoder(&self) -> &'static str {
+        "builtin"
+    }
+
     /// Side of the square image the encoder expects, in pixels.
     fn image_size(&self) -> u32;
 

@@ -1,11 +1,16 @@
-//! Stable Diffusion as an SDS [`Teacher`]: the VAE encoder (fp32) with its VJP, the UNet with
-//! classifier-free guidance and the CLIP text encoder, from [`crate::models::StableDiffusion`].
+//! Stable Diffusion as an SDS [`Teacher`]: the model's codec (the VAE encoder in fp32, TAESD in
+//! its place, or pixel space for models without `vae/`) with its VJP, the UNet with
+//! classifier-free guidance and the text encoder, from [`crate::models::StableDiffusion`].
+//!
+//! Pixel-space models take renders of any size (e.g. 128 px) and area-resize them to the UNet's
+//! `sample_size` inside the encoder; latent models need a multiple of the VAE's downsampling.
 //!
 //! Images cross the boundary composited over white as `[1, 3, H, W]` tensors in `[0, 1]`; the
 //! image gradient is mapped back to premultiplied RGBA (`d/dα = −Σ_c d/dc`).
 
 use super::{Conditioning, Latent, Teacher, TeacherError};
 use crate::image::Image;
+use crate::models::codec::CodecKind;
 use crate::models::{LoadOptions, StableDiffusion};
 use candle_core::{DType, Tensor};
 use std::path::Path;
@@ -25,8 +30,19 @@ fn model_err(e: impl std::fmt::Display) -> TeacherError {
 impl SdTeacher {
     /// Loads a diffusers directory; `image_size` is the encoder input side (512 for SD 1.x).
     pub fn load(dir: &Path, image_size: u32) -> Result<Self, TeacherError> {
+        Self::load_with(dir, image_size, None)
+    }
+
+    /// [`SdTeacher::load`] with TAESD (`taesd`, an `AutoencoderTiny` directory) as the encoder
+    /// instead of the VAE; pixel-space models ignore it.
+    pub fn load_with(
+        dir: &Path,
+        image_size: u32,
+        taesd: Option<&Path>,
+    ) -> Result<Self, TeacherError> {
         let opts = LoadOptions {
             allow_download: false,
+            taesd: taesd.map(Path::to_path_buf),
             ..LoadOptions::default()
         };
         let sd = StableDiffusion::load(dir, &opts).map_err(model_err)?;
@@ -35,15 +51,10 @@ impl SdTeacher {
 
     /// Wraps an already built model (benchmarks use random weights).
     pub fn new(sd: StableDiffusion, image_size: u32) -> Result<Self, TeacherError> {
-        let cfg = &sd.vae.config;
-        let down = 1usize << cfg.block_out_channels.len().saturating_sub(1);
-        if image_size == 0 || image_size as usize % down != 0 {
-            return Err(TeacherError::Setup(format!(
-                "image size {image_size} must be a positive multiple of the VAE's downsampling {down}"
-            )));
-        }
-        let s = image_size as usize / down;
-        let latent_shape = [cfg.latent_channels, s, s];
+        let s = sd
+            .latent_side(image_size as usize)
+            .map_err(TeacherError::Setup)?;
+        let latent_shape = [sd.codec.latent_channels(), s, s];
         let alphas = sd.alphas_cumprod().iter().map(|&a| a as f32).collect();
         Ok(Self {
             sd,
@@ -131,7 +142,19 @@ fn flat(t: &Tensor) -> Result<(Vec<f32>, Vec<usize>), TeacherError> {
 
 impl Teacher for SdTeacher {
     fn name(&self) -> String {
-        format!("Stable Diffusion (VAE encoder, {} px)", self.image_size)
+        let s = self.image_size;
+        match self.sd.codec.kind() {
+            CodecKind::Pixel => format!(
+                "pixel-space diffusion ({0}x{0} prior, {s} px renders)",
+                self.latent_shape[1]
+            ),
+            CodecKind::Vae => format!("Stable Diffusion (VAE encoder, {s} px)"),
+            CodecKind::Taesd => format!("Stable Diffusion (TAESD encoder, {s} px)"),
+        }
+    }
+
+    fn encoder(&self) -> &'static str {
+        self.sd.codec.kind().as_str()
     }
 
     fn image_size(&self) -> u32 {

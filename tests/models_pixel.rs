@@ -1,0 +1,294 @@
+//! Pixel-space models (`docs/EMBEDDED.md`: a diffusers directory without `vae/`) against
+//! diffusers on `tests/fixtures/sd-tiny-pixel` (`scripts/make_pixel_fixtures.py`), the TAESD SDS
+//! encoder against its diffusers reference, and the loader's pixel-space detection.
+
+use candle_core::{DType, Device, Tensor};
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use vectorfusion::image::Image;
+use vectorfusion::models::codec::CodecKind;
+use vectorfusion::models::scheduler::SamplerKind;
+use vectorfusion::models::{LoadOptions, ModelError, StableDiffusion};
+use vectorfusion::stages::sds::{Weighting, sds_image_grad};
+use vectorfusion::teacher::{Conditioning, SdTeacher, Teacher};
+
+fn fixture(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/fixtures")
+        .join(name)
+}
+
+fn refs(path: PathBuf) -> HashMap<String, Tensor> {
+    candle_core::safetensors::load(path, &Device::Cpu).unwrap()
+}
+
+fn pixel_refs() -> HashMap<String, Tensor> {
+    refs(fixture("sd-tiny-pixel").join("refs.safetensors"))
+}
+
+fn scale(a: &Tensor) -> f32 {
+    a.abs()
+        .unwrap()
+        .flatten_all()
+        .unwrap()
+        .max(0)
+        .unwrap()
+        .to_scalar::<f32>()
+        .unwrap()
+}
+
+fn assert_close(name: &str, got: &Tensor, want: &Tensor, tol: f32) {
+    assert_eq!(got.dims(), want.dims(), "{name}: shape");
+    let e = scale(&(got.to_dtype(DType::F32).unwrap() - want).unwrap());
+    assert!(
+        e <= tol,
+        "{name}: max abs err {e} > {tol} (ref scale {})",
+        scale(want)
+    );
+    assert!(scale(want) > 1e-3, "{name}: reference is trivially small");
+}
+
+/// Through the UNet's GEGLU (tanh GELU in candle vs exact in diffusers): the tolerance the SD
+/// tests use, 2e-4 of the output scale.
+fn assert_close_gelu(name: &str, got: &Tensor, want: &Tensor) {
+    assert_close(name, got, want, 2e-4 * scale(want).max(1.0));
+}
+
+fn pixel() -> StableDiffusion {
+    StableDiffusion::load(&fixture("sd-tiny-pixel"), &LoadOptions::default()).unwrap()
+}
+
+#[test]
+fn directory_without_vae_loads_as_pixel_space() {
+    let sd = pixel();
+    assert!(sd.is_pixel_space());
+    assert_eq!(sd.codec.kind(), CodecKind::Pixel);
+    assert!(sd.vae().is_none());
+    assert_eq!(sd.latent_side(128), Ok(16));
+    assert_eq!(sd.latent_side(40), Ok(16));
+    // A TAESD given in the options is ignored by pixel-space models.
+    let opts = LoadOptions {
+        taesd: Some(fixture("taesd-tiny")),
+        ..LoadOptions::default()
+    };
+    let sd = StableDiffusion::load(&fixture("sd-tiny-pixel"), &opts).unwrap();
+    assert!(sd.is_pixel_space());
+}
+
+#[test]
+fn pixel_unet_and_guidance_match_diffusers() {
+    let sd = pixel();
+    let r = pixel_refs();
+    let (z, cond, uncond) = (&r["unet.z"], &r["text.cond"], &r["text.uncond"]);
+    let (c2, u2) = sd.text_embeddings("a red cat").unwrap();
+    assert_close("cond emb", &c2, cond, 1e-4);
+    assert_close("uncond emb", &u2, uncond, 1e-4);
+    for t in [999usize, 500, 10] {
+        let out = sd.unet.forward(z, t as f64, cond).unwrap();
+        assert_close_gelu(&format!("cond t={t}"), &out, &r[&format!("unet.cond.t{t}")]);
+        let g = sd.predict_noise(z, t, cond, uncond, 7.5).unwrap();
+        assert_close_gelu(
+            &format!("guided t={t}"),
+            &g,
+            &r[&format!("unet.guided.t{t}")],
+        );
+        // with diffusers switched to the tanh GELU the only difference is gone
+        assert_close(
+            &format!("tanh guided t={t}"),
+            &g,
+            &r[&format!("unet_tanh.guided.t{t}")],
+            1e-4,
+        );
+    }
+}
+
+#[test]
+fn squaredcos_schedule_and_four_step_ddim_sample_match_diffusers() {
+    let sd = pixel();
+    let r = pixel_refs();
+    let want: Vec<f32> = r["sched.alphas_cumprod"].to_vec1().unwrap();
+    assert_eq!(want.len(), sd.alphas_cumprod().len());
+    for (a, b) in sd.alphas_cumprod().iter().zip(&want) {
+        assert!((*a as f32 - b).abs() < 1e-6, "{a} vs {b}");
+    }
+    let traj = sd
+        .sample(
+            &r["ddim.init"],
+            &r["text.cond"],
+            &r["text.uncond"],
+            7.5,
+            4,
+            SamplerKind::Ddim,
+        )
+        .unwrap();
+    assert_eq!(traj.len(), 4);
+    for (i, x) in traj.iter().enumerate() {
+        assert_close_gelu(&format!("ddim step {i}"), x, &r[&format!("ddim.step{i}")]);
+    }
+    let img = sd.decode(&traj[3]).unwrap();
+    assert_eq!(img.dims(), &[1, 3, 16, 16], "decoded at the sample size");
+}
+
+#[test]
+fn pixel_encode_and_its_vjp_match_torch_area_interpolation() {
+    let sd = pixel();
+    let r = pixel_refs();
+    for side in [64, 40] {
+        let img = &r[&format!("encode.image{side}")];
+        let lat = sd.encode(img).unwrap();
+        assert_close(
+            &format!("latents {side}"),
+            &lat,
+            &r[&format!("encode.latents{side}")],
+            1e-5,
+        );
+        let d = sd.encode_vjp(img, &r["encode.d_latents"]).unwrap();
+        assert_close(
+            &format!("d_image {side}"),
+            &d,
+            &r[&format!("encode.d_image{side}")],
+            1e-5,
+        );
+    }
+    let bad = Tensor::zeros((1, 4, 8, 8), DType::F32, &Device::Cpu).unwrap();
+    assert!(matches!(sd.encode(&bad), Err(ModelError::InvalidInput(_))));
+}
+
+fn opaque(t: &Tensor) -> Image {
+    let dims = t.dims().to_vec();
+    let (h, w) = (dims[2], dims[3]);
+    let v: Vec<f32> = t.flatten_all().unwrap().to_vec1().unwrap();
+    let n = h * w;
+    let mut im = Image::new(w as u32, h as u32);
+    for i in 0..n {
+        for c in 0..3 {
+            im.data[4 * i + c] = v[c * n + i];
+        }
+        im.data[4 * i + 3] = 1.0;
+    }
+    im
+}
+
+fn flat(t: &Tensor) -> Vec<f32> {
+    t.flatten_all().unwrap().to_vec1().unwrap()
+}
+
+/// The teacher's premultiplied-RGBA gradient against a `[1, 3, H, W]` reference (alpha gets
+/// `−Σ_c`), within the GELU tolerance.
+fn assert_image_grad(name: &str, g: &[f32], want: &Tensor) {
+    let n = want.elem_count() / 3;
+    let want = flat(want);
+    let s = want.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+    assert!(s > 1e-4, "{name}: reference is trivially small ({s})");
+    let tol = 2e-4 * s.max(1.0);
+    let mut err = 0.0f32;
+    for i in 0..n {
+        let mut sum = 0.0;
+        for c in 0..3 {
+            err = err.max((g[4 * i + c] - want[c * n + i]).abs());
+            sum += want[c * n + i];
+        }
+        err = err.max((g[4 * i + 3] + sum).abs());
+    }
+    assert!(err <= tol, "{name}: max abs err {err} > {tol} (scale {s})");
+}
+
+#[test]
+fn sds_image_gradient_through_the_pixel_teacher_matches_diffusers() {
+    let r = pixel_refs();
+    // 64 px renders, area-resized to the 16 px prior inside the encoder.
+    let te = SdTeacher::load(&fixture("sd-tiny-pixel"), 64).unwrap();
+    assert_eq!(te.latent_shape(), [3, 16, 16]);
+    assert_eq!(te.encoder(), "pixel");
+    assert!(te.name().contains("pixel"), "{}", te.name());
+    let c = Conditioning {
+        prompt: "a red cat".into(),
+        negative_prompt: String::new(),
+        embed_shape: r["text.cond"].dims().to_vec(),
+        cond: flat(&r["text.cond"]),
+        uncond: flat(&r["text.uncond"]),
+    };
+    let im = opaque(&r["encode.image64"]);
+    let (g, _) = sds_image_grad(
+        &te,
+        &im,
+        600,
+        &flat(&r["sds.noise"]),
+        &c,
+        7.5,
+        Weighting::OneMinusAlpha,
+    )
+    .unwrap();
+    assert_image_grad("pixel sds", &g, &r["sds.d_image"]);
+}
+
+#[test]
+fn sds_image_gradient_with_taesd_as_the_encoder_matches_diffusers() {
+    let r = refs(fixture("taesd-tiny").join("sds_refs.safetensors"));
+    let sd_refs = refs(fixture("sd-tiny").join("refs.safetensors"));
+    let te = SdTeacher::load_with(&fixture("sd-tiny"), 64, Some(&fixture("taesd-tiny"))).unwrap();
+    assert_eq!(te.encoder(), "taesd");
+    assert_eq!(te.latent_shape(), [4, 8, 8]);
+    let im = opaque(&r["image"]);
+    let z = te.encode(&im).unwrap();
+    let zr = Tensor::from_vec(z.data.clone(), (1, 4, 8, 8), &Device::Cpu).unwrap();
+    assert_close("taesd latents", &zr, &r["latents"], 1e-4);
+    let c = Conditioning {
+        prompt: "a red cat".into(),
+        negative_prompt: String::new(),
+        embed_shape: sd_refs["text.cond"].dims().to_vec(),
+        cond: flat(&sd_refs["text.cond"]),
+        uncond: flat(&sd_refs["text.uncond"]),
+    };
+    let (g, _) = sds_image_grad(
+        &te,
+        &im,
+        600,
+        &flat(&r["noise"]),
+        &c,
+        7.5,
+        Weighting::OneMinusAlpha,
+    )
+    .unwrap();
+    assert_image_grad("taesd sds", &g, &r["d_image"]);
+    // and the VAE teacher on the same model differs (the choice is real)
+    let vae = SdTeacher::load(&fixture("sd-tiny"), 64).unwrap();
+    assert_eq!(vae.encoder(), "vae");
+    assert_ne!(vae.encode(&im).unwrap().data, z.data);
+}
+
+fn copy_dir(src: &Path, dst: &Path) {
+    std::fs::create_dir_all(dst).unwrap();
+    for e in std::fs::read_dir(src).unwrap() {
+        let e = e.unwrap();
+        let p = e.path();
+        if p.is_dir() {
+            copy_dir(&p, &dst.join(e.file_name()));
+        } else {
+            std::fs::copy(&p, dst.join(e.file_name())).unwrap();
+        }
+    }
+}
+
+#[test]
+fn loader_tells_pixel_space_from_a_latent_model_with_missing_files() {
+    let base = std::env::temp_dir().join(format!("vf-pixel-detect-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&base);
+    // An SD directory whose vae/ is gone but whose model_index.json names a VAE: missing files.
+    let sd = base.join("sd");
+    copy_dir(&fixture("sd-tiny"), &sd);
+    std::fs::remove_dir_all(sd.join("vae")).unwrap();
+    let e = StableDiffusion::load(&sd, &LoadOptions::default()).unwrap_err();
+    assert!(matches!(e, ModelError::MissingFiles { .. }), "{e}");
+    assert!(e.to_string().contains("vae"), "{e}");
+    // Without the "vae" entry it is a pixel-space model, and a 4-channel UNet is refused.
+    std::fs::write(
+        sd.join("model_index.json"),
+        r#"{"unet": ["diffusers", "UNet2DConditionModel"]}"#,
+    )
+    .unwrap();
+    let e = StableDiffusion::load(&sd, &LoadOptions::default()).unwrap_err();
+    assert!(matches!(e, ModelError::Unsupported { .. }), "{e}");
+    assert!(e.to_string().contains("pixel"), "{e}");
+    let _ = std::fs::remove_dir_all(&base);
+}
