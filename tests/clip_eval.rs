@@ -192,11 +192,14 @@ fn eval_cli_errors_are_clear() {
     let o = bin()
         .args(["eval", "--prompts", s(&prompts), "--method", "sd_live"])
         .args(["--scorer", s(&fixture("clip-tiny"))])
+        .env("VF_DEFAULT_MODEL", prompts.with_file_name("no-model-here"))
         .output()
         .unwrap();
-    // Generating needs a model (`tests/eval_generate.rs` runs it end to end).
+    // Generating needs a model: without --model the default model is used, and a default
+    // that is not a model directory is a usage error naming the variable
+    // (`tests/eval_generate.rs` runs generation end to end).
     assert_eq!(o.status.code(), Some(2));
-    assert!(String::from_utf8_lossy(&o.stderr).contains("--model"));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("VF_DEFAULT_MODEL"));
 
     let bad = prompts.with_file_name("bad.txt");
     std::fs::write(&bad, "a cat\n\na dog\n").unwrap();

@@ -93,8 +93,9 @@ fn generate_bad_input_is_a_clear_error() {
         .arg(&out)
         .output()
         .unwrap();
-    assert_eq!(st.status.code(), Some(1));
-    assert!(String::from_utf8_lossy(&st.stderr).contains("loading the model"));
+    // A model directory that does not exist is bad input (exit 2) naming the path.
+    assert_eq!(st.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&st.stderr).contains("/nonexistent"));
     let st = bin()
         .args(["generate", "a cat", "--teacher", "magic:x", "-o"])
         .arg(&out)
@@ -152,7 +153,8 @@ fn generate_with_the_tiny_model_directory() {
     let out = dir.join("m.svg");
     let model = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/sd-tiny");
     let st = bin()
-        .args(["generate", "a red cat", "--style", "sketch", "--model"])
+        .args(["generate", "a red cat", "--method", "scratch", "--style", "sketch"])
+        .arg("--model")
         .arg(&model)
         .args(["--size", "32", "--steps", "3", "--guidance", "7.5", "-o"])
         .arg(&out)

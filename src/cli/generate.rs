@@ -26,9 +26,10 @@ use std::path::PathBuf;
 pub struct GenerateArgs {
     /// The caption (with the analytic test teacher it is only recorded).
     pub caption: String,
-    /// Generation method: scratch, sd_live or sd_live_sds.
-    #[arg(long, default_value = "scratch")]
-    pub method: String,
+    /// Generation method: scratch, sd_live or sd_live_sds [default: sd_live_sds with a
+    /// diffusion model (the paper's full pipeline), scratch with `--teacher`].
+    #[arg(long)]
+    pub method: Option<String>,
     /// Preset: draft, fast, balanced or paper (resolution, steps, paths, samples). Any of
     /// --preset, --scorer, --samples, --image, --svg or a method other than scratch runs the
     /// shared pipeline (the one the service runs).
@@ -131,7 +132,11 @@ fn no_model() -> CliError {
 }
 
 pub fn run(mut args: GenerateArgs) -> Result<(), CliError> {
-    let method: Method = args.method.parse().map_err(CliError::Usage)?;
+    let method: Method = match &args.method {
+        Some(m) => m.parse().map_err(CliError::Usage)?,
+        None if args.teacher.is_some() => Method::Scratch,
+        None => Method::SdLiveSds,
+    };
     let encoder: EncoderChoice = args.encoder.parse().map_err(CliError::Usage)?;
     let (model, default_scorer) = model_and_scorer(&args)?;
     args.model = model;
