@@ -33,8 +33,21 @@ def main():
         toks, sents = [], []
         for i in range(0, len(uniq), 256):
             batch = uniq[i : i + 256]
-            toks.append(vf_icon.encode_tokens(tok, model, batch).half().numpy())
-            sents.append(vf_icon.encode_sentence(tok, model, batch).half().numpy())
+            h = vf_icon.encode_tokens(tok, model, batch)
+            # The sentence embedding (L=64) pools only real tokens, and with the attention mask
+            # real tokens do not see padding, so it equals the masked mean of the L=32 states
+            # whenever the caption fits in 32 tokens (checked below); longer ones are re-encoded.
+            m = tok(batch, padding="max_length", truncation=True, max_length=vf_icon.UNET_TEXT_LEN, return_tensors="pt").attention_mask
+            s = torch.nn.functional.normalize((h * m[..., None]).sum(1) / m.sum(1, keepdim=True), dim=-1)
+            long = [j for j, c in enumerate(batch) if len(tok.tokenize(c)) > vf_icon.UNET_TEXT_LEN - 2]
+            if long:
+                s[long] = vf_icon.encode_sentence(tok, model, [batch[j] for j in long])
+            if i == 0:
+                ref = vf_icon.encode_sentence(tok, model, batch[:16])
+                assert torch.allclose(ref, s[:16], atol=1e-4), (ref - s[:16]).abs().max()
+            toks.append(h.half().numpy())
+            sents.append(s.half().numpy())
+            print(f"  {i + len(batch)}/{len(uniq)}", flush=True)
         np.concatenate(toks).tofile(os.path.join(split, "text_tokens.f16"))
         np.concatenate(sents).tofile(os.path.join(split, "text_sentence.f16"))
         print(f"{split}: {len(caps)} images, {len(uniq)} unique captions")

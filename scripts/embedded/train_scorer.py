@@ -57,6 +57,8 @@ def augment(x, gen):
 def evaluate(model, raw, idx, sent, caps, meta, seed=0, distractors=99):
     """Image->text retrieval over the split's unique captions (excluding "")."""
     model.eval()
+    keep = idx != 0  # images with an empty caption cannot be retrieved
+    raw, idx, meta = raw[keep], idx[keep], [m for m, k in zip(meta, keep.tolist()) if k]
     img = torch.cat([model.encode_image(to01(raw[i : i + 512])) for i in range(0, len(raw), 512)])
     used = sorted(set(idx.tolist()) - {0})
     pos = {c: j for j, c in enumerate(used)}
