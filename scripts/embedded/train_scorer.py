@@ -1,0 +1,181 @@
+"""Trains the IconClip scorer (docs/EMBEDDED.md) contrastively against frozen MiniLM sentence
+embeddings, and evaluates retrieval on the held-out split.
+
+    nice -n 15 python scripts/embedded/train_scorer.py --train data/icons/train --eval data/icons/eval \
+        --out data/scorer --export models/vf-icon/scorer --epochs 4
+
+Symmetric InfoNCE; images that share a caption in a batch (the same emoji from several sets) are
+all positives (soft targets). Light augmentation: horizontal flip and a random shift/scale
+(pad with white, crop/resize back). Writes OUT/metrics.json, OUT/loss.csv, a restartable
+OUT/ckpt.pt, and EXPORT/{config.json, model.safetensors}.
+"""
+
+import argparse
+import csv
+import json
+import os
+import sys
+import time
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+sys.path.insert(0, os.path.dirname(__file__))
+import vf_icon  # noqa: E402
+
+
+def load(path):
+    raw = np.fromfile(os.path.join(path, "images_64.u8"), dtype=np.uint8).reshape(-1, 64, 64, 3)
+    idx = np.load(os.path.join(path, "text_index.npy")).astype(np.int64)
+    caps = json.load(open(os.path.join(path, "text_captions.json")))
+    sent = np.fromfile(os.path.join(path, "text_sentence.f16"), dtype=np.float16).reshape(len(caps), 384)
+    meta = [json.loads(l) for l in open(os.path.join(path, "captions.jsonl"))]
+    return torch.from_numpy(raw), torch.from_numpy(idx), torch.from_numpy(sent.astype(np.float32)), caps, meta
+
+
+def to01(u8):
+    return u8.permute(0, 3, 1, 2).float() / 255.0
+
+
+def augment(x, gen):
+    b = x.shape[0]
+    flip = torch.rand(b, generator=gen) < 0.5
+    x = torch.where(flip[:, None, None, None], x.flip(-1), x)
+    # random scale in [0.8, 1.05] and shift up to 4 px, white fill
+    s = 0.8 + 0.25 * torch.rand(b, generator=gen)
+    sh = (torch.rand(b, 2, generator=gen) * 2 - 1) * (4 / 32)
+    theta = torch.zeros(b, 2, 3)
+    theta[:, 0, 0] = 1 / s
+    theta[:, 1, 1] = 1 / s
+    theta[:, :, 2] = sh
+    grid = F.affine_grid(theta, x.shape, align_corners=False)
+    return 1 - F.grid_sample(1 - x, grid, mode="bilinear", padding_mode="zeros", align_corners=False)
+
+
+@torch.no_grad()
+def evaluate(model, raw, idx, sent, caps, meta, seed=0, distractors=99):
+    """Image->text retrieval over the split's unique captions (excluding "")."""
+    model.eval()
+    keep = idx != 0  # images with an empty caption cannot be retrieved
+    raw, idx, meta = raw[keep], idx[keep], [m for m, k in zip(meta, keep.tolist()) if k]
+    img = torch.cat([model.encode_image(to01(raw[i : i + 512])) for i in range(0, len(raw), 512)])
+    used = sorted(set(idx.tolist()) - {0})
+    pos = {c: j for j, c in enumerate(used)}
+    txt = model.encode_text(sent[used])
+    sim = img @ txt.t()
+    target = torch.tensor([pos[int(c)] for c in idx])
+    rank = (sim > sim.gather(1, target[:, None])).sum(1)
+    r1 = (rank == 0).float().mean().item()
+    r5 = (rank < 5).float().mean().item()
+    # R-Precision style: true caption vs `distractors` random other captions
+    g = torch.Generator().manual_seed(seed)
+    hits = []
+    for i in range(len(img)):
+        d = torch.randint(0, len(used) - 1, (distractors,), generator=g)
+        d = d + (d >= target[i]).long()
+        hits.append(bool(sim[i, target[i]] > sim[i, d].max()))
+    rp = float(np.mean(hits))
+    per_set = {}
+    sets = np.array([m["set"] for m in meta])
+    for s in sorted(set(sets)):
+        m = torch.from_numpy(sets == s)
+        per_set[s] = {"n": int(m.sum()), "r1": (rank[m] == 0).float().mean().item()}
+    base = torch.tensor(["skin tone" not in caps[c] and not caps[c].endswith((" light", " dark", " medium", " medium light", " medium dark")) for c in idx.tolist()])
+    model.train()
+    return {"n_images": len(img), "n_captions": len(used), "r1": r1, "r5": r5, "chance_r1": 1 / len(used),
+            f"r_precision_1_of_{distractors + 1}": rp, "chance_r_precision": 1 / (distractors + 1),
+            "r1_without_skin_tone_variants": (rank[base] == 0).float().mean().item(), "n_without_skin_tone_variants": int(base.sum()),
+            "per_set": per_set}
+
+
+def export(model, out_dir):
+    from safetensors.torch import save_file
+
+    os.makedirs(out_dir, exist_ok=True)
+    sd = {k: v.detach().float().contiguous() for k, v in model.state_dict().items()}
+    save_file(sd, os.path.join(out_dir, "model.safetensors"))
+    with open(os.path.join(out_dir, "config.json"), "w") as f:
+        json.dump(model.config, f, indent=2)
+        f.write("\n")
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--train", default="data/icons/train")
+    ap.add_argument("--eval", default="data/icons/eval")
+    ap.add_argument("--out", default="data/scorer")
+    ap.add_argument("--export", default="models/vf-icon/scorer")
+    ap.add_argument("--epochs", type=float, default=4)
+    ap.add_argument("--batch", type=int, default=256)
+    ap.add_argument("--lr", type=float, default=2e-3)
+    ap.add_argument("--seed", type=int, default=4321)
+    ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--eval-only", action="store_true")
+    args = ap.parse_args()
+    torch.set_num_threads(args.threads)
+    os.makedirs(args.out, exist_ok=True)
+
+    raw, idx, sent, caps, meta = load(args.train)
+    ev = load(args.eval)
+    torch.manual_seed(args.seed)
+    model = vf_icon.IconClip()
+    opt = torch.optim.AdamW(model.parameters(), lr=args.lr, weight_decay=0.05)
+    steps_per_epoch = len(raw) // args.batch
+    total = int(args.epochs * steps_per_epoch)
+    gen = torch.Generator().manual_seed(args.seed)
+    step, elapsed0 = 0, 0.0
+    ckpt = os.path.join(args.out, "ckpt.pt")
+    if os.path.exists(ckpt):
+        ck = torch.load(ckpt, weights_only=False)
+        model.load_state_dict(ck["model"])
+        opt.load_state_dict(ck["opt"])
+        gen.set_state(ck["gen"])
+        step, elapsed0 = ck["step"], ck["elapsed"]
+        print(f"resumed at step {step}", flush=True)
+    logf = open(os.path.join(args.out, "loss.csv"), "a", newline="")
+    log = csv.writer(logf)
+    if step == 0:
+        log.writerow(["step", "loss", "lr", "elapsed_s"])
+    t0 = time.time()
+    last = t0
+    print(f"train {len(raw)} images, {total} steps", flush=True)
+    while step < total and not args.eval_only:
+        b = torch.randint(0, len(raw), (args.batch,), generator=gen)
+        x = augment(to01(raw[b]), gen)
+        ci = idx[b]
+        img = model.encode_image(x)
+        txt = model.encode_text(sent[ci])
+        logits = model.logits(img, txt)
+        same = (ci[:, None] == ci[None, :]).float()
+        tgt = same / same.sum(1, keepdim=True)
+        loss = 0.5 * (-(tgt * F.log_softmax(logits, 1)).sum(1).mean() - (tgt * F.log_softmax(logits.t(), 1)).sum(1).mean())
+        lr = args.lr * min(1.0, (step + 1) / 100) * 0.5 * (1 + np.cos(np.pi * step / total))
+        for g in opt.param_groups:
+            g["lr"] = lr
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        opt.step()
+        with torch.no_grad():
+            model.logit_scale.clamp_(0, 4.6052)
+        step += 1
+        if step % 10 == 0:
+            log.writerow([step, f"{loss.item():.4f}", f"{lr:.2e}", f"{elapsed0 + time.time() - t0:.1f}"])
+            logf.flush()
+            print(f"step {step}/{total} loss {loss.item():.3f}", flush=True)
+        if time.time() - last > 600 or step == total:
+            torch.save({"model": model.state_dict(), "opt": opt.state_dict(), "gen": gen.get_state(), "step": step,
+                        "elapsed": elapsed0 + time.time() - t0}, ckpt)
+            export(model, args.export)
+            last = time.time()
+    m = evaluate(model, *ev)
+    m["train_steps"] = step
+    m["train_wall_s"] = elapsed0 + time.time() - t0
+    m["args"] = vars(args)
+    json.dump(m, open(os.path.join(args.out, "metrics.json"), "w"), indent=1)
+    export(model, args.export)
+    print(json.dumps({k: v for k, v in m.items() if k != "per_set"}), flush=True)
+
+
+if __name__ == "__main__":
+    main()
