@@ -153,7 +153,14 @@ fn generate_with_the_tiny_model_directory() {
     let out = dir.join("m.svg");
     let model = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/sd-tiny");
     let st = bin()
-        .args(["generate", "a red cat", "--method", "scratch", "--style", "sketch"])
+        .args([
+            "generate",
+            "a red cat",
+            "--method",
+            "scratch",
+            "--style",
+            "sketch",
+        ])
         .arg("--model")
         .arg(&model)
         .args(["--size", "32", "--steps", "3", "--guidance", "7.5", "-o"])

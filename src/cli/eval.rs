@@ -206,7 +206,15 @@ fn generate_and_evaluate(
         let mut seconds = 0.0;
         for (i, caption) in captions.iter().enumerate() {
             let line = i + 1;
-            let spec = job_spec(args, exec.pixel_space(), *method, style, preset, caption, line)?;
+            let spec = job_spec(
+                args,
+                exec.pixel_space(),
+                *method,
+                style,
+                preset,
+                caption,
+                line,
+            )?;
             let t0 = std::time::Instant::now();
             let out = exec
                 .run(&spec, &JobContext::detached(CancelToken::new()))

@@ -640,9 +640,13 @@ pub fn run_text_resumable(
         paths,
         steps,
         samples: k,
-    } = req
-        .preset
-        .resolve(models.is_pixel_space(), req.style, req.paths, req.steps, req.samples);
+    } = req.preset.resolve(
+        models.is_pixel_space(),
+        req.style,
+        req.paths,
+        req.steps,
+        req.samples,
+    );
     let (steps, k) = (steps.max(1), k.max(1));
     if paths == 0 || paths > 1024 {
         return Err(PipelineError::InvalidInput(format!(

@@ -1,0 +1,122 @@
+//! The shipped embedded model (`models/vf-icon/`) against reference outputs of the same exported
+//! files in PyTorch (`scripts/embedded/make_refs.py` → `tests/fixtures/vf-icon-refs/`): the
+//! pixel-space UNet and the IconClip image tower always; the MiniLM conditioning and the scorer's
+//! text tower when the MiniLM weights are installed (`vectorfusion setup`; CI runs it).
+
+use candle_core::{DType, Device, Tensor};
+use sha2::{Digest, Sha256};
+use std::path::{Path, PathBuf};
+use vectorfusion::models::bert::weights::MiniLmLocations;
+use vectorfusion::models::pipeline::load_unet;
+use vectorfusion::models::scorer::{IconClip, IconClipConfig, IconClipScorer};
+use vectorfusion::models::{LoadOptions, Precision, StableDiffusion};
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("models/vf-icon")
+}
+
+fn refs() -> (std::collections::HashMap<String, Tensor>, serde_json::Value) {
+    let path =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/vf-icon-refs/refs.safetensors");
+    let bytes = std::fs::read(&path).unwrap();
+    let n = u64::from_le_bytes(bytes[..8].try_into().unwrap()) as usize;
+    let header: serde_json::Value = serde_json::from_slice(&bytes[8..8 + n]).unwrap();
+    let meta = header["__metadata__"].clone();
+    (
+        candle_core::safetensors::load(&path, &Device::Cpu).unwrap(),
+        meta,
+    )
+}
+
+fn sha256(path: &Path) -> String {
+    format!("{:x}", Sha256::digest(std::fs::read(path).unwrap()))
+}
+
+fn max_abs(a: &Tensor, b: &Tensor) -> f32 {
+    assert_eq!(a.dims(), b.dims());
+    let a = a.to_dtype(DType::F32).unwrap();
+    let b = b.to_dtype(DType::F32).unwrap();
+    (a - b)
+        .unwrap()
+        .abs()
+        .unwrap()
+        .flatten_all()
+        .unwrap()
+        .max(0)
+        .unwrap()
+        .to_scalar::<f32>()
+        .unwrap()
+}
+
+/// The fixture was made from exactly the committed weights (re-run make_refs.py after a retrain).
+#[test]
+fn reference_fixture_matches_the_committed_weights() {
+    let (_, meta) = refs();
+    let unet = root().join("unet/diffusion_pytorch_model.safetensors");
+    let scorer = root().join("scorer/model.safetensors");
+    assert_eq!(
+        meta["model_sha256_unet"].as_str(),
+        Some(sha256(&unet).as_str()),
+        "stale refs: run scripts/embedded/make_refs.py"
+    );
+    assert_eq!(
+        meta["model_sha256_scorer"].as_str(),
+        Some(sha256(&scorer).as_str()),
+        "stale refs: run scripts/embedded/make_refs.py"
+    );
+}
+
+#[test]
+fn pixel_unet_matches_diffusers_on_the_shipped_weights() {
+    let (r, _) = refs();
+    let unet = load_unet(&root().join("unet"), Precision::F32, &Device::Cpu).unwrap();
+    let cond = r["unet_cond"].narrow(0, 0, 1).unwrap();
+    let eps = unet.forward(&r["unet_x_t"], 500.0, &cond).unwrap();
+    let d = max_abs(&eps, &r["unet_eps"]);
+    assert!(d < 2e-4, "UNet eps max abs diff {d}");
+}
+
+#[test]
+fn iconclip_image_tower_matches_torch_on_the_shipped_weights() {
+    let (r, _) = refs();
+    let dir = root().join("scorer");
+    let cfg = IconClipConfig::from_file(&dir.join("config.json")).unwrap();
+    let w = dir.join("model.safetensors");
+    let vb =
+        unsafe { candle_nn::VarBuilder::from_mmaped_safetensors(&[w], DType::F32, &Device::Cpu) }
+            .unwrap();
+    let m = IconClip::new(vb, cfg, 384).unwrap();
+    let emb = m.encode_image(&r["clip_images"]).unwrap();
+    let d = max_abs(&emb, &r["clip_image_emb"]);
+    assert!(d < 1e-4, "image embeddings max abs diff {d}");
+}
+
+/// MiniLM conditioning of the pixel UNet and the scorer's text tower, end to end through the
+/// loaders the pipeline uses.
+#[test]
+fn text_conditioning_and_scorer_text_match_when_minilm_is_installed() {
+    if let Err(e) = MiniLmLocations::from_env().ensure(false) {
+        eprintln!("SKIP text_conditioning_and_scorer_text_match_when_minilm_is_installed: {e}");
+        return;
+    }
+    let (r, meta) = refs();
+    let captions: Vec<String> = serde_json::from_str(meta["captions"].as_str().unwrap()).unwrap();
+    let sd = StableDiffusion::load(&root(), &LoadOptions::default()).unwrap();
+    for (i, c) in captions.iter().enumerate() {
+        let cond = sd.embed_text(c).unwrap();
+        let want = r["unet_cond"].narrow(0, i, 1).unwrap();
+        // relative to the largest activation (|h| reaches ~10 at padded positions)
+        let scale = max_abs(&want, &want.zeros_like().unwrap()).max(1.0);
+        let d = max_abs(&cond, &want);
+        assert!(
+            d < 1e-4 * scale,
+            "conditioning of {c:?}: max abs diff {d} (scale {scale})"
+        );
+    }
+    let s = IconClipScorer::load(&root().join("scorer"), &root(), &Device::Cpu, false).unwrap();
+    let caps: Vec<&str> = captions.iter().map(String::as_str).collect();
+    let t = s.text_embeddings(&caps).unwrap();
+    let t = Tensor::from_vec(t.concat(), (caps.len(), t[0].len()), &Device::Cpu).unwrap();
+    let d = max_abs(&t, &r["clip_text_emb"]);
+    assert!(d < 1e-4, "scorer text embeddings max abs diff {d}");
+}
