@@ -1,6 +1,9 @@
 //! The candle BertModel against transformers (tiny random model over the real vocabulary) and,
 //! when its weights are installed (`vectorfusion setup`), the real all-MiniLM-L6-v2.
 
+mod common;
+use common::max_abs as max_abs_diff;
+
 use candle_core::{DType, Device, Tensor};
 use std::path::{Path, PathBuf};
 use vectorfusion::models::bert::weights::{self, MiniLmLocations};
@@ -16,20 +19,6 @@ fn refs(name: &str) -> std::collections::HashMap<String, Tensor> {
 
 fn captions(name: &str) -> Vec<String> {
     serde_json::from_str(&std::fs::read_to_string(fixture().join(name)).unwrap()).unwrap()
-}
-
-fn max_abs_diff(a: &Tensor, b: &Tensor) -> f32 {
-    assert_eq!(a.dims(), b.dims());
-    (a - b)
-        .unwrap()
-        .abs()
-        .unwrap()
-        .flatten_all()
-        .unwrap()
-        .max(0)
-        .unwrap()
-        .to_scalar::<f32>()
-        .unwrap()
 }
 
 fn tiny() -> BertTextEncoder {

@@ -1,26 +1,16 @@
 //! The SD pipeline's `TextEncoder` dispatches on `text_encoder/config.json` `model_type`: a BERT
 //! model root gives the embedded model's conditioning (`last_hidden_state` over all L positions).
 
-use candle_core::{DType, Device, Tensor};
+mod common;
+use common::max_abs;
+
+use candle_core::{DType, Device};
 use std::path::{Path, PathBuf};
 use vectorfusion::models::Precision;
 use vectorfusion::models::pipeline::TextEncoder;
 
 fn fixture() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/bert-tiny")
-}
-
-fn max_abs(a: &Tensor, b: &Tensor) -> f32 {
-    (a - b)
-        .unwrap()
-        .abs()
-        .unwrap()
-        .flatten_all()
-        .unwrap()
-        .max(0)
-        .unwrap()
-        .to_scalar::<f32>()
-        .unwrap()
 }
 
 #[test]

@@ -1,6 +1,9 @@
 //! The CLIP vision tower, full model and image preprocessing against `transformers` on the
 //! tiny fixture (`scripts/make_clip_fixtures.py`).
 
+mod common;
+use common::max_abs as max_abs_diff;
+
 use candle_core::{Device, Tensor};
 use std::path::PathBuf;
 use vectorfusion::image::Image;
@@ -13,20 +16,6 @@ fn dir() -> PathBuf {
 
 fn reference() -> std::collections::HashMap<String, Tensor> {
     candle_core::safetensors::load(dir().join("reference/outputs.safetensors"), &Device::Cpu)
-        .unwrap()
-}
-
-fn max_abs_diff(a: &Tensor, b: &Tensor) -> f32 {
-    assert_eq!(a.dims(), b.dims());
-    (a - b)
-        .unwrap()
-        .abs()
-        .unwrap()
-        .flatten_all()
-        .unwrap()
-        .max(0)
-        .unwrap()
-        .to_scalar()
         .unwrap()
 }
 

@@ -1,5 +1,8 @@
 //! `ClipScorer` on the tiny fixtures: transformers layout and OpenCLIP layout.
 
+mod common;
+use common::max_abs as max_abs_diff;
+
 use candle_core::{Device, Tensor};
 use std::path::PathBuf;
 use vectorfusion::image::Image;
@@ -17,20 +20,6 @@ fn reference(name: &str) -> std::collections::HashMap<String, Tensor> {
         &Device::Cpu,
     )
     .unwrap()
-}
-
-fn max_abs_diff(a: &Tensor, b: &Tensor) -> f32 {
-    assert_eq!(a.dims(), b.dims());
-    (a - b)
-        .unwrap()
-        .abs()
-        .unwrap()
-        .flatten_all()
-        .unwrap()
-        .max(0)
-        .unwrap()
-        .to_scalar()
-        .unwrap()
 }
 
 fn texts(name: &str) -> Vec<String> {

@@ -1,6 +1,9 @@
 //! The CLIP tokenizer and text tower against `transformers` on the tiny fixture
 //! (`scripts/make_clip_fixtures.py`).
 
+mod common;
+use common::max_abs as max_abs_diff;
+
 use candle_core::{DType, Device, IndexOp, Tensor};
 use std::path::PathBuf;
 use vectorfusion::models::clip::text::ClipTextModelWithProjection;
@@ -30,20 +33,6 @@ fn tokens() -> Tokens {
 
 fn reference() -> std::collections::HashMap<String, Tensor> {
     candle_core::safetensors::load(dir().join("reference/outputs.safetensors"), &Device::Cpu)
-        .unwrap()
-}
-
-fn max_abs_diff(a: &Tensor, b: &Tensor) -> f32 {
-    assert_eq!(a.dims(), b.dims());
-    (a - b)
-        .unwrap()
-        .abs()
-        .unwrap()
-        .flatten_all()
-        .unwrap()
-        .max(0)
-        .unwrap()
-        .to_scalar()
         .unwrap()
 }
 

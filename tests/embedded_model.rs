@@ -3,6 +3,9 @@
 //! pixel-space UNet and the IconClip image tower always; the MiniLM conditioning and the scorer's
 //! text tower when the MiniLM weights are installed (`vectorfusion setup`; CI runs it).
 
+mod common;
+use common::max_abs;
+
 use candle_core::{DType, Device, Tensor};
 use sha2::{Digest, Sha256};
 use std::path::{Path, PathBuf};
@@ -30,22 +33,6 @@ fn refs() -> (std::collections::HashMap<String, Tensor>, serde_json::Value) {
 
 fn sha256(path: &Path) -> String {
     format!("{:x}", Sha256::digest(std::fs::read(path).unwrap()))
-}
-
-fn max_abs(a: &Tensor, b: &Tensor) -> f32 {
-    assert_eq!(a.dims(), b.dims());
-    let a = a.to_dtype(DType::F32).unwrap();
-    let b = b.to_dtype(DType::F32).unwrap();
-    (a - b)
-        .unwrap()
-        .abs()
-        .unwrap()
-        .flatten_all()
-        .unwrap()
-        .max(0)
-        .unwrap()
-        .to_scalar::<f32>()
-        .unwrap()
 }
 
 /// The fixture was made from exactly the committed weights (re-run make_refs.py after a retrain).

@@ -2,6 +2,9 @@
 //! (`scripts/embedded/vf_icon.py`, fixture by `scripts/embedded/make_fixtures.py`), and the
 //! scorer abstraction that loads CLIP or IconClip wherever a scorer is accepted.
 
+mod common;
+use common::max_abs;
+
 use candle_core::{Device, Tensor};
 use std::path::{Path, PathBuf};
 use vectorfusion::eval::clip::evaluate;
@@ -33,20 +36,6 @@ fn scorer() -> IconClipScorer {
         false,
     )
     .unwrap()
-}
-
-fn max_abs(a: &Tensor, b: &Tensor) -> f32 {
-    assert_eq!(a.dims(), b.dims());
-    (a - b)
-        .unwrap()
-        .abs()
-        .unwrap()
-        .flatten_all()
-        .unwrap()
-        .max(0)
-        .unwrap()
-        .to_scalar::<f32>()
-        .unwrap()
 }
 
 fn rows(v: Vec<Vec<f32>>) -> Tensor {

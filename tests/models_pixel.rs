@@ -2,6 +2,9 @@
 //! diffusers on `tests/fixtures/sd-tiny-pixel` (`scripts/make_pixel_fixtures.py`), the TAESD SDS
 //! encoder against its diffusers reference, and the loader's pixel-space detection.
 
+mod common;
+use common::{abs_max, fixture};
+
 use candle_core::{DType, Device, Tensor};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -12,12 +15,6 @@ use vectorfusion::models::{LoadOptions, ModelError, StableDiffusion};
 use vectorfusion::stages::sds::{Weighting, sds_image_grad};
 use vectorfusion::teacher::{Conditioning, SdTeacher, Teacher};
 
-fn fixture(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/fixtures")
-        .join(name)
-}
-
 fn refs(path: PathBuf) -> HashMap<String, Tensor> {
     candle_core::safetensors::load(path, &Device::Cpu).unwrap()
 }
@@ -26,32 +23,21 @@ fn pixel_refs() -> HashMap<String, Tensor> {
     refs(fixture("sd-tiny-pixel").join("refs.safetensors"))
 }
 
-fn scale(a: &Tensor) -> f32 {
-    a.abs()
-        .unwrap()
-        .flatten_all()
-        .unwrap()
-        .max(0)
-        .unwrap()
-        .to_scalar::<f32>()
-        .unwrap()
-}
-
 fn assert_close(name: &str, got: &Tensor, want: &Tensor, tol: f32) {
     assert_eq!(got.dims(), want.dims(), "{name}: shape");
-    let e = scale(&(got.to_dtype(DType::F32).unwrap() - want).unwrap());
+    let e = abs_max(&(got.to_dtype(DType::F32).unwrap() - want).unwrap());
     assert!(
         e <= tol,
         "{name}: max abs err {e} > {tol} (ref scale {})",
-        scale(want)
+        abs_max(want)
     );
-    assert!(scale(want) > 1e-3, "{name}: reference is trivially small");
+    assert!(abs_max(want) > 1e-3, "{name}: reference is trivially small");
 }
 
 /// Through the UNet's GEGLU (tanh GELU in candle vs exact in diffusers): the tolerance the SD
 /// tests use, 2e-4 of the output scale.
 fn assert_close_gelu(name: &str, got: &Tensor, want: &Tensor) {
-    assert_close(name, got, want, 2e-4 * scale(want).max(1.0));
+    assert_close(name, got, want, 2e-4 * abs_max(want).max(1.0));
 }
 
 fn pixel() -> StableDiffusion {

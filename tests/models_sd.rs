@@ -1,47 +1,18 @@
 //! Equivalence of the Stable Diffusion components with diffusers on the tiny fixtures
 //! produced by `scripts/make_sd_fixtures.py` (fp32, max abs error ≤ 1e-4).
 
+mod common;
+use common::{abs_max, fixture, max_abs};
+
 use candle_core::{DType, Device, Tensor};
 use std::collections::HashMap;
-use std::path::{Path, PathBuf};
 use vectorfusion::models::pipeline::{load_scheduler, load_unet};
 use vectorfusion::models::scheduler::SamplerKind;
 use vectorfusion::models::taesd::Taesd;
 use vectorfusion::models::{LoadOptions, ModelError, Precision, StableDiffusion};
 
-fn fixture(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/fixtures")
-        .join(name)
-}
-
 fn refs(name: &str) -> HashMap<String, Tensor> {
     candle_core::safetensors::load(fixture(name).join("refs.safetensors"), &Device::Cpu).unwrap()
-}
-
-fn max_abs(a: &Tensor, b: &Tensor) -> f32 {
-    assert_eq!(a.dims(), b.dims(), "shape mismatch");
-    (a.to_dtype(DType::F32).unwrap() - b.to_dtype(DType::F32).unwrap())
-        .unwrap()
-        .abs()
-        .unwrap()
-        .flatten_all()
-        .unwrap()
-        .max(0)
-        .unwrap()
-        .to_scalar::<f32>()
-        .unwrap()
-}
-
-fn scale(a: &Tensor) -> f32 {
-    a.abs()
-        .unwrap()
-        .flatten_all()
-        .unwrap()
-        .max(0)
-        .unwrap()
-        .to_scalar::<f32>()
-        .unwrap()
 }
 
 fn assert_close(name: &str, got: &Tensor, want: &Tensor, tol: f32) {
@@ -49,9 +20,9 @@ fn assert_close(name: &str, got: &Tensor, want: &Tensor, tol: f32) {
     assert!(
         e <= tol,
         "{name}: max abs err {e} > {tol} (ref scale {})",
-        scale(want)
+        abs_max(want)
     );
-    assert!(scale(want) > 1e-3, "{name}: reference is trivially small");
+    assert!(abs_max(want) > 1e-3, "{name}: reference is trivially small");
 }
 
 /// Comparisons that go through the UNet's GEGLU: candle-transformers uses the tanh GELU
@@ -59,7 +30,7 @@ fn assert_close(name: &str, got: &Tensor, want: &Tensor, tol: f32) {
 /// `unet_matches_diffusers_up_to_the_gelu_approximation`, which holds at 1e-4), so these allow
 /// a relative 2e-4 of the output scale.
 fn assert_close_gelu(name: &str, got: &Tensor, want: &Tensor) {
-    let tol = 2e-4 * scale(want).max(1.0);
+    let tol = 2e-4 * abs_max(want).max(1.0);
     assert_close(name, got, want, tol);
 }
 

@@ -1,7 +1,11 @@
-//! Shared helpers for the service tests.
+//! Helpers shared by the integration tests (`mod common;`): service clients, fixtures, tensors.
 #![allow(dead_code)]
 
 pub mod http;
+pub mod tensors;
+
+#[allow(unused_imports)]
+pub use tensors::{abs_max, fixture, max_abs};
 
 use base64::Engine;
 use std::net::SocketAddr;

@@ -1,0 +1,29 @@
+//! Tensor and fixture helpers for the model tests.
+
+use candle_core::{DType, Tensor};
+use std::path::{Path, PathBuf};
+
+/// `tests/fixtures/<name>` of this checkout.
+pub fn fixture(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/fixtures")
+        .join(name)
+}
+
+/// Largest absolute elementwise difference of two tensors of the same shape (compared in f32).
+pub fn max_abs(a: &Tensor, b: &Tensor) -> f32 {
+    assert_eq!(a.dims(), b.dims(), "shape mismatch");
+    abs_max(&(a.to_dtype(DType::F32).unwrap() - b.to_dtype(DType::F32).unwrap()).unwrap())
+}
+
+/// Largest absolute value of an f32 tensor.
+pub fn abs_max(a: &Tensor) -> f32 {
+    a.abs()
+        .unwrap()
+        .flatten_all()
+        .unwrap()
+        .max(0)
+        .unwrap()
+        .to_scalar::<f32>()
+        .unwrap()
+}
