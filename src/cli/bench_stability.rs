@@ -238,11 +238,8 @@ pub fn run(args: BenchStabilityArgs) -> Result<(), CliError> {
     let models = if let Some(dir) = &a.model {
         Models::load_sd(dir, a.scorer.as_deref(), a.size).map_err(usage)?
     } else if let Some(spec) = &a.teacher {
-        let dir = spec.strip_prefix("analytic:").ok_or_else(|| {
-            CliError::Usage(format!("unknown teacher {spec:?}: use analytic:DIR"))
-        })?;
-        Models::load_analytic(std::path::Path::new(dir), a.scorer.as_deref(), a.size)
-            .map_err(usage)?
+        let dir = super::analytic_teacher_dir(spec)?;
+        Models::load_analytic(dir, a.scorer.as_deref(), a.size).map_err(usage)?
     } else {
         let cfg = AnalyticTeacherConfig {
             image_size: a.size,
@@ -349,7 +346,7 @@ pub fn run(args: BenchStabilityArgs) -> Result<(), CliError> {
                     .max_by(f64::total_cmp);
                 psnrs.extend(best);
                 if let Some(dir) = &a.save {
-                    let stem = format!("{}-{style}-s{seed}", method_name(*method));
+                    let stem = format!("{}-{style}-s{seed}", method.as_str());
                     let io = |e: std::io::Error| CliError::Other(e.into());
                     std::fs::write(dir.join(format!("{stem}.svg")), &out.svg).map_err(io)?;
                     img.save_png(&dir.join(format!("{stem}.png")))
@@ -414,14 +411,6 @@ pub fn run(args: BenchStabilityArgs) -> Result<(), CliError> {
         );
     }
     Ok(())
-}
-
-fn method_name(m: Method) -> &'static str {
-    match m {
-        Method::Scratch => "scratch",
-        Method::SdLive => "sd_live",
-        Method::SdLiveSds => "sd_live_sds",
-    }
 }
 
 fn fmt_opt(v: Option<f64>) -> String {

@@ -171,13 +171,7 @@ fn generate_and_evaluate(
     let preset: Preset = args.preset.parse().map_err(CliError::Usage)?;
     let analytic_dir = match &args.teacher {
         None => None,
-        Some(t) => Some(PathBuf::from(t.strip_prefix("analytic:").ok_or_else(
-            || {
-                CliError::Usage(format!(
-                    "unknown teacher {t:?}: the only test teacher is analytic:DIR"
-                ))
-            },
-        )?)),
+        Some(t) => Some(super::analytic_teacher_dir(t)?.to_path_buf()),
     };
     // Without --model / --teacher: the embedded default model (and its scorer for reranking).
     let dirs = ModelDirs {
@@ -198,8 +192,8 @@ fn generate_and_evaluate(
     let exec = DefaultExecutor::new(dirs);
     exec.text_ready().map_err(CliError::Usage)?;
     let mut reports = Vec::with_capacity(methods.len());
-    for (method, name) in methods.iter().zip(&args.methods) {
-        let name = name.to_ascii_lowercase().replace('-', "_");
+    for method in &methods {
+        let name = method.as_str().to_string();
         let dir = args.out_dir.join(&name);
         std::fs::create_dir_all(&dir)
             .map_err(|e| CliError::Other(anyhow::anyhow!("{}: {e}", dir.display())))?;

@@ -176,11 +176,7 @@ pub fn run(mut args: GenerateArgs) -> Result<(), CliError> {
         )
     } else {
         let spec = args.teacher.as_deref().ok_or_else(no_model)?;
-        let dir = spec.strip_prefix("analytic:").ok_or_else(|| {
-            CliError::Usage(format!(
-                "unknown teacher {spec:?}: the only test teacher is analytic:DIR"
-            ))
-        })?;
+        let dir = super::analytic_teacher_dir(spec)?;
         let pool = if size >= 64 && size % 64 == 0 {
             size / 64
         } else {
@@ -188,7 +184,7 @@ pub fn run(mut args: GenerateArgs) -> Result<(), CliError> {
         };
         Box::new(
             AnalyticTeacher::from_dir(
-                std::path::Path::new(dir),
+                dir,
                 AnalyticTeacherConfig {
                     image_size: size,
                     pool,
@@ -326,13 +322,8 @@ fn run_pipeline(
             .map_err(pipeline_err)?
     } else {
         let spec = args.teacher.as_deref().ok_or_else(no_model)?;
-        let dir = spec.strip_prefix("analytic:").ok_or_else(|| {
-            CliError::Usage(format!(
-                "unknown teacher {spec:?}: the only test teacher is analytic:DIR"
-            ))
-        })?;
-        Models::load_analytic(std::path::Path::new(dir), args.scorer.as_deref(), size)
-            .map_err(pipeline_err)?
+        let dir = super::analytic_teacher_dir(spec)?;
+        Models::load_analytic(dir, args.scorer.as_deref(), size).map_err(pipeline_err)?
     };
     eprintln!("teacher: {}", models.teacher().name());
     let start = if let Some(p) = &args.image {

@@ -70,6 +70,17 @@ impl CliError {
     }
 }
 
+/// The directory of a `--teacher analytic:DIR` spec (the only test teacher).
+pub(crate) fn analytic_teacher_dir(spec: &str) -> Result<&std::path::Path, CliError> {
+    spec.strip_prefix("analytic:")
+        .map(std::path::Path::new)
+        .ok_or_else(|| {
+            CliError::Usage(format!(
+                "unknown teacher {spec:?}: the only test teacher is analytic:DIR"
+            ))
+        })
+}
+
 pub fn run(cli: Cli) -> Result<(), CliError> {
     match cli.command {
         Command::Generate(a) => generate::run(*a),

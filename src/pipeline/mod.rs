@@ -54,6 +54,15 @@ pub enum Method {
 
 impl Method {
     pub const ALL: &[Method] = &[Method::Scratch, Method::SdLive, Method::SdLiveSds];
+
+    /// The method's name as in the API and on the command line (`sd_live_sds`).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Method::Scratch => "scratch",
+            Method::SdLive => "sd_live",
+            Method::SdLiveSds => "sd_live_sds",
+        }
+    }
 }
 
 /// Named speed/quality trade-offs (resolution, steps, paths, samples, encoder; see
