@@ -119,3 +119,44 @@ fn eval_method_rejects_empty_lines_and_missing_models() {
         .unwrap();
     assert_eq!(o.status.code(), Some(2), "{o:?}");
 }
+
+/// `--method samples`: the raster row of Table 1. The rerank scorer's pick of K samples per
+/// caption is saved as NNNN.png and scored as an image; the same seed draws the same picture.
+#[test]
+fn eval_samples_row_scores_the_reranked_raster_samples() {
+    let dir = tempfile::tempdir().unwrap();
+    let prompts = dir.path().join("prompts.txt");
+    std::fs::write(&prompts, "a crown\na red apple\n").unwrap();
+    let run = |out: &Path| {
+        let o = bin()
+            .args(["eval", "--prompts", s(&prompts), "--json"])
+            .args(["--method", "samples", "--preset", "draft", "--samples", "3"])
+            .args(["--model", s(&fixture("sd-tiny"))])
+            .args(["--rerank-scorer", s(&fixture("clip-tiny"))])
+            .args(["--scorer", s(&fixture("clip-tiny"))])
+            .args(["--out-dir", s(out)])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        serde_json::from_slice::<serde_json::Value>(&o.stdout).unwrap()
+    };
+    let (a, b) = (dir.path().join("a"), dir.path().join("b"));
+    let v = run(&a);
+    let m = &v["methods"][0];
+    assert_eq!(m["method"], "samples");
+    assert_eq!(m["mean_paths"], 0.0);
+    assert!(m["mean_seconds"].as_f64().unwrap() > 0.0, "{m}");
+    let sc = &m["scorers"][0];
+    assert_eq!(sc["per_svg"].as_array().unwrap().len(), 2);
+    assert!(sc["mean_similarity"].as_f64().unwrap().is_finite(), "{sc}");
+    let png = |d: &Path, f: &str| std::fs::read(d.join("samples").join(f)).unwrap();
+    let first = png(&a, "0001.png");
+    assert!(first.starts_with(b"\x89PNG"));
+    assert_ne!(
+        first,
+        png(&a, "0002.png"),
+        "each caption line has its own seed"
+    );
+    run(&b);
+    assert_eq!(first, png(&b, "0001.png"), "seeded: the same sample again");
+}

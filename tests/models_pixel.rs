@@ -278,3 +278,45 @@ fn loader_tells_pixel_space_from_a_latent_model_with_missing_files() {
     assert!(e.to_string().contains("pixel"), "{e}");
     let _ = std::fs::remove_dir_all(&base);
 }
+
+/// `"_style_suffix": false` in `model_index.json` (a model trained on bare captions) turns the
+/// paper's style suffix off for prompts; absent, it stays on; anything but a bool is refused.
+#[test]
+fn model_index_style_suffix_switch() {
+    assert!(pixel().style_suffix, "default: the paper's suffix");
+    let base = std::env::temp_dir().join(format!("vf-style-suffix-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&base);
+    let dir = base.join("m");
+    copy_dir(&fixture("sd-tiny-pixel"), &dir);
+    let index = dir.join("model_index.json");
+    let mut v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&index).unwrap()).unwrap();
+    v["_style_suffix"] = serde_json::json!(false);
+    std::fs::write(&index, v.to_string()).unwrap();
+    let sd = StableDiffusion::load(&dir, &LoadOptions::default()).unwrap();
+    assert!(!sd.style_suffix);
+
+    let t = vectorfusion::teacher::SdTeacher::load(&dir, 64).unwrap();
+    let models = vectorfusion::pipeline::methods::Models {
+        teacher: vectorfusion::pipeline::methods::TeacherModel::Sd(Box::new(t)),
+        scorer: None,
+    };
+    use vectorfusion::stages::styles::Style as S;
+    assert_eq!(models.prompt(S::Iconography, " a crown "), "a crown");
+    let with = vectorfusion::pipeline::methods::Models {
+        teacher: vectorfusion::pipeline::methods::TeacherModel::Sd(Box::new(
+            vectorfusion::teacher::SdTeacher::load(&fixture("sd-tiny-pixel"), 64).unwrap(),
+        )),
+        scorer: None,
+    };
+    assert_eq!(
+        with.prompt(S::Iconography, "a crown"),
+        S::Iconography.prompt("a crown")
+    );
+
+    v["_style_suffix"] = serde_json::json!("no");
+    std::fs::write(&index, v.to_string()).unwrap();
+    let e = StableDiffusion::load(&dir, &LoadOptions::default()).unwrap_err();
+    assert!(e.to_string().contains("_style_suffix"), "{e}");
+    let _ = std::fs::remove_dir_all(&base);
+}

@@ -48,6 +48,8 @@ def main():
     ap.add_argument("--loss", default=None)
     ap.add_argument("--loss-out", default="docs/embedded/loss.png")
     ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--clip-sample", choices=["config", "on", "off"], default="config",
+                    help="override the scheduler's clip_sample (x0 clamped to [-1, 1] each step)")
     ap.add_argument("--batch", type=int, default=16, help="training batch size, for the loss plot label")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
@@ -58,7 +60,8 @@ def main():
     from diffusers import DDIMScheduler, UNet2DConditionModel
 
     unet = UNet2DConditionModel.from_pretrained(os.path.join(args.model, "unet")).float().eval()
-    sched = DDIMScheduler.from_pretrained(os.path.join(args.model, "scheduler"))
+    over = {} if args.clip_sample == "config" else {"clip_sample": args.clip_sample == "on"}
+    sched = DDIMScheduler.from_pretrained(os.path.join(args.model, "scheduler"), **over)
     tok, text = vf_icon.load_text_model()
     uncond = vf_icon.encode_tokens(tok, text, [""])
     gen = torch.Generator().manual_seed(args.seed)
@@ -74,7 +77,8 @@ def main():
         ax.imshow(strip, interpolation="nearest")
         ax.set_title(c, fontsize=8)
         ax.axis("off")
-    fig.suptitle(f"vf-icon prior, DDIM {args.steps} steps, CFG {args.cfg}, seed {args.seed} (32x32)", fontsize=9)
+    fig.suptitle(f"vf-icon prior, DDIM {args.steps} steps, CFG {args.cfg}, clip_sample {sched.config.clip_sample}, "
+                 f"seed {args.seed} (32x32)", fontsize=9)
     fig.tight_layout()
     fig.savefig(args.out, dpi=110)
     print("wrote", args.out)

@@ -55,6 +55,8 @@ MODEL_INDEX = {
     "text_encoder": ["transformers", "BertModel"],
     "tokenizer": ["transformers", "BertTokenizer"],
     "scorer": ["vectorfusion", "IconClip"],
+    # trained on bare icon names: vectorfusion conditions on the caption without the style suffix
+    "_style_suffix": False,
 }
 
 
@@ -69,13 +71,15 @@ def load_split(path, size=32):
     return x.contiguous(), idx, torch.from_numpy(tok.astype(np.float32)), caps
 
 
-def export(ema, out_dir):
+def export(ema, out_dir, prediction):
     from diffusers import DDIMScheduler
 
     os.makedirs(out_dir, exist_ok=True)
     half = copy.deepcopy(ema).to(torch.float16)
     half.save_pretrained(os.path.join(out_dir, "unet"), safe_serialization=True)
-    DDIMScheduler(**SCHEDULER_CONFIG).save_pretrained(os.path.join(out_dir, "scheduler"))
+    # Sampling: start at t = 999 (trailing spacing) and clamp x0 to [-1, 1] each step (pixel space).
+    cfg = {**SCHEDULER_CONFIG, "prediction_type": prediction, "timestep_spacing": "trailing", "clip_sample": True}
+    DDIMScheduler(**cfg).save_pretrained(os.path.join(out_dir, "scheduler"))
     with open(os.path.join(out_dir, "model_index.json"), "w") as f:
         json.dump(MODEL_INDEX, f, indent=2)
         f.write("\n")
@@ -94,6 +98,10 @@ def main():
     ap.add_argument("--seed", type=int, default=1234)
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--max-steps", type=int, default=10**9)
+    ap.add_argument("--prediction", choices=["epsilon", "v_prediction"], default="v_prediction",
+                    help="training target; v weights the loss toward the high-noise steps that decide layout")
+    ap.add_argument("--init", default=None,
+                    help="start from this checkpoint's EMA weights (fresh optimiser, step count kept)")
     ap.add_argument("--until", default=None, help="stop at this UTC time HH:MM")
     ap.add_argument("--export-every-min", type=float, default=15.0)
     args = ap.parse_args()
@@ -127,6 +135,12 @@ def main():
         gen.set_state(ck["gen"])
         step, elapsed0 = ck["step"], ck["elapsed"]
         print(f"resumed at step {step}", flush=True)
+    elif args.init:
+        ck = torch.load(args.init, weights_only=False)
+        unet.load_state_dict(ck["ema"])
+        ema.load_state_dict(ck["ema"])
+        step = ck["step"]
+        print(f"initialised from {args.init} (EMA weights of step {step}), target {args.prediction}", flush=True)
 
     deadline = None
     if args.until:
@@ -147,7 +161,7 @@ def main():
             ckpt_path + ".tmp",
         )
         os.replace(ckpt_path + ".tmp", ckpt_path)
-        export(ema, args.export)
+        export(ema, args.export, args.prediction)
         print(f"{'final ' if final else ''}checkpoint + export at step {step}", flush=True)
 
     t0 = time.time()
@@ -173,7 +187,8 @@ def main():
         for g in opt.param_groups:
             g["lr"] = lr
         pred = unet(xt, t, encoder_hidden_states=cond).sample
-        loss = F.mse_loss(pred, noise)
+        target = noise if args.prediction == "epsilon" else a.sqrt() * noise - (1 - a).sqrt() * x0
+        loss = F.mse_loss(pred, target)
         opt.zero_grad(set_to_none=True)
         loss.backward()
         torch.nn.utils.clip_grad_norm_(unet.parameters(), 1.0)

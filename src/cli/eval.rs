@@ -3,18 +3,20 @@
 //! `--svgs DIR` scores SVGs generated elsewhere; `--method M` (repeatable) first generates one
 //! SVG per caption with the shared pipeline ([`DefaultExecutor`], exactly what `generate` and
 //! the service run), writing `OUT_DIR/M/0001.svg`…, then scores that directory the same way and
-//! adds the mean generation seconds per SVG.
+//! adds the mean generation seconds per SVG. `--method samples` scores the prior's raster
+//! samples themselves (K per caption, the rerank scorer's pick kept, saved as `NNNN.png`): the
+//! raster row of the paper's Table 1, the ceiling the vector methods are measured against.
 
 use super::CliError;
 use crate::eval::clip::{
-    EvalError, EvalReport, evaluate_svg_dir, format_table, read_prompts, svg_name,
+    EvalError, EvalReport, evaluate, evaluate_svg_dir, format_table, read_prompts, svg_name,
 };
 use crate::models::scorer::Scorer;
 use crate::pipeline::{
     DefaultExecutor, Executor, JobContext, JobKind, JobSpec, Limits, Method, ModelDirs,
     PipelineError, Preset, Style,
 };
-use crate::progress::CancelToken;
+use crate::progress::{CancelToken, NullSink};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 
@@ -24,7 +26,8 @@ pub struct EvalArgs {
     /// Caption file, one caption per line (line N ↔ NNNN.svg).
     #[arg(long)]
     pub prompts: PathBuf,
-    /// Generate with this method (scratch, sd_live, sd_live_sds), then evaluate; repeat for
+    /// Generate with this method (scratch, sd_live, sd_live_sds, or `samples` for the raster
+    /// samples of the diffusion model before any vectorisation), then evaluate; repeat for
     /// several methods (one table row each).
     #[arg(
         long = "method",
@@ -162,10 +165,10 @@ fn generate_and_evaluate(
     captions: &[String],
     scorers: &[Scorer],
 ) -> Result<MethodsReport, CliError> {
-    let methods: Vec<Method> = args
+    let methods: Vec<EvalMethod> = args
         .methods
         .iter()
-        .map(|m| m.parse().map_err(CliError::Usage))
+        .map(|m| EvalMethod::parse(m))
         .collect::<Result<_, _>>()?;
     let style: Style = parse_enum("style", &args.style)?;
     let preset: Preset = args.preset.parse().map_err(CliError::Usage)?;
@@ -197,6 +200,15 @@ fn generate_and_evaluate(
         let dir = args.out_dir.join(&name);
         std::fs::create_dir_all(&dir)
             .map_err(|e| CliError::Other(anyhow::anyhow!("{}: {e}", dir.display())))?;
+        let method = match method {
+            EvalMethod::Samples => {
+                reports.push(sample_and_evaluate(
+                    args, &exec, style, preset, captions, scorers, &dir,
+                )?);
+                continue;
+            }
+            EvalMethod::Pipeline(m) => m,
+        };
         let mut seconds = 0.0;
         for (i, caption) in captions.iter().enumerate() {
             let line = i + 1;
@@ -237,6 +249,96 @@ fn generate_and_evaluate(
         style,
         preset,
         methods: reports,
+    })
+}
+
+/// A row of the evaluation table: a pipeline method, or the raster samples it starts from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum EvalMethod {
+    Pipeline(Method),
+    Samples,
+}
+
+impl EvalMethod {
+    fn parse(s: &str) -> Result<Self, CliError> {
+        if s.eq_ignore_ascii_case("samples") {
+            return Ok(Self::Samples);
+        }
+        s.parse()
+            .map(Self::Pipeline)
+            .map_err(|e: String| CliError::Usage(format!("{e} (or `samples`)")))
+    }
+
+    fn as_str(self) -> &'static str {
+        match self {
+            Self::Pipeline(m) => m.as_str(),
+            Self::Samples => "samples",
+        }
+    }
+}
+
+/// `--method samples`: K raster samples per caption from the same model and preset as
+/// `sd_live*`, the rerank scorer's pick kept (`dir/NNNN.png`) and scored as an image.
+#[allow(clippy::too_many_arguments)]
+fn sample_and_evaluate(
+    args: &EvalArgs,
+    exec: &DefaultExecutor,
+    style: Style,
+    preset: Preset,
+    captions: &[String],
+    scorers: &[Scorer],
+    dir: &Path,
+) -> Result<EvalReport, CliError> {
+    let ps = exec.settings(preset);
+    let models = exec
+        .load_models_for(ps.size, ps.prefer_taesd)
+        .map_err(pipeline_err)?;
+    let stage_style = crate::pipeline::methods::stage_style(style);
+    let k = preset
+        .resolve(exec.pixel_space(), stage_style, None, None, args.samples)
+        .samples
+        .max(1);
+    let cancel = CancelToken::new();
+    let mut images = Vec::with_capacity(captions.len());
+    let mut seconds = 0.0;
+    for (i, caption) in captions.iter().enumerate() {
+        let line = i + 1;
+        let t0 = std::time::Instant::now();
+        let ranked = models
+            .sample_and_rerank(
+                &models.prompt(stage_style, caption),
+                caption,
+                k,
+                ps.sample_steps,
+                args.seed.wrapping_add(line as u64 - 1),
+                &NullSink,
+                &cancel,
+            )
+            .map_err(pipeline_err)?;
+        let secs = t0.elapsed().as_secs_f64();
+        seconds += secs;
+        let path = dir.join(format!("{line:04}.png"));
+        ranked
+            .best_image()
+            .save_png(&path)
+            .map_err(|e| CliError::Other(anyhow::anyhow!("{}: {e}", path.display())))?;
+        eprintln!(
+            "samples {line}/{}: best of {k}, {secs:.1} s -> {}",
+            captions.len(),
+            path.display()
+        );
+        images.push(ranked.best_image().clone());
+    }
+    let mut results = Vec::with_capacity(scorers.len());
+    for s in scorers {
+        results.push(evaluate(s, captions, &images).map_err(map_err)?);
+    }
+    Ok(EvalReport {
+        method: "samples".into(),
+        prompts: captions.len(),
+        mean_paths: 0.0,
+        mean_seconds: Some(seconds / captions.len().max(1) as f64),
+        scorers: results,
     })
 }
 

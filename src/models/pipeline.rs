@@ -141,8 +141,30 @@ pub struct StableDiffusion {
     /// space for models without `vae/`.
     pub codec: Codec,
     pub scheduler: SchedulerConfig,
+    /// Whether prompts get the paper's style suffix ("… minimal flat 2d vector icon …"): true
+    /// for Stable Diffusion; a model trained on bare captions (the embedded `vf-icon`) sets
+    /// `"_style_suffix": false` in its `model_index.json`.
+    pub style_suffix: bool,
     alphas_cumprod: Vec<f64>,
     device: Device,
+}
+
+/// `"_style_suffix"` of `root/model_index.json` (a key diffusers ignores); true when the file or
+/// the key is absent.
+fn wants_style_suffix(root: &Path) -> Result<bool> {
+    let index = root.join("model_index.json");
+    if !index.is_file() {
+        return Ok(true);
+    }
+    let v: serde_json::Value = loader::read_config(&index)?;
+    match v.get("_style_suffix") {
+        None | Some(serde_json::Value::Null) => Ok(true),
+        Some(serde_json::Value::Bool(b)) => Ok(*b),
+        Some(other) => Err(ModelError::Config {
+            path: index.display().to_string(),
+            reason: format!("_style_suffix must be true or false, got {other}"),
+        }),
+    }
 }
 
 impl StableDiffusion {
@@ -169,6 +191,7 @@ impl StableDiffusion {
         let text = TextEncoder::load(&root, opts.text, &opts.device)?;
         let mut sd = Self::from_parts(unet, codec, scheduler, opts.device.clone())?;
         sd.text = Some(text);
+        sd.style_suffix = wants_style_suffix(&root)?;
         Ok(sd)
     }
 
@@ -199,6 +222,7 @@ impl StableDiffusion {
             unet,
             codec,
             scheduler,
+            style_suffix: true,
             alphas_cumprod,
             device,
         })

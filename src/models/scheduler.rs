@@ -39,6 +39,18 @@ pub struct SchedulerConfig {
     pub timestep_spacing: String,
     #[serde(default)]
     pub rescale_betas_zero_snr: bool,
+    /// DDIM: clamp the predicted `x₀` to `±clip_sample_range` each step (pixel-space models).
+    #[serde(default)]
+    pub clip_sample: bool,
+    #[serde(default = "one")]
+    pub clip_sample_range: f64,
+    /// Dynamic thresholding (Imagen); not supported, refused when set.
+    #[serde(default)]
+    pub thresholding: bool,
+}
+
+fn one() -> f64 {
+    1.0
 }
 
 fn thousand() -> usize {
@@ -160,6 +172,8 @@ pub struct Sampler {
     sigmas: Vec<f64>,
     final_alpha_cumprod: f64,
     step_ratio: usize,
+    /// DDIM: `Some(r)` clamps `x̂₀` to `[-r, r]` (diffusers `clip_sample`).
+    clip_x0: Option<f64>,
 }
 
 impl Sampler {
@@ -169,6 +183,17 @@ impl Sampler {
             reason: r,
         };
         let ac = cfg.alphas_cumprod().map_err(bad)?;
+        if cfg.thresholding {
+            return Err(bad(
+                "thresholding (dynamic x0 thresholding) is not supported".into(),
+            ));
+        }
+        if cfg.clip_sample && (cfg.clip_sample_range.is_nan() || cfg.clip_sample_range <= 0.0) {
+            return Err(bad(format!(
+                "clip_sample_range must be positive, got {}",
+                cfg.clip_sample_range
+            )));
+        }
         let n = cfg.num_train_timesteps;
         if steps == 0 || steps > n {
             return Err(ModelError::InvalidInput(format!(
@@ -240,6 +265,7 @@ impl Sampler {
             sigmas,
             final_alpha_cumprod,
             step_ratio: ratio,
+            clip_x0: cfg.clip_sample.then_some(cfg.clip_sample_range),
         })
     }
 
@@ -284,6 +310,11 @@ impl Sampler {
                     self.final_alpha_cumprod
                 };
                 let (x0, eps) = split_prediction(self.prediction_type, model_out, x, a)?;
+                // As diffusers: the clamped x̂₀ is used, ε̂ stays the model's.
+                let x0 = match self.clip_x0 {
+                    Some(r) => x0.clamp(-r, r)?,
+                    None => x0,
+                };
                 Ok(((x0 * a_prev.sqrt())? + (eps * (1.0 - a_prev).sqrt())?)?)
             }
             SamplerKind::Euler => {
@@ -325,5 +356,61 @@ pub fn split_prediction(
             let eps = ((x - (out * sa)?)? / sb)?;
             Ok((out.clone(), eps))
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use candle_core::Device;
+
+    fn cfg(extra: &str) -> SchedulerConfig {
+        serde_json::from_str(&format!(
+            r#"{{"beta_schedule": "squaredcos_cap_v2", "prediction_type": "v_prediction",
+                "timestep_spacing": "trailing"{extra}}}"#
+        ))
+        .unwrap()
+    }
+
+    /// `clip_sample` clamps x̂₀ (so a wild model output cannot push x outside the data range at
+    /// the last step) and leaves in-range predictions alone.
+    #[test]
+    fn clip_sample_clamps_the_predicted_x0_only() {
+        let x = Tensor::from_vec(vec![0.5f32, -0.2, 0.1, 0.0], (1, 1, 2, 2), &Device::Cpu).unwrap();
+        // v = -x0 at t = 999 (ᾱ ≈ 0): outputs of ±5 mean x̂₀ ≈ ∓5, far outside [-1, 1].
+        let v = Tensor::from_vec(vec![5f32, -5.0, 0.3, -0.3], (1, 1, 2, 2), &Device::Cpu).unwrap();
+        let plain = Sampler::new(&cfg(""), SamplerKind::Ddim, 1).unwrap();
+        let clip = Sampler::new(&cfg(r#", "clip_sample": true"#), SamplerKind::Ddim, 1).unwrap();
+        assert_eq!(clip.timesteps, vec![999.0]);
+        let a: Vec<f32> = plain
+            .step(&v, 0, &x)
+            .unwrap()
+            .flatten_all()
+            .unwrap()
+            .to_vec1()
+            .unwrap();
+        let b: Vec<f32> = clip
+            .step(&v, 0, &x)
+            .unwrap()
+            .flatten_all()
+            .unwrap()
+            .to_vec1()
+            .unwrap();
+        assert!(a[0] < -4.0 && a[1] > 4.0, "{a:?}");
+        assert!(b[0] >= -1.0 - 1e-6 && b[1] <= 1.0 + 1e-6, "{b:?}");
+        assert!((a[2] - b[2]).abs() < 1e-6 && (a[3] - b[3]).abs() < 1e-6);
+    }
+
+    #[test]
+    fn thresholding_and_bad_clip_range_are_refused() {
+        let e = Sampler::new(&cfg(r#", "thresholding": true"#), SamplerKind::Ddim, 4).unwrap_err();
+        assert!(e.to_string().contains("thresholding"), "{e}");
+        let e = Sampler::new(
+            &cfg(r#", "clip_sample": true, "clip_sample_range": 0.0"#),
+            SamplerKind::Ddim,
+            4,
+        )
+        .unwrap_err();
+        assert!(e.to_string().contains("clip_sample_range"), "{e}");
     }
 }

@@ -411,6 +411,77 @@ impl Models {
     }
 }
 
+/// The K raster samples of one caption and the scorer's pick among them.
+///
+/// Invariant: `images` is not empty and `best < images.len()` (checked where it is built).
+#[derive(Debug, Clone)]
+pub struct Ranked {
+    images: Vec<Image>,
+    best: usize,
+    scores: Vec<f32>,
+}
+
+impl Ranked {
+    pub fn images(&self) -> &[Image] {
+        &self.images
+    }
+    /// Index of the kept image (0 without a scorer).
+    pub fn best(&self) -> usize {
+        self.best
+    }
+    /// One score per image (empty without a scorer).
+    pub fn scores(&self) -> &[f32] {
+        &self.scores
+    }
+    pub fn best_image(&self) -> &Image {
+        &self.images[self.best]
+    }
+}
+
+impl Models {
+    /// The prompt the diffusion model is conditioned on: `caption` with the style suffix, unless
+    /// the model was trained on bare captions (`StableDiffusion::style_suffix`).
+    pub fn prompt(&self, style: Style, caption: &str) -> String {
+        match &self.teacher {
+            TeacherModel::Sd(t) if !t.model().style_suffix => caption.trim().to_string(),
+            _ => style.prompt(caption),
+        }
+    }
+
+    /// Samples `k` images with `prompt` (the caption plus its style suffix) and keeps the one the
+    /// scorer matches best to `caption` (rejection sampling, the first stage of `sd_live*`).
+    #[allow(clippy::too_many_arguments)]
+    pub fn sample_and_rerank(
+        &self,
+        prompt: &str,
+        caption: &str,
+        k: u32,
+        sample_steps: usize,
+        seed: u64,
+        sink: &dyn ProgressSink,
+        cancel: &CancelToken,
+    ) -> Result<Ranked, PipelineError> {
+        let images = self.sample(prompt, k, sample_steps, seed, sink, cancel)?;
+        if images.is_empty() {
+            return Err(failed("sampling", "no samples drawn (K = 0)"));
+        }
+        let (best, scores) = match &self.scorer {
+            Some(scorer) => scorer
+                .best_of(&images, caption)
+                .map_err(|e| failed("CLIP rerank", e))?,
+            None => (0, Vec::new()),
+        };
+        if best >= images.len() {
+            return Err(failed("rerank", "best index out of range"));
+        }
+        Ok(Ranked {
+            images,
+            best,
+            scores,
+        })
+    }
+}
+
 fn load_scorer(dir: Option<&Path>) -> Result<Option<Scorer>, PipelineError> {
     dir.map(|d| {
         Scorer::load(d).map_err(|e| {
@@ -653,7 +724,7 @@ pub fn run_text_resumable(
             "paths must be in 1..=1024, got {paths}"
         )));
     }
-    let prompt = req.style.prompt(&req.caption);
+    let prompt = models.prompt(req.style, &req.caption);
     let mut detail = json!({
         "method": req.method,
         "style": req.style,
@@ -709,26 +780,26 @@ pub fn run_text_resumable(
         }
         Start::Method => {
             augment = false;
-            let images = models.sample(&prompt, k, ps.sample_steps, req.seed, sink, cancel)?;
-            let (best, scores) = match &models.scorer {
-                Some(scorer) => scorer
-                    .best_of(&images, &req.caption)
-                    .map_err(|e| failed("CLIP rerank", e))?,
-                None => (0, Vec::new()),
-            };
+            let ranked = models.sample_and_rerank(
+                &prompt,
+                &req.caption,
+                k,
+                ps.sample_steps,
+                req.seed,
+                sink,
+                cancel,
+            )?;
             let rerank = json!({
                 "scorer": models.scorer.as_ref().map(|s| s.name().to_string()),
-                "scores": scores,
-                "best": best,
+                "scores": ranked.scores(),
+                "best": ranked.best(),
                 "samples": k,
             });
             let mut ev = Progress::new("rerank", 1, 1);
             ev.detail = Some(rerank.clone());
             sink.report(ev);
             detail["rerank"] = rerank;
-            let best_img = images
-                .get(best)
-                .ok_or_else(|| failed("rerank", "best index out of range"))?;
+            let best_img = ranked.best_image();
             match req.style {
                 Style::PixelArt => {
                     pixelate_l1(best_img, size).map_err(|e| failed("pixelation", e))?
@@ -787,6 +858,7 @@ pub fn run_text_resumable(
     let mut scene = start_scene;
     if sds_after {
         let mut cfg = SdsConfig::for_style(req.style, &req.caption, steps, size);
+        cfg.prompt = prompt.clone();
         cfg.seed = req.seed;
         cfg.snapshot_every = ps.snapshot_every;
         if !augment {
