@@ -49,7 +49,8 @@ fn spec(method: Method, style: Style) -> JobSpec {
 }
 
 /// One attempt: progress events, the checkpoints it saved (through JSON text, as the store
-/// keeps them), and its outcome. `cancel_at` cancels after that SDS step.
+/// keeps them), and its outcome. `cancel_at` cancels at the first report of that stage at or
+/// past that step.
 struct Attempt {
     events: Vec<Progress>,
     checkpoints: Vec<Value>,
@@ -61,14 +62,14 @@ fn attempt(
     spec: &JobSpec,
     every: u32,
     resume: Option<Value>,
-    cancel_at: Option<u32>,
+    cancel_at: Option<(&'static str, u32)>,
 ) -> Attempt {
     let events = Arc::new(Mutex::new(Vec::new()));
     let saved = Arc::new(Mutex::new(Vec::new()));
     let cancel = CancelToken::new();
     let (ev, tok) = (events.clone(), cancel.clone());
     let sink = move |p: Progress| {
-        if p.stage == "sds" && Some(p.step) == cancel_at {
+        if cancel_at.is_some_and(|(stage, step)| p.stage == stage && p.step >= step) {
             tok.cancel();
         }
         ev.lock().unwrap().push(p);
@@ -156,7 +157,7 @@ fn cancellation_saves_a_checkpoint_that_resumes_exactly() {
         let spec = spec(method, style);
         let full = attempt(&exec, &spec, 100, None, None).out.unwrap();
         // Shutdown after step 5: the job stops with Cancelled and saves step 5.
-        let stopped = attempt(&exec, &spec, 100, None, Some(5));
+        let stopped = attempt(&exec, &spec, 100, None, Some(("sds", 5)));
         assert!(matches!(stopped.out, Err(PipelineError::Cancelled)));
         let last = stopped.checkpoints.last().expect("checkpoint on cancel");
         assert_eq!(step_of(last), 5);
@@ -187,6 +188,87 @@ fn a_checkpoint_of_another_request_is_ignored() {
         None,
     );
     assert_eq!(junk.out.unwrap().svg, fresh.svg);
+}
+
+/// A vectorize job (LIVE only, no caption) saves its state after every LIVE stage; a restart
+/// from a saved stage, or from the last one before a cancellation, ends with the same SVG.
+#[test]
+fn vectorize_jobs_checkpoint_each_live_stage_and_resume_exactly() {
+    // A 6x6 board of random colours: every stage of 8 paths still finds error to fix.
+    let side = 48u32;
+    let mut img = vectorfusion::image::Image::filled(side, side, [1.0, 1.0, 1.0, 1.0]);
+    let mut x = 12345u32;
+    let mut next = || {
+        x = x.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+        (x >> 8) as f32 / (1u32 << 24) as f32
+    };
+    for cy in 0..6 {
+        for cx in 0..6 {
+            let c = [next(), next(), next(), 1.0];
+            for y in cy * 8..cy * 8 + 8 {
+                for xx in cx * 8..cx * 8 + 8 {
+                    let i = 4 * (y * side + xx) as usize;
+                    img.data[i..i + 4].copy_from_slice(&c);
+                }
+            }
+        }
+    }
+    let spec = JobSpec {
+        kind: JobKind::Vectorize,
+        caption: None,
+        image: Some(img.encode_png().unwrap()),
+        svg: None,
+        style: Style::Iconography,
+        method: Method::SdLive,
+        paths: 24,
+        steps: 1,
+        seed: 5,
+        samples: 1,
+        preset: Preset::Draft,
+        priority: 0,
+    };
+    let exec = DefaultExecutor::new(ModelDirs::default());
+    let full = attempt(&exec, &spec, 100, None, None);
+    let full_out = full.out.unwrap();
+    let stages: Vec<u64> = full
+        .checkpoints
+        .iter()
+        .map(|c| c["live"]["next_stage"].as_u64().unwrap())
+        .collect();
+    assert!(stages.len() >= 2, "{stages:?}");
+    assert_eq!(stages, (1..=stages.len() as u64).collect::<Vec<_>>());
+    assert!(full_out.detail["resumed_from_stage"].is_null());
+
+    // Restart from the first stage's state: LIVE continues after it, same SVG.
+    let first = &full.checkpoints[0];
+    let done_steps = first["live"]["step"].as_u64().unwrap() as u32;
+    let resumed = attempt(&exec, &spec, 100, Some(first.clone()), None);
+    let out = resumed.out.unwrap();
+    assert_eq!(out.detail["resumed_from_stage"], 1, "{}", out.detail);
+    let first_live = resumed.events.iter().find(|p| p.stage == "live").unwrap();
+    assert!(first_live.step > done_steps, "{first_live:?}");
+    assert_eq!(out.svg, full_out.svg, "resumed vectorize differs");
+
+    // Cancelled mid-run (a shutdown): the last saved stage resumes to the same SVG.
+    let stopped = attempt(&exec, &spec, 100, None, Some(("live", done_steps + 3)));
+    assert!(matches!(stopped.out, Err(PipelineError::Cancelled)));
+    let last = stopped
+        .checkpoints
+        .last()
+        .expect("a stage was saved")
+        .clone();
+    let out = attempt(&exec, &spec, 100, Some(last), None).out.unwrap();
+    assert_eq!(out.svg, full_out.svg);
+
+    // A text job's checkpoint, or another image's, is ignored.
+    let mut other = spec.clone();
+    other.seed = 6;
+    let fresh = attempt(&exec, &other, 100, None, None).out.unwrap();
+    let foreign = attempt(&exec, &other, 100, Some(first.clone()), None)
+        .out
+        .unwrap();
+    assert!(foreign.detail["resumed_from_stage"].is_null());
+    assert_eq!(foreign.svg, fresh.svg);
 }
 
 /// Starts the real service with the tiny models on `db`.

@@ -930,6 +930,54 @@ pub fn run_text_resumable(
 }
 
 /// Image → SVG with LIVE (vectorize jobs), with an `auto` path budget capped at `max_paths`.
+/// A vectorize job's saved LIVE state, tagged with the request it belongs to.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct VectorizeCheckpoint {
+    /// [`vectorize_checkpoint_key`]; a state saved for another request is ignored.
+    pub key: String,
+    pub live: live::LiveState,
+}
+
+/// Identifies a vectorize run: preset, path budget, seed and the image itself (size and a
+/// checksum of its pixels).
+pub fn vectorize_checkpoint_key(
+    image: &Image,
+    preset: Preset,
+    max_paths: usize,
+    seed: u64,
+) -> String {
+    use std::hash::{Hash, Hasher};
+    let mut h = std::collections::hash_map::DefaultHasher::new();
+    for v in &image.data {
+        v.to_bits().hash(&mut h);
+    }
+    format!(
+        "live-v1|{preset:?}|{max_paths}|{seed}|{}x{}|{:016x}",
+        image.width,
+        image.height,
+        h.finish()
+    )
+}
+
+struct VectorizeCheckpoints<'a> {
+    ctx: &'a JobContext,
+    key: &'a str,
+}
+
+impl live::LiveCheckpoint for VectorizeCheckpoints<'_> {
+    fn save(&self, state: &live::LiveState) -> Result<(), String> {
+        let value = serde_json::to_value(VectorizeCheckpoint {
+            key: self.key.to_string(),
+            live: state.clone(),
+        })
+        .map_err(|e| e.to_string())?;
+        self.ctx.checkpoint(value).map_err(|e| e.to_string())
+    }
+}
+
+/// Image → SVG with LIVE. With a job context, the LIVE state is checkpointed after every stage
+/// and a restarted job continues from the last one (`detail.resumed_from_stage`), ending with
+/// the SVG an uninterrupted run gives.
 pub fn run_vectorize(
     image: &Image,
     preset: Preset,
@@ -937,6 +985,7 @@ pub fn run_vectorize(
     seed: u64,
     sink: &dyn ProgressSink,
     cancel: &CancelToken,
+    ctx: Option<&JobContext>,
 ) -> Result<MethodOutput, PipelineError> {
     let mut cfg = LiveConfig::preset(preset.live());
     cfg.seed = seed;
@@ -955,13 +1004,30 @@ pub fn run_vectorize(
         cfg.final_iters = 10;
         cfg.size = 64;
     }
-    let r = live::vectorize(image, &cfg, sink, cancel).map_err(|e| match e {
+    let key = vectorize_checkpoint_key(image, preset, max_paths, seed);
+    let resume = ctx
+        .and_then(JobContext::resume_state)
+        .and_then(|v| serde_json::from_value::<VectorizeCheckpoint>(v).ok())
+        .filter(|c| c.key == key)
+        .map(|c| c.live);
+    let resumed_from = resume.as_ref().map(|s| s.reports.len());
+    let hook = ctx.map(|ctx| VectorizeCheckpoints { ctx, key: &key });
+    let r = live::vectorize_resumable(
+        image,
+        &cfg,
+        sink,
+        cancel,
+        resume,
+        hook.as_ref().map(|h| h as &dyn live::LiveCheckpoint),
+    )
+    .map_err(|e| match e {
         live::LiveError::Cancelled => PipelineError::Cancelled,
         live::LiveError::Target(m) => PipelineError::InvalidInput(m),
+        live::LiveError::Checkpoint(m) => PipelineError::Transient(m),
         other => failed("LIVE", other),
     })?;
     let svg = RasterBackend::svg_text(&r.scene);
-    let detail = json!({
+    let mut detail = json!({
         "method": "live",
         "preset": preset,
         "psnr": r.psnr,
@@ -970,6 +1036,9 @@ pub fn run_vectorize(
         "steps": r.steps,
         "stages": r.stages,
     });
+    if let Some(n) = resumed_from {
+        detail["resumed_from_stage"] = json!(n);
+    }
     Ok(MethodOutput {
         paths: r.scene.shapes.len(),
         scene: r.scene,

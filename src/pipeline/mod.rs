@@ -670,6 +670,7 @@ impl DefaultExecutor {
             spec.seed,
             ctx.sink(),
             ctx.cancel_token(),
+            Some(ctx),
         )?;
         Ok(JobOutput {
             svg: out.svg,

@@ -11,6 +11,8 @@
 //! [`schedule`]). `--init vtracer` starts from the vtracer crate's trace ([`tracer`]).
 //!
 //! Entry point: [`vectorize`]. Everything is deterministic for a given [`LiveConfig::seed`].
+//! [`vectorize_resumable`] also hands a [`LiveState`] to a [`LiveCheckpoint`] after every
+//! stage; a run resumed from one ends exactly as the uninterrupted run.
 
 pub mod init;
 pub mod prune;
@@ -36,6 +38,8 @@ pub enum LiveError {
     Loss(#[from] LossError),
     #[error("vtracer failed: {0}")]
     Tracer(String),
+    #[error("saving a checkpoint failed: {0}")]
+    Checkpoint(String),
 }
 
 /// How many paths to use.
@@ -455,11 +459,49 @@ fn border_colour(img: &Image) -> Rgba {
 
 /// Traces `target` into closed cubic paths (see the module docs). Emits progress events with
 /// stage `"live"` and checks `cancel` before every step.
+/// Where a LIVE run stands after a stage: enough to finish it exactly as if uninterrupted.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LiveState {
+    /// Index into the stage plan of the next stage to run.
+    pub next_stage: usize,
+    /// No more stages: the budget is spent or `auto` decided to stop.
+    pub stages_done: bool,
+    /// The scene at the working size.
+    pub scene: Scene,
+    pub reports: Vec<StageReport>,
+    /// PSNR after the last stage (the `auto` budget compares against it).
+    pub prev_psnr: f64,
+    /// Adam steps taken so far.
+    pub step: u32,
+    /// Position of the seeded ChaCha8 stream (path initialisation and re-initialisation).
+    pub rng_word_pos: u64,
+}
+
+/// Receives the state after every completed stage.
+pub trait LiveCheckpoint {
+    fn save(&self, state: &LiveState) -> Result<(), String>;
+}
+
+/// [`vectorize_resumable`] without checkpoints.
 pub fn vectorize(
     target: &Image,
     cfg: &LiveConfig,
     sink: &dyn ProgressSink,
     cancel: &CancelToken,
+) -> Result<LiveResult, LiveError> {
+    vectorize_resumable(target, cfg, sink, cancel, None, None)
+}
+
+/// Traces `target`, saving a [`LiveState`] through `checkpoint` after each stage, and continuing
+/// from `resume` when given. A state that does not fit this run (another working size or stage
+/// plan) is ignored and the run starts over.
+pub fn vectorize_resumable(
+    target: &Image,
+    cfg: &LiveConfig,
+    sink: &dyn ProgressSink,
+    cancel: &CancelToken,
+    resume: Option<LiveState>,
+    checkpoint: Option<&dyn LiveCheckpoint>,
 ) -> Result<LiveResult, LiveError> {
     cfg.validate()?;
     let (tw, th) = (target.width, target.height);
@@ -507,8 +549,45 @@ pub fn vectorize(
     };
     let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);
     let mut reports = Vec::new();
-
-    if vtracer_stage {
+    let save = |scene: &Scene,
+                reports: &[StageReport],
+                next_stage: usize,
+                stages_done: bool,
+                prev_psnr: f64,
+                step: u32,
+                rng: &ChaCha8Rng|
+     -> Result<(), LiveError> {
+        let Some(c) = checkpoint else { return Ok(()) };
+        let state = LiveState {
+            next_stage,
+            stages_done,
+            scene: scene.clone(),
+            reports: reports.to_vec(),
+            prev_psnr,
+            step,
+            rng_word_pos: u64::try_from(rng.get_word_pos())
+                .map_err(|_| LiveError::Checkpoint("random stream position overflow".into()))?,
+        };
+        c.save(&state).map_err(LiveError::Checkpoint)
+    };
+    let resume = resume.filter(|r| {
+        r.scene.width == ww
+            && r.scene.height == wh
+            && r.next_stage <= stages_plan.len()
+            && r.scene.validate().is_ok()
+    });
+    let mut first_stage = 0;
+    let mut stages_done = false;
+    let mut prev_psnr = f64::NAN;
+    if let Some(r) = resume {
+        scene = r.scene;
+        reports = r.reports;
+        first_stage = r.next_stage;
+        stages_done = r.stages_done;
+        prev_psnr = r.prev_psnr;
+        run.step = r.step;
+        rng.set_word_pos(u128::from(r.rng_word_pos));
+    } else if vtracer_stage {
         let small = resize(target, ww, wh);
         let traced =
             tracer::trace(&small, &tracer::TracerSetting::default()).map_err(LiveError::Tracer)?;
@@ -526,10 +605,19 @@ pub fn vectorize(
             psnr: run.psnr(&scene),
             loss,
         });
+        prev_psnr = run.psnr(&scene);
+        save(&scene, &reports, 0, false, prev_psnr, run.step, &rng)?;
     }
-
-    let mut prev_psnr = run.psnr(&scene);
-    for (si, &want) in stages_plan.iter().enumerate() {
+    if prev_psnr.is_nan() {
+        prev_psnr = run.psnr(&scene);
+    }
+    let plan = if stages_done {
+        &stages_plan[..0]
+    } else {
+        &stages_plan[first_stage..]
+    };
+    for (si, &want) in plan.iter().enumerate() {
+        let si = si + first_stage;
         let room = max_total.saturating_sub(scene.shapes.len());
         let want = want.min(room);
         if want == 0 {
@@ -555,12 +643,15 @@ pub fn vectorize(
             psnr,
             loss,
         });
-        if let PathBudget::Auto {
-            min_gain_db_per_path,
-            ..
-        } = cfg.budget
-            && !schedule::auto_should_continue(prev_psnr, psnr, added, min_gain_db_per_path)
-        {
+        let stop = match cfg.budget {
+            PathBudget::Auto {
+                min_gain_db_per_path,
+                ..
+            } => !schedule::auto_should_continue(prev_psnr, psnr, added, min_gain_db_per_path),
+            PathBudget::Schedule { .. } => false,
+        };
+        save(&scene, &reports, si + 1, stop, psnr, run.step, &rng)?;
+        if stop {
             break;
         }
         prev_psnr = psnr;
