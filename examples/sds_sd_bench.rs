@@ -2,7 +2,8 @@
 //! compute does not depend on weight values) on this machine, next to an in-run baseline of the
 //! same loop with the analytic test teacher (everything but the model).
 //!
-//! `cargo run --example sds_sd_bench [STEPS] [SIZE]` (defaults 3 and 512).
+//! `cargo run --example sds_sd_bench [STEPS] [SIZE] [vae|taesd]` (defaults 3, 512, vae): the
+//! encoder SDS backpropagates through, the full VAE (the paper's) or TAESD (the `fast` preset's).
 
 use candle_core::{DType, Device, Tensor};
 use std::path::Path;
@@ -12,6 +13,7 @@ use vectorfusion::image::Image;
 use vectorfusion::models::StableDiffusion;
 use vectorfusion::models::loader::random_var_builder;
 use vectorfusion::models::scheduler::SchedulerConfig;
+use vectorfusion::models::taesd::{Taesd, TaesdConfig};
 use vectorfusion::models::unet::{Unet, UnetConfig};
 use vectorfusion::models::vae::{AutoencoderKl, VaeConfig};
 use vectorfusion::progress::{CancelToken, Progress};
@@ -112,10 +114,32 @@ fn main() {
         Path::new("random-sd15-unet"),
     )
     .unwrap();
-    let vae = AutoencoderKl::new(random_var_builder(DType::F32, &dev), VaeConfig::sd()).unwrap();
-    let sd = StableDiffusion::from_parts(unet, vae, SchedulerConfig::sd(), dev.clone()).unwrap();
+    let encoder = args.get(3).map(String::as_str).unwrap_or("vae");
+    let vb = random_var_builder(DType::F32, &dev);
+    let sd = match encoder {
+        "vae" => StableDiffusion::from_parts(
+            unet,
+            AutoencoderKl::new(vb, VaeConfig::sd()).unwrap(),
+            SchedulerConfig::sd(),
+            dev.clone(),
+        ),
+        "taesd" => StableDiffusion::from_parts(
+            unet,
+            Taesd::new(vb, TaesdConfig::taesd()).unwrap(),
+            SchedulerConfig::sd(),
+            dev.clone(),
+        ),
+        other => {
+            eprintln!("encoder must be vae or taesd, got {other:?}");
+            std::process::exit(2);
+        }
+    }
+    .unwrap();
     let teacher = RandomText(SdTeacher::new(sd, size).unwrap());
-    println!("built random SD 1.5 in {:.1} s", t0.elapsed().as_secs_f64());
+    println!(
+        "built random SD 1.5 (SDS encoder: {encoder}) in {:.1} s",
+        t0.elapsed().as_secs_f64()
+    );
 
     // Component breakdown (one call each).
     let im = Image::filled(size, size, [0.5, 0.5, 0.5, 1.0]);
@@ -129,7 +153,9 @@ fn main() {
     let t = Instant::now();
     teacher.predict_noise(&z, 500, &c, 100.0).unwrap();
     let unet = t.elapsed().as_secs_f64();
-    println!("VAE encode {enc:.2} s, encoder VJP {vjp:.2} s, UNet with CFG (batch 2) {unet:.2} s");
+    println!(
+        "{encoder} encode {enc:.2} s, encoder VJP {vjp:.2} s, UNet with CFG (batch 2) {unet:.2} s"
+    );
 
     let base = AnalyticTeacher::new(
         AnalyticTeacherConfig {

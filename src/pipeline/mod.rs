@@ -735,31 +735,19 @@ impl Executor for DefaultExecutor {
             ));
         }
         let te = dir.join("text_encoder");
+        // The embedded model's MiniLM weights are not committed: they resolve from
+        // VF_MINILM_DIR or the cache (`vectorfusion setup`), or download on first use.
+        let locations = crate::models::bert::weights::MiniLmLocations::from_env();
         if te.is_dir()
-            && !crate::models::loader::TEXT_WEIGHTS
-                .iter()
-                .any(|n| te.join(n).is_file())
+            && !crate::models::bert::weights::text_encoder_weights_available(&te, &locations)
         {
-            // The embedded model's MiniLM weights are not committed: they resolve from
-            // VF_MINILM_DIR or the cache (`vectorfusion setup`), or download on first use.
-            use crate::models::bert::{model, weights};
-            let locations = weights::MiniLmLocations::from_env();
-            let resolvable = model::read_config(&te.join("config.json"))
-                .ok()
-                .filter(weights::is_minilm)
-                .map(|cfg| {
-                    weights::resolve_text_encoder_weights(&te, &cfg, &locations, false).is_ok()
-                        || !locations.offline
-                });
-            if resolvable != Some(true) {
-                return Err(format!(
-                    "the model {} has no text encoder weights ({} holds none; for the embedded \
-                     model run `vectorfusion setup` or set VF_MINILM_DIR: see docs/EMBEDDED.md, \
-                     \"MiniLM weights\")",
-                    dir.display(),
-                    te.display()
-                ));
-            }
+            return Err(format!(
+                "the model {} has no text encoder weights ({} holds none; for the embedded \
+                 model run `vectorfusion setup` or set VF_MINILM_DIR: see docs/EMBEDDED.md, \
+                 \"MiniLM weights\")",
+                dir.display(),
+                te.display()
+            ));
         }
         if let Some(c) = &self.models.clip_dir
             && !c.is_dir()

@@ -33,8 +33,8 @@ pub const ENV_DIR: &str = "VF_MINILM_DIR";
 /// Environment variable that turns the download off (`1`, `true`).
 pub const ENV_OFFLINE: &str = "VF_OFFLINE";
 
-/// Weight file names accepted in a `text_encoder/` directory.
-pub const TEXT_WEIGHTS: &[&str] = &["model.safetensors", "model.fp16.safetensors"];
+/// Weight file names accepted in a `text_encoder/` directory (the loader's list).
+pub use crate::models::loader::TEXT_WEIGHTS;
 
 /// The places the MiniLM files are looked for (besides the model directory).
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
@@ -178,6 +178,22 @@ pub fn resolve_text_encoder_weights(
         });
     }
     Ok(locations.ensure(allow_download)?.join("model.safetensors"))
+}
+
+/// Whether a run can get the weights of the BERT `text_encoder/` directory `dir` without
+/// downloading now: its own safetensors, the MiniLM files already at `locations`, or (MiniLM
+/// only, not offline) a first-use download. For submit-time checks; loading uses
+/// [`resolve_text_encoder_weights`].
+pub fn text_encoder_weights_available(dir: &Path, locations: &MiniLmLocations) -> bool {
+    if TEXT_WEIGHTS.iter().any(|n| dir.join(n).is_file()) {
+        return true;
+    }
+    super::model::read_config(&dir.join("config.json"))
+        .ok()
+        .filter(is_minilm)
+        .is_some_and(|cfg| {
+            resolve_text_encoder_weights(dir, &cfg, locations, false).is_ok() || !locations.offline
+        })
 }
 
 /// Lower-case hex sha256.
