@@ -382,20 +382,15 @@ mod tests {
         let plain = Sampler::new(&cfg(""), SamplerKind::Ddim, 1).unwrap();
         let clip = Sampler::new(&cfg(r#", "clip_sample": true"#), SamplerKind::Ddim, 1).unwrap();
         assert_eq!(clip.timesteps, vec![999.0]);
-        let a: Vec<f32> = plain
-            .step(&v, 0, &x)
-            .unwrap()
-            .flatten_all()
-            .unwrap()
-            .to_vec1()
-            .unwrap();
-        let b: Vec<f32> = clip
-            .step(&v, 0, &x)
-            .unwrap()
-            .flatten_all()
-            .unwrap()
-            .to_vec1()
-            .unwrap();
+        let run = |s: &Sampler| -> Vec<f32> {
+            s.step(&v, 0, &x)
+                .unwrap()
+                .flatten_all()
+                .unwrap()
+                .to_vec1()
+                .unwrap()
+        };
+        let (a, b) = (run(&plain), run(&clip));
         assert!(a[0] < -4.0 && a[1] > 4.0, "{a:?}");
         assert!(b[0] >= -1.0 - 1e-6 && b[1] <= 1.0 + 1e-6, "{b:?}");
         assert!((a[2] - b[2]).abs() < 1e-6 && (a[3] - b[3]).abs() < 1e-6);
