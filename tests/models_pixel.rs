@@ -10,6 +10,7 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use vectorfusion::image::Image;
 use vectorfusion::models::codec::CodecKind;
+use vectorfusion::models::pipeline::ModelHints;
 use vectorfusion::models::scheduler::SamplerKind;
 use vectorfusion::models::{LoadOptions, ModelError, StableDiffusion};
 use vectorfusion::stages::sds::{Weighting, sds_image_grad};
@@ -280,10 +281,12 @@ fn loader_tells_pixel_space_from_a_latent_model_with_missing_files() {
 }
 
 /// `"_style_suffix": false` in `model_index.json` (a model trained on bare captions) turns the
-/// paper's style suffix off for prompts; absent, it stays on; anything but a bool is refused.
+/// paper's style suffix off for prompts; `_sample_guidance` / `_sds_guidance` set the model's
+/// guidance defaults; absent keys keep the paper's values; bad values are refused.
 #[test]
 fn model_index_style_suffix_switch() {
-    assert!(pixel().style_suffix, "default: the paper's suffix");
+    assert_eq!(pixel().hints, ModelHints::default(), "SD defaults");
+    assert!(ModelHints::default().style_suffix);
     let base = std::env::temp_dir().join(format!("vf-style-suffix-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&base);
     let dir = base.join("m");
@@ -292,9 +295,12 @@ fn model_index_style_suffix_switch() {
     let mut v: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&index).unwrap()).unwrap();
     v["_style_suffix"] = serde_json::json!(false);
+    v["_sample_guidance"] = serde_json::json!(3.0);
     std::fs::write(&index, v.to_string()).unwrap();
     let sd = StableDiffusion::load(&dir, &LoadOptions::default()).unwrap();
-    assert!(!sd.style_suffix);
+    assert!(!sd.hints.style_suffix);
+    assert_eq!(sd.hints.sample_guidance, 3.0);
+    assert_eq!(sd.hints.sds_guidance, 100.0, "absent: the default");
 
     let t = vectorfusion::teacher::SdTeacher::load(&dir, 64).unwrap();
     let models = vectorfusion::pipeline::methods::Models {
@@ -317,6 +323,11 @@ fn model_index_style_suffix_switch() {
     v["_style_suffix"] = serde_json::json!("no");
     std::fs::write(&index, v.to_string()).unwrap();
     let e = StableDiffusion::load(&dir, &LoadOptions::default()).unwrap_err();
-    assert!(e.to_string().contains("_style_suffix"), "{e}");
+    assert!(e.to_string().contains("model_index.json"), "{e}");
+    v["_style_suffix"] = serde_json::json!(false);
+    v["_sds_guidance"] = serde_json::json!(-1.0);
+    std::fs::write(&index, v.to_string()).unwrap();
+    let e = StableDiffusion::load(&dir, &LoadOptions::default()).unwrap_err();
+    assert!(e.to_string().contains("_sds_guidance"), "{e}");
     let _ = std::fs::remove_dir_all(&base);
 }

@@ -46,6 +46,7 @@ fn req(method: Method, style: StageStyle, start: Start) -> TextRequest {
         steps: Some(4),
         samples: Some(2),
         seed: 7,
+        guidance: None,
         start,
     }
 }
@@ -124,6 +125,13 @@ fn same_seed_same_svg() {
     let a = run_text(&m, &r, &NullSink, &CancelToken::new()).unwrap();
     let b = run_text(&m, &r, &NullSink, &CancelToken::new()).unwrap();
     assert_eq!(a.svg, b.svg);
+    // An explicit SDS guidance replaces the model's default (100): another drawing.
+    let g = TextRequest {
+        guidance: Some(1.0),
+        ..r
+    };
+    let c = run_text(&m, &g, &NullSink, &CancelToken::new()).unwrap();
+    assert_ne!(a.svg, c.svg);
 }
 
 fn disc_image(side: u32) -> Image {

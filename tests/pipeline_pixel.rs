@@ -36,6 +36,7 @@ fn req(method: Method, style: StageStyle) -> TextRequest {
         steps: Some(3),
         samples: Some(2),
         seed: 3,
+        guidance: None,
         start: Start::Method,
     }
 }

@@ -293,6 +293,7 @@ pub fn run(args: BenchStabilityArgs) -> Result<(), CliError> {
                     steps: Some(a.steps),
                     samples: Some(a.samples),
                     seed,
+                    guidance: None,
                     start: Start::Method,
                 };
                 let t0 = Instant::now();

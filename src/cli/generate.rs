@@ -76,9 +76,10 @@ pub struct GenerateArgs {
     pub paths: Option<usize>,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Classifier-free guidance scale.
-    #[arg(long, default_value_t = 100.0)]
-    pub guidance: f32,
+    /// SDS classifier-free guidance scale [default: the model's (`_sds_guidance` in its
+    /// model_index.json), 100 as in the paper for Stable Diffusion and the test teacher].
+    #[arg(long)]
+    pub guidance: Option<f32>,
     /// Smallest timestep drawn.
     #[arg(long, default_value_t = 50)]
     pub t_min: usize,
@@ -198,7 +199,7 @@ pub fn run(mut args: GenerateArgs) -> Result<(), CliError> {
 
     let mut cfg = SdsConfig::for_style(style, &args.caption, steps, size);
     cfg.seed = args.seed;
-    cfg.guidance = args.guidance;
+    cfg.guidance = args.guidance.unwrap_or(100.0);
     cfg.snapshot_every = if args.snapshots.is_some() {
         args.snapshot_every
     } else {
@@ -350,6 +351,7 @@ fn run_pipeline(
         steps: args.steps,
         samples: args.samples,
         seed: args.seed,
+        guidance: args.guidance,
         start,
     };
     if let Some(d) = &args.snapshots {

@@ -141,29 +141,68 @@ pub struct StableDiffusion {
     /// space for models without `vae/`.
     pub codec: Codec,
     pub scheduler: SchedulerConfig,
-    /// Whether prompts get the paper's style suffix ("… minimal flat 2d vector icon …"): true
-    /// for Stable Diffusion; a model trained on bare captions (the embedded `vf-icon`) sets
-    /// `"_style_suffix": false` in its `model_index.json`.
-    pub style_suffix: bool,
+    /// Per-model defaults from `model_index.json` (style suffix, guidance scales).
+    pub hints: ModelHints,
     alphas_cumprod: Vec<f64>,
     device: Device,
 }
 
-/// `"_style_suffix"` of `root/model_index.json` (a key diffusers ignores); true when the file or
-/// the key is absent.
-fn wants_style_suffix(root: &Path) -> Result<bool> {
-    let index = root.join("model_index.json");
-    if !index.is_file() {
-        return Ok(true);
+/// vectorfusion's defaults for one model, from underscore keys of its `model_index.json` (keys
+/// diffusers ignores). Stable Diffusion directories have none and get the paper's values.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize)]
+pub struct ModelHints {
+    /// `_style_suffix`: whether prompts get the paper's style suffix ("… minimal flat 2d vector
+    /// icon …"). The embedded `vf-icon`, trained on bare icon names, sets false.
+    #[serde(rename = "_style_suffix", default = "yes")]
+    pub style_suffix: bool,
+    /// `_sample_guidance`: classifier-free guidance when sampling the K raster images.
+    #[serde(rename = "_sample_guidance", default = "sample_guidance")]
+    pub sample_guidance: f32,
+    /// `_sds_guidance`: classifier-free guidance of the SDS teacher (the paper uses 100).
+    #[serde(rename = "_sds_guidance", default = "sds_guidance")]
+    pub sds_guidance: f32,
+}
+
+fn yes() -> bool {
+    true
+}
+fn sample_guidance() -> f32 {
+    7.5
+}
+fn sds_guidance() -> f32 {
+    100.0
+}
+
+impl Default for ModelHints {
+    fn default() -> Self {
+        Self {
+            style_suffix: true,
+            sample_guidance: sample_guidance(),
+            sds_guidance: sds_guidance(),
+        }
     }
-    let v: serde_json::Value = loader::read_config(&index)?;
-    match v.get("_style_suffix") {
-        None | Some(serde_json::Value::Null) => Ok(true),
-        Some(serde_json::Value::Bool(b)) => Ok(*b),
-        Some(other) => Err(ModelError::Config {
-            path: index.display().to_string(),
-            reason: format!("_style_suffix must be true or false, got {other}"),
-        }),
+}
+
+impl ModelHints {
+    /// The hints of the model directory `root`; defaults when it has no `model_index.json`.
+    pub fn read(root: &Path) -> Result<Self> {
+        let index = root.join("model_index.json");
+        if !index.is_file() {
+            return Ok(Self::default());
+        }
+        let h: Self = loader::read_config(&index)?;
+        for (name, g) in [
+            ("_sample_guidance", h.sample_guidance),
+            ("_sds_guidance", h.sds_guidance),
+        ] {
+            if !(g.is_finite() && (0.0..=1000.0).contains(&g)) {
+                return Err(ModelError::Config {
+                    path: index.display().to_string(),
+                    reason: format!("{name} must be in 0..=1000, got {g}"),
+                });
+            }
+        }
+        Ok(h)
     }
 }
 
@@ -191,7 +230,7 @@ impl StableDiffusion {
         let text = TextEncoder::load(&root, opts.text, &opts.device)?;
         let mut sd = Self::from_parts(unet, codec, scheduler, opts.device.clone())?;
         sd.text = Some(text);
-        sd.style_suffix = wants_style_suffix(&root)?;
+        sd.hints = ModelHints::read(&root)?;
         Ok(sd)
     }
 
@@ -222,7 +261,7 @@ impl StableDiffusion {
             unet,
             codec,
             scheduler,
-            style_suffix: true,
+            hints: ModelHints::default(),
             alphas_cumprod,
             device,
         })

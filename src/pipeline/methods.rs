@@ -15,6 +15,7 @@
 use super::{JobContext, PipelineError, Preset};
 use crate::image::Image;
 use crate::image::ops::resize;
+use crate::models::pipeline::ModelHints;
 use crate::models::scheduler::SamplerKind;
 use crate::models::scorer::{ImageTextScorer, Scorer};
 use crate::progress::{CancelToken, Progress, ProgressSink};
@@ -383,8 +384,9 @@ impl Models {
                     let noise: Vec<f32> = (0..c * h * w).map(|_| gaussian(&mut rng)).collect();
                     let noise = Tensor::from_vec(noise, (1, c, h, w), sd.device())
                         .map_err(|e| failed("noise", e))?;
+                    let g = f64::from(sd.hints.sample_guidance);
                     let traj = sd
-                        .sample(&noise, &cond, &uncond, 7.5, sample_steps, SamplerKind::Ddim)
+                        .sample(&noise, &cond, &uncond, g, sample_steps, SamplerKind::Ddim)
                         .map_err(|e| failed("sampling", e))?;
                     let z = traj
                         .last()
@@ -440,11 +442,20 @@ impl Ranked {
 
 impl Models {
     /// The prompt the diffusion model is conditioned on: `caption` with the style suffix, unless
-    /// the model was trained on bare captions (`StableDiffusion::style_suffix`).
+    /// the model was trained on bare captions ([`ModelHints::style_suffix`]).
     pub fn prompt(&self, style: Style, caption: &str) -> String {
+        if self.hints().style_suffix {
+            style.prompt(caption)
+        } else {
+            caption.trim().to_string()
+        }
+    }
+
+    /// The diffusion model's defaults (the paper's for the analytic test teacher).
+    pub fn hints(&self) -> ModelHints {
         match &self.teacher {
-            TeacherModel::Sd(t) if !t.model().style_suffix => caption.trim().to_string(),
-            _ => style.prompt(caption),
+            TeacherModel::Sd(t) => t.model().hints,
+            TeacherModel::Analytic(_) => ModelHints::default(),
         }
     }
 
@@ -542,6 +553,8 @@ pub struct TextRequest {
     pub steps: Option<u32>,
     pub samples: Option<u32>,
     pub seed: u64,
+    /// SDS guidance scale [default: the model's, [`ModelHints::sds_guidance`]].
+    pub guidance: Option<f32>,
     pub start: Start,
 }
 
@@ -859,6 +872,7 @@ pub fn run_text_resumable(
     if sds_after {
         let mut cfg = SdsConfig::for_style(req.style, &req.caption, steps, size);
         cfg.prompt = prompt.clone();
+        cfg.guidance = req.guidance.unwrap_or(models.hints().sds_guidance);
         cfg.seed = req.seed;
         cfg.snapshot_every = ps.snapshot_every;
         if !augment {

@@ -640,6 +640,7 @@ impl DefaultExecutor {
             steps: Some(spec.steps),
             samples: Some(spec.samples),
             seed: spec.seed,
+            guidance: None,
             start,
         };
         let out =
