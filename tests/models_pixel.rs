@@ -319,6 +319,15 @@ fn model_index_style_suffix_switch() {
         with.prompt(S::Iconography, "a crown"),
         S::Iconography.prompt("a crown")
     );
+    // `_sample_guidance` reaches the sampler: the same prompt, seed and noise, another image.
+    let draw = |m: &vectorfusion::pipeline::methods::Models| {
+        let sink = vectorfusion::progress::NullSink;
+        let cancel = vectorfusion::progress::CancelToken::new();
+        m.sample("a crown", 1, 3, 7, &sink, &cancel).unwrap()[0]
+            .data
+            .clone()
+    };
+    assert_ne!(draw(&models), draw(&with));
 
     v["_style_suffix"] = serde_json::json!("no");
     std::fs::write(&index, v.to_string()).unwrap();

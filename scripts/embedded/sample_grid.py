@@ -42,10 +42,11 @@ def main():
     ap.add_argument("--model", default="models/vf-icon")
     ap.add_argument("--out", default="docs/embedded/samples.png")
     ap.add_argument("--steps", type=int, default=50)
-    ap.add_argument("--cfg", type=float, default=5.0)
+    ap.add_argument("--cfg", type=float, default=3.0, help="guidance (the shipped model samples at 3)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--per-caption", type=int, default=3)
-    ap.add_argument("--loss", default=None)
+    ap.add_argument("--loss", nargs="*", default=None,
+                    help="loss.csv files of the training runs, one curve each (named by their folder)")
     ap.add_argument("--loss-out", default="docs/embedded/loss.png")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--clip-sample", choices=["config", "on", "off"], default="config",
@@ -85,15 +86,19 @@ def main():
     if args.loss:
         import csv
 
-        r = list(csv.DictReader(open(args.loss)))
-        s = [int(x["step"]) for x in r]
         plt.figure(figsize=(6, 3.2))
-        plt.plot(s, [float(x["loss"]) for x in r], lw=0.5, alpha=0.4, label="batch loss")
-        plt.plot(s, [float(x["ema_loss"]) for x in r], lw=1.5, label="EMA(0.98)")
+        top = 0.3
+        for path in args.loss:
+            r = list(csv.DictReader(open(path)))
+            s = [int(x["step"]) for x in r]
+            name = os.path.basename(os.path.dirname(os.path.abspath(path))) or path
+            plt.plot(s, [float(x["loss"]) for x in r], lw=0.5, alpha=0.35)
+            plt.plot(s, [float(x["ema_loss"]) for x in r], lw=1.5, label=f"{name} (EMA 0.98)")
+            top = max(top, min(1.0, max(float(x["ema_loss"]) for x in r[len(r) // 10:]) * 1.3))
         plt.xlabel(f"step (batch {args.batch})")
-        plt.ylabel("epsilon MSE")
-        plt.ylim(0, max(0.3, min(1.0, float(r[0]["loss"]) * 1.1)))
-        plt.legend()
+        plt.ylabel("MSE of the training target")
+        plt.ylim(0, top)
+        plt.legend(fontsize=7)
         plt.title("vf-icon prior training loss")
         plt.tight_layout()
         plt.savefig(args.loss_out, dpi=110)

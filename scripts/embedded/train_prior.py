@@ -136,6 +136,12 @@ def main():
         opt.load_state_dict(ck["opt"])
         gen.set_state(ck["gen"])
         step, elapsed0 = ck["step"], ck["elapsed"]
+        trained = ck.get("args", {}).get("prediction", "epsilon")  # older checkpoints: epsilon
+        if trained != args.prediction:
+            sys.exit(f"{ckpt_path} was trained with --prediction {trained}; resume with the same target "
+                     f"(or start a new --out with --init to switch)")
+        if args.init:
+            print(f"note: --init ignored, {ckpt_path} exists", flush=True)
         print(f"resumed at step {step}", flush=True)
     elif args.init:
         ck = torch.load(args.init, weights_only=False)

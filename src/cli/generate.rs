@@ -166,15 +166,17 @@ pub fn run(mut args: GenerateArgs) -> Result<(), CliError> {
     if steps == 0 {
         return Err(CliError::Usage("--steps must be positive".into()));
     }
+    // The model's prompt/guidance defaults (the paper's for the analytic test teacher).
+    let mut hints = crate::models::pipeline::ModelHints::default();
     let teacher: Box<dyn Teacher> = if let Some(dir) = &args.model {
         let taesd =
             resolve_encoder(encoder, true, dir, args.taesd.as_deref()).map_err(pipeline_err)?;
-        Box::new(
-            SdTeacher::load_with(dir, size, taesd.as_deref()).map_err(|e| match e {
-                TeacherError::Setup(m) => CliError::Usage(m),
-                other => CliError::Other(anyhow::Error::new(other).context("loading the model")),
-            })?,
-        )
+        let t = SdTeacher::load_with(dir, size, taesd.as_deref()).map_err(|e| match e {
+            TeacherError::Setup(m) => CliError::Usage(m),
+            other => CliError::Other(anyhow::Error::new(other).context("loading the model")),
+        })?;
+        hints = t.model().hints;
+        Box::new(t)
     } else {
         let spec = args.teacher.as_deref().ok_or_else(no_model)?;
         let dir = super::analytic_teacher_dir(spec)?;
@@ -198,8 +200,11 @@ pub fn run(mut args: GenerateArgs) -> Result<(), CliError> {
     eprintln!("teacher: {}", teacher.name());
 
     let mut cfg = SdsConfig::for_style(style, &args.caption, steps, size);
+    if !hints.style_suffix {
+        cfg.prompt = args.caption.trim().to_string();
+    }
     cfg.seed = args.seed;
-    cfg.guidance = args.guidance.unwrap_or(100.0);
+    cfg.guidance = args.guidance.unwrap_or(hints.sds_guidance);
     cfg.snapshot_every = if args.snapshots.is_some() {
         args.snapshot_every
     } else {

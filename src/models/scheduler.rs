@@ -209,7 +209,8 @@ impl Sampler {
             "trailing" => {
                 let r = n as f64 / steps as f64;
                 (0..steps)
-                    .map(|i| (n as f64 - i as f64 * r).round() - 1.0)
+                    // numpy's round: halves to even (1000 / 16 steps: 812.5 → 812)
+                    .map(|i| (n as f64 - i as f64 * r).round_ties_even() - 1.0)
                     .collect()
             }
             "linspace" => (0..steps)

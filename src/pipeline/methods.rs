@@ -459,7 +459,7 @@ impl Models {
         }
     }
 
-    /// Samples `k` images with `prompt` (the caption plus its style suffix) and keeps the one the
+    /// Samples `k` images with `prompt` ([`Models::prompt`]) and keeps the one the
     /// scorer matches best to `caption` (rejection sampling, the first stage of `sd_live*`).
     #[allow(clippy::too_many_arguments)]
     pub fn sample_and_rerank(
@@ -669,15 +669,19 @@ pub struct TextCheckpoint {
     pub sds: SdsState,
 }
 
-/// Identifies the run a checkpoint belongs to: everything that shapes the SDS stage.
-pub fn checkpoint_key(req: &TextRequest, teacher: &str, size: u32) -> String {
+/// Identifies the run a checkpoint belongs to: everything that shapes the SDS stage (with the
+/// prompt the model is conditioned on and the SDS guidance, which the model's hints decide).
+pub fn checkpoint_key(req: &TextRequest, models: &Models, size: u32) -> String {
+    let teacher = models.teacher().name();
+    let prompt = models.prompt(req.style, &req.caption);
+    let guidance = req.guidance.unwrap_or(models.hints().sds_guidance);
     let start = match &req.start {
         Start::Method => "method",
         Start::Image(_) => "image",
         Start::Svg(_) => "svg",
     };
     format!(
-        "v1|{:?}|{:?}|{:?}|{:?}|{:?}|{:?}|{:?}|{}|{start}|{teacher}|{size}",
+        "v2|{:?}|{:?}|{:?}|{:?}|{:?}|{:?}|{:?}|{}|{start}|{teacher}|{size}|{prompt:?}|{guidance}",
         req.method, req.style, req.preset, req.paths, req.steps, req.samples, req.caption, req.seed
     )
 }
@@ -748,7 +752,7 @@ pub fn run_text_resumable(
         "prompt": prompt,
     });
     let t0 = std::time::Instant::now();
-    let key = checkpoint_key(req, &teacher.name(), size);
+    let key = checkpoint_key(req, models, size);
     let mut resumed = ctx
         .and_then(JobContext::resume_state)
         .and_then(|v| serde_json::from_value::<TextCheckpoint>(v).ok())
@@ -943,7 +947,6 @@ pub fn run_text_resumable(
     })
 }
 
-/// Image → SVG with LIVE (vectorize jobs), with an `auto` path budget capped at `max_paths`.
 /// A vectorize job's saved LIVE state, tagged with the request it belongs to.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct VectorizeCheckpoint {
@@ -989,7 +992,8 @@ impl live::LiveCheckpoint for VectorizeCheckpoints<'_> {
     }
 }
 
-/// Image → SVG with LIVE. With a job context, the LIVE state is checkpointed after every stage
+/// Image → SVG with LIVE (vectorize jobs), with an `auto` path budget capped at `max_paths`.
+/// With a job context, the LIVE state is checkpointed after every stage
 /// and a restarted job continues from the last one (`detail.resumed_from_stage`), ending with
 /// the SVG an uninterrupted run gives.
 pub fn run_vectorize(

@@ -457,8 +457,6 @@ fn border_colour(img: &Image) -> Rgba {
     Rgba::new((s[0] / n) as f32, (s[1] / n) as f32, (s[2] / n) as f32, 1.0).clamped()
 }
 
-/// Traces `target` into closed cubic paths (see the module docs). Emits progress events with
-/// stage `"live"` and checks `cancel` before every step.
 /// Where a LIVE run stands after a stage: enough to finish it exactly as if uninterrupted.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct LiveState {
@@ -469,7 +467,9 @@ pub struct LiveState {
     /// The scene at the working size.
     pub scene: Scene,
     pub reports: Vec<StageReport>,
-    /// PSNR after the last stage (the `auto` budget compares against it).
+    /// PSNR after the last stage (the `auto` budget compares against it), stored as its bit
+    /// pattern so a JSON round trip is exact and infinity (a perfect fit) survives.
+    #[serde(with = "f64_bits")]
     pub prev_psnr: f64,
     /// Adam steps taken so far.
     pub step: u32,
@@ -477,12 +477,26 @@ pub struct LiveState {
     pub rng_word_pos: u64,
 }
 
+mod f64_bits {
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(v: &f64, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_u64(v.to_bits())
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+        u64::deserialize(d).map(f64::from_bits)
+    }
+}
+
 /// Receives the state after every completed stage.
 pub trait LiveCheckpoint {
     fn save(&self, state: &LiveState) -> Result<(), String>;
 }
 
-/// [`vectorize_resumable`] without checkpoints.
+/// Traces `target` into closed cubic paths (see the module docs). Emits progress events with
+/// stage `"live"` and checks `cancel` before every step. [`vectorize_resumable`] without
+/// checkpoints.
 pub fn vectorize(
     target: &Image,
     cfg: &LiveConfig,
