@@ -11,6 +11,7 @@ use sha2::{Digest, Sha256};
 use std::path::{Path, PathBuf};
 use vectorfusion::models::bert::weights::MiniLmLocations;
 use vectorfusion::models::pipeline::load_unet;
+use vectorfusion::models::scheduler::{Sampler, SamplerKind, SchedulerConfig};
 use vectorfusion::models::scorer::{IconClip, IconClipConfig, IconClipScorer};
 use vectorfusion::models::{LoadOptions, Precision, StableDiffusion};
 
@@ -61,6 +62,50 @@ fn pixel_unet_matches_diffusers_on_the_shipped_weights() {
     let eps = unet.forward(&r["unet_x_t"], 500.0, &cond).unwrap();
     let d = max_abs(&eps, &r["unet_eps"]);
     assert!(d < 2e-4, "UNet eps max abs diff {d}");
+}
+
+/// The shipped scheduler (prediction type, trailing spacing, `clip_sample`) drives a guided DDIM
+/// trajectory exactly as diffusers' `DDIMScheduler` does.
+#[test]
+fn guided_ddim_with_the_shipped_scheduler_matches_diffusers() {
+    let (r, meta) = refs();
+    let g: f64 = meta["ddim_guidance"].as_str().unwrap().parse().unwrap();
+    let unet = load_unet(&root().join("unet"), Precision::F32, &Device::Cpu).unwrap();
+    let text = std::fs::read_to_string(root().join("scheduler/scheduler_config.json")).unwrap();
+    let cfg: SchedulerConfig = serde_json::from_str(&text).unwrap();
+    let sampler = Sampler::new(&cfg, SamplerKind::Ddim, 4).unwrap();
+    let want_t: Vec<i64> = r["ddim_timesteps"].to_vec1().unwrap();
+    let got_t: Vec<i64> = sampler.timesteps.iter().map(|&t| t as i64).collect();
+    assert_eq!(got_t, want_t);
+    let cond = r["unet_cond"].narrow(0, 0, 1).unwrap();
+    let uncond = &r["ddim_uncond"];
+    let trajectory = |s: &Sampler| {
+        let mut x = r["ddim_init"].clone();
+        let mut out = Vec::new();
+        for (i, &t) in s.timesteps.iter().enumerate() {
+            let eu = unet.forward(&x, t, uncond).unwrap();
+            let ec = unet.forward(&x, t, &cond).unwrap();
+            let guided = (&eu + ((ec - &eu).unwrap() * g).unwrap()).unwrap();
+            x = s.step(&guided, i, &x).unwrap();
+            out.push(x.clone());
+        }
+        out
+    };
+    for (i, x) in trajectory(&sampler).iter().enumerate() {
+        let d = max_abs(x, &r[&format!("ddim_step{i}")]);
+        assert!(d < 1e-3, "DDIM step {i}: max abs diff {d}");
+    }
+    // The shipped config's clip_sample matters here: without it the trajectory differs.
+    if cfg.clip_sample {
+        let unclipped = SchedulerConfig {
+            clip_sample: false,
+            ..cfg.clone()
+        };
+        let s = Sampler::new(&unclipped, SamplerKind::Ddim, 4).unwrap();
+        let last = trajectory(&s).pop().unwrap();
+        let d = max_abs(&last, &r["ddim_step3"]);
+        assert!(d > 1e-3, "clip_sample had no effect (diff {d})");
+    }
 }
 
 #[test]

@@ -14,6 +14,11 @@ Keys:
   unet_x_t              [1, 3, 32, 32] torch.randn(generator seed 0)
   unet_t                [1]           500.0 (timestep)
   unet_eps              [1, 3, 32, 32] UNet(unet_x_t, 500, encoder_hidden_states=unet_cond[0:1]) ("a crown")
+  ddim_uncond           [1, 32, 384]  encode_tokens([""])
+  ddim_init             [1, 3, 32, 32] torch.randn(generator seed 2)
+  ddim_step{0..3}       [1, 3, 32, 32] x after each step of a 4-step DDIM (eta 0) with the shipped
+                                      scheduler, guidance 5 on unet_cond[0:1]
+  ddim_timesteps        i64 [4]       the scheduler's timesteps for 4 steps
   clip_images           [2, 3, 64, 64] RGB in [0,1]: seeded (seed 1) 8x8 uniform noise upsampled bilinearly
   clip_image_emb        [2, 384]      IconClip.encode_image(clip_images), L2-normalised
   clip_input_ids        i64 [3, 64]   ids for CAPTIONS padded to 64 (scorer text length)
@@ -39,6 +44,9 @@ import vf_icon  # noqa: E402
 CAPTIONS = ["a crown", "red heart", ""]
 
 
+DDIM_GUIDANCE = 5.0
+
+
 def sha(path):
     return hashlib.sha256(open(path, "rb").read()).hexdigest()
 
@@ -49,7 +57,7 @@ def main():
     ap.add_argument("--model", default="models/vf-icon")
     ap.add_argument("--out", default="tests/fixtures/vf-icon-refs/refs.safetensors")
     args = ap.parse_args()
-    from diffusers import UNet2DConditionModel
+    from diffusers import DDIMScheduler, UNet2DConditionModel
     from safetensors.torch import load_file, save_file
 
     torch.set_num_threads(2)
@@ -71,6 +79,20 @@ def main():
     out["unet_t"] = torch.tensor([500.0])
     out["unet_eps"] = unet(x_t, torch.tensor([500]), encoder_hidden_states=cond[0:1]).sample
 
+    # A 4-step guided DDIM trajectory with the shipped scheduler (prediction type, spacing, clip_sample).
+    sched = DDIMScheduler.from_pretrained(os.path.join(args.model, "scheduler"))
+    sched.set_timesteps(4)
+    uncond = vf_icon.encode_tokens(tok, text, [""])
+    out["ddim_uncond"] = uncond
+    x = torch.randn((1, 3, 32, 32), generator=torch.Generator().manual_seed(2))
+    out["ddim_init"] = x
+    for i, t in enumerate(sched.timesteps):
+        eu = unet(x, t, encoder_hidden_states=uncond).sample
+        ec = unet(x, t, encoder_hidden_states=cond[0:1]).sample
+        x = sched.step(eu + DDIM_GUIDANCE * (ec - eu), t, x, eta=0.0).prev_sample
+        out[f"ddim_step{i}"] = x
+    out["ddim_timesteps"] = sched.timesteps.to(torch.int64)
+
     small = torch.rand((2, 3, 8, 8), generator=torch.Generator().manual_seed(1))
     imgs = F.interpolate(small, size=(64, 64), mode="bilinear", align_corners=False).clamp(0, 1)
     out["clip_images"] = imgs
@@ -88,7 +110,8 @@ def main():
     meta = {
         "captions": json.dumps(CAPTIONS),
         "unet_caption": CAPTIONS[0],
-        "seed": "x_t: 0, clip_images: 1",
+        "seed": "x_t: 0, clip_images: 1, ddim_init: 2",
+        "ddim_guidance": str(DDIM_GUIDANCE),
         "model_sha256_unet": sha(os.path.join(args.model, "unet", "diffusion_pytorch_model.safetensors")),
         "model_sha256_scorer": sha(os.path.join(args.model, "scorer", "model.safetensors")),
     }
