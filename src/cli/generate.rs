@@ -200,9 +200,7 @@ pub fn run(mut args: GenerateArgs) -> Result<(), CliError> {
     eprintln!("teacher: {}", teacher.name());
 
     let mut cfg = SdsConfig::for_style(style, &args.caption, steps, size);
-    if !hints.style_suffix {
-        cfg.prompt = args.caption.trim().to_string();
-    }
+    cfg.prompt = style.prompt_with(&args.caption, hints.style_suffix);
     cfg.seed = args.seed;
     cfg.guidance = args.guidance.unwrap_or(hints.sds_guidance);
     cfg.snapshot_every = if args.snapshots.is_some() {

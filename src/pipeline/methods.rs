@@ -444,11 +444,7 @@ impl Models {
     /// The prompt the diffusion model is conditioned on: `caption` with the style suffix, unless
     /// the model was trained on bare captions ([`ModelHints::style_suffix`]).
     pub fn prompt(&self, style: Style, caption: &str) -> String {
-        if self.hints().style_suffix {
-            style.prompt(caption)
-        } else {
-            caption.trim().to_string()
-        }
+        style.prompt_with(caption, self.hints().style_suffix)
     }
 
     /// The diffusion model's defaults (the paper's for the analytic test teacher).
@@ -699,15 +695,29 @@ impl SdsCheckpoint for JobCheckpoints<'_> {
     }
 
     fn save(&self, state: &SdsState) -> Result<(), String> {
-        let value = serde_json::to_value(TextCheckpoint {
-            key: self.key.to_string(),
-            augment: self.augment,
-            detail: self.detail.clone(),
-            sds: state.clone(),
-        })
-        .map_err(|e| e.to_string())?;
-        self.ctx.checkpoint(value).map_err(|e| e.to_string())
+        save_checkpoint(
+            self.ctx,
+            &TextCheckpoint {
+                key: self.key.to_string(),
+                augment: self.augment,
+                detail: self.detail.clone(),
+                sds: state.clone(),
+            },
+        )
     }
+}
+
+/// Stores `state` as the job's checkpoint (JSON through `ctx`).
+fn save_checkpoint(ctx: &JobContext, state: &impl Serialize) -> Result<(), String> {
+    let value = serde_json::to_value(state).map_err(|e| e.to_string())?;
+    ctx.checkpoint(value).map_err(|e| e.to_string())
+}
+
+/// The state an interrupted attempt saved, when it is a `T`; none, garbage or a checkpoint of
+/// another kind of run give `None` (the run starts over).
+fn resume_as<T: serde::de::DeserializeOwned>(ctx: Option<&JobContext>) -> Option<T> {
+    ctx.and_then(JobContext::resume_state)
+        .and_then(|v| serde_json::from_value(v).ok())
 }
 
 /// [`run_text`] for a service job: checkpoints the SDS stage through `ctx` every
@@ -753,10 +763,7 @@ pub fn run_text_resumable(
     });
     let t0 = std::time::Instant::now();
     let key = checkpoint_key(req, models, size);
-    let mut resumed = ctx
-        .and_then(JobContext::resume_state)
-        .and_then(|v| serde_json::from_value::<TextCheckpoint>(v).ok())
-        .filter(|c| c.key == key);
+    let mut resumed = resume_as::<TextCheckpoint>(ctx).filter(|c| c.key == key);
 
     // 1. The starting scene, and whether SDS (with augmentation) follows.
     let mut sds_after = req.method != Method::SdLive;
@@ -983,12 +990,13 @@ struct VectorizeCheckpoints<'a> {
 
 impl live::LiveCheckpoint for VectorizeCheckpoints<'_> {
     fn save(&self, state: &live::LiveState) -> Result<(), String> {
-        let value = serde_json::to_value(VectorizeCheckpoint {
-            key: self.key.to_string(),
-            live: state.clone(),
-        })
-        .map_err(|e| e.to_string())?;
-        self.ctx.checkpoint(value).map_err(|e| e.to_string())
+        save_checkpoint(
+            self.ctx,
+            &VectorizeCheckpoint {
+                key: self.key.to_string(),
+                live: state.clone(),
+            },
+        )
     }
 }
 
@@ -1023,9 +1031,7 @@ pub fn run_vectorize(
         cfg.size = 64;
     }
     let key = vectorize_checkpoint_key(image, preset, max_paths, seed);
-    let resume = ctx
-        .and_then(JobContext::resume_state)
-        .and_then(|v| serde_json::from_value::<VectorizeCheckpoint>(v).ok())
+    let resume = resume_as::<VectorizeCheckpoint>(ctx)
         .filter(|c| c.key == key)
         .map(|c| c.live);
     let resumed_from = resume.as_ref().map(|s| s.reports.len());

@@ -72,6 +72,15 @@ impl Style {
 
     /// `caption` with the style suffix appended.
     pub fn prompt(self, caption: &str) -> String {
+        self.prompt_with(caption, true)
+    }
+
+    /// [`Style::prompt`], or the bare trimmed caption without `suffix` (a model trained on bare
+    /// captions, `ModelHints::style_suffix`).
+    pub fn prompt_with(self, caption: &str, suffix: bool) -> String {
+        if !suffix {
+            return caption.trim().to_string();
+        }
         let c = caption.trim().trim_end_matches('.');
         format!("{c}. {}", self.suffix())
     }
