@@ -15,12 +15,14 @@
 //! | [`clip`] | CLIP text/vision towers and BPE tokenizer (text encoder of SD 1.x/2.x) |
 //! | [`scorer`] | one scorer abstraction over CLIP and the embedded IconClip (rerank, eval) |
 //! | [`nn`] | small layers with hand-written input-only backward passes |
+//! | [`kernels`] | CPU f32 kernels behind those layers: conv as shifted GEMMs, fused group norm |
 //!
 //! [`StableDiffusion`] ties them together behind the small API the SDS and sampling stages use.
 
 pub mod bert;
 pub mod clip;
 pub mod codec;
+pub mod kernels;
 pub mod loader;
 pub mod nn;
 pub mod pipeline;

@@ -5,8 +5,10 @@
 //! kernel gradient (one extra convolution per layer, plus memory), which is pure waste here.
 //! Field names follow the checkpoint keys.
 
+use super::kernels::{self, conv, conv::ConvGeom, norm, pointwise, winograd};
 use candle_core::{D, DType, Module, Tensor};
 use candle_nn::VarBuilder;
+use std::sync::{Arc, OnceLock};
 
 type R<T> = candle_core::Result<T>;
 
@@ -17,6 +19,17 @@ pub struct Conv2d {
     pub bias: Option<Tensor>,
     pub stride: usize,
     pub padding: usize,
+    /// Kernel-path caches, filled on first use: the weights as f32 values, their Winograd
+    /// transform, and the transform of the flipped, transposed kernel (for the input gradient).
+    cache: Arc<ConvCache>,
+}
+
+#[derive(Debug, Default)]
+struct ConvCache {
+    weight: OnceLock<Vec<f32>>,
+    bias: OnceLock<Option<Vec<f32>>>,
+    wino: OnceLock<Vec<f32>>,
+    wino_flipped: OnceLock<Vec<f32>>,
 }
 
 impl Conv2d {
@@ -40,10 +53,14 @@ impl Conv2d {
             bias,
             stride,
             padding,
+            cache: Arc::default(),
         })
     }
 
     pub fn forward(&self, x: &Tensor) -> R<Tensor> {
+        if kernels::applies(&[x, &self.weight]) {
+            return self.forward_padded(x, [self.padding; 4]);
+        }
         let y = x.conv2d(&self.weight, self.padding, self.stride, 1, 1)?;
         match &self.bias {
             Some(b) => y.broadcast_add(&b.reshape((1, b.dim(0)?, 1, 1))?),
@@ -51,10 +68,123 @@ impl Conv2d {
         }
     }
 
+    fn geom(&self, x_dims: (usize, usize, usize, usize), pad: [usize; 4]) -> R<ConvGeom> {
+        let (co, ci, k, _) = self.weight.dims4()?;
+        let (b, xc, h, w) = x_dims;
+        if xc != ci {
+            candle_core::bail!("conv2d: input has {xc} channels, kernel expects {ci}");
+        }
+        ConvGeom::new(b, ci, h, w, co, k, self.stride, pad).map_err(kernels::err)
+    }
+
+    /// Forward with explicit zero padding `[top, bottom, left, right]` (the kernel path; the
+    /// candle fallback pads first).
+    pub fn forward_padded(&self, x: &Tensor, pad: [usize; 4]) -> R<Tensor> {
+        if !kernels::applies(&[x, &self.weight]) {
+            let x = x
+                .pad_with_zeros(2, pad[0], pad[1])?
+                .pad_with_zeros(3, pad[2], pad[3])?;
+            let c = Conv2d {
+                padding: 0,
+                ..self.clone()
+            };
+            return c.forward(&x);
+        }
+        let (y, shape) = self.kernel_forward(x, pad)?;
+        kernels::tensor(y, &shape)
+    }
+
+    /// `relu(conv(x))`, the ReLU applied to the kernel's output before it becomes a tensor.
+    pub fn forward_relu(&self, x: &Tensor) -> R<Tensor> {
+        if !kernels::applies(&[x, &self.weight]) {
+            return self.forward(x)?.relu();
+        }
+        let (mut y, shape) = self.kernel_forward(x, [self.padding; 4])?;
+        pointwise::relu_inplace(&mut y);
+        kernels::tensor(y, &shape)
+    }
+
+    fn kernel_forward(&self, x: &Tensor, pad: [usize; 4]) -> R<(Vec<f32>, [usize; 4])> {
+        let g = self.geom(x.dims4()?, pad)?;
+        let (ho, wo) = g.out_hw();
+        let (weight, bias) = self.cached_weights()?;
+        let wino = if winograd::applies(&g) {
+            Some(
+                self.cache
+                    .wino
+                    .get_or_init(|| winograd::transform_kernel(weight, g.co, g.ci)),
+            )
+        } else {
+            None
+        };
+        let y = kernels::with_f32(x, |xs| {
+            conv::conv2d_prepared(&g, xs, weight, wino.map(|v| v.as_slice()), bias)
+                .map_err(kernels::err)
+        })?;
+        Ok((y, [g.b, g.co, ho, wo]))
+    }
+
+    /// The weights (and bias) as f32 values, read once.
+    fn cached_weights(&self) -> R<(&[f32], Option<&[f32]>)> {
+        if self.cache.weight.get().is_none() {
+            let w = self.weight.flatten_all()?.to_vec1::<f32>()?;
+            let _ = self.cache.weight.set(w);
+        }
+        if self.cache.bias.get().is_none() {
+            let b = match &self.bias {
+                Some(b) => Some(b.to_vec1::<f32>()?),
+                None => None,
+            };
+            let _ = self.cache.bias.set(b);
+        }
+        match (self.cache.weight.get(), self.cache.bias.get()) {
+            (Some(w), Some(b)) => Ok((w.as_slice(), b.as_deref())),
+            _ => candle_core::bail!("conv2d: weight cache not filled"),
+        }
+    }
+
+    /// Input gradient of [`Conv2d::forward_padded`] for an input of spatial size `(h, w)`.
+    pub fn backward_padded(&self, dy: &Tensor, h: usize, w: usize, pad: [usize; 4]) -> R<Tensor> {
+        if !kernels::applies(&[dy, &self.weight]) {
+            let c = Conv2d {
+                padding: 0,
+                ..self.clone()
+            };
+            let d = c.backward(dy, h + pad[0] + pad[1], w + pad[2] + pad[3])?;
+            return d.narrow(2, pad[0], h)?.narrow(3, pad[2], w);
+        }
+        let (b, co, oh, ow) = dy.dims4()?;
+        let (_, ci, _, _) = self.weight.dims4()?;
+        let g = self.geom((b, ci, h, w), pad)?;
+        if g.co != co || g.out_hw() != (oh, ow) {
+            candle_core::bail!(
+                "conv2d backward: gradient {:?} does not match the output {:?} of a {h}x{w} input",
+                dy.dims(),
+                (b, g.co, g.out_hw())
+            );
+        }
+        let (weight, _) = self.cached_weights()?;
+        let wino = if g.stride == 1 && g.k == 3 {
+            Some(self.cache.wino_flipped.get_or_init(|| {
+                winograd::transform_kernel(&conv::flip_transpose(weight, g.co, ci, 3), ci, g.co)
+            }))
+        } else {
+            None
+        };
+        let dx = kernels::with_f32(dy, |ds| {
+            conv::conv2d_input_grad_prepared(&g, ds, weight, wino.map(|v| v.as_slice()))
+                .map_err(kernels::err)
+        })?;
+        kernels::tensor(dx, &[b, ci, h, w])
+    }
+
     /// Gradient w.r.t. the input of spatial size `(h, w)` given the output gradient `dy`:
     /// a stride-1 convolution of the (dilated, padded) `dy` with the flipped, transposed
     /// kernel, which reuses candle's fast im2col + GEMM path.
     pub fn backward(&self, dy: &Tensor, h: usize, w: usize) -> R<Tensor> {
+        if kernels::applies(&[dy, &self.weight]) {
+            return self.backward_padded(dy, h, w, [self.padding; 4]);
+        }
         let (_, _, k, _) = self.weight.dims4()?;
         let (b, c, oh, ow) = dy.dims4()?;
         let s = self.stride;
@@ -121,11 +251,13 @@ pub struct GroupNorm {
     pub eps: f64,
 }
 
-/// What [`GroupNorm::backward`] needs: the normalised input and `1/σ` per group.
+/// What [`GroupNorm::backward`] needs: the normalised input, `1/σ` per group and whether a SiLU
+/// followed the norm.
 #[derive(Debug)]
 pub struct GroupNormTape {
     xhat: Tensor,
     inv_std: Tensor,
+    silu: bool,
 }
 
 impl GroupNorm {
@@ -163,33 +295,151 @@ impl GroupNorm {
         Ok((xhat, inv_std))
     }
 
-    pub fn forward(&self, x: &Tensor) -> R<Tensor> {
+    /// `[b, c, …]` → `(b, c, n)` for the kernel.
+    fn dims3(x: &Tensor) -> R<(usize, usize, usize)> {
+        let d = x.dims();
+        if d.len() < 2 {
+            candle_core::bail!("group norm: input of shape {d:?} has no channel axis");
+        }
+        Ok((d[0], d[1], d[2..].iter().product()))
+    }
+
+    /// The fused kernel: `(y, x̂, 1/σ)`.
+    fn kernel(&self, x: &Tensor, silu: bool, keep: bool) -> R<(Tensor, Option<Tensor>, Tensor)> {
+        let (b, c, n) = Self::dims3(x)?;
+        let gamma = self.weight.to_vec1::<f32>()?;
+        let beta = self.bias.to_vec1::<f32>()?;
+        let g = norm::GroupNormGeom::new((b, c, n), self.groups, self.eps, &gamma, &beta)
+            .map_err(kernels::err)?;
+        let (y, xhat, inv) = kernels::with_f32(x, |xs| {
+            norm::group_norm(&g, xs, silu, keep).map_err(kernels::err)
+        })?;
+        let xhat = match xhat {
+            Some(v) => Some(kernels::tensor(v, x.dims())?),
+            None => None,
+        };
+        Ok((
+            kernels::tensor(y, x.dims())?,
+            xhat,
+            kernels::tensor(inv, &[b, self.groups, 1])?,
+        ))
+    }
+
+    fn forward_act(&self, x: &Tensor, silu: bool) -> R<Tensor> {
+        if kernels::applies(&[x, &self.weight, &self.bias]) {
+            return Ok(self.kernel(x, silu, false)?.0);
+        }
         let (xhat, _) = self.normalise(x)?;
-        self.affine(&xhat, x.dims())
+        let y = self.affine(&xhat, x.dims())?;
+        if silu { y.silu() } else { Ok(y) }
+    }
+
+    fn forward_act_t(&self, x: &Tensor, silu: bool) -> R<(Tensor, GroupNormTape)> {
+        if kernels::applies(&[x, &self.weight, &self.bias]) {
+            let (y, xhat, inv_std) = self.kernel(x, silu, true)?;
+            let xhat =
+                xhat.ok_or_else(|| candle_core::Error::Msg("group norm: x̂ not kept".into()))?;
+            return Ok((
+                y,
+                GroupNormTape {
+                    xhat,
+                    inv_std,
+                    silu,
+                },
+            ));
+        }
+        let (xhat, inv_std) = self.normalise(x)?;
+        let y = self.affine(&xhat, x.dims())?;
+        let y = if silu { y.silu()? } else { y };
+        Ok((
+            y,
+            GroupNormTape {
+                xhat,
+                inv_std,
+                silu,
+            },
+        ))
+    }
+
+    pub fn forward(&self, x: &Tensor) -> R<Tensor> {
+        self.forward_act(x, false)
+    }
+
+    /// `silu(group_norm(x))`, fused.
+    pub fn forward_silu(&self, x: &Tensor) -> R<Tensor> {
+        self.forward_act(x, true)
     }
 
     pub fn forward_t(&self, x: &Tensor) -> R<(Tensor, GroupNormTape)> {
-        let (xhat, inv_std) = self.normalise(x)?;
-        let y = self.affine(&xhat, x.dims())?;
-        Ok((y, GroupNormTape { xhat, inv_std }))
+        self.forward_act_t(x, false)
     }
 
+    /// [`GroupNorm::forward_silu`] with a tape for [`GroupNorm::backward`].
+    pub fn forward_silu_t(&self, x: &Tensor) -> R<(Tensor, GroupNormTape)> {
+        self.forward_act_t(x, true)
+    }
+
+    /// Input gradient given the gradient of the output (of the SiLU, if the tape has one).
     pub fn backward(&self, t: &GroupNormTape, dy: &Tensor) -> R<Tensor> {
         let shape = dy.dims().to_vec();
+        if kernels::applies(&[dy, &t.xhat, &t.inv_std, &self.weight, &self.bias]) {
+            let (b, c, n) = Self::dims3(dy)?;
+            let gamma = self.weight.to_vec1::<f32>()?;
+            let beta = self.bias.to_vec1::<f32>()?;
+            let g = norm::GroupNormGeom::new((b, c, n), self.groups, self.eps, &gamma, &beta)
+                .map_err(kernels::err)?;
+            let dx = kernels::with_f32(dy, |ds| {
+                kernels::with_f32(&t.xhat, |xh| {
+                    kernels::with_f32(&t.inv_std, |iv| {
+                        norm::group_norm_input_grad(&g, ds, xh, iv, t.silu).map_err(kernels::err)
+                    })
+                })
+            })?;
+            return kernels::tensor(dx, &shape);
+        }
+        let dy = if t.silu {
+            let a = self.affine(&t.xhat, &shape)?;
+            silu_backward(&a, dy)?
+        } else {
+            dy.clone()
+        };
         let b = shape[0];
         let mut bshape = vec![1usize; shape.len()];
         bshape[1] = shape[1];
         let dxhat = dy
             .broadcast_mul(&self.weight.reshape(bshape.as_slice())?)?
             .reshape((b, self.groups, ()))?;
+        let xhat = t.xhat.reshape((b, self.groups, ()))?;
         let m1 = dxhat.mean_keepdim(2)?;
-        let m2 = (&dxhat * &t.xhat)?.mean_keepdim(2)?;
+        let m2 = (&dxhat * &xhat)?.mean_keepdim(2)?;
         let dx = dxhat
             .broadcast_sub(&m1)?
-            .sub(&t.xhat.broadcast_mul(&m2)?)?
+            .sub(&xhat.broadcast_mul(&m2)?)?
             .broadcast_mul(&t.inv_std)?;
         dx.reshape(shape)
     }
+}
+
+/// `max(a + b, 0)`.
+pub fn add_relu(a: &Tensor, b: &Tensor) -> R<Tensor> {
+    if !kernels::applies(&[a, b]) || a.dims() != b.dims() {
+        return (a + b)?.relu();
+    }
+    let y = kernels::with_f32(a, |av| {
+        kernels::with_f32(b, |bv| pointwise::add_relu(av, bv).map_err(kernels::err))
+    })?;
+    kernels::tensor(y, a.dims())
+}
+
+/// Input gradient of a ReLU given its output `out`: `dy · [out > 0]`.
+pub fn relu_backward(out: &Tensor, dy: &Tensor) -> R<Tensor> {
+    if !kernels::applies(&[out, dy]) || out.dims() != dy.dims() {
+        return dy * out.gt(0.0)?.to_dtype(dy.dtype())?;
+    }
+    let d = kernels::with_f32(out, |o| {
+        kernels::with_f32(dy, |g| pointwise::relu_backward(o, g).map_err(kernels::err))
+    })?;
+    kernels::tensor(d, dy.dims())
 }
 
 /// `silu'(x) · dy`.
@@ -247,9 +497,7 @@ pub struct ResnetBlock {
 #[derive(Debug)]
 pub struct ResnetTape {
     n1: GroupNormTape,
-    a1: Tensor,
     n2: GroupNormTape,
-    a2: Tensor,
     hw: (usize, usize),
 }
 
@@ -270,8 +518,8 @@ impl ResnetBlock {
     }
 
     pub fn forward(&self, x: &Tensor) -> R<Tensor> {
-        let h = self.conv1.forward(&self.norm1.forward(x)?.silu()?)?;
-        let h = self.conv2.forward(&self.norm2.forward(&h)?.silu()?)?;
+        let h = self.conv1.forward(&self.norm1.forward_silu(x)?)?;
+        let h = self.conv2.forward(&self.norm2.forward_silu(&h)?)?;
         let skip = match &self.conv_shortcut {
             Some(c) => c.forward(x)?,
             None => x.clone(),
@@ -281,10 +529,10 @@ impl ResnetBlock {
 
     pub fn forward_t(&self, x: &Tensor) -> R<(Tensor, ResnetTape)> {
         let (_, _, hh, ww) = x.dims4()?;
-        let (a1, n1) = self.norm1.forward_t(x)?;
-        let h = self.conv1.forward(&a1.silu()?)?;
-        let (a2, n2) = self.norm2.forward_t(&h)?;
-        let h = self.conv2.forward(&a2.silu()?)?;
+        let (a1, n1) = self.norm1.forward_silu_t(x)?;
+        let h = self.conv1.forward(&a1)?;
+        let (a2, n2) = self.norm2.forward_silu_t(&h)?;
+        let h = self.conv2.forward(&a2)?;
         let skip = match &self.conv_shortcut {
             Some(c) => c.forward(x)?,
             None => x.clone(),
@@ -294,9 +542,7 @@ impl ResnetBlock {
             y,
             ResnetTape {
                 n1,
-                a1,
                 n2,
-                a2,
                 hw: (hh, ww),
             },
         ))
@@ -305,10 +551,8 @@ impl ResnetBlock {
     pub fn backward(&self, t: &ResnetTape, dy: &Tensor) -> R<Tensor> {
         let (h, w) = t.hw;
         let d = self.conv2.backward(dy, h, w)?;
-        let d = silu_backward(&t.a2, &d)?;
         let d = self.norm2.backward(&t.n2, &d)?;
         let d = self.conv1.backward(&d, h, w)?;
-        let d = silu_backward(&t.a1, &d)?;
         let d = self.norm1.backward(&t.n1, &d)?;
         let skip = match &self.conv_shortcut {
             Some(c) => c.backward(dy, h, w)?,
@@ -446,13 +690,11 @@ impl Downsample {
     }
 
     pub fn forward(&self, x: &Tensor) -> R<Tensor> {
-        let x = x.pad_with_zeros(2, 0, 1)?.pad_with_zeros(3, 0, 1)?;
-        self.conv.forward(&x)
+        self.conv.forward_padded(x, [0, 1, 0, 1])
     }
 
     pub fn backward(&self, dy: &Tensor, h: usize, w: usize) -> R<Tensor> {
-        let d = self.conv.backward(dy, h + 1, w + 1)?;
-        d.narrow(2, 0, h)?.narrow(3, 0, w)
+        self.conv.backward_padded(dy, h, w, [0, 1, 0, 1])
     }
 }
 

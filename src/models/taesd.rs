@@ -3,7 +3,7 @@
 //! VJP) and decode. Latents are in the SD latent space (already scaled).
 
 use super::loader::{self, Precision, UNET_WEIGHTS};
-use super::nn::Conv2d;
+use super::nn::{Conv2d, add_relu, relu_backward};
 use super::{ModelError, Result};
 use candle_core::{Device, Tensor};
 use candle_nn::VarBuilder;
@@ -113,17 +113,16 @@ impl Block {
     }
 
     fn forward(&self, x: &Tensor) -> candle_core::Result<Tensor> {
-        let h = self.convs[0].forward(x)?.relu()?;
-        let h = self.convs[1].forward(&h)?.relu()?;
-        let h = self.convs[2].forward(&h)?;
-        (h + x)?.relu()
+        let h = self.convs[0].forward_relu(x)?;
+        let h = self.convs[1].forward_relu(&h)?;
+        add_relu(&self.convs[2].forward(&h)?, x)
     }
 
     /// Forward keeping the three ReLU outputs.
     fn forward_t(&self, x: &Tensor) -> candle_core::Result<[Tensor; 3]> {
-        let a = self.convs[0].forward(x)?.relu()?;
-        let b = self.convs[1].forward(&a)?.relu()?;
-        let y = (self.convs[2].forward(&b)? + x)?.relu()?;
+        let a = self.convs[0].forward_relu(x)?;
+        let b = self.convs[1].forward_relu(&a)?;
+        let y = add_relu(&self.convs[2].forward(&b)?, x)?;
         Ok([a, b, y])
     }
 
@@ -138,10 +137,6 @@ impl Block {
         let d = self.convs[0].backward(&d, h, w)?;
         d + skip
     }
-}
-
-fn relu_backward(out: &Tensor, dy: &Tensor) -> candle_core::Result<Tensor> {
-    dy * out.gt(0.0)?.to_dtype(dy.dtype())?
 }
 
 #[derive(Debug, Clone)]
@@ -324,7 +319,7 @@ impl Taesd {
             }
         }
         let z = ((latents / 3.0)?.tanh()? * 3.0)?;
-        let mut x = self.dec_in.forward(&z)?.relu()?;
+        let mut x = self.dec_in.forward_relu(&z)?;
         for (blocks, upsample, conv) in &self.decoder {
             for b in blocks {
                 x = b.forward(&x)?;

@@ -140,7 +140,7 @@ enum Tape {
     Res(super::nn::ResnetTape),
     Attn(super::nn::AttentionTape),
     Down(usize, usize),
-    NormSilu(super::nn::GroupNormTape, Tensor),
+    NormSilu(super::nn::GroupNormTape),
 }
 
 /// The encoder as a flat sequence of layers (diffusers order).
@@ -239,7 +239,7 @@ impl Encoder {
                 Layer::Res(r) => r.forward(&x)?,
                 Layer::Attn(a) => a.forward(&x)?,
                 Layer::Down(d) => d.forward(&x)?,
-                Layer::NormSilu(n) => n.forward(&x)?.silu()?,
+                Layer::NormSilu(n) => n.forward_silu(&x)?,
             };
         }
         Ok(x)
@@ -262,8 +262,8 @@ impl Encoder {
                 }
                 Layer::Down(d) => (d.forward(&x)?, Tape::Down(h, w)),
                 Layer::NormSilu(n) => {
-                    let (a, t) = n.forward_t(&x)?;
-                    (a.silu()?, Tape::NormSilu(t, a))
+                    let (a, t) = n.forward_silu_t(&x)?;
+                    (a, Tape::NormSilu(t))
                 }
             };
             tapes.push(t);
@@ -285,9 +285,7 @@ impl Encoder {
                 (Layer::Res(r), Tape::Res(t)) => r.backward(&t, &d)?,
                 (Layer::Attn(a), Tape::Attn(t)) => a.backward(&t, &d)?,
                 (Layer::Down(dn), Tape::Down(h, w)) => dn.backward(&d, h, w)?,
-                (Layer::NormSilu(n), Tape::NormSilu(t, a)) => {
-                    n.backward(&t, &super::nn::silu_backward(&a, &d)?)?
-                }
+                (Layer::NormSilu(n), Tape::NormSilu(t)) => n.backward(&t, &d)?,
                 _ => candle_core::bail!("encoder tape out of order"),
             };
         }
@@ -371,7 +369,7 @@ impl Decoder {
                 x = c.forward(&x.upsample_nearest2d(2 * h, 2 * w)?)?;
             }
         }
-        let x = self.conv_norm_out.forward(&x)?.silu()?;
+        let x = self.conv_norm_out.forward_silu(&x)?;
         self.conv_out.forward(&x)
     }
 }

@@ -1,0 +1,56 @@
+//! CPU f32 kernels for the convolution-heavy autoencoders (VAE, TAESD): convolution as shifted
+//! GEMMs ([`conv`]) and a fused group norm (+SiLU) ([`norm`]), each with its input adjoint.
+//!
+//! The layers in [`super::nn`] use them when their tensors are f32 on the CPU and fall back to
+//! candle's ops otherwise (CUDA, f16). [`set_enabled`]`(false)` forces the fallback everywhere,
+//! which `vectorfusion bench models --candle-kernels` uses as the in-run baseline.
+
+pub mod conv;
+pub mod norm;
+pub mod pointwise;
+pub mod winograd;
+
+use candle_core::{DType, Device, Storage, Tensor};
+use std::sync::atomic::{AtomicBool, Ordering};
+
+static ENABLED: AtomicBool = AtomicBool::new(true);
+
+/// Turns the kernels on (the default) or off (candle's own ops) for the whole process.
+pub fn set_enabled(on: bool) {
+    ENABLED.store(on, Ordering::Relaxed);
+}
+
+/// Whether the kernels apply to these tensors: enabled, all f32 and on the CPU.
+pub fn applies(ts: &[&Tensor]) -> bool {
+    ENABLED.load(Ordering::Relaxed)
+        && ts
+            .iter()
+            .all(|t| t.dtype() == DType::F32 && t.device().is_cpu())
+}
+
+/// Runs `f` on the contiguous f32 values of a CPU tensor.
+pub fn with_f32<T>(
+    t: &Tensor,
+    f: impl FnOnce(&[f32]) -> candle_core::Result<T>,
+) -> candle_core::Result<T> {
+    let t = t.contiguous()?;
+    let (storage, layout) = t.storage_and_layout();
+    let Storage::Cpu(cpu) = &*storage else {
+        candle_core::bail!("kernel called on a non-CPU tensor");
+    };
+    let all = cpu.as_slice::<f32>()?;
+    let Some((start, end)) = layout.contiguous_offsets() else {
+        candle_core::bail!("kernel called on a non-contiguous tensor");
+    };
+    f(&all[start..end])
+}
+
+/// A CPU tensor from kernel output (moved, not copied).
+pub fn tensor(v: Vec<f32>, shape: &[usize]) -> candle_core::Result<Tensor> {
+    Tensor::from_vec(v, shape, &Device::Cpu)
+}
+
+/// A kernel's error as a candle error.
+pub fn err(e: String) -> candle_core::Error {
+    candle_core::Error::Msg(e)
+}

@@ -1,0 +1,275 @@
+//! Group normalisation (optionally followed by SiLU) in one pass over each group, and its input
+//! gradient in two. candle's op-by-op version walks every activation six or more times
+//! (mean, subtract, square, mean, scale, affine, activation), writing a new tensor each time.
+//!
+//! Layout: `x [b, c, n]` contiguous (`n` = spatial size); group `g` of image `b` is the contiguous
+//! run of `c / groups` channels, so groups are independent chunks and run in parallel. Statistics
+//! accumulate in f64.
+
+use rayon::prelude::*;
+
+/// Shape and parameters of one group norm. Invariant (checked by [`GroupNormGeom::new`]):
+/// `groups ≥ 1` divides `c`, and `gamma`/`beta` have `c` values.
+#[derive(Clone, Copy, Debug)]
+pub struct GroupNormGeom<'a> {
+    pub b: usize,
+    pub c: usize,
+    pub n: usize,
+    pub groups: usize,
+    pub eps: f64,
+    pub gamma: &'a [f32],
+    pub beta: &'a [f32],
+}
+
+impl<'a> GroupNormGeom<'a> {
+    pub fn new(
+        (b, c, n): (usize, usize, usize),
+        groups: usize,
+        eps: f64,
+        gamma: &'a [f32],
+        beta: &'a [f32],
+    ) -> Result<Self, String> {
+        if groups == 0 || c % groups != 0 {
+            return Err(format!(
+                "group norm: {c} channels not divisible by {groups} groups"
+            ));
+        }
+        if gamma.len() != c || beta.len() != c {
+            return Err(format!(
+                "group norm: {} / {} affine values for {c} channels",
+                gamma.len(),
+                beta.len()
+            ));
+        }
+        Ok(Self {
+            b,
+            c,
+            n,
+            groups,
+            eps,
+            gamma,
+            beta,
+        })
+    }
+
+    fn group_len(&self) -> usize {
+        self.c / self.groups * self.n
+    }
+
+    fn check(&self, what: &str, len: usize) -> Result<(), String> {
+        if len != self.b * self.c * self.n {
+            return Err(format!(
+                "group norm: {what} has {len} values, expected {}",
+                self.b * self.c * self.n
+            ));
+        }
+        Ok(())
+    }
+}
+
+#[inline]
+fn sigmoid(a: f32) -> f32 {
+    1.0 / (1.0 + (-a).exp())
+}
+
+/// `(y, x̂ if kept, 1/σ per (image, group))`.
+pub type GroupNormOut = (Vec<f32>, Option<Vec<f32>>, Vec<f32>);
+
+/// Forward: returns `y = γ·x̂ + β` (then `silu(y)` when `silu`), the normalised input `x̂` (only
+/// when `keep_xhat`, for the backward pass) and `1/σ` per `(image, group)`.
+pub fn group_norm(
+    g: &GroupNormGeom,
+    x: &[f32],
+    silu: bool,
+    keep_xhat: bool,
+) -> Result<GroupNormOut, String> {
+    g.check("input", x.len())?;
+    let len = g.group_len();
+    let cpg = g.c / g.groups;
+    let mut y = vec![0f32; x.len()];
+    let mut xhat = if keep_xhat {
+        vec![0f32; x.len()]
+    } else {
+        Vec::new()
+    };
+    let mut inv = vec![0f32; g.b * g.groups];
+    if len == 0 {
+        return Ok((y, keep_xhat.then_some(xhat), inv));
+    }
+    let one = |idx: usize, yc: &mut [f32], xh: Option<&mut [f32]>, inv_out: &mut f32| {
+        let xc = &x[idx * len..(idx + 1) * len];
+        let mean = xc.iter().map(|&v| v as f64).sum::<f64>() / len as f64;
+        let var = xc
+            .iter()
+            .map(|&v| {
+                let d = v as f64 - mean;
+                d * d
+            })
+            .sum::<f64>()
+            / len as f64;
+        let inv_std = 1.0 / (var + g.eps).sqrt();
+        *inv_out = inv_std as f32;
+        let (mean, inv_std) = (mean as f32, inv_std as f32);
+        let ch0 = (idx % g.groups) * cpg;
+        for j in 0..cpg {
+            let (ga, be) = (g.gamma[ch0 + j], g.beta[ch0 + j]);
+            let r = j * g.n..(j + 1) * g.n;
+            let src = &xc[r.clone()];
+            let dst = &mut yc[r.clone()];
+            for (d, &v) in dst.iter_mut().zip(src) {
+                let a = (v - mean) * inv_std * ga + be;
+                *d = if silu { a * sigmoid(a) } else { a };
+            }
+        }
+        if let Some(xh) = xh {
+            for (d, &v) in xh.iter_mut().zip(xc) {
+                *d = (v - mean) * inv_std;
+            }
+        }
+    };
+    if keep_xhat {
+        y.par_chunks_mut(len)
+            .zip(xhat.par_chunks_mut(len))
+            .zip(inv.par_iter_mut())
+            .enumerate()
+            .for_each(|(idx, ((yc, xh), iv))| one(idx, yc, Some(xh), iv));
+    } else {
+        y.par_chunks_mut(len)
+            .zip(inv.par_iter_mut())
+            .enumerate()
+            .for_each(|(idx, (yc, iv))| one(idx, yc, None, iv));
+    }
+    Ok((y, keep_xhat.then_some(xhat), inv))
+}
+
+/// Input gradient of [`group_norm`] given `dy` (the gradient of its output, after the SiLU when
+/// `silu`), the saved `x̂` and `1/σ`: `dx = (d̂ − mean(d̂) − x̂·mean(d̂·x̂)) / σ` with `d̂ = γ·dy_pre`.
+pub fn group_norm_input_grad(
+    g: &GroupNormGeom,
+    dy: &[f32],
+    xhat: &[f32],
+    inv_std: &[f32],
+    silu: bool,
+) -> Result<Vec<f32>, String> {
+    g.check("output gradient", dy.len())?;
+    g.check("normalised input", xhat.len())?;
+    if inv_std.len() != g.b * g.groups {
+        return Err("group norm: wrong number of saved statistics".into());
+    }
+    let len = g.group_len();
+    let cpg = g.c / g.groups;
+    let mut dx = vec![0f32; dy.len()];
+    if len == 0 {
+        return Ok(dx);
+    }
+    dx.par_chunks_mut(len).enumerate().for_each(|(idx, dxc)| {
+        let r = idx * len..(idx + 1) * len;
+        let (dyc, xh) = (&dy[r.clone()], &xhat[r]);
+        let ch0 = (idx % g.groups) * cpg;
+        // pass 1: d̂ into dx, with its two sums
+        let (mut s1, mut s2) = (0f64, 0f64);
+        for j in 0..cpg {
+            let (ga, be) = (g.gamma[ch0 + j], g.beta[ch0 + j]);
+            let cr = j * g.n..(j + 1) * g.n;
+            for ((d, &gy), &xv) in dxc[cr.clone()]
+                .iter_mut()
+                .zip(&dyc[cr.clone()])
+                .zip(&xh[cr])
+            {
+                let gpre = if silu {
+                    let a = xv * ga + be;
+                    let s = sigmoid(a);
+                    gy * s * (1.0 + a * (1.0 - s))
+                } else {
+                    gy
+                };
+                let dh = gpre * ga;
+                *d = dh;
+                s1 += dh as f64;
+                s2 += (dh * xv) as f64;
+            }
+        }
+        let (m1, m2) = ((s1 / len as f64) as f32, (s2 / len as f64) as f32);
+        let iv = inv_std[idx];
+        // pass 2
+        for (d, &xv) in dxc.iter_mut().zip(xh) {
+            *d = (*d - m1 - xv * m2) * iv;
+        }
+    });
+    Ok(dx)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn rand(n: usize, seed: u64) -> Vec<f32> {
+        let mut s = seed;
+        (0..n)
+            .map(|_| {
+                s = s
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                ((s >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
+            })
+            .collect()
+    }
+
+    /// The scalar loss `Σ r ⊙ f(x)` and its finite-difference gradient.
+    fn fd_check(silu: bool) {
+        let (b, c, n, groups) = (2, 6, 5, 3);
+        let gamma = rand(c, 1);
+        let beta = rand(c, 2);
+        let g = GroupNormGeom::new((b, c, n), groups, 1e-5, &gamma, &beta).unwrap();
+        let x: Vec<f32> = rand(b * c * n, 3).iter().map(|v| v * 2.0 + 0.3).collect();
+        let r = rand(b * c * n, 4);
+        let loss = |x: &[f32]| -> f64 {
+            let (y, _, _) = group_norm(&g, x, silu, false).unwrap();
+            y.iter()
+                .zip(&r)
+                .map(|(a, b)| (*a as f64) * (*b as f64))
+                .sum()
+        };
+        let (_, xhat, inv) = group_norm(&g, &x, silu, true).unwrap();
+        let dx = group_norm_input_grad(&g, &r, &xhat.unwrap(), &inv, silu).unwrap();
+        let h = 1e-2f32;
+        for i in (0..x.len()).step_by(7) {
+            let mut xp = x.clone();
+            xp[i] += h;
+            let mut xm = x.clone();
+            xm[i] -= h;
+            let fd = (loss(&xp) - loss(&xm)) / (2.0 * h as f64);
+            assert!(
+                (fd - dx[i] as f64).abs() < 2e-3 * (1.0 + fd.abs()),
+                "silu {silu}, x[{i}]: finite difference {fd} vs {}",
+                dx[i]
+            );
+        }
+    }
+
+    #[test]
+    fn gradient_matches_finite_differences() {
+        fd_check(false);
+        fd_check(true);
+    }
+
+    #[test]
+    fn forward_normalises_each_group() {
+        let (b, c, n, groups) = (1, 4, 8, 2);
+        let gamma = vec![1.0; c];
+        let beta = vec![0.0; c];
+        let g = GroupNormGeom::new((b, c, n), groups, 0.0, &gamma, &beta).unwrap();
+        let x: Vec<f32> = (0..b * c * n).map(|i| (i * i) as f32 * 0.1).collect();
+        let (y, _, _) = group_norm(&g, &x, false, false).unwrap();
+        for grp in y.chunks(c / groups * n) {
+            let mean: f32 = grp.iter().sum::<f32>() / grp.len() as f32;
+            let var: f32 = grp.iter().map(|v| (v - mean).powi(2)).sum::<f32>() / grp.len() as f32;
+            assert!(
+                mean.abs() < 1e-5 && (var - 1.0).abs() < 1e-4,
+                "{mean} {var}"
+            );
+        }
+        assert!(GroupNormGeom::new((1, 4, 8), 3, 1e-5, &gamma, &beta).is_err());
+        assert!(group_norm(&g, &x[1..], false, false).is_err());
+    }
+}
