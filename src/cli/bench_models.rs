@@ -45,6 +45,10 @@ pub struct BenchModelsArgs {
     /// Print one JSON object instead of a table.
     #[arg(long)]
     pub json: bool,
+    /// In-run baseline: candle's own CPU ops instead of our autoencoder kernels (Winograd /
+    /// im2col convolution, fused group norm).
+    #[arg(long)]
+    pub candle_kernels: bool,
 }
 
 impl std::str::FromStr for Arch {
@@ -129,6 +133,8 @@ struct Report {
     arch: String,
     size: usize,
     unet_precision: String,
+    /// "ours" or "candle" (the `--candle-kernels` baseline)
+    kernels: String,
     reps: usize,
     unet_reps: usize,
     threads: usize,
@@ -195,12 +201,19 @@ pub fn run(args: BenchModelsArgs) -> Result<(), CliError> {
         )));
     }
     let want = |c: &str| args.only.is_empty() || args.only.iter().any(|o| o == c);
+    crate::models::kernels::set_enabled(!args.candle_kernels);
     let dev = Device::Cpu;
     let s = args.size;
     let mut r = Report {
         arch: format!("{:?}", args.arch).to_lowercase(),
         size: s,
         unet_precision: format!("{:?}", args.unet_precision).to_lowercase(),
+        kernels: if args.candle_kernels {
+            "candle"
+        } else {
+            "ours"
+        }
+        .into(),
         reps: args.reps,
         unet_reps: args.unet_reps,
         threads: candle_core::utils::get_num_threads(),
@@ -310,8 +323,8 @@ pub fn run(args: BenchModelsArgs) -> Result<(), CliError> {
     } else {
         let f = |v: Option<f64>| v.map_or("-".to_string(), |x| format!("{x:.0}"));
         println!(
-            "bench models  arch={} size={} unet={} threads={} (median of {} / unet {})",
-            r.arch, r.size, r.unet_precision, r.threads, r.reps, r.unet_reps
+            "bench models  arch={} size={} unet={} kernels={} threads={} (median of {} / unet {})",
+            r.arch, r.size, r.unet_precision, r.kernels, r.threads, r.reps, r.unet_reps
         );
         println!("  unet_cfg_ms     {}", f(r.unet_cfg_ms));
         println!("  encoder_fwd_ms  {}", f(r.encoder_fwd_ms));
