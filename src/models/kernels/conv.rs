@@ -15,7 +15,7 @@
 //! Work is split into column tiles sized for the L2 cache; tiles run in parallel (rayon) and each
 //! runs its `k²` GEMMs single-threaded, accumulating into a tile that stays in cache.
 
-use super::winograd;
+use super::{SyncPtr, winograd};
 use gemm::{Parallelism, gemm};
 use rayon::prelude::*;
 
@@ -108,19 +108,6 @@ impl ConvGeom {
             }
         }
         v
-    }
-}
-
-/// A raw pointer that may cross threads: the tiles that use it write disjoint columns.
-#[derive(Clone, Copy)]
-struct SyncPtr(*mut f32);
-unsafe impl Send for SyncPtr {}
-unsafe impl Sync for SyncPtr {}
-
-impl SyncPtr {
-    /// The pointer (a method, so closures capture the whole `Sync` wrapper).
-    fn get(self) -> *mut f32 {
-        self.0
     }
 }
 
@@ -623,17 +610,7 @@ mod tests {
     }
 
     fn rand(n: usize, seed: u64) -> Vec<f32> {
-        let mut s = seed
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (0..n)
-            .map(|_| {
-                s = s
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                ((s >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
-            })
-            .collect()
+        crate::models::kernels::test_values(n, seed.wrapping_add(0x5eed))
     }
 
     fn geoms() -> Vec<ConvGeom> {

@@ -54,3 +54,31 @@ pub fn tensor(v: Vec<f32>, shape: &[usize]) -> candle_core::Result<Tensor> {
 pub fn err(e: String) -> candle_core::Error {
     candle_core::Error::Msg(e)
 }
+
+/// A raw pointer that may cross threads. Users write disjoint parts of the buffer from
+/// different threads and say so at each `unsafe` use.
+#[derive(Clone, Copy)]
+pub(crate) struct SyncPtr(pub(crate) *mut f32);
+unsafe impl Send for SyncPtr {}
+unsafe impl Sync for SyncPtr {}
+
+impl SyncPtr {
+    /// The pointer (a method, so closures capture the whole `Sync` wrapper).
+    pub(crate) fn get(self) -> *mut f32 {
+        self.0
+    }
+}
+
+/// Deterministic values in [-1, 1) for the kernel tests (an LCG; no RNG state to share).
+#[cfg(test)]
+pub(crate) fn test_values(n: usize, seed: u64) -> Vec<f32> {
+    let mut s = seed;
+    (0..n)
+        .map(|_| {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((s >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
+        })
+        .collect()
+}

@@ -10,6 +10,7 @@
 //! input row into even and odd samples), runs the 16 GEMMs into `[16, co, T]`, and writes its
 //! output rows with the inverse transform.
 
+use super::SyncPtr;
 use super::conv::ConvGeom;
 use gemm::{Parallelism, gemm};
 use rayon::prelude::*;
@@ -54,16 +55,6 @@ struct Scratch {
 
 thread_local! {
     static SCRATCH: RefCell<Scratch> = RefCell::new(Scratch::default());
-}
-
-#[derive(Clone, Copy)]
-struct SyncPtr(*mut f32);
-unsafe impl Send for SyncPtr {}
-unsafe impl Sync for SyncPtr {}
-impl SyncPtr {
-    fn get(self) -> *mut f32 {
-        self.0
-    }
 }
 
 /// Whether [`conv2d`] handles this geometry (3×3, stride 1).
