@@ -164,7 +164,7 @@ impl Conv2d {
             );
         }
         let (weight, _) = self.cached_weights()?;
-        let wino = if g.stride == 1 && g.k == 3 {
+        let wino = if winograd::applies(&g) {
             Some(self.cache.wino_flipped.get_or_init(|| {
                 winograd::transform_kernel(&conv::flip_transpose(weight, g.co, ci, 3), ci, g.co)
             }))
@@ -178,9 +178,9 @@ impl Conv2d {
         kernels::tensor(dx, &[b, ci, h, w])
     }
 
-    /// Gradient w.r.t. the input of spatial size `(h, w)` given the output gradient `dy`:
-    /// a stride-1 convolution of the (dilated, padded) `dy` with the flipped, transposed
-    /// kernel, which reuses candle's fast im2col + GEMM path.
+    /// Gradient w.r.t. the input of spatial size `(h, w)` given the output gradient `dy`: the
+    /// kernels' adjoint ([`Conv2d::backward_padded`]), or, off the kernel path, a stride-1
+    /// candle convolution of the (dilated, padded) `dy` with the flipped, transposed kernel.
     pub fn backward(&self, dy: &Tensor, h: usize, w: usize) -> R<Tensor> {
         if kernels::applies(&[dy, &self.weight]) {
             return self.backward_padded(dy, h, w, [self.padding; 4]);
@@ -295,24 +295,26 @@ impl GroupNorm {
         Ok((xhat, inv_std))
     }
 
-    /// `[b, c, …]` → `(b, c, n)` for the kernel.
-    fn dims3(x: &Tensor) -> R<(usize, usize, usize)> {
-        let d = x.dims();
-        if d.len() < 2 {
-            candle_core::bail!("group norm: input of shape {d:?} has no channel axis");
+    /// Runs `f` with the kernel geometry of an input of shape `dims`.
+    fn with_geom<T>(&self, dims: &[usize], f: impl FnOnce(&norm::GroupNormGeom) -> R<T>) -> R<T> {
+        if dims.len() < 2 {
+            candle_core::bail!("group norm: input of shape {dims:?} has no channel axis");
         }
-        Ok((d[0], d[1], d[2..].iter().product()))
-    }
-
-    /// The fused kernel: `(y, x̂, 1/σ)`.
-    fn kernel(&self, x: &Tensor, silu: bool, keep: bool) -> R<(Tensor, Option<Tensor>, Tensor)> {
-        let (b, c, n) = Self::dims3(x)?;
+        let (b, c, n) = (dims[0], dims[1], dims[2..].iter().product());
         let gamma = self.weight.to_vec1::<f32>()?;
         let beta = self.bias.to_vec1::<f32>()?;
         let g = norm::GroupNormGeom::new((b, c, n), self.groups, self.eps, &gamma, &beta)
             .map_err(kernels::err)?;
-        let (y, xhat, inv) = kernels::with_f32(x, |xs| {
-            norm::group_norm(&g, xs, silu, keep).map_err(kernels::err)
+        f(&g)
+    }
+
+    /// The fused kernel: `(y, x̂, 1/σ)`.
+    fn kernel(&self, x: &Tensor, silu: bool, keep: bool) -> R<(Tensor, Option<Tensor>, Tensor)> {
+        let b = x.dim(0)?;
+        let (y, xhat, inv) = self.with_geom(x.dims(), |g| {
+            kernels::with_f32(x, |xs| {
+                norm::group_norm(g, xs, silu, keep).map_err(kernels::err)
+            })
         })?;
         let xhat = match xhat {
             Some(v) => Some(kernels::tensor(v, x.dims())?),
@@ -383,15 +385,12 @@ impl GroupNorm {
     pub fn backward(&self, t: &GroupNormTape, dy: &Tensor) -> R<Tensor> {
         let shape = dy.dims().to_vec();
         if kernels::applies(&[dy, &t.xhat, &t.inv_std, &self.weight, &self.bias]) {
-            let (b, c, n) = Self::dims3(dy)?;
-            let gamma = self.weight.to_vec1::<f32>()?;
-            let beta = self.bias.to_vec1::<f32>()?;
-            let g = norm::GroupNormGeom::new((b, c, n), self.groups, self.eps, &gamma, &beta)
-                .map_err(kernels::err)?;
-            let dx = kernels::with_f32(dy, |ds| {
-                kernels::with_f32(&t.xhat, |xh| {
-                    kernels::with_f32(&t.inv_std, |iv| {
-                        norm::group_norm_input_grad(&g, ds, xh, iv, t.silu).map_err(kernels::err)
+            let dx = self.with_geom(&shape, |g| {
+                kernels::with_f32(dy, |ds| {
+                    kernels::with_f32(&t.xhat, |xh| {
+                        kernels::with_f32(&t.inv_std, |iv| {
+                            norm::group_norm_input_grad(g, ds, xh, iv, t.silu).map_err(kernels::err)
+                        })
                     })
                 })
             })?;

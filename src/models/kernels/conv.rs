@@ -1,19 +1,18 @@
-//! 2-D convolution on the CPU as a sum of shifted GEMMs, with its input adjoint.
+//! 2-D convolution on the CPU, with its input adjoint (the gradient with respect to the input).
 //!
-//! A `k×k` convolution with stride `s` is `Σ_taps W_tap · shift_tap(x)`: for every kernel tap
-//! `(kh, kw)`, the `[co, ci]` slice of the kernel times the input shifted by that tap. Laying the
-//! zero-padded input out as `s²` *phase planes* (`P_{a,b}[c, i, j] = x_pad[c, s·i + a, s·j + b]`,
-//! each `hq × wq`) makes every shifted input a plain strided view: output pixel `(y, x)`, stored on
-//! a grid of pitch `wq`, reads phase plane `(kh mod s, kw mod s)` at
-//! `(y + kh / s) · wq + x + kw / s`. So the whole convolution is `k²` GEMMs over views of one
-//! buffer, with no im2col matrix (candle's CPU path copies every input value `k²` times, one
-//! pixel at a time). The grid columns `x ≥ wo` are junk and are dropped at the end.
+//! Forward: 3×3 stride-1 geometries go to Winograd F(2×2, 3×3) ([`winograd`]); every other
+//! geometry runs a row-tiled im2col GEMM ([`conv2d_im2col`]): tiles of output rows in parallel,
+//! each gathering its `[ci·k·k, rows·wo]` patch block from contiguous input row segments and
+//! running one GEMM written straight into the output (candle's CPU path copies every input
+//! value `k²` times, one pixel at a time, and transposes in and out of NHWC).
 //!
-//! The input adjoint is the same machinery run backwards: each phase plane gathers
-//! `Σ_{taps of that phase} W_tapᵀ · dgrid` from the output gradient, shifted the other way.
-//!
-//! Work is split into column tiles sized for the L2 cache; tiles run in parallel (rayon) and each
-//! runs its `k²` GEMMs single-threaded, accumulating into a tile that stays in cache.
+//! Adjoint: for stride 1 it is the forward convolution of the output gradient with the flipped,
+//! transposed kernel ([`flip_transpose`]), padded by `k − 1 − p`. For larger strides the padded
+//! input is viewed as `s²` *phase planes* (`P_{a,b}[c, i, j] = x_pad[c, s·i + a, s·j + b]`,
+//! each `hq × wq`); on the output grid of pitch `wq` tap `(kh, kw)` reads plane
+//! `(kh mod s, kw mod s)` at offset `(kh / s) · wq + kw / s`, so each phase plane of the
+//! gradient gathers `Σ_{taps of that phase} W_tapᵀ · dgrid` from shifted views of one buffer
+//! (`tap_gemm`), with no zero-dilated gradient.
 
 use super::{SyncPtr, winograd};
 use gemm::{Parallelism, gemm};
@@ -120,9 +119,8 @@ struct Tap<'a> {
     src_off: usize,
 }
 
-/// `out[i, q] (+)= Σ_taps lhs_t[i, :] · src[:, src_off_t + q]` for `q < n`, where `out` rows have
-/// pitch `out_rs` and `src` rows pitch `src_rs`. `init` (one value per output row) seeds the
-/// sum; without it the sum starts from zero.
+/// `out[i, q] = Σ_taps lhs_t[i, :] · src[:, src_off_t + q]` for `q < n`, where `out` rows have
+/// pitch `out_rs` and `src` rows pitch `src_rs` (an empty tap list writes zeros).
 ///
 /// With several taps, each column tile first gathers its `taps · kk` source rows (contiguous
 /// runs, so plain copies) into one `[taps·kk, cols]` block and runs a single GEMM of depth
@@ -138,7 +136,6 @@ fn tap_gemm(
     taps: &[Tap],
     src: &[f32],
     src_rs: usize,
-    init: Option<&[f32]>,
 ) -> Result<(), String> {
     if m == 0 || n == 0 {
         return Ok(());
@@ -146,9 +143,6 @@ fn tap_gemm(
     // Bounds of every access, checked once so the GEMMs below cannot go out of range.
     if (m - 1) * out_rs + n > out.len() {
         return Err("conv2d: output buffer too small".into());
-    }
-    if init.is_some_and(|v| v.len() < m) {
-        return Err("conv2d: bias shorter than the output channels".into());
     }
     if kk == 0 {
         return Err("conv2d: zero GEMM depth".into());
@@ -182,26 +176,14 @@ fn tap_gemm(
         let q0 = t_idx * tn;
         let cols = tn.min(n - q0);
         let dst = out_ptr;
-        let read_dst = init.is_some();
-        if let Some(bias) = init {
-            for (i, &b) in bias.iter().take(m).enumerate() {
-                // SAFETY: row i, columns [q0, q0 + cols) lie inside `out` (checked above) and
-                // belong to this tile only.
-                unsafe {
-                    let row = dst.0.add(i * out_rs + q0);
-                    std::slice::from_raw_parts_mut(row, cols).fill(b);
-                }
-            }
-        }
         match taps {
             [] => {
-                if !read_dst {
-                    for i in 0..m {
-                        // SAFETY: as above.
-                        unsafe {
-                            let row = dst.0.add(i * out_rs + q0);
-                            std::slice::from_raw_parts_mut(row, cols).fill(0.0);
-                        }
+                for i in 0..m {
+                    // SAFETY: row i, columns [q0, q0 + cols) lie inside `out` (checked above)
+                    // and belong to this tile only.
+                    unsafe {
+                        let row = dst.get().add(i * out_rs + q0);
+                        std::slice::from_raw_parts_mut(row, cols).fill(0.0);
                     }
                 }
             }
@@ -212,10 +194,10 @@ fn tap_gemm(
                         m,
                         cols,
                         kk,
-                        dst.0.add(q0),
+                        dst.get().add(q0),
                         1,
                         out_rs as isize,
-                        read_dst,
+                        false,
                         t.lhs.as_ptr(),
                         t.lhs_cs as isize,
                         t.lhs_rs as isize,
@@ -248,10 +230,10 @@ fn tap_gemm(
                             m,
                             cols,
                             depth,
-                            dst.0.add(q0),
+                            dst.get().add(q0),
                             1,
                             out_rs as isize,
-                            read_dst,
+                            false,
                             packed.as_ptr(),
                             1,
                             depth as isize,
@@ -279,19 +261,30 @@ thread_local! {
     static COL: std::cell::RefCell<Vec<f32>> = const { std::cell::RefCell::new(Vec::new()) };
 }
 
-fn check_len(what: &str, got: usize, want: usize) -> Result<(), String> {
+pub(super) fn check_len(what: &str, got: usize, want: usize) -> Result<(), String> {
     if got != want {
         return Err(format!("conv2d: {what} has {got} values, expected {want}"));
     }
     Ok(())
 }
 
+/// The input, weight and bias lengths `g` implies.
+fn check_inputs(
+    g: &ConvGeom,
+    x: &[f32],
+    weight: &[f32],
+    bias: Option<&[f32]>,
+) -> Result<(), String> {
+    check_len("input", x.len(), g.b * g.ci * g.h * g.w)?;
+    check_len("weight", weight.len(), g.co * g.ci * g.k * g.k)?;
+    if let Some(bias) = bias {
+        check_len("bias", bias.len(), g.co)?;
+    }
+    Ok(())
+}
+
 /// Convolution forward: `x [b, ci, h, w]`, `weight [co, ci, k, k]`, optional `bias [co]`, all
 /// contiguous; returns `[b, co, ho, wo]`.
-///
-/// Output rows are processed in tiles, in parallel: each tile gathers its im2col block
-/// `[ci·k·k, rows·wo]` (row segments of the input, zero outside it) into a per-thread buffer and
-/// runs one GEMM against the weight viewed as `[co, ci·k·k]`, written straight into the output.
 pub fn conv2d(
     g: &ConvGeom,
     x: &[f32],
@@ -311,11 +304,7 @@ pub fn conv2d_prepared(
     wino: Option<&[f32]>,
     bias: Option<&[f32]>,
 ) -> Result<Vec<f32>, String> {
-    check_len("input", x.len(), g.b * g.ci * g.h * g.w)?;
-    check_len("weight", weight.len(), g.co * g.ci * g.k * g.k)?;
-    if let Some(bias) = bias {
-        check_len("bias", bias.len(), g.co)?;
-    }
+    check_inputs(g, x, weight, bias)?;
     if winograd::applies(g) {
         let owned;
         let u = match wino {
@@ -325,13 +314,15 @@ pub fn conv2d_prepared(
                 &owned
             }
         };
-        check_len("Winograd kernel", u.len(), 16 * g.co * g.ci)?;
-        return Ok(winograd::conv2d(g, x, u, bias));
+        return winograd::conv2d(g, x, u, bias);
     }
     conv2d_im2col(g, x, weight, bias)
 }
 
-/// The im2col + GEMM convolution (any geometry).
+/// The im2col + GEMM convolution (any geometry): output rows in tiles, in parallel; each tile
+/// gathers its im2col block `[ci·k·k, rows·wo]` (row segments of the input, zero outside it)
+/// into a per-thread buffer and runs one GEMM against the weight viewed as `[co, ci·k·k]`,
+/// written straight into the output.
 pub fn conv2d_im2col(
     g: &ConvGeom,
     x: &[f32],
@@ -348,11 +339,7 @@ pub fn conv2d_im2col(
         stride: s,
         pad,
     } = *g;
-    check_len("input", x.len(), b * ci * h * w)?;
-    check_len("weight", weight.len(), co * ci * k * k)?;
-    if let Some(bias) = bias {
-        check_len("bias", bias.len(), co)?;
-    }
+    check_inputs(g, x, weight, bias)?;
     let (ho, wo) = g.out_hw();
     let depth = ci * k * k;
     let plain = k == 1 && s == 1 && pad == [0; 4];
@@ -509,8 +496,7 @@ pub fn conv2d_input_grad_prepared(
         // dx = correlation of dy with the flipped, transposed kernel, padded by k − 1 − p
         let gt = ConvGeom::new(b, co, ho, wo, ci, k, 1, pad.map(|p| k - 1 - p))?;
         if let (Some(u), true) = (wino_flipped, winograd::applies(&gt)) {
-            check_len("Winograd kernel", u.len(), 16 * co * ci)?;
-            return Ok(winograd::conv2d(&gt, dy, u, None));
+            return winograd::conv2d(&gt, dy, u, None);
         }
         let wt = flip_transpose(weight, co, ci, k);
         return conv2d(&gt, dy, &wt, None);
@@ -548,7 +534,7 @@ pub fn conv2d_input_grad_prepared(
                 })
                 .collect();
             let out = &mut dphases[phase * ci * plane..(phase + 1) * ci * plane];
-            tap_gemm(ci, co, plane, out, plane, &taps, &dgrid, pitch, None)?;
+            tap_gemm(ci, co, plane, out, plane, &taps, &dgrid, pitch)?;
         }
         // gather the padded-input gradient back from the phase planes, dropping the padding
         let (pt, pl) = (pad[0], pad[2]);
@@ -703,5 +689,11 @@ mod tests {
         let g = ConvGeom::new(1, 2, 4, 4, 2, 3, 1, [1; 4]).unwrap();
         assert!(conv2d(&g, &[0.0; 5], &[0.0; 36], None).is_err());
         assert!(conv2d_input_grad(&g, &[0.0; 31], &[0.0; 36]).is_err());
+        // the Winograd entry point checks its own inputs (a short kernel transform, a geometry
+        // it does not handle)
+        assert!(winograd::conv2d(&g, &[0.0; 32], &[0.0; 63], None).is_err());
+        assert!(winograd::conv2d(&g, &[0.0; 32], &[0.0; 64], None).is_ok());
+        let g2 = ConvGeom::new(1, 2, 4, 4, 2, 3, 2, [1; 4]).unwrap();
+        assert!(winograd::conv2d(&g2, &[0.0; 32], &[0.0; 64], None).is_err());
     }
 }

@@ -11,7 +11,7 @@
 //! output rows with the inverse transform.
 
 use super::SyncPtr;
-use super::conv::ConvGeom;
+use super::conv::{ConvGeom, check_len};
 use gemm::{Parallelism, gemm};
 use rayon::prelude::*;
 use std::cell::RefCell;
@@ -63,11 +63,26 @@ pub fn applies(g: &ConvGeom) -> bool {
 }
 
 /// The convolution of [`super::conv::conv2d`] for 3×3 stride-1 geometries, given the transformed
-/// kernel `u` from [`transform_kernel`]. Inputs must already have the lengths `g` implies.
-pub fn conv2d(g: &ConvGeom, x: &[f32], u: &[f32], bias: Option<&[f32]>) -> Vec<f32> {
+/// kernel `u` from [`transform_kernel`].
+pub fn conv2d(
+    g: &ConvGeom,
+    x: &[f32],
+    u: &[f32],
+    bias: Option<&[f32]>,
+) -> Result<Vec<f32>, String> {
     let ConvGeom {
         b, ci, h, w, co, ..
     } = *g;
+    if !applies(g) {
+        return Err(format!(
+            "Winograd F(2x2, 3x3) needs a 3x3 stride-1 convolution, got {g:?}"
+        ));
+    }
+    check_len("input", x.len(), b * ci * h * w)?;
+    check_len("Winograd kernel", u.len(), 16 * co * ci)?;
+    if let Some(bias) = bias {
+        check_len("bias", bias.len(), co)?;
+    }
     let (ho, wo) = g.out_hw();
     let (th, tw) = (ho.div_ceil(2), wo.div_ceil(2));
     // tiles per block: enough columns for an efficient GEMM, small enough for the caches, and at
@@ -116,15 +131,10 @@ pub fn conv2d(g: &ConvGeom, x: &[f32], u: &[f32], bias: Option<&[f32]>) -> Vec<f
                     );
                 }
             }
-            // SAFETY: this job writes output rows [2·ty0, 2·(ty0 + nr)) ∩ [0, ho) of image bi
-            // only; the slice covers image bi.
-            let ob = unsafe {
-                std::slice::from_raw_parts_mut(out_ptr.get().add(bi * co * ho * wo), co * ho * wo)
-            };
-            output_transform(g, &s.m, ty0, nr, tw, bias, ob);
+            output_transform(g, &s.m, ty0, nr, tw, bias, out_ptr, bi);
         });
     });
-    out
+    Ok(out)
 }
 
 /// `V[ξ, c, tile] = (Bᵀ d B)[ξ]` for the tiles of tile rows `[ty0, ty0 + nr)`.
@@ -218,7 +228,10 @@ fn deinterleave(src: &[f32], pl: usize, even: &mut [f32], odd: &mut [f32]) {
     }
 }
 
-/// `y = Aᵀ M A (+ bias)` for the tiles of tile rows `[ty0, ty0 + nr)`, into `out [co, ho, wo]`.
+/// `y = Aᵀ M A (+ bias)` for the tiles of tile rows `[ty0, ty0 + nr)` of image `bi`, into the
+/// `[b, co, ho, wo]` output behind `out`. Only output rows `[2·ty0, 2·(ty0 + nr)) ∩ [0, ho)` are
+/// touched: those belong to this block alone, so blocks can run at the same time.
+#[allow(clippy::too_many_arguments)]
 fn output_transform(
     g: &ConvGeom,
     m: &[f32],
@@ -226,7 +239,8 @@ fn output_transform(
     nr: usize,
     tw: usize,
     bias: Option<&[f32]>,
-    out: &mut [f32],
+    out: SyncPtr,
+    bi: usize,
 ) {
     let co = g.co;
     let (ho, wo) = g.out_hw();
@@ -262,7 +276,11 @@ fn output_transform(
                 let (q0, rest) = pr.split_at(tw);
                 let (q1, rest) = rest.split_at(tw);
                 let (q2, q3) = rest.split_at(tw);
-                let orow = &mut out[(o * ho + y) * wo..(o * ho + y + 1) * wo];
+                // SAFETY: row y < ho of channel o of image bi lies inside the b·co·ho·wo output,
+                // and only this block writes it (see above).
+                let orow = unsafe {
+                    std::slice::from_raw_parts_mut(out.get().add(((bi * co + o) * ho + y) * wo), wo)
+                };
                 // full tiles write two columns; an odd width leaves one column for the last
                 let full = wo / 2;
                 for (tx, pair) in orow.chunks_exact_mut(2).take(full).enumerate() {
