@@ -23,6 +23,11 @@
 //! | [`config`] | service configuration (`config.toml`, env, flags) |
 //! | [`cli`] | command-line front end |
 
+/// See the `mimalloc` feature in `Cargo.toml`.
+#[cfg(feature = "mimalloc")]
+#[global_allocator]
+static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 pub mod augment;
 pub mod cli;
 pub mod config;
