@@ -13,38 +13,38 @@ pub fn relu_inplace(v: &mut [f32]) {
 
 /// `max(a + b, 0)`.
 pub fn add_relu(a: &[f32], b: &[f32]) -> Result<Vec<f32>, String> {
+    zip_map("add_relu", a, b, |a, b| (a + b).max(0.0))
+}
+
+/// Input gradient of a ReLU from its output: `dy · [out > 0]`.
+pub fn relu_backward(out: &[f32], dy: &[f32]) -> Result<Vec<f32>, String> {
+    zip_map(
+        "relu_backward",
+        out,
+        dy,
+        |o, g| if o > 0.0 { g } else { 0.0 },
+    )
+}
+
+/// `f(a[i], b[i])` for two equally long slices, in parallel chunks.
+fn zip_map(
+    name: &str,
+    a: &[f32],
+    b: &[f32],
+    f: impl Fn(f32, f32) -> f32 + Sync,
+) -> Result<Vec<f32>, String> {
     if a.len() != b.len() {
-        return Err(format!("add_relu: {} vs {} values", a.len(), b.len()));
+        return Err(format!("{name}: {} vs {} values", a.len(), b.len()));
     }
     let mut out = vec![0f32; a.len()];
     out.par_chunks_mut(CHUNK)
         .zip(a.par_chunks(CHUNK).zip(b.par_chunks(CHUNK)))
         .for_each(|(o, (a, b))| {
             for ((o, a), b) in o.iter_mut().zip(a).zip(b) {
-                *o = (a + b).max(0.0);
+                *o = f(*a, *b);
             }
         });
     Ok(out)
-}
-
-/// Input gradient of a ReLU from its output: `dy · [out > 0]`.
-pub fn relu_backward(out: &[f32], dy: &[f32]) -> Result<Vec<f32>, String> {
-    if out.len() != dy.len() {
-        return Err(format!(
-            "relu_backward: {} vs {} values",
-            out.len(),
-            dy.len()
-        ));
-    }
-    let mut dx = vec![0f32; dy.len()];
-    dx.par_chunks_mut(CHUNK)
-        .zip(out.par_chunks(CHUNK).zip(dy.par_chunks(CHUNK)))
-        .for_each(|(d, (o, g))| {
-            for ((d, o), g) in d.iter_mut().zip(o).zip(g) {
-                *d = if *o > 0.0 { *g } else { 0.0 };
-            }
-        });
-    Ok(dx)
 }
 
 #[cfg(test)]
