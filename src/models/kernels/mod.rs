@@ -1,11 +1,16 @@
-//! CPU f32 kernels for the convolution-heavy autoencoders (VAE, TAESD): convolution as shifted
-//! GEMMs ([`conv`]) and a fused group norm (+SiLU) ([`norm`]), each with its input adjoint.
+//! CPU f32 kernels for the diffusion models: convolution as shifted GEMMs or Winograd ([`conv`],
+//! [`winograd`]) and a fused group norm (+SiLU) ([`norm`]), each with its input adjoint for the
+//! autoencoders' VJP; for the UNet's transformer blocks, linear layers with fused epilogues
+//! ([`linear`]), fused tiled attention ([`attention`]), layer norm and GEGLU.
 //!
 //! The layers in [`super::nn`] use them when their tensors are f32 on the CPU and fall back to
 //! candle's ops otherwise (CUDA, f16). [`set_enabled`]`(false)` forces the fallback everywhere,
 //! which `vectorfusion bench models --candle-kernels` uses as the in-run baseline.
 
+pub mod attention;
 pub mod conv;
+pub mod linear;
+pub mod math;
 pub mod norm;
 pub mod pointwise;
 pub mod winograd;

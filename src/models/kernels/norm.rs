@@ -199,6 +199,49 @@ pub fn group_norm_input_grad(
     Ok(dx)
 }
 
+/// Layer normalisation over the last axis of `x [rows, c]` (`γ`, `β` of length `c`), rows in
+/// parallel; statistics accumulate in f64.
+pub fn layer_norm(
+    x: &[f32],
+    c: usize,
+    gamma: &[f32],
+    beta: &[f32],
+    eps: f64,
+) -> Result<Vec<f32>, String> {
+    if c == 0 || x.len() % c != 0 {
+        return Err(format!(
+            "layer norm: {} values are not rows of {c}",
+            x.len()
+        ));
+    }
+    if gamma.len() != c || beta.len() != c {
+        return Err(format!(
+            "layer norm: {} / {} affine values for {c} channels",
+            gamma.len(),
+            beta.len()
+        ));
+    }
+    let mut y = vec![0f32; x.len()];
+    let rows_per = (1 << 14) / c + 1;
+    y.par_chunks_mut(rows_per * c)
+        .zip(x.par_chunks(rows_per * c))
+        .for_each(|(yc, xc)| {
+            for (yr, xr) in yc.chunks_exact_mut(c).zip(xc.chunks_exact(c)) {
+                let mean = xr.iter().map(|&v| v as f64).sum::<f64>() / c as f64;
+                let var = xr
+                    .iter()
+                    .map(|&v| (v as f64 - mean) * (v as f64 - mean))
+                    .sum::<f64>()
+                    / c as f64;
+                let (m, inv) = (mean as f32, (1.0 / (var + eps).sqrt()) as f32);
+                for (((o, &v), &g), &b) in yr.iter_mut().zip(xr).zip(gamma).zip(beta) {
+                    *o = (v - m) * inv * g + b;
+                }
+            }
+        });
+    Ok(y)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -263,5 +306,25 @@ mod tests {
         }
         assert!(GroupNormGeom::new((1, 4, 8), 3, 1e-5, &gamma, &beta).is_err());
         assert!(group_norm(&g, &x[1..], false, false).is_err());
+    }
+
+    #[test]
+    fn layer_norm_matches_the_definition() {
+        let c = 48;
+        let x = crate::models::kernels::test_values(7 * c, 3);
+        let gamma = crate::models::kernels::test_values(c, 4);
+        let beta = crate::models::kernels::test_values(c, 5);
+        let y = layer_norm(&x, c, &gamma, &beta, 1e-5).unwrap();
+        for r in 0..7 {
+            let xr = &x[r * c..(r + 1) * c];
+            let m = xr.iter().sum::<f32>() / c as f32;
+            let v = xr.iter().map(|a| (a - m) * (a - m)).sum::<f32>() / c as f32;
+            for j in 0..c {
+                let want = (xr[j] - m) / (v + 1e-5).sqrt() * gamma[j] + beta[j];
+                assert!((y[r * c + j] - want).abs() < 1e-5);
+            }
+        }
+        assert!(layer_norm(&x[1..], c, &gamma, &beta, 1e-5).is_err());
+        assert!(layer_norm(&x, c, &gamma[1..], &beta, 1e-5).is_err());
     }
 }

@@ -1,6 +1,7 @@
-//! Element-wise ReLU pieces, in parallel chunks (candle's CPU element-wise ops run on one
-//! thread and allocate a tensor per step: `dy * (out > 0)` is three passes there).
+//! Element-wise pieces, in parallel chunks (candle's CPU element-wise ops run on one thread and
+//! allocate a tensor per step: `dy * (out > 0)` is three passes there).
 
+use super::math;
 use rayon::prelude::*;
 
 const CHUNK: usize = 1 << 15;
@@ -24,6 +25,91 @@ pub fn relu_backward(out: &[f32], dy: &[f32]) -> Result<Vec<f32>, String> {
         dy,
         |o, g| if o > 0.0 { g } else { 0.0 },
     )
+}
+
+/// `a + b`.
+pub fn add(a: &[f32], b: &[f32]) -> Result<Vec<f32>, String> {
+    zip_map("add", a, b, |a, b| a + b)
+}
+
+/// `(a + b) · s`.
+pub fn add_scaled(a: &[f32], b: &[f32], s: f32) -> Result<Vec<f32>, String> {
+    zip_map("add", a, b, |a, b| (a + b) * s)
+}
+
+/// `x[b, c, n] += v[b, c]` (a per-image, per-channel offset such as a time embedding).
+pub fn add_per_channel(x: &mut [f32], v: &[f32], n: usize) -> Result<(), String> {
+    if n == 0 || x.len() != v.len() * n {
+        return Err(format!(
+            "add_per_channel: {} values for {} channels of {n}",
+            x.len(),
+            v.len()
+        ));
+    }
+    x.par_chunks_mut(n)
+        .zip(v.par_iter())
+        .for_each(|(xc, &o)| xc.iter_mut().for_each(|x| *x += o));
+    Ok(())
+}
+
+/// GEGLU: `h [rows, 2·inner] -> h[:, ..inner] · gelu(h[:, inner..])` (exact GELU).
+pub fn geglu(h: &[f32], inner: usize) -> Result<Vec<f32>, String> {
+    if inner == 0 || h.len() % (2 * inner) != 0 {
+        return Err(format!(
+            "geglu: {} values are not rows of 2 x {inner}",
+            h.len()
+        ));
+    }
+    let rows = h.len() / (2 * inner);
+    let mut out = vec![0f32; rows * inner];
+    let per = CHUNK / inner + 1;
+    out.par_chunks_mut(per * inner)
+        .zip(h.par_chunks(per * 2 * inner))
+        .for_each(|(o, hc)| {
+            math::vectorised(|| {
+                for (orow, hrow) in o.chunks_exact_mut(inner).zip(hc.chunks_exact(2 * inner)) {
+                    let (a, gate) = hrow.split_at(inner);
+                    for ((o, &a), &g) in orow.iter_mut().zip(a).zip(gate) {
+                        *o = a * math::gelu(g);
+                    }
+                }
+            })
+        });
+    Ok(out)
+}
+
+/// Nearest-neighbour resize of `x [planes, h, w]` to `[planes, oh, ow]` (PyTorch's `nearest`:
+/// source index `⌊i · h / oh⌋`).
+pub fn upsample_nearest(
+    x: &[f32],
+    h: usize,
+    w: usize,
+    oh: usize,
+    ow: usize,
+) -> Result<Vec<f32>, String> {
+    if h == 0 || w == 0 || x.len() % (h * w) != 0 {
+        return Err(format!(
+            "upsample: {} values are not planes of {h}x{w}",
+            x.len()
+        ));
+    }
+    let planes = x.len() / (h * w);
+    let cols: Vec<usize> = (0..ow).map(|j| j * w / ow).collect();
+    let mut out = vec![0f32; planes * oh * ow];
+    if oh == 0 || ow == 0 {
+        return Ok(out);
+    }
+    out.par_chunks_mut(oh * ow)
+        .zip(x.par_chunks(h * w))
+        .for_each(|(o, p)| {
+            for (i, orow) in o.chunks_exact_mut(ow).enumerate() {
+                let src = &p[(i * h / oh) * w..][..w];
+                for (d, &j) in orow.iter_mut().zip(&cols) {
+                    *d = src[j];
+                }
+            }
+        });
+    Ok(out)
 }
 
 /// `f(a[i], b[i])` for two equally long slices, in parallel chunks.
@@ -71,5 +157,30 @@ mod tests {
         relu_inplace(&mut r);
         assert!(r.iter().zip(&a).all(|(r, a)| *r == a.max(0.0)));
         assert!(add_relu(&a, &b[1..]).is_err() && relu_backward(&a[1..], &b).is_err());
+    }
+
+    #[test]
+    fn geglu_upsample_and_channel_offsets() {
+        let h: Vec<f32> = (0..3 * 10).map(|i| (i as f32 * 0.31).sin() * 3.0).collect();
+        let g = geglu(&h, 5).unwrap();
+        for r in 0..3 {
+            for j in 0..5 {
+                let (a, x) = (h[r * 10 + j], h[r * 10 + 5 + j]);
+                assert!((g[r * 5 + j] - a * math::gelu(x)).abs() < 1e-6);
+            }
+        }
+        assert!(geglu(&h[1..], 5).is_err());
+        // 2x: every source pixel becomes a 2x2 block; 2 -> 3 follows floor(i * 2 / 3)
+        let x = [1.0, 2.0, 3.0, 4.0];
+        let u = upsample_nearest(&x, 2, 2, 4, 4).unwrap();
+        assert_eq!(&u[..8], &[1.0, 1.0, 2.0, 2.0, 1.0, 1.0, 2.0, 2.0]);
+        assert_eq!(&u[8..12], &[3.0, 3.0, 4.0, 4.0]);
+        let u = upsample_nearest(&x, 2, 2, 3, 3).unwrap();
+        assert_eq!(u, vec![1.0, 1.0, 2.0, 1.0, 1.0, 2.0, 3.0, 3.0, 4.0]);
+        let mut y = vec![1.0f32; 6];
+        add_per_channel(&mut y, &[1.0, 2.0], 3).unwrap();
+        assert_eq!(y, vec![2.0, 2.0, 2.0, 3.0, 3.0, 3.0]);
+        assert!(add_per_channel(&mut y, &[1.0], 3).is_err());
+        assert_eq!(add_scaled(&[1.0], &[2.0], 0.5).unwrap(), vec![1.5]);
     }
 }

@@ -1,0 +1,272 @@
+//! Linear layers as one GEMM each with the bias (and a residual) folded into the accumulator,
+//! including the two layout changes of a spatial transformer: channels-first activations in,
+//! token rows out (`proj_in`) and back (`proj_out` + residual), read through strides instead of
+//! a transposed copy.
+//!
+//! Weights are PyTorch's `[out, in]`.
+
+use gemm::{Parallelism, gemm};
+use rayon::prelude::*;
+
+/// A strided read-only matrix: element `(r, c)` is `data[r·rs + c·cs]`. Invariant (checked by
+/// [`View::new`]): every element lies inside `data`.
+#[derive(Clone, Copy)]
+pub(crate) struct View<'a> {
+    data: &'a [f32],
+    rs: usize,
+    cs: usize,
+}
+
+impl<'a> View<'a> {
+    pub(crate) fn new(
+        data: &'a [f32],
+        rows: usize,
+        cols: usize,
+        rs: usize,
+        cs: usize,
+    ) -> Result<Self, String> {
+        if rows > 0 && cols > 0 && (rows - 1) * rs + (cols - 1) * cs >= data.len() {
+            return Err(format!(
+                "matrix view {rows}x{cols} (strides {rs}, {cs}) exceeds {} values",
+                data.len()
+            ));
+        }
+        Ok(Self { data, rs, cs })
+    }
+}
+
+/// `dst[m, n] (row stride dst_rs) += a[m, k] · b[k, n]`, threaded inside the GEMM. `dst` must
+/// hold the `m × n` window (checked).
+pub(crate) fn gemm_acc(
+    dst: &mut [f32],
+    dst_rs: usize,
+    (m, n, k): (usize, usize, usize),
+    a: View,
+    b: View,
+    threads: Parallelism,
+) -> Result<(), String> {
+    if m == 0 || n == 0 {
+        return Ok(());
+    }
+    if (m - 1) * dst_rs + n > dst.len() {
+        return Err(format!(
+            "gemm: {m}x{n} output window does not fit {} values",
+            dst.len()
+        ));
+    }
+    if k == 0 {
+        return Ok(());
+    }
+    // SAFETY: the views and the output window were bounds-checked; `dst` is borrowed mutably.
+    unsafe {
+        gemm(
+            m,
+            n,
+            k,
+            dst.as_mut_ptr(),
+            1,
+            dst_rs as isize,
+            true,
+            a.data.as_ptr(),
+            a.cs as isize,
+            a.rs as isize,
+            b.data.as_ptr(),
+            b.cs as isize,
+            b.rs as isize,
+            1.0,
+            1.0,
+            false,
+            false,
+            false,
+            threads,
+        );
+    }
+    Ok(())
+}
+
+fn all_threads() -> Parallelism {
+    Parallelism::Rayon(rayon::current_num_threads())
+}
+
+fn check_weight(w: &[f32], o: usize, i: usize, bias: Option<&[f32]>) -> Result<(), String> {
+    if w.len() != o * i {
+        return Err(format!("linear: {} weights for {o}x{i}", w.len()));
+    }
+    if bias.is_some_and(|b| b.len() != o) {
+        return Err(format!("linear: bias for {o} outputs has the wrong length"));
+    }
+    Ok(())
+}
+
+/// Token rows: `x [rows, i] -> x·Wᵀ + bias (+ residual [rows, o])`.
+pub fn linear(
+    x: &[f32],
+    i: usize,
+    w: &[f32],
+    o: usize,
+    bias: Option<&[f32]>,
+    residual: Option<&[f32]>,
+) -> Result<Vec<f32>, String> {
+    check_weight(w, o, i, bias)?;
+    if i == 0 || x.len() % i != 0 {
+        return Err(format!("linear: {} inputs are not rows of {i}", x.len()));
+    }
+    let rows = x.len() / i;
+    let mut y = match residual {
+        Some(r) if r.len() == rows * o => r.to_vec(),
+        Some(r) => {
+            return Err(format!(
+                "linear: residual has {} values, expected {}",
+                r.len(),
+                rows * o
+            ));
+        }
+        None => vec![0f32; rows * o],
+    };
+    if let Some(b) = bias {
+        y.par_chunks_mut(o)
+            .for_each(|r| r.iter_mut().zip(b).for_each(|(y, b)| *y += b));
+    }
+    gemm_acc(
+        &mut y,
+        o,
+        (rows, o, i),
+        View::new(x, rows, i, i, 1)?,
+        View::new(w, i, o, 1, i)?,
+        all_threads(),
+    )?;
+    Ok(y)
+}
+
+/// Channels-first in, tokens out: `x [b, i, n] -> [b, n, o]`, `y[b, p, :] = W·x[b, :, p] + bias`.
+pub fn linear_from_channels(
+    x: &[f32],
+    (b, i, n): (usize, usize, usize),
+    w: &[f32],
+    o: usize,
+    bias: Option<&[f32]>,
+) -> Result<Vec<f32>, String> {
+    check_weight(w, o, i, bias)?;
+    if x.len() != b * i * n {
+        return Err(format!("linear: {} inputs for [{b}, {i}, {n}]", x.len()));
+    }
+    let mut y = vec![0f32; b * n * o];
+    if let Some(bv) = bias {
+        y.par_chunks_mut(o).for_each(|r| r.copy_from_slice(bv));
+    }
+    if n == 0 {
+        return Ok(y);
+    }
+    for bi in 0..b {
+        let xb = &x[bi * i * n..(bi + 1) * i * n];
+        gemm_acc(
+            &mut y[bi * n * o..(bi + 1) * n * o],
+            o,
+            (n, o, i),
+            View::new(xb, n, i, 1, n)?,
+            View::new(w, i, o, 1, i)?,
+            all_threads(),
+        )?;
+    }
+    Ok(y)
+}
+
+/// Tokens in, channels-first out, plus a residual: `t [b, n, i] -> r + [b, o, n]` with
+/// `y[b, :, p] = W·t[b, p, :] + bias`.
+pub fn linear_to_channels(
+    t: &[f32],
+    (b, n, i): (usize, usize, usize),
+    w: &[f32],
+    o: usize,
+    bias: Option<&[f32]>,
+    residual: &[f32],
+) -> Result<Vec<f32>, String> {
+    check_weight(w, o, i, bias)?;
+    if t.len() != b * n * i || residual.len() != b * o * n {
+        return Err(format!(
+            "linear: {} inputs / {} residual values for [{b}, {n}, {i}] -> [{b}, {o}, {n}]",
+            t.len(),
+            residual.len()
+        ));
+    }
+    let mut y = residual.to_vec();
+    if n == 0 {
+        return Ok(y);
+    }
+    if let Some(bv) = bias {
+        y.par_chunks_mut(n)
+            .enumerate()
+            .for_each(|(idx, p)| p.iter_mut().for_each(|v| *v += bv[idx % o]));
+    }
+    for bi in 0..b {
+        let tb = &t[bi * n * i..(bi + 1) * n * i];
+        gemm_acc(
+            &mut y[bi * o * n..(bi + 1) * o * n],
+            n,
+            (o, n, i),
+            View::new(w, o, i, i, 1)?,
+            View::new(tb, i, n, 1, i)?,
+            all_threads(),
+        )?;
+    }
+    Ok(y)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::models::kernels::test_values;
+
+    fn naive(
+        x: impl Fn(usize, usize) -> f32,
+        rows: usize,
+        i: usize,
+        w: &[f32],
+        o: usize,
+    ) -> Vec<f32> {
+        let mut y = vec![0f32; rows * o];
+        for r in 0..rows {
+            for oo in 0..o {
+                y[r * o + oo] = (0..i).map(|k| x(r, k) * w[oo * i + k]).sum();
+            }
+        }
+        y
+    }
+
+    #[test]
+    fn the_three_layouts_match_a_naive_product() {
+        let (b, i, n, o) = (2, 5, 7, 3);
+        let w = test_values(o * i, 1);
+        let bias = test_values(o, 2);
+        let x = test_values(b * n * i, 3);
+        let res = test_values(b * n * o, 4);
+        // tokens
+        let y = linear(&x, i, &w, o, Some(&bias), Some(&res)).unwrap();
+        let want = naive(|r, k| x[r * i + k], b * n, i, &w, o);
+        for (idx, v) in y.iter().enumerate() {
+            assert!((v - (want[idx] + bias[idx % o] + res[idx])).abs() < 1e-5);
+        }
+        // channels-first x [b, i, n] -> tokens
+        let y = linear_from_channels(&x, (b, i, n), &w, o, Some(&bias)).unwrap();
+        let want = naive(|r, k| x[(r / n) * i * n + k * n + r % n], b * n, i, &w, o);
+        for (idx, v) in y.iter().enumerate() {
+            assert!((v - (want[idx] + bias[idx % o])).abs() < 1e-5);
+        }
+        // tokens t [b, n, i] -> channels-first + residual
+        let y = linear_to_channels(&x, (b, n, i), &w, o, Some(&bias), &res).unwrap();
+        let want = naive(|r, k| x[r * i + k], b * n, i, &w, o);
+        for bi in 0..b {
+            for oo in 0..o {
+                for p in 0..n {
+                    let got = y[bi * o * n + oo * n + p];
+                    let exp = want[(bi * n + p) * o + oo] + bias[oo] + res[bi * o * n + oo * n + p];
+                    assert!((got - exp).abs() < 1e-5);
+                }
+            }
+        }
+        assert!(linear(&x, i, &w[1..], o, None, None).is_err());
+        assert!(linear(&x, i, &w, o, None, Some(&res[1..])).is_err());
+        assert!(linear_to_channels(&x, (b, n, i), &w, o, None, &res[1..]).is_err());
+        assert!(View::new(&x, 100, 1, 1, 1).is_err());
+    }
+}
