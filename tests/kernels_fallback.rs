@@ -8,6 +8,7 @@ use common::{abs_max, fixture, max_abs};
 use candle_core::{Device, Tensor};
 use std::collections::HashMap;
 use vectorfusion::models::kernels;
+use vectorfusion::models::pipeline::load_unet;
 use vectorfusion::models::taesd::Taesd;
 use vectorfusion::models::{LoadOptions, Precision, StableDiffusion};
 
@@ -15,7 +16,7 @@ fn refs(name: &str) -> HashMap<String, Tensor> {
     candle_core::safetensors::load(fixture(name).join("refs.safetensors"), &Device::Cpu).unwrap()
 }
 
-/// Every autoencoder output the fixtures check, in a fixed order.
+/// Every autoencoder and UNet output the fixtures check, in a fixed order.
 fn outputs() -> Vec<(&'static str, Tensor, Tensor)> {
     let sd = StableDiffusion::load(&fixture("sd-tiny"), &LoadOptions::default()).unwrap();
     let r = refs("sd-tiny");
@@ -35,6 +36,32 @@ fn outputs() -> Vec<(&'static str, Tensor, Tensor)> {
             r["vjp.d_image"].clone(),
         ),
     ];
+    for t in [999usize, 10] {
+        v.push((
+            "unet",
+            sd.unet
+                .forward(&r["unet.z"], t as f64, &r["text.cond"])
+                .unwrap(),
+            r[&format!("unet.cond.t{t}")].clone(),
+        ));
+    }
+    // SD 2.x style: linear projections, per-block head counts, v-prediction, fp16 file
+    let unet = load_unet(
+        &fixture("sd-tiny-v").join("unet"),
+        Precision::F32,
+        &Device::Cpu,
+    )
+    .unwrap();
+    let rv = refs("sd-tiny-v");
+    let (z, t) = (&rv["unet.z"], 500.0);
+    let cond = unet.forward(z, t, &rv["text.cond"]).unwrap();
+    let uncond = unet.forward(z, t, &rv["text.uncond"]).unwrap();
+    let guided = (&uncond + ((cond - &uncond).unwrap() * 7.5).unwrap()).unwrap();
+    v.push((
+        "unet guided (linear projection)",
+        guided,
+        rv["unet.guided.t500"].clone(),
+    ));
     let t = Taesd::load(&fixture("taesd-tiny"), Precision::F32, &Device::Cpu).unwrap();
     let r = refs("taesd-tiny");
     let (lat, d) = t.encode_vjp(&r["image"], &r["d_latents"]).unwrap();

@@ -3,7 +3,7 @@
 //! encoder against its diffusers reference, and the loader's pixel-space detection.
 
 mod common;
-use common::{abs_max, fixture};
+use common::{abs_max, fixture, max_abs};
 
 use candle_core::{DType, Device, Tensor};
 use std::collections::HashMap;
@@ -33,12 +33,6 @@ fn assert_close(name: &str, got: &Tensor, want: &Tensor, tol: f32) {
         abs_max(want)
     );
     assert!(abs_max(want) > 1e-3, "{name}: reference is trivially small");
-}
-
-/// Through the UNet's GEGLU (tanh GELU in candle vs exact in diffusers): the tolerance the SD
-/// tests use, 2e-4 of the output scale.
-fn assert_close_gelu(name: &str, got: &Tensor, want: &Tensor) {
-    assert_close(name, got, want, 2e-4 * abs_max(want).max(1.0));
 }
 
 fn pixel() -> StableDiffusion {
@@ -72,19 +66,24 @@ fn pixel_unet_and_guidance_match_diffusers() {
     assert_close("uncond emb", &u2, uncond, 1e-4);
     for t in [999usize, 500, 10] {
         let out = sd.unet.forward(z, t as f64, cond).unwrap();
-        assert_close_gelu(&format!("cond t={t}"), &out, &r[&format!("unet.cond.t{t}")]);
+        assert_close(
+            &format!("cond t={t}"),
+            &out,
+            &r[&format!("unet.cond.t{t}")],
+            1e-4,
+        );
         let g = sd.predict_noise(z, t, cond, uncond, 7.5).unwrap();
-        assert_close_gelu(
+        assert_close(
             &format!("guided t={t}"),
             &g,
             &r[&format!("unet.guided.t{t}")],
-        );
-        // with diffusers switched to the tanh GELU the only difference is gone
-        assert_close(
-            &format!("tanh guided t={t}"),
-            &g,
-            &r[&format!("unet_tanh.guided.t{t}")],
             1e-4,
+        );
+        // diffusers with the tanh GELU (candle-transformers' UNet) is measurably further off
+        let tanh = max_abs(&g, &r[&format!("unet_tanh.guided.t{t}")]);
+        assert!(
+            tanh > 5.0 * max_abs(&g, &r[&format!("unet.guided.t{t}")]),
+            "t={t}"
         );
     }
 }
@@ -110,7 +109,12 @@ fn squaredcos_schedule_and_four_step_ddim_sample_match_diffusers() {
         .unwrap();
     assert_eq!(traj.len(), 4);
     for (i, x) in traj.iter().enumerate() {
-        assert_close_gelu(&format!("ddim step {i}"), x, &r[&format!("ddim.step{i}")]);
+        assert_close(
+            &format!("ddim step {i}"),
+            x,
+            &r[&format!("ddim.step{i}")],
+            1e-4,
+        );
     }
     let img = sd.decode(&traj[3]).unwrap();
     assert_eq!(img.dims(), &[1, 3, 16, 16], "decoded at the sample size");

@@ -25,32 +25,29 @@ fn assert_close(name: &str, got: &Tensor, want: &Tensor, tol: f32) {
     assert!(abs_max(want) > 1e-3, "{name}: reference is trivially small");
 }
 
-/// Comparisons that go through the UNet's GEGLU: candle-transformers uses the tanh GELU
-/// approximation where diffusers uses the exact one (isolated by
-/// `unet_matches_diffusers_up_to_the_gelu_approximation`, which holds at 1e-4), so these allow
-/// a relative 2e-4 of the output scale.
-fn assert_close_gelu(name: &str, got: &Tensor, want: &Tensor) {
-    let tol = 2e-4 * abs_max(want).max(1.0);
-    assert_close(name, got, want, tol);
-}
-
 fn sd() -> StableDiffusion {
     StableDiffusion::load(&fixture("sd-tiny"), &LoadOptions::default()).unwrap()
 }
 
 #[test]
-fn unet_matches_exact_gelu_diffusers_within_documented_tolerance() {
+fn unet_matches_diffusers() {
     let sd = sd();
     let r = refs("sd-tiny");
     let (z, cond, uncond) = (&r["unet.z"], &r["text.cond"], &r["text.uncond"]);
     for t in [999usize, 500, 10] {
         let out = sd.unet.forward(z, t as f64, cond).unwrap();
-        assert_close_gelu(&format!("cond t={t}"), &out, &r[&format!("unet.cond.t{t}")]);
+        assert_close(
+            &format!("cond t={t}"),
+            &out,
+            &r[&format!("unet.cond.t{t}")],
+            1e-4,
+        );
         let g = sd.predict_noise(z, t, cond, uncond, 7.5).unwrap();
-        assert_close_gelu(
+        assert_close(
             &format!("guided t={t}"),
             &g,
             &r[&format!("unet.guided.t{t}")],
+            1e-4,
         );
     }
 }
@@ -78,10 +75,11 @@ fn v_prediction_unet_from_fp16_file_matches() {
         let eps = sd
             .predict_noise(&r["unet.z"], t, &r["text.cond"], &r["text.uncond"], 7.5)
             .unwrap();
-        assert_close_gelu(
+        assert_close(
             &format!("v->eps t={t}"),
             &eps,
             &r[&format!("unet.eps.t{t}")],
+            1e-4,
         );
     }
 }
@@ -184,7 +182,12 @@ fn ddim_trajectory_matches_diffusers() {
         .unwrap();
     assert_eq!(traj.len(), 3);
     for (i, x) in traj.iter().enumerate() {
-        assert_close_gelu(&format!("ddim step {i}"), x, &r[&format!("ddim.step{i}")]);
+        assert_close(
+            &format!("ddim step {i}"),
+            x,
+            &r[&format!("ddim.step{i}")],
+            1e-4,
+        );
     }
 }
 
@@ -222,7 +225,15 @@ fn euler_trailing_trajectory_matches_diffusers() {
         )
         .unwrap();
     for (i, x) in traj.iter().enumerate() {
-        assert_close_gelu(&format!("euler step {i}"), x, &r[&format!("euler.step{i}")]);
+        // Euler latents are scaled by σ (≈ 15 at t = 999, values up to ~67): float32 rounding of
+        // the UNet output grows with them, so the bound is 1e-5 of the reference scale
+        let want = &r[&format!("euler.step{i}")];
+        assert_close(
+            &format!("euler step {i}"),
+            x,
+            want,
+            1e-5 * abs_max(want).max(10.0),
+        );
     }
 }
 
@@ -242,9 +253,9 @@ fn sds_image_gradient_matches_reference() {
             7.5,
         )
         .unwrap();
-    assert_close_gelu("sds latent grad", &g, &r["sds.grad_latents"]);
+    assert_close("sds latent grad", &g, &r["sds.grad_latents"], 1e-4);
     let d = sd.encode_vjp(img, &g).unwrap();
-    assert_close_gelu("sds image grad", &d, &r["sds.d_image"]);
+    assert_close("sds image grad", &d, &r["sds.d_image"], 1e-4);
 }
 
 #[test]
@@ -309,25 +320,19 @@ fn bad_inputs_are_rejected() {
 }
 
 #[test]
-fn unet_matches_diffusers_up_to_the_gelu_approximation() {
+fn unet_feed_forward_uses_the_exact_gelu() {
+    // the fixtures also hold the same UNet with diffusers' GEGLU switched to the tanh GELU
+    // approximation (what candle-transformers' UNet computes); ours must sit clearly closer to
+    // the exact one
     let sd = sd();
     let r = refs("sd-tiny");
-    let (z, cond, uncond) = (&r["unet.z"], &r["text.cond"], &r["text.uncond"]);
+    let (z, cond) = (&r["unet.z"], &r["text.cond"]);
     for t in [999usize, 500, 10] {
         let out = sd.unet.forward(z, t as f64, cond).unwrap();
-        assert_close(
-            &format!("cond t={t}"),
-            &out,
-            &r[&format!("unet_tanh.cond.t{t}")],
-            1e-4,
-        );
-        let g = sd.predict_noise(z, t, cond, uncond, 7.5).unwrap();
-        assert_close(
-            &format!("guided t={t}"),
-            &g,
-            &r[&format!("unet_tanh.guided.t{t}")],
-            1e-4,
-        );
+        let exact = max_abs(&out, &r[&format!("unet.cond.t{t}")]);
+        let tanh = max_abs(&out, &r[&format!("unet_tanh.cond.t{t}")]);
+        eprintln!("t={t}: {exact} from the exact-GELU reference, {tanh} from the tanh one");
+        assert!(tanh > 5.0 * exact, "t={t}: {exact} vs {tanh}");
     }
 }
 
@@ -352,5 +357,5 @@ fn text_embeddings_from_prompt_match_transformers_and_drive_the_unet() {
     let g = sd
         .predict_noise(&r["unet.z"], 500, &cond, &uncond, 7.5)
         .unwrap();
-    assert_close("prompt-guided t=500", &g, &r["unet_tanh.guided.t500"], 1e-4);
+    assert_close("prompt-guided t=500", &g, &r["unet.guided.t500"], 1e-4);
 }

@@ -5,7 +5,7 @@
 //! kernel gradient (one extra convolution per layer, plus memory), which is pure waste here.
 //! Field names follow the checkpoint keys.
 
-use super::kernels::{self, conv, conv::ConvGeom, norm, pointwise, winograd};
+use super::kernels::{self, conv, conv::ConvGeom, linear, norm, pointwise, winograd};
 use candle_core::{D, DType, Module, Tensor};
 use candle_nn::VarBuilder;
 use std::sync::{Arc, OnceLock};
@@ -101,6 +101,23 @@ impl Conv2d {
         }
         let (mut y, shape) = self.kernel_forward(x, [self.padding; 4])?;
         pointwise::relu_inplace(&mut y);
+        kernels::tensor(y, &shape)
+    }
+
+    /// `conv(x) + v[b, co]` broadcast over the image (how the UNet adds its time embedding),
+    /// added to the kernel's output in place.
+    pub fn forward_channel_add(&self, x: &Tensor, v: &Tensor) -> R<Tensor> {
+        let (b, c) = v.dims2()?;
+        if !kernels::applies(&[x, &self.weight, v]) {
+            return self.forward(x)?.broadcast_add(&v.reshape((b, c, 1, 1))?);
+        }
+        let (mut y, shape) = self.kernel_forward(x, [self.padding; 4])?;
+        if (b, c) != (shape[0], shape[1]) {
+            candle_core::bail!("conv2d: offsets {:?} for an output {shape:?}", v.dims());
+        }
+        kernels::with_f32(v, |vs| {
+            pointwise::add_per_channel(&mut y, vs, shape[2] * shape[3]).map_err(kernels::err)
+        })?;
         kernels::tensor(y, &shape)
     }
 
@@ -441,12 +458,56 @@ pub fn relu_backward(out: &Tensor, dy: &Tensor) -> R<Tensor> {
     kernels::tensor(d, dy.dims())
 }
 
+/// `(a + b) · scale` (`scale = 1` is a plain sum).
+pub fn add_scaled(a: &Tensor, b: &Tensor, scale: f64) -> R<Tensor> {
+    if !kernels::applies(&[a, b]) || a.dims() != b.dims() {
+        let s = (a + b)?;
+        return if scale == 1.0 { Ok(s) } else { s * scale };
+    }
+    let y = kernels::with_f32(a, |av| {
+        kernels::with_f32(b, |bv| {
+            pointwise::add_scaled(av, bv, scale as f32).map_err(kernels::err)
+        })
+    })?;
+    kernels::tensor(y, a.dims())
+}
+
 /// `silu'(x) · dy`.
 pub fn silu_backward(x: &Tensor, dy: &Tensor) -> R<Tensor> {
     let s = candle_nn::ops::sigmoid(x)?;
     // s * (1 + x * (1 - s))
     let d = (&s * ((x * (1.0 - &s)?)? + 1.0)?)?;
     dy * d
+}
+
+/// Layer normalisation over the last axis.
+#[derive(Debug, Clone)]
+pub struct LayerNorm {
+    pub weight: Tensor,
+    pub bias: Tensor,
+    pub eps: f64,
+}
+
+impl LayerNorm {
+    pub fn load(vb: VarBuilder, c: usize, eps: f64) -> R<Self> {
+        Ok(Self {
+            weight: vb.get(c, "weight")?,
+            bias: vb.get(c, "bias")?,
+            eps,
+        })
+    }
+
+    pub fn forward(&self, x: &Tensor) -> R<Tensor> {
+        if kernels::applies(&[x, &self.weight, &self.bias]) {
+            let c = self.weight.dim(0)?;
+            let (g, b) = (self.weight.to_vec1::<f32>()?, self.bias.to_vec1::<f32>()?);
+            let y = kernels::with_f32(x, |xs| {
+                norm::layer_norm(xs, c, &g, &b, self.eps).map_err(kernels::err)
+            })?;
+            return kernels::tensor(y, x.dims());
+        }
+        candle_nn::LayerNorm::new(self.weight.clone(), self.bias.clone(), self.eps).forward(x)
+    }
 }
 
 /// Linear layer, `weight [out, in]` (a 1×1 conv weight `[out, in, 1, 1]` is accepted too).
@@ -469,11 +530,55 @@ impl Linear {
         Ok(Self { weight, bias })
     }
 
-    /// `x [b, n, in] -> [b, n, out]`.
+    /// `x [..., in] -> [..., out]`.
     pub fn forward(&self, x: &Tensor) -> R<Tensor> {
+        self.forward_impl(x, None)
+    }
+
+    /// `residual + linear(x)`, the residual folded into the product's accumulator.
+    pub fn forward_residual(&self, x: &Tensor, residual: &Tensor) -> R<Tensor> {
+        self.forward_impl(x, Some(residual))
+    }
+
+    fn out_dims(&self, x: &Tensor) -> R<Vec<usize>> {
+        let mut dims = x.dims().to_vec();
+        match dims.last_mut() {
+            Some(last) => *last = self.weight.dim(0)?,
+            None => candle_core::bail!("linear: scalar input"),
+        }
+        Ok(dims)
+    }
+
+    fn forward_impl(&self, x: &Tensor, residual: Option<&Tensor>) -> R<Tensor> {
+        let mut ts = vec![x, &self.weight];
+        ts.extend(self.bias.as_ref());
+        ts.extend(residual);
+        let dims = self.out_dims(x)?;
+        if kernels::applies(&ts) && residual.is_none_or(|r| r.dims() == dims.as_slice()) {
+            let (o, i) = self.weight.dims2()?;
+            let bias = match &self.bias {
+                Some(b) => Some(b.to_vec1::<f32>()?),
+                None => None,
+            };
+            let y = kernels::with_f32(x, |xs| {
+                kernels::with_f32(&self.weight, |w| match residual {
+                    Some(r) => kernels::with_f32(r, |rs| {
+                        linear::linear(xs, i, w, o, bias.as_deref(), Some(rs)).map_err(kernels::err)
+                    }),
+                    None => {
+                        linear::linear(xs, i, w, o, bias.as_deref(), None).map_err(kernels::err)
+                    }
+                })
+            })?;
+            return kernels::tensor(y, &dims);
+        }
         let y = x.broadcast_matmul(&self.weight.t()?)?;
-        match &self.bias {
-            Some(b) => y.broadcast_add(b),
+        let y = match &self.bias {
+            Some(b) => y.broadcast_add(b)?,
+            None => y,
+        };
+        match residual {
+            Some(r) => y + r,
             None => Ok(y),
         }
     }

@@ -1,15 +1,7 @@
-//! diffusers `UNet2DConditionModel` built from `unet/config.json`.
-//!
-//! The config is parsed completely and mapped onto candle-transformers' UNet (whose module
-//! names are the checkpoint keys); every field that would change the computation and that the
-//! implementation does not cover is rejected with a clear error instead of being ignored.
+//! `unet/config.json`, parsed completely and resolved into [`UnetArch`]: every field that would
+//! change the computation and that the implementation does not cover is rejected with a clear
+//! error instead of being ignored.
 
-use super::{ModelError, Result};
-use candle_core::Tensor;
-use candle_nn::VarBuilder;
-use candle_transformers::models::stable_diffusion::unet_2d::{
-    BlockConfig, UNet2DConditionModel, UNet2DConditionModelConfig,
-};
 use serde::Deserialize;
 use serde_json::Value;
 
@@ -87,6 +79,18 @@ pub struct UnetConfig {
     pub conv_out_kernel: Option<usize>,
     #[serde(default)]
     pub attention_type: Option<String>,
+    #[serde(default)]
+    pub reverse_transformer_layers_per_block: Value,
+    #[serde(default)]
+    pub resnet_out_scale_factor: Option<f64>,
+    #[serde(default)]
+    pub resnet_skip_time_act: bool,
+    #[serde(default)]
+    pub mid_block_only_cross_attention: Option<bool>,
+    #[serde(default)]
+    pub cross_attention_norm: Option<String>,
+    #[serde(default)]
+    pub class_embeddings_concat: bool,
 }
 
 fn four() -> usize {
@@ -137,9 +141,54 @@ fn per_block(v: &Value, n: usize, name: &str) -> std::result::Result<Vec<usize>,
     }
 }
 
+/// A block's transformer: `heads` attention heads (head size = channels / heads) and `layers`
+/// `BasicTransformerBlock`s.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct AttnArch {
+    pub heads: usize,
+    pub layers: usize,
+}
+
+/// One resolution level: its output channels and the transformers of its down and up block
+/// (`None` for `DownBlock2D` / `UpBlock2D`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct LevelArch {
+    pub channels: usize,
+    pub down_attn: Option<AttnArch>,
+    /// The up block that mirrors this level (up block `n − 1 − i` for level `i`).
+    pub up_attn: Option<AttnArch>,
+}
+
+/// The resolved architecture: everything the forward pass needs, checked for consistency.
+#[derive(Debug, Clone, PartialEq)]
+pub struct UnetArch {
+    pub in_channels: usize,
+    pub out_channels: usize,
+    pub levels: Vec<LevelArch>,
+    pub layers_per_block: usize,
+    pub mid: AttnArch,
+    pub groups: usize,
+    pub eps: f64,
+    pub cross_attention_dim: usize,
+    pub use_linear_projection: bool,
+    pub downsample_padding: usize,
+    pub mid_block_scale_factor: f64,
+    pub flip_sin_to_cos: bool,
+    pub freq_shift: f64,
+    pub center_input_sample: bool,
+    pub upcast_attention: bool,
+}
+
+impl UnetArch {
+    /// Channels of the time embedding (`4 × block_out_channels[0]`).
+    pub fn time_embed_dim(&self) -> usize {
+        4 * self.levels[0].channels
+    }
+}
+
 impl UnetConfig {
-    /// Maps the config onto candle-transformers' UNet config, or says why it cannot.
-    pub fn to_candle(&self) -> std::result::Result<UNet2DConditionModelConfig, String> {
+    /// Resolves the config into the architecture, or says why it cannot.
+    pub fn arch(&self) -> std::result::Result<UnetArch, String> {
         let n = self.block_out_channels.len();
         if n == 0 {
             return Err("block_out_channels is empty".into());
@@ -152,13 +201,6 @@ impl UnetConfig {
             ));
         }
         let bad = |what: &str| Err(format!("{what} is not supported"));
-        if self.norm_num_groups != 32 {
-            // candle-transformers' down/up resnets always build 32-group norms
-            return bad(&format!(
-                "norm_num_groups {} (only 32)",
-                self.norm_num_groups
-            ));
-        }
         if self.act_fn != "silu" {
             return bad(&format!("act_fn {:?}", self.act_fn));
         }
@@ -167,6 +209,7 @@ impl UnetConfig {
         }
         if matches!(&self.only_cross_attention, Value::Bool(true))
             || matches!(&self.only_cross_attention, Value::Array(a) if a.iter().any(|x| x == &Value::Bool(true)))
+            || self.mid_block_only_cross_attention == Some(true)
         {
             return bad("only_cross_attention");
         }
@@ -175,19 +218,29 @@ impl UnetConfig {
             ("addition_embed_type (SDXL)", &self.addition_embed_type),
             ("time_embedding_act_fn", &self.time_embedding_act_fn),
             ("timestep_post_act", &self.timestep_post_act),
+            ("cross_attention_norm", &self.cross_attention_norm),
         ] {
             if v.is_some() {
                 return bad(name);
             }
         }
-        if self.num_class_embeds.is_some() {
-            return bad("num_class_embeds");
+        if self.num_class_embeds.is_some() || self.class_embeddings_concat {
+            return bad("class embeddings");
         }
         if self.encoder_hid_dim.is_some() {
             return bad("encoder_hid_dim");
         }
         if self.time_cond_proj_dim.is_some() {
             return bad("time_cond_proj_dim (LCM)");
+        }
+        if self.resnet_skip_time_act {
+            return bad("resnet_skip_time_act");
+        }
+        if self.resnet_out_scale_factor.is_some_and(|f| f != 1.0) {
+            return bad("resnet_out_scale_factor other than 1");
+        }
+        if !self.reverse_transformer_layers_per_block.is_null() {
+            return bad("reverse_transformer_layers_per_block");
         }
         if let Some(d) = self.time_embedding_dim
             && d != 4 * self.block_out_channels[0]
@@ -227,68 +280,97 @@ impl UnetConfig {
         {
             return bad(&format!("mid_block_type {:?}", self.mid_block_type));
         }
-        if !self.num_attention_heads.is_null() {
-            return bad(
-                "num_attention_heads (SD configs leave it null and use attention_head_dim)",
-            );
+        if self.downsample_padding.fract() != 0.0 || !(0.0..=1.0).contains(&self.downsample_padding)
+        {
+            return bad(&format!("downsample_padding {}", self.downsample_padding));
         }
         let cross = match &self.cross_attention_dim {
             Value::Number(x) => x.as_u64().map(|x| x as usize),
             _ => None,
         }
         .ok_or("cross_attention_dim must be a single integer")?;
-        let heads = per_block(&self.attention_head_dim, n, "attention_head_dim")?;
+        // diffusers: `num_attention_heads or attention_head_dim` is the head count (the legacy
+        // naming of SD 1.x/2.x configs)
+        let heads = if self.num_attention_heads.is_null() {
+            per_block(&self.attention_head_dim, n, "attention_head_dim")?
+        } else {
+            per_block(&self.num_attention_heads, n, "num_attention_heads")?
+        };
         let layers = per_block(
             &self.transformer_layers_per_block,
             n,
             "transformer_layers_per_block",
         )?;
-        let mut blocks = Vec::with_capacity(n);
+        if self.norm_num_groups == 0 {
+            return Err("norm_num_groups is 0".into());
+        }
+        let mut levels = Vec::with_capacity(n);
         for i in 0..n {
-            let down = self.down_block_types[i].as_str();
-            let up = self.up_block_types[n - 1 - i].as_str();
-            let cross_attn = match (down, up) {
-                ("CrossAttnDownBlock2D", "CrossAttnUpBlock2D") => true,
-                ("DownBlock2D", "UpBlock2D") => false,
-                _ => {
-                    return Err(format!(
-                        "block pair {down:?} / {up:?} (down block {i}, mirrored up block) is not supported"
-                    ));
-                }
-            };
             let c = self.block_out_channels[i];
-            if heads[i] == 0 || c % heads[i] != 0 {
-                return Err(format!("{c} channels not divisible by {} heads", heads[i]));
-            }
             if c % self.norm_num_groups != 0 {
                 return Err(format!(
                     "{c} channels not divisible by norm_num_groups {}",
                     self.norm_num_groups
                 ));
             }
-            blocks.push(BlockConfig {
-                out_channels: c,
-                use_cross_attn: cross_attn.then_some(layers[i]),
-                attention_head_dim: heads[i],
+            let attn = || -> std::result::Result<AttnArch, String> {
+                if heads[i] == 0 || c % heads[i] != 0 || layers[i] == 0 {
+                    return Err(format!(
+                        "{c} channels, {} heads, {} transformer layers in block {i}",
+                        heads[i], layers[i]
+                    ));
+                }
+                Ok(AttnArch {
+                    heads: heads[i],
+                    layers: layers[i],
+                })
+            };
+            let down_attn = match self.down_block_types[i].as_str() {
+                "CrossAttnDownBlock2D" => Some(attn()?),
+                "DownBlock2D" => None,
+                t => return bad(&format!("down block type {t:?}")),
+            };
+            let up_attn = match self.up_block_types[n - 1 - i].as_str() {
+                "CrossAttnUpBlock2D" => Some(attn()?),
+                "UpBlock2D" => None,
+                t => return bad(&format!("up block type {t:?}")),
+            };
+            levels.push(LevelArch {
+                channels: c,
+                down_attn,
+                up_attn,
             });
         }
-        // candle's mid block uses the last block's head count and one transformer layer
-        if layers[n - 1] != 1 {
-            return bad("transformer_layers_per_block > 1 in the last block (mid block)");
+        let last = self.block_out_channels[n - 1];
+        if heads[n - 1] == 0 || last % heads[n - 1] != 0 || layers[n - 1] == 0 {
+            return Err(format!(
+                "mid block: {last} channels, {} heads, {} layers",
+                heads[n - 1],
+                layers[n - 1]
+            ));
         }
-        Ok(UNet2DConditionModelConfig {
-            center_input_sample: self.center_input_sample,
-            flip_sin_to_cos: self.flip_sin_to_cos,
-            freq_shift: self.freq_shift,
-            blocks,
+        if self.layers_per_block == 0 {
+            return Err("layers_per_block is 0".into());
+        }
+        Ok(UnetArch {
+            in_channels: self.in_channels,
+            out_channels: self.out_channels,
+            levels,
             layers_per_block: self.layers_per_block,
+            mid: AttnArch {
+                heads: heads[n - 1],
+                layers: layers[n - 1],
+            },
+            groups: self.norm_num_groups,
+            eps: self.norm_eps,
+            cross_attention_dim: cross,
+            use_linear_projection: self.use_linear_projection,
             downsample_padding: self.downsample_padding as usize,
             mid_block_scale_factor: self.mid_block_scale_factor,
-            norm_num_groups: self.norm_num_groups,
-            norm_eps: self.norm_eps,
-            cross_attention_dim: cross,
-            sliced_attention_size: None,
-            use_linear_projection: self.use_linear_projection,
+            flip_sin_to_cos: self.flip_sin_to_cos,
+            freq_shift: self.freq_shift,
+            center_input_sample: self.center_input_sample,
+            upcast_attention: self.upcast_attention,
         })
     }
 
@@ -314,77 +396,5 @@ impl UnetConfig {
         });
         // a literal config: deserialising it cannot fail
         serde_json::from_value(cfg).unwrap_or_else(|_| unreachable!())
-    }
-}
-
-/// The UNet plus its parsed config.
-pub struct Unet {
-    pub config: UnetConfig,
-    model: UNet2DConditionModel,
-    dtype: candle_core::DType,
-}
-
-impl std::fmt::Debug for Unet {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Unet")
-            .field("config", &self.config)
-            .finish()
-    }
-}
-
-impl Unet {
-    /// Builds the UNet (`path` is only used in error messages).
-    pub fn new(vb: VarBuilder, config: UnetConfig, path: &std::path::Path) -> Result<Self> {
-        let cc = config
-            .to_candle()
-            .map_err(|reason| ModelError::Unsupported {
-                component: "unet",
-                path: path.display().to_string(),
-                reason,
-            })?;
-        let dtype = vb.dtype();
-        let model =
-            UNet2DConditionModel::new(vb, config.in_channels, config.out_channels, false, cc)
-                .map_err(super::loader::mismatch("unet", path))?;
-        Ok(Self {
-            config,
-            model,
-            dtype,
-        })
-    }
-
-    /// Raw model output (ε or v, as the scheduler's `prediction_type` says) for latents
-    /// `[b, c, h, w]` at timestep `t`, conditioned on `context [b, seq, cross_attention_dim]`.
-    pub fn forward(&self, latents: &Tensor, t: f64, context: &Tensor) -> Result<Tensor> {
-        let (b, c, _, _) = latents.dims4().map_err(|_| {
-            ModelError::InvalidInput(format!(
-                "latents must be [b, c, h, w], got {:?}",
-                latents.dims()
-            ))
-        })?;
-        if c != self.config.in_channels {
-            return Err(ModelError::InvalidInput(format!(
-                "latents have {c} channels, the UNet expects {}",
-                self.config.in_channels
-            )));
-        }
-        let (cb, _, cd) = context.dims3().map_err(|_| {
-            ModelError::InvalidInput(format!(
-                "context must be [b, seq, dim], got {:?}",
-                context.dims()
-            ))
-        })?;
-        let want = self.config.cross_attention_dim.as_u64().unwrap_or(0) as usize;
-        if cb != b || cd != want {
-            return Err(ModelError::InvalidInput(format!(
-                "context shape {:?} does not match batch {b} and cross_attention_dim {want}",
-                context.dims()
-            )));
-        }
-        let dtype = self.dtype;
-        let out = self
-            .model
-            .forward(&latents.to_dtype(dtype)?, t, &context.to_dtype(dtype)?)?;
-        Ok(out.to_dtype(latents.dtype())?)
     }
 }
