@@ -19,14 +19,13 @@ pub struct Conv2d {
     pub bias: Option<Tensor>,
     pub stride: usize,
     pub padding: usize,
-    /// Kernel-path caches, filled on first use: the weights as f32 values, their Winograd
+    /// Kernel-path caches, filled on first use: the bias as f32 values, the weights' Winograd
     /// transform, and the transform of the flipped, transposed kernel (for the input gradient).
     cache: Arc<ConvCache>,
 }
 
 #[derive(Debug, Default)]
 struct ConvCache {
-    weight: OnceLock<Vec<f32>>,
     bias: OnceLock<Option<Vec<f32>>>,
     wino: OnceLock<Vec<f32>>,
     wino_flipped: OnceLock<Vec<f32>>,
@@ -124,29 +123,28 @@ impl Conv2d {
     fn kernel_forward(&self, x: &Tensor, pad: [usize; 4]) -> R<(Vec<f32>, [usize; 4])> {
         let g = self.geom(x.dims4()?, pad)?;
         let (ho, wo) = g.out_hw();
-        let (weight, bias) = self.cached_weights()?;
-        let wino = if winograd::applies(&g) {
-            Some(
-                self.cache
-                    .wino
-                    .get_or_init(|| winograd::transform_kernel(weight, g.co, g.ci)),
-            )
-        } else {
-            None
-        };
-        let y = kernels::with_f32(x, |xs| {
-            conv::conv2d_prepared(&g, xs, weight, wino.map(|v| v.as_slice()), bias)
-                .map_err(kernels::err)
+        let bias = self.cached_bias()?;
+        // the weights are read in place (no copy); only their Winograd transform is cached
+        let y = kernels::with_f32(&self.weight, |weight| {
+            let wino = if winograd::applies(&g) {
+                Some(
+                    self.cache
+                        .wino
+                        .get_or_init(|| winograd::transform_kernel(weight, g.co, g.ci)),
+                )
+            } else {
+                None
+            };
+            kernels::with_f32(x, |xs| {
+                conv::conv2d_prepared(&g, xs, weight, wino.map(|v| v.as_slice()), bias)
+                    .map_err(kernels::err)
+            })
         })?;
         Ok((y, [g.b, g.co, ho, wo]))
     }
 
-    /// The weights (and bias) as f32 values, read once.
-    fn cached_weights(&self) -> R<(&[f32], Option<&[f32]>)> {
-        if self.cache.weight.get().is_none() {
-            let w = self.weight.flatten_all()?.to_vec1::<f32>()?;
-            let _ = self.cache.weight.set(w);
-        }
+    /// The bias as f32 values, read once.
+    fn cached_bias(&self) -> R<Option<&[f32]>> {
         if self.cache.bias.get().is_none() {
             let b = match &self.bias {
                 Some(b) => Some(b.to_vec1::<f32>()?),
@@ -154,9 +152,9 @@ impl Conv2d {
             };
             let _ = self.cache.bias.set(b);
         }
-        match (self.cache.weight.get(), self.cache.bias.get()) {
-            (Some(w), Some(b)) => Ok((w.as_slice(), b.as_deref())),
-            _ => candle_core::bail!("conv2d: weight cache not filled"),
+        match self.cache.bias.get() {
+            Some(b) => Ok(b.as_deref()),
+            None => candle_core::bail!("conv2d: bias cache not filled"),
         }
     }
 
@@ -180,17 +178,18 @@ impl Conv2d {
                 (b, g.co, g.out_hw())
             );
         }
-        let (weight, _) = self.cached_weights()?;
-        let wino = if winograd::applies(&g) {
-            Some(self.cache.wino_flipped.get_or_init(|| {
-                winograd::transform_kernel(&conv::flip_transpose(weight, g.co, ci, 3), ci, g.co)
-            }))
-        } else {
-            None
-        };
-        let dx = kernels::with_f32(dy, |ds| {
-            conv::conv2d_input_grad_prepared(&g, ds, weight, wino.map(|v| v.as_slice()))
-                .map_err(kernels::err)
+        let dx = kernels::with_f32(&self.weight, |weight| {
+            let wino = if winograd::applies(&g) {
+                Some(self.cache.wino_flipped.get_or_init(|| {
+                    winograd::transform_kernel(&conv::flip_transpose(weight, g.co, ci, 3), ci, g.co)
+                }))
+            } else {
+                None
+            };
+            kernels::with_f32(dy, |ds| {
+                conv::conv2d_input_grad_prepared(&g, ds, weight, wino.map(|v| v.as_slice()))
+                    .map_err(kernels::err)
+            })
         })?;
         kernels::tensor(dx, &[b, ci, h, w])
     }
