@@ -16,7 +16,7 @@ fn refs(name: &str) -> HashMap<String, Tensor> {
     candle_core::safetensors::load(fixture(name).join("refs.safetensors"), &Device::Cpu).unwrap()
 }
 
-/// Every autoencoder and UNet output the fixtures check, in a fixed order.
+/// Every autoencoder, text encoder and UNet output the fixtures check, in a fixed order.
 fn outputs() -> Vec<(&'static str, Tensor, Tensor)> {
     let sd = StableDiffusion::load(&fixture("sd-tiny"), &LoadOptions::default()).unwrap();
     let r = refs("sd-tiny");
@@ -36,6 +36,9 @@ fn outputs() -> Vec<(&'static str, Tensor, Tensor)> {
             r["vjp.d_image"].clone(),
         ),
     ];
+    // the CLIP text encoder (causal attention)
+    let (cond, _) = sd.text_embeddings("a red cat").unwrap();
+    v.push(("text embeddings", cond, r["text.cond"].clone()));
     for t in [999usize, 10] {
         v.push((
             "unet",

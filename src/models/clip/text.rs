@@ -5,10 +5,22 @@
 
 use super::config::{Activation, ClipTextConfig};
 use super::{ClipError, load_weights};
+use crate::models::kernels::{self, math, pointwise};
+use crate::models::nn::{self, LayerNorm, Linear};
 use candle_core::{D, DType, Device, IndexOp, Module, Result, Tensor};
-use candle_nn::{Embedding, LayerNorm, Linear, VarBuilder, embedding, layer_norm, linear};
+use candle_nn::{Embedding, VarBuilder, embedding};
 
 fn activate(act: Activation, xs: &Tensor) -> Result<Tensor> {
+    if kernels::applies(&[xs]) && act != Activation::GeluTanh {
+        let mut v = xs.flatten_all()?.to_vec1::<f32>()?;
+        match act {
+            Activation::QuickGelu => {
+                pointwise::map_inplace(&mut v, |x| x / (1.0 + math::exp_fast(-1.702 * x)))
+            }
+            _ => pointwise::map_inplace(&mut v, math::gelu),
+        }
+        return kernels::tensor(v, xs.dims());
+    }
     match act {
         Activation::QuickGelu => xs * candle_nn::ops::sigmoid(&(xs * 1.702)?)?,
         Activation::Gelu => xs.gelu_erf(),
@@ -34,42 +46,30 @@ struct Attention {
     v: Linear,
     out: Linear,
     heads: usize,
-    head_dim: usize,
-    scale: f64,
 }
 
 impl Attention {
     fn new(vb: VarBuilder, s: &EncoderShape) -> Result<Self> {
         let h = s.hidden_size;
-        let head_dim = h / s.num_heads;
+        if s.num_heads == 0 || h % s.num_heads != 0 {
+            candle_core::bail!("{h} hidden units not divisible by {} heads", s.num_heads);
+        }
         Ok(Self {
-            q: linear(h, h, vb.pp("q_proj"))?,
-            k: linear(h, h, vb.pp("k_proj"))?,
-            v: linear(h, h, vb.pp("v_proj"))?,
-            out: linear(h, h, vb.pp("out_proj"))?,
+            q: Linear::load(vb.pp("q_proj"), h, h, true)?,
+            k: Linear::load(vb.pp("k_proj"), h, h, true)?,
+            v: Linear::load(vb.pp("v_proj"), h, h, true)?,
+            out: Linear::load(vb.pp("out_proj"), h, h, true)?,
             heads: s.num_heads,
-            head_dim,
-            scale: (head_dim as f64).powf(-0.5),
         })
     }
 
-    fn forward(&self, xs: &Tensor, mask: Option<&Tensor>) -> Result<Tensor> {
-        let (b, n, c) = xs.dims3()?;
-        let split = |t: Tensor| -> Result<Tensor> {
-            t.reshape((b, n, self.heads, self.head_dim))?
-                .transpose(1, 2)?
-                .contiguous()
-        };
-        let q = split((self.q.forward(xs)? * self.scale)?)?;
-        let k = split(self.k.forward(xs)?)?;
-        let v = split(self.v.forward(xs)?)?;
-        let mut w = q.matmul(&k.t()?.contiguous()?)?;
-        if let Some(m) = mask {
-            w = w.broadcast_add(m)?;
-        }
-        let w = candle_nn::ops::softmax_last_dim(&w)?;
-        let o = w.matmul(&v)?.transpose(1, 2)?.reshape((b, n, c))?;
-        self.out.forward(&o)
+    /// `residual + out_proj(attention(xs))`.
+    fn forward(&self, xs: &Tensor, causal: bool, residual: &Tensor) -> Result<Tensor> {
+        let q = self.q.forward(xs)?;
+        let k = self.k.forward(xs)?;
+        let v = self.v.forward(xs)?;
+        let o = nn::attention(&q, &k, &v, self.heads, causal, false)?;
+        self.out.forward_residual(&o, residual)
     }
 }
 
@@ -87,21 +87,28 @@ impl EncoderLayer {
     fn new(vb: VarBuilder, s: &EncoderShape) -> Result<Self> {
         Ok(Self {
             attn: Attention::new(vb.pp("self_attn"), s)?,
-            ln1: layer_norm(s.hidden_size, s.eps, vb.pp("layer_norm1"))?,
-            fc1: linear(s.hidden_size, s.intermediate_size, vb.pp("mlp").pp("fc1"))?,
-            fc2: linear(s.intermediate_size, s.hidden_size, vb.pp("mlp").pp("fc2"))?,
-            ln2: layer_norm(s.hidden_size, s.eps, vb.pp("layer_norm2"))?,
+            ln1: LayerNorm::load(vb.pp("layer_norm1"), s.hidden_size, s.eps)?,
+            fc1: Linear::load(
+                vb.pp("mlp").pp("fc1"),
+                s.hidden_size,
+                s.intermediate_size,
+                true,
+            )?,
+            fc2: Linear::load(
+                vb.pp("mlp").pp("fc2"),
+                s.intermediate_size,
+                s.hidden_size,
+                true,
+            )?,
+            ln2: LayerNorm::load(vb.pp("layer_norm2"), s.hidden_size, s.eps)?,
             act: s.act,
         })
     }
 
-    fn forward(&self, xs: &Tensor, mask: Option<&Tensor>) -> Result<Tensor> {
-        let h = (xs + self.attn.forward(&self.ln1.forward(xs)?, mask)?)?;
-        let m = self.fc2.forward(&activate(
-            self.act,
-            &self.fc1.forward(&self.ln2.forward(&h)?)?,
-        )?)?;
-        h + m
+    fn forward(&self, xs: &Tensor, causal: bool) -> Result<Tensor> {
+        let h = self.attn.forward(&self.ln1.forward(xs)?, causal, xs)?;
+        let a = activate(self.act, &self.fc1.forward(&self.ln2.forward(&h)?)?)?;
+        self.fc2.forward_residual(&a, &h)
     }
 }
 
@@ -124,34 +131,27 @@ impl ClipEncoder {
         self.layers.len()
     }
 
-    /// Runs all layers; returns the input followed by every layer's output
-    /// (`output_hidden_states=True`), so the last entry is the final hidden state.
-    pub fn forward_all(&self, xs: &Tensor, mask: Option<&Tensor>) -> Result<Vec<Tensor>> {
+    /// Runs all layers (`causal`: the text tower's causal attention mask); returns the input
+    /// followed by every layer's output (`output_hidden_states=True`), so the last entry is the
+    /// final hidden state.
+    pub fn forward_all(&self, xs: &Tensor, causal: bool) -> Result<Vec<Tensor>> {
         let mut states = Vec::with_capacity(self.layers.len() + 1);
         states.push(xs.clone());
         let mut h = xs.clone();
         for l in &self.layers {
-            h = l.forward(&h, mask)?;
+            h = l.forward(&h, causal)?;
             states.push(h.clone());
         }
         Ok(states)
     }
 
-    pub fn forward(&self, xs: &Tensor, mask: Option<&Tensor>) -> Result<Tensor> {
+    pub fn forward(&self, xs: &Tensor, causal: bool) -> Result<Tensor> {
         let mut h = xs.clone();
         for l in &self.layers {
-            h = l.forward(&h, mask)?;
+            h = l.forward(&h, causal)?;
         }
         Ok(h)
     }
-}
-
-/// Additive causal mask `(1, 1, n, n)`: 0 on and below the diagonal, -inf above.
-pub fn causal_mask(n: usize, dtype: DType, device: &Device) -> Result<Tensor> {
-    let v: Vec<f32> = (0..n)
-        .flat_map(|i| (0..n).map(move |j| if j > i { f32::NEG_INFINITY } else { 0.0 }))
-        .collect();
-    Tensor::from_vec(v, (1, 1, n, n), device)?.to_dtype(dtype)
 }
 
 /// Outputs of the text tower.
@@ -197,10 +197,10 @@ impl ClipTextTransformer {
                 emb.pp("position_embedding"),
             )?,
             encoder: ClipEncoder::new(vb.pp("encoder"), &shape)?,
-            final_layer_norm: layer_norm(
+            final_layer_norm: LayerNorm::load(
+                vb.pp("final_layer_norm"),
                 c.hidden_size,
                 c.layer_norm_eps,
-                vb.pp("final_layer_norm"),
             )?,
             config: c.clone(),
         })
@@ -210,7 +210,7 @@ impl ClipTextTransformer {
         &self.config
     }
 
-    fn embed(&self, input_ids: &Tensor) -> Result<(Tensor, Tensor)> {
+    fn embed(&self, input_ids: &Tensor) -> Result<Tensor> {
         let (_, n) = input_ids.dims2()?;
         if n > self.config.max_position_embeddings {
             candle_core::bail!(
@@ -220,12 +220,9 @@ impl ClipTextTransformer {
         }
         let dev = input_ids.device();
         let pos = Tensor::arange(0u32, n as u32, dev)?;
-        let x = self
-            .token_embedding
+        self.token_embedding
             .forward(input_ids)?
-            .broadcast_add(&self.position_embedding.forward(&pos)?)?;
-        let mask = causal_mask(n, x.dtype(), dev)?;
-        Ok((x, mask))
+            .broadcast_add(&self.position_embedding.forward(&pos)?)
     }
 
     /// Index of the pooled token per row: the first `eos_token_id`, or the largest id when the
@@ -264,8 +261,8 @@ impl ClipTextTransformer {
     /// `input_ids`: `(batch, seq)` u32 ids. No attention mask: padding follows the end token
     /// and the causal mask keeps it out of every earlier position, as Stable Diffusion uses it.
     pub fn forward(&self, input_ids: &Tensor) -> Result<TextOutput> {
-        let (x, mask) = self.embed(input_ids)?;
-        let h = self.encoder.forward(&x, Some(&mask))?;
+        let x = self.embed(input_ids)?;
+        let h = self.encoder.forward(&x, true)?;
         let last = self.final_layer_norm.forward(&h)?;
         let pooled = self.pool(&last, input_ids)?;
         Ok(TextOutput {
@@ -278,8 +275,8 @@ impl ClipTextTransformer {
     /// As [`Self::forward`], also returning every hidden state (for `clip_skip` /
     /// penultimate-layer conditioning).
     pub fn forward_with_hidden_states(&self, input_ids: &Tensor) -> Result<TextOutput> {
-        let (x, mask) = self.embed(input_ids)?;
-        let states = self.encoder.forward_all(&x, Some(&mask))?;
+        let x = self.embed(input_ids)?;
+        let states = self.encoder.forward_all(&x, true)?;
         let h = states.last().cloned().unwrap_or(x);
         let last = self.final_layer_norm.forward(&h)?;
         let pooled = self.pool(&last, input_ids)?;
@@ -344,10 +341,11 @@ impl ClipTextModelWithProjection {
     pub fn new(vb: VarBuilder, config: &ClipTextConfig, projection_dim: usize) -> Result<Self> {
         Ok(Self {
             text_model: ClipTextTransformer::new(text_tower(vb.clone()), config)?,
-            text_projection: candle_nn::linear_no_bias(
+            text_projection: Linear::load(
+                vb.pp("text_projection"),
                 config.hidden_size,
                 projection_dim,
-                vb.pp("text_projection"),
+                false,
             )?,
         })
     }

@@ -107,7 +107,7 @@ impl ClipVisionTransformer {
         let pos = Tensor::arange(0u32, n as u32, x.device())?;
         let x = x.broadcast_add(&self.position_embedding.forward(&pos)?)?;
         let x = self.pre_layrnorm.forward(&x)?;
-        let last = self.encoder.forward(&x, None)?;
+        let last = self.encoder.forward(&x, false)?;
         let pooled = self.post_layernorm.forward(&last.i((.., 0, ..))?)?;
         Ok(VisionOutput {
             last_hidden_state: last,

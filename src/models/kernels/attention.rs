@@ -21,6 +21,8 @@ pub struct AttentionGeom {
     pub m: usize,
     pub c: usize,
     pub heads: usize,
+    /// Query `i` sees keys `0..=i` only (a text encoder's causal mask).
+    pub causal: bool,
 }
 
 impl AttentionGeom {
@@ -30,7 +32,22 @@ impl AttentionGeom {
                 "attention: {c} channels not divisible by {heads} heads"
             ));
         }
-        Ok(Self { b, n, m, c, heads })
+        Ok(Self {
+            b,
+            n,
+            m,
+            c,
+            heads,
+            causal: false,
+        })
+    }
+
+    /// The same shape with a causal mask.
+    pub fn causal(self) -> Self {
+        Self {
+            causal: true,
+            ..self
+        }
     }
 
     /// Queries per task: about 256 Ki scores (1 MiB) per tile.
@@ -51,7 +68,14 @@ pub fn attention(
     v: &[f32],
     scale: f32,
 ) -> Result<Vec<f32>, String> {
-    let AttentionGeom { b, n, m, c, heads } = *g;
+    let AttentionGeom {
+        b,
+        n,
+        m,
+        c,
+        heads,
+        causal,
+    } = *g;
     if q.len() != b * n * c || k.len() != b * m * c || v.len() != b * m * c {
         return Err(format!(
             "attention: q/k/v have {}/{}/{} values for b={b}, n={n}, m={m}, c={c}",
@@ -111,7 +135,9 @@ pub fn attention(
             let mut inv = [0f32; 256];
             math::vectorised(|| {
                 for (r, row) in s.chunks_exact_mut(m).enumerate() {
-                    inv[r] = 1.0 / math::exp_shifted_sum(row);
+                    let seen = if causal { (q0 + r + 1).min(m) } else { m };
+                    inv[r] = 1.0 / math::exp_shifted_sum(&mut row[..seen]);
+                    row[seen..].fill(0.0);
                 }
             });
             // SAFETY: as above: this task's output window, v read inside its checked length.
@@ -154,13 +180,21 @@ mod tests {
     use crate::models::kernels::test_values;
 
     fn naive(g: &AttentionGeom, q: &[f32], k: &[f32], v: &[f32], scale: f32) -> Vec<f32> {
-        let AttentionGeom { b, n, m, c, heads } = *g;
+        let AttentionGeom {
+            b,
+            n,
+            m,
+            c,
+            heads,
+            causal,
+        } = *g;
         let d = c / heads;
         let mut out = vec![0f32; b * n * c];
         for bi in 0..b {
             for h in 0..heads {
                 for i in 0..n {
-                    let s: Vec<f64> = (0..m)
+                    let seen = if causal { (i + 1).min(m) } else { m };
+                    let s: Vec<f64> = (0..seen)
                         .map(|j| {
                             (0..d)
                                 .map(|x| {
@@ -175,7 +209,7 @@ mod tests {
                     let e: Vec<f64> = s.iter().map(|x| (x - mx).exp()).collect();
                     let z: f64 = e.iter().sum();
                     for x in 0..d {
-                        out[(bi * n + i) * c + h * d + x] = (0..m)
+                        out[(bi * n + i) * c + h * d + x] = (0..seen)
                             .map(|j| e[j] * v[(bi * m + j) * c + h * d + x] as f64)
                             .sum::<f64>()
                             as f32
@@ -190,8 +224,15 @@ mod tests {
     #[test]
     fn fused_attention_matches_the_definition() {
         // n spans several query tiles (tile = 256 for m = 70), cross-attention shape m != n
-        for (b, n, m, c, heads) in [(2, 300, 70, 12, 3), (1, 5, 5, 8, 1), (1, 40, 1100, 4, 2)] {
+        for (b, n, m, c, heads, causal) in [
+            (2, 300, 70, 12, 3, false),
+            (1, 5, 5, 8, 1, false),
+            (1, 40, 1100, 4, 2, false),
+            // causal over several query tiles (tile = 256 for m = 600)
+            (2, 600, 600, 6, 2, true),
+        ] {
             let g = AttentionGeom::new(b, n, m, c, heads).unwrap();
+            let g = if causal { g.causal() } else { g };
             let q = test_values(b * n * c, 1);
             let k: Vec<f32> = test_values(b * m * c, 2).iter().map(|x| x * 4.0).collect();
             let v = test_values(b * m * c, 3);

@@ -6,9 +6,9 @@
 //! `proj_in`/`proj_out` and attention is the fused kernel; otherwise candle ops run the same
 //! maths (f16/bf16, CUDA).
 
-use crate::models::kernels::{self, attention, linear, pointwise};
-use crate::models::nn::{GroupNorm, LayerNorm, Linear};
-use candle_core::{DType, Tensor};
+use crate::models::kernels::{self, linear, pointwise};
+use crate::models::nn::{self, GroupNorm, LayerNorm, Linear};
+use candle_core::Tensor;
 use candle_nn::VarBuilder;
 
 type R<T> = candle_core::Result<T>;
@@ -44,42 +44,9 @@ impl Attention {
         let q = self.to_q.forward(x)?;
         let k = self.to_k.forward(kv)?;
         let v = self.to_v.forward(kv)?;
-        let o = sdpa(&q, &k, &v, self.heads, self.upcast)?;
+        let o = nn::attention(&q, &k, &v, self.heads, false, self.upcast)?;
         self.to_out.forward_residual(&o, residual)
     }
-}
-
-/// `softmax(Q Kᵀ / √d) V` per head for `q [b, n, c]`, `k, v [b, m, c]`.
-pub fn sdpa(q: &Tensor, k: &Tensor, v: &Tensor, heads: usize, upcast: bool) -> R<Tensor> {
-    let (b, n, c) = q.dims3()?;
-    let (_, m, _) = k.dims3()?;
-    let g = attention::AttentionGeom::new(b, n, m, c, heads).map_err(kernels::err)?;
-    let scale = 1.0 / ((c / heads) as f64).sqrt();
-    if kernels::applies(&[q, k, v]) && k.dims() == v.dims() && k.dim(0)? == b && k.dim(2)? == c {
-        let o = kernels::with_f32(q, |qs| {
-            kernels::with_f32(k, |ks| {
-                kernels::with_f32(v, |vs| {
-                    attention::attention(&g, qs, ks, vs, scale as f32).map_err(kernels::err)
-                })
-            })
-        })?;
-        return kernels::tensor(o, &[b, n, c]);
-    }
-    let dtype = q.dtype();
-    let split = |t: &Tensor, len: usize| -> R<Tensor> {
-        let t = t.reshape((b, len, heads, c / heads))?.transpose(1, 2)?;
-        let t = if upcast { t.to_dtype(DType::F32)? } else { t };
-        t.contiguous()
-    };
-    let (qh, kh, vh) = (split(q, n)?, split(k, m)?, split(v, m)?);
-    let s = (qh.matmul(&kh.t()?)? * scale)?;
-    let p = candle_nn::ops::softmax_last_dim(&s)?;
-    let p = if upcast { p.to_dtype(vh.dtype())? } else { p };
-    p.matmul(&vh)?
-        .to_dtype(dtype)?
-        .transpose(1, 2)?
-        .contiguous()?
-        .reshape((b, n, c))
 }
 
 /// `FeedForward` with GEGLU: `net.2(h · gelu(gate))`, `[h, gate] = net.0.proj(x)`.
