@@ -29,7 +29,7 @@ pub fn exp_fast(x: f32) -> f32 {
     let p = p * y + 0.5;
     let p = p * y + 1.0;
     let p = p * y + 1.0;
-    p * f32::from_bits(((ni + 127) as u32) << 23)
+    p * f32::from_bits((ni.wrapping_add(127) as u32) << 23)
 }
 
 /// `erf(x)`, absolute error ≤ 5e-7 (Abramowitz & Stegun 7.1.26, with the exponential above).
