@@ -45,8 +45,8 @@ pub struct BenchModelsArgs {
     /// Print one JSON object instead of a table.
     #[arg(long)]
     pub json: bool,
-    /// In-run baseline: candle's own CPU ops instead of our autoencoder kernels (Winograd /
-    /// im2col convolution, fused group norm).
+    /// In-run baseline: candle's own CPU ops instead of our kernels (Winograd / im2col
+    /// convolution, fused group norm, fused attention, linear layers with fused bias).
     #[arg(long)]
     pub candle_kernels: bool,
 }
