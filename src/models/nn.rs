@@ -584,6 +584,11 @@ impl Linear {
         self.forward_impl(x, None)
     }
 
+    /// The bias as f32 values (for the kernels).
+    pub fn bias_f32(&self) -> R<Option<Vec<f32>>> {
+        self.bias.as_ref().map(|b| b.to_vec1::<f32>()).transpose()
+    }
+
     /// `residual + linear(x)`, the residual folded into the product's accumulator.
     pub fn forward_residual(&self, x: &Tensor, residual: &Tensor) -> R<Tensor> {
         self.forward_impl(x, Some(residual))
@@ -605,10 +610,7 @@ impl Linear {
         let dims = self.out_dims(x)?;
         if kernels::applies(&ts) && residual.is_none_or(|r| r.dims() == dims.as_slice()) {
             let (o, i) = self.weight.dims2()?;
-            let bias = match &self.bias {
-                Some(b) => Some(b.to_vec1::<f32>()?),
-                None => None,
-            };
+            let bias = self.bias_f32()?;
             let y = kernels::with_f32(x, |xs| {
                 kernels::with_f32(&self.weight, |w| match residual {
                     Some(r) => kernels::with_f32(r, |rs| {

@@ -176,10 +176,7 @@ impl Transformer2DModel {
         ts.extend(p.bias.as_ref());
         if kernels::applies(&ts) {
             let o = p.weight.dim(0)?;
-            let bias = match &p.bias {
-                Some(bv) => Some(bv.to_vec1::<f32>()?),
-                None => None,
-            };
+            let bias = p.bias_f32()?;
             let y = kernels::with_f32(x, |xs| {
                 kernels::with_f32(&p.weight, |ws| {
                     linear::linear_from_channels(xs, (b, c, n), ws, o, bias.as_deref())
@@ -200,10 +197,7 @@ impl Transformer2DModel {
         ts.extend(p.bias.as_ref());
         if kernels::applies(&ts) {
             let o = p.weight.dim(0)?;
-            let bias = match &p.bias {
-                Some(bv) => Some(bv.to_vec1::<f32>()?),
-                None => None,
-            };
+            let bias = p.bias_f32()?;
             let y = kernels::with_f32(t, |tsv| {
                 kernels::with_f32(&p.weight, |ws| {
                     kernels::with_f32(residual, |rs| {
