@@ -55,12 +55,6 @@ pub fn gelu(x: f32) -> f32 {
     0.5 * x * (1.0 + erf(x * std::f32::consts::FRAC_1_SQRT_2))
 }
 
-/// `x · sigmoid(x)`.
-#[inline(always)]
-pub fn silu(x: f32) -> f32 {
-    x / (1.0 + exp_fast(-x))
-}
-
 /// Runs `f`, compiled for AVX2 + FMA when the CPU has them (the body is inlined into a copy with
 /// those target features), else as built. The results differ only by FMA rounding.
 #[inline(always)]
@@ -149,7 +143,6 @@ mod tests {
         assert!((gelu(1.0) - 0.841_344_7).abs() < 5e-7);
         assert!((gelu(-1.0) + 0.158_655_25).abs() < 5e-7);
         assert_eq!(gelu(-20.0), 0.0);
-        assert!((silu(2.0) - 2.0 / (1.0 + (-2.0f32).exp())).abs() < 1e-6);
     }
 
     #[test]

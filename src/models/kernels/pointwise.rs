@@ -33,14 +33,9 @@ pub fn relu_backward(out: &[f32], dy: &[f32]) -> Result<Vec<f32>, String> {
     )
 }
 
-/// `a + b`.
-pub fn add(a: &[f32], b: &[f32]) -> Result<Vec<f32>, String> {
-    zip_map("add", a, b, |a, b| a + b)
-}
-
 /// `(a + b) · s`.
 pub fn add_scaled(a: &[f32], b: &[f32], s: f32) -> Result<Vec<f32>, String> {
-    zip_map("add", a, b, |a, b| (a + b) * s)
+    zip_map("add_scaled", a, b, |a, b| (a + b) * s)
 }
 
 /// `x[b, c, n] += v[b, c]` (a per-image, per-channel offset such as a time embedding).
