@@ -589,6 +589,14 @@ impl Linear {
         self.bias.as_ref().map(|b| b.to_vec1::<f32>()).transpose()
     }
 
+    /// Whether the kernels apply to this layer's weights together with `activations`.
+    pub fn kernels_apply(&self, activations: &[&Tensor]) -> bool {
+        let mut ts = vec![&self.weight];
+        ts.extend(self.bias.as_ref());
+        ts.extend_from_slice(activations);
+        kernels::applies(&ts)
+    }
+
     /// `residual + linear(x)`, the residual folded into the product's accumulator.
     pub fn forward_residual(&self, x: &Tensor, residual: &Tensor) -> R<Tensor> {
         self.forward_impl(x, Some(residual))
@@ -604,11 +612,10 @@ impl Linear {
     }
 
     fn forward_impl(&self, x: &Tensor, residual: Option<&Tensor>) -> R<Tensor> {
-        let mut ts = vec![x, &self.weight];
-        ts.extend(self.bias.as_ref());
-        ts.extend(residual);
+        let mut acts = vec![x];
+        acts.extend(residual);
         let dims = self.out_dims(x)?;
-        if kernels::applies(&ts) && residual.is_none_or(|r| r.dims() == dims.as_slice()) {
+        if self.kernels_apply(&acts) && residual.is_none_or(|r| r.dims() == dims.as_slice()) {
             let (o, i) = self.weight.dims2()?;
             let bias = self.bias_f32()?;
             let y = kernels::with_f32(x, |xs| {

@@ -172,9 +172,7 @@ impl Transformer2DModel {
     /// `proj_in` on `[b, c, n]` read channels-first, giving tokens `[b, n, c]`.
     fn tokens_in(&self, x: &Tensor, (b, c, n): (usize, usize, usize)) -> R<Tensor> {
         let p = &self.proj_in;
-        let mut ts = vec![x, &p.weight];
-        ts.extend(p.bias.as_ref());
-        if kernels::applies(&ts) {
+        if p.kernels_apply(&[x]) {
             let o = p.weight.dim(0)?;
             let bias = p.bias_f32()?;
             let y = kernels::with_f32(x, |xs| {
@@ -193,9 +191,7 @@ impl Transformer2DModel {
     fn tokens_out(&self, t: &Tensor, residual: &Tensor) -> R<Tensor> {
         let p = &self.proj_out;
         let (b, n, i) = t.dims3()?;
-        let mut ts = vec![t, &p.weight, residual];
-        ts.extend(p.bias.as_ref());
-        if kernels::applies(&ts) {
+        if p.kernels_apply(&[t, residual]) {
             let o = p.weight.dim(0)?;
             let bias = p.bias_f32()?;
             let y = kernels::with_f32(t, |tsv| {
