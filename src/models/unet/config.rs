@@ -246,31 +246,27 @@ impl UnetConfig {
         {
             return bad("time_embedding_dim other than 4 × block_out_channels[0]");
         }
-        if self
-            .time_embedding_type
-            .as_deref()
-            .is_some_and(|t| t != "positional")
-        {
-            return bad("time_embedding_type other than positional");
-        }
-        if self
-            .resnet_time_scale_shift
-            .as_deref()
-            .is_some_and(|t| t != "default")
-        {
-            return bad("resnet_time_scale_shift other than default");
+        for (name, v, only) in [
+            (
+                "time_embedding_type",
+                &self.time_embedding_type,
+                "positional",
+            ),
+            (
+                "resnet_time_scale_shift",
+                &self.resnet_time_scale_shift,
+                "default",
+            ),
+            ("attention_type", &self.attention_type, "default"),
+        ] {
+            if v.as_deref().is_some_and(|t| t != only) {
+                return bad(&format!("{name} other than {only}"));
+            }
         }
         if self.conv_in_kernel.is_some_and(|k| k != 3)
             || self.conv_out_kernel.is_some_and(|k| k != 3)
         {
             return bad("conv kernels other than 3");
-        }
-        if self
-            .attention_type
-            .as_deref()
-            .is_some_and(|t| t != "default")
-        {
-            return bad("attention_type other than default");
         }
         if self
             .mid_block_type
@@ -303,6 +299,20 @@ impl UnetConfig {
         if self.norm_num_groups == 0 {
             return Err("norm_num_groups is 0".into());
         }
+        // the transformer of level i (its down and up blocks; the mid block uses the last)
+        let attn = |i: usize| -> std::result::Result<AttnArch, String> {
+            let c = self.block_out_channels[i];
+            if heads[i] == 0 || c % heads[i] != 0 || layers[i] == 0 {
+                return Err(format!(
+                    "{c} channels, {} heads, {} transformer layers in block {i}",
+                    heads[i], layers[i]
+                ));
+            }
+            Ok(AttnArch {
+                heads: heads[i],
+                layers: layers[i],
+            })
+        };
         let mut levels = Vec::with_capacity(n);
         for i in 0..n {
             let c = self.block_out_channels[i];
@@ -312,25 +322,13 @@ impl UnetConfig {
                     self.norm_num_groups
                 ));
             }
-            let attn = || -> std::result::Result<AttnArch, String> {
-                if heads[i] == 0 || c % heads[i] != 0 || layers[i] == 0 {
-                    return Err(format!(
-                        "{c} channels, {} heads, {} transformer layers in block {i}",
-                        heads[i], layers[i]
-                    ));
-                }
-                Ok(AttnArch {
-                    heads: heads[i],
-                    layers: layers[i],
-                })
-            };
             let down_attn = match self.down_block_types[i].as_str() {
-                "CrossAttnDownBlock2D" => Some(attn()?),
+                "CrossAttnDownBlock2D" => Some(attn(i)?),
                 "DownBlock2D" => None,
                 t => return bad(&format!("down block type {t:?}")),
             };
             let up_attn = match self.up_block_types[n - 1 - i].as_str() {
-                "CrossAttnUpBlock2D" => Some(attn()?),
+                "CrossAttnUpBlock2D" => Some(attn(i)?),
                 "UpBlock2D" => None,
                 t => return bad(&format!("up block type {t:?}")),
             };
@@ -340,14 +338,7 @@ impl UnetConfig {
                 up_attn,
             });
         }
-        let last = self.block_out_channels[n - 1];
-        if heads[n - 1] == 0 || last % heads[n - 1] != 0 || layers[n - 1] == 0 {
-            return Err(format!(
-                "mid block: {last} channels, {} heads, {} layers",
-                heads[n - 1],
-                layers[n - 1]
-            ));
-        }
+        let mid = attn(n - 1).map_err(|e| format!("mid block: {e}"))?;
         if self.layers_per_block == 0 {
             return Err("layers_per_block is 0".into());
         }
@@ -356,10 +347,7 @@ impl UnetConfig {
             out_channels: self.out_channels,
             levels,
             layers_per_block: self.layers_per_block,
-            mid: AttnArch {
-                heads: heads[n - 1],
-                layers: layers[n - 1],
-            },
+            mid,
             groups: self.norm_num_groups,
             eps: self.norm_eps,
             cross_attention_dim: cross,
