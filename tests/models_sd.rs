@@ -256,6 +256,31 @@ fn sds_image_gradient_matches_reference() {
     assert_close("sds latent grad", &g, &r["sds.grad_latents"], 1e-4);
     let d = sd.encode_vjp(img, &g).unwrap();
     assert_close("sds image grad", &d, &r["sds.d_image"], 1e-4);
+    // The same step on one taped encoder pass (what the SDS stage runs).
+    let (lat_t, tape) = sd.encode_t(img).unwrap();
+    assert_close("taped latents", &lat_t, &r["vjp.latents"], 1e-4);
+    let d_t = sd.encode_pullback(tape, &g).unwrap();
+    assert_close("taped sds image grad", &d_t, &r["sds.d_image"], 1e-4);
+}
+
+#[test]
+fn encoder_pullback_refuses_foreign_tapes_and_wrong_shapes() {
+    let sd = sd();
+    let r = refs("sd-tiny");
+    let img = &r["vae.image"];
+    let (lat, tape) = sd.encode_t(img).unwrap();
+    let wrong = Tensor::zeros((1, 4, 1, 1), DType::F32, &Device::Cpu).unwrap();
+    assert!(matches!(
+        sd.encode_pullback(tape, &wrong),
+        Err(ModelError::InvalidInput(_))
+    ));
+    // A TAESD tape cannot be pulled back through the VAE.
+    let taesd = vectorfusion::models::codec::Codec::from(
+        Taesd::load(&fixture("taesd-tiny"), Precision::F32, &Device::Cpu).unwrap(),
+    );
+    let (_, foreign) = taesd.encode_t(img).unwrap();
+    let err = sd.encode_pullback(foreign, &lat).unwrap_err();
+    assert!(err.to_string().contains("taesd"), "{err}");
 }
 
 #[test]

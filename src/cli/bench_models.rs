@@ -97,6 +97,19 @@ fn time_it<F>(warmup: usize, reps: usize, mut f: F) -> Result<Timing, CliError>
 where
     F: FnMut() -> Result<(), CliError>,
 {
+    time_part(warmup, reps, || {
+        let t0 = Instant::now();
+        f()?;
+        Ok(t0.elapsed().as_secs_f64() * 1e3)
+    })
+}
+
+/// [`time_it`] for a run whose timed part `f` measures itself (it returns that part's wall ms,
+/// after untimed setup such as recording a tape). CPU time covers the whole run.
+fn time_part<F>(warmup: usize, reps: usize, mut f: F) -> Result<Timing, CliError>
+where
+    F: FnMut() -> Result<f64, CliError>,
+{
     for _ in 0..warmup {
         f()?;
     }
@@ -104,9 +117,7 @@ where
     let c0 = cpu_ms();
     let mut ts = Vec::with_capacity(reps.max(1));
     for _ in 0..reps.max(1) {
-        let t0 = Instant::now();
-        f()?;
-        ts.push(t0.elapsed().as_secs_f64() * 1e3);
+        ts.push(f()?);
     }
     let cpu = match (c0, cpu_ms()) {
         (Some(a), Some(b)) => Some((b - a) / reps.max(1) as f64),
@@ -141,6 +152,9 @@ struct Report {
     unet_cfg_ms: Option<f64>,
     encoder_fwd_ms: Option<f64>,
     encoder_vjp_ms: Option<f64>,
+    /// the VJP's backward alone: the pullback of a tape recorded by an untimed forward (what an
+    /// SDS step adds to the encode it needs anyway)
+    encoder_bwd_ms: Option<f64>,
     decoder_ms: Option<f64>,
     text_ms: Option<f64>,
     encoder_fwd_peak_rss_mb: Option<f64>,
@@ -160,17 +174,37 @@ impl Report {
     }
 }
 
-/// Times one autoencoder's (VAE or TAESD) encoder forward, encoder VJP and decoder, each when
-/// selected by `--only`, and records them (with CPU time and peak RSS) in `r`.
-fn time_autoencoder(
+/// One autoencoder's timed runs: encoder forward, the VJP from scratch (taped forward +
+/// pullback), the pullback alone (returns its own wall ms) and the decoder.
+struct AutoencoderRuns<E, V, B, D> {
+    encode: E,
+    vjp: V,
+    pullback: B,
+    decode: D,
+}
+
+/// Times one autoencoder's (VAE or TAESD) encoder forward, encoder VJP (and its pullback alone)
+/// and decoder, each when selected by `--only`, and records them (with CPU time and peak RSS)
+/// in `r`.
+fn time_autoencoder<E, V, B, D>(
     r: &mut Report,
     args: &BenchModelsArgs,
     want: &dyn Fn(&str) -> bool,
     say: &dyn Fn(&str),
-    mut encode: impl FnMut() -> Result<(), CliError>,
-    mut vjp: impl FnMut() -> Result<(), CliError>,
-    mut decode: impl FnMut() -> Result<(), CliError>,
-) -> Result<(), CliError> {
+    runs: AutoencoderRuns<E, V, B, D>,
+) -> Result<(), CliError>
+where
+    E: FnMut() -> Result<(), CliError>,
+    V: FnMut() -> Result<(), CliError>,
+    B: FnMut() -> Result<f64, CliError>,
+    D: FnMut() -> Result<(), CliError>,
+{
+    let AutoencoderRuns {
+        mut encode,
+        mut vjp,
+        pullback,
+        mut decode,
+    } = runs;
     if want("encoder") {
         say("encoder forward");
         let Timing { ms, peak, cpu } = time_it(args.warmup, args.reps, &mut encode)?;
@@ -184,6 +218,9 @@ fn time_autoencoder(
         r.encoder_vjp_ms = Some(ms);
         r.cpu("encoder_vjp", cpu);
         r.encoder_vjp_peak_rss_mb = peak;
+        say("encoder VJP backward (pullback of a recorded tape)");
+        let tm = time_part(args.warmup, args.reps, pullback)?;
+        r.encoder_bwd_ms = Some(tm.ms);
     }
     if want("decoder") {
         say("decoder");
@@ -231,30 +268,36 @@ pub fn run(args: BenchModelsArgs) -> Result<(), CliError> {
         Arch::Taesd => {
             let t = Taesd::new(random_var_builder(DType::F32, &dev), TaesdConfig::taesd())
                 .map_err(candle_err)?;
-            time_autoencoder(
-                &mut r,
-                &args,
-                &want,
-                &say,
-                || t.encode(&image).map(|_| ()).map_err(model_err),
-                || t.encode_vjp(&image, &lat).map(|_| ()).map_err(model_err),
-                || t.decode(&lat).map(|_| ()).map_err(model_err),
-            )?;
+            let runs = AutoencoderRuns {
+                encode: || t.encode(&image).map(|_| ()).map_err(model_err),
+                vjp: || t.encode_vjp(&image, &lat).map(|_| ()).map_err(model_err),
+                pullback: || {
+                    let (_, tape) = t.encode_t(&image).map_err(model_err)?;
+                    let t0 = Instant::now();
+                    t.encode_pullback(tape, &lat).map_err(model_err)?;
+                    Ok(t0.elapsed().as_secs_f64() * 1e3)
+                },
+                decode: || t.decode(&lat).map(|_| ()).map_err(model_err),
+            };
+            time_autoencoder(&mut r, &args, &want, &say, runs)?;
         }
         Arch::Sd15 | Arch::Sd21 => {
             let sd21 = args.arch == Arch::Sd21;
             if want("encoder") || want("vjp") || want("decoder") {
                 let vae = AutoencoderKl::new(random_var_builder(DType::F32, &dev), VaeConfig::sd())
                     .map_err(candle_err)?;
-                time_autoencoder(
-                    &mut r,
-                    &args,
-                    &want,
-                    &say,
-                    || vae.encode(&image).map(|_| ()).map_err(model_err),
-                    || vae.encode_vjp(&image, &lat).map(|_| ()).map_err(model_err),
-                    || vae.decode(&lat).map(|_| ()).map_err(model_err),
-                )?;
+                let runs = AutoencoderRuns {
+                    encode: || vae.encode(&image).map(|_| ()).map_err(model_err),
+                    vjp: || vae.encode_vjp(&image, &lat).map(|_| ()).map_err(model_err),
+                    pullback: || {
+                        let (_, tape) = vae.encode_t(&image).map_err(model_err)?;
+                        let t0 = Instant::now();
+                        vae.encode_pullback(tape, &lat).map_err(model_err)?;
+                        Ok(t0.elapsed().as_secs_f64() * 1e3)
+                    },
+                    decode: || vae.decode(&lat).map(|_| ()).map_err(model_err),
+                };
+                time_autoencoder(&mut r, &args, &want, &say, runs)?;
             }
             let text_cfg: ClipTextConfig = if sd21 {
                 serde_json::from_value(serde_json::json!({
@@ -329,6 +372,7 @@ pub fn run(args: BenchModelsArgs) -> Result<(), CliError> {
         println!("  unet_cfg_ms     {}", f(r.unet_cfg_ms));
         println!("  encoder_fwd_ms  {}", f(r.encoder_fwd_ms));
         println!("  encoder_vjp_ms  {}", f(r.encoder_vjp_ms));
+        println!("  encoder_bwd_ms  {}", f(r.encoder_bwd_ms));
         println!("  decoder_ms      {}", f(r.decoder_ms));
         println!("  text_ms         {}", f(r.text_ms));
         println!("  cpu ms per run  {:?}", r.cpu_ms);

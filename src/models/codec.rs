@@ -119,6 +119,26 @@ impl PixelSpace {
     }
 }
 
+/// What [`Codec::encode_t`] keeps for [`Codec::encode_pullback`].
+#[derive(Debug)]
+pub enum EncodeTape {
+    Vae(super::vae::EncodeTape),
+    Taesd(super::taesd::EncodeTape),
+    /// Pixel space is linear: its pullback needs only the image's shape (kept as the image).
+    Pixel(Tensor),
+}
+
+impl EncodeTape {
+    /// The codec that recorded this tape.
+    pub fn kind(&self) -> CodecKind {
+        match self {
+            EncodeTape::Vae(_) => CodecKind::Vae,
+            EncodeTape::Taesd(_) => CodecKind::Taesd,
+            EncodeTape::Pixel(_) => CodecKind::Pixel,
+        }
+    }
+}
+
 /// The image ↔ latent map a model runs with.
 #[derive(Debug)]
 pub enum Codec {
@@ -197,10 +217,37 @@ impl Codec {
 
     /// `J_encodeᵀ · d_latents` with respect to the `[0, 1]` image (no weight gradients).
     pub fn encode_vjp(&self, image: &Tensor, d_latents: &Tensor) -> Result<Tensor> {
-        match self {
-            Codec::Vae(v) => Ok(v.encode_vjp(image, d_latents)?.1),
-            Codec::Taesd(t) => Ok(t.encode_vjp(image, d_latents)?.1),
-            Codec::Pixel(p) => p.encode_vjp(image, d_latents),
+        let (_, tape) = self.encode_t(image)?;
+        self.encode_pullback(tape, d_latents)
+    }
+
+    /// [`Self::encode`] that also keeps what [`Self::encode_pullback`] needs, so that encoding
+    /// an image and pulling a latent gradient back to it cost one encoder forward pass.
+    pub fn encode_t(&self, image: &Tensor) -> Result<(Tensor, EncodeTape)> {
+        Ok(match self {
+            Codec::Vae(v) => {
+                let (z, t) = v.encode_t(image)?;
+                (z, EncodeTape::Vae(t))
+            }
+            Codec::Taesd(t) => {
+                let (z, tape) = t.encode_t(image)?;
+                (z, EncodeTape::Taesd(tape))
+            }
+            Codec::Pixel(p) => (p.encode(image)?, EncodeTape::Pixel(image.clone())),
+        })
+    }
+
+    /// `J_encodeᵀ · d_latents` at the image `tape` was recorded for (no weight gradients).
+    pub fn encode_pullback(&self, tape: EncodeTape, d_latents: &Tensor) -> Result<Tensor> {
+        match (self, tape) {
+            (Codec::Vae(v), EncodeTape::Vae(t)) => v.encode_pullback(t, d_latents),
+            (Codec::Taesd(m), EncodeTape::Taesd(t)) => m.encode_pullback(t, d_latents),
+            (Codec::Pixel(p), EncodeTape::Pixel(image)) => p.encode_vjp(&image, d_latents),
+            (c, t) => Err(ModelError::InvalidInput(format!(
+                "a {} encoder tape cannot be pulled back through the {}",
+                t.kind().as_str(),
+                c.kind().as_str()
+            ))),
         }
     }
 

@@ -2,7 +2,7 @@
 
 use super::bert::BertTextEncoder;
 use super::clip::{ClipTextConfig, ClipTextModel, ClipTokenizer};
-use super::codec::{self, Codec, CodecKind};
+use super::codec::{self, Codec, CodecKind, EncodeTape};
 use super::loader::{self, LoadOptions, ModelSource, Precision, UNET_WEIGHTS};
 use super::scheduler::{PredictionType, Sampler, SamplerKind, SchedulerConfig, split_prediction};
 use super::taesd::Taesd;
@@ -321,6 +321,17 @@ impl StableDiffusion {
     /// `J_encode^T · d_latents` with respect to the `[0, 1]` image (no weight gradients).
     pub fn encode_vjp(&self, image: &Tensor, d_latents: &Tensor) -> Result<Tensor> {
         self.codec.encode_vjp(image, d_latents)
+    }
+
+    /// [`Self::encode`] that keeps the encoder's tape for [`Self::encode_pullback`]: one forward
+    /// pass serves both the latents and the VJP.
+    pub fn encode_t(&self, image: &Tensor) -> Result<(Tensor, EncodeTape)> {
+        self.codec.encode_t(image)
+    }
+
+    /// `J_encode^T · d_latents` at the image `tape` was recorded for (no weight gradients).
+    pub fn encode_pullback(&self, tape: EncodeTape, d_latents: &Tensor) -> Result<Tensor> {
+        self.codec.encode_pullback(tape, d_latents)
     }
 
     /// Latents → images in `[0, 1]` (pixel space: at the latent size; callers upscale).

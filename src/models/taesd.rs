@@ -145,6 +145,20 @@ enum Layer {
     Block(Block),
 }
 
+#[derive(Debug)]
+enum Tape {
+    Conv(usize, usize),
+    Block([Tensor; 3]),
+}
+
+/// What the TAESD encoder's forward pass keeps for its VJP ([`Taesd::encode_t`]).
+#[derive(Debug)]
+pub struct EncodeTape {
+    layers: Vec<Tape>,
+    latent_dims: Vec<usize>,
+    dtype: candle_core::DType,
+}
+
 /// TAESD encoder + decoder.
 #[derive(Debug, Clone)]
 pub struct Taesd {
@@ -265,45 +279,59 @@ impl Taesd {
         Ok(x)
     }
 
-    /// `(latents, J^T · d_latents)` with respect to the `[0, 1]` image.
-    pub fn encode_vjp(&self, image: &Tensor, d_latents: &Tensor) -> Result<(Tensor, Tensor)> {
+    /// [`Self::encode`] that also keeps what the encoder's VJP needs ([`Self::encode_pullback`]).
+    pub fn encode_t(&self, image: &Tensor) -> Result<(Tensor, EncodeTape)> {
         self.check_image(image)?;
-        enum T {
-            Conv(usize, usize),
-            Block([Tensor; 3]),
-        }
         let mut x = image.clone();
-        let mut tapes = Vec::with_capacity(self.encoder.len());
+        let mut layers = Vec::with_capacity(self.encoder.len());
         for l in &self.encoder {
             let (_, _, h, w) = x.dims4()?;
             match l {
                 Layer::Conv(c) => {
-                    tapes.push(T::Conv(h, w));
+                    layers.push(Tape::Conv(h, w));
                     x = c.forward(&x)?;
                 }
                 Layer::Block(b) => {
                     let t = b.forward_t(&x)?;
                     x = t[2].clone();
-                    tapes.push(T::Block(t));
+                    layers.push(Tape::Block(t));
                 }
             }
         }
-        if d_latents.dims() != x.dims() {
+        let tape = EncodeTape {
+            layers,
+            latent_dims: x.dims().to_vec(),
+            dtype: x.dtype(),
+        };
+        Ok((x, tape))
+    }
+
+    /// `J^T · d_latents` at the image `tape` was recorded for, with respect to the `[0, 1]`
+    /// image (no weight gradients). Consumes the tape, releasing it layer by layer.
+    pub fn encode_pullback(&self, tape: EncodeTape, d_latents: &Tensor) -> Result<Tensor> {
+        if d_latents.dims() != tape.latent_dims.as_slice() {
             return Err(ModelError::InvalidInput(format!(
                 "d_latents shape {:?} != latents shape {:?}",
                 d_latents.dims(),
-                x.dims()
+                tape.latent_dims
             )));
         }
-        let mut d = d_latents.to_dtype(x.dtype())?;
-        for (l, t) in self.encoder.iter().zip(tapes).rev() {
+        let mut d = d_latents.to_dtype(tape.dtype)?;
+        for (l, t) in self.encoder.iter().zip(tape.layers).rev() {
             d = match (l, t) {
-                (Layer::Conv(c), T::Conv(h, w)) => c.backward(&d, h, w)?,
-                (Layer::Block(b), T::Block(t)) => b.backward(&t, &d)?,
+                (Layer::Conv(c), Tape::Conv(h, w)) => c.backward(&d, h, w)?,
+                (Layer::Block(b), Tape::Block(t)) => b.backward(&t, &d)?,
                 _ => return Err(ModelError::InvalidInput("taesd tape out of order".into())),
             };
         }
-        Ok((x, d))
+        Ok(d)
+    }
+
+    /// `(latents, J^T · d_latents)` with respect to the `[0, 1]` image.
+    pub fn encode_vjp(&self, image: &Tensor, d_latents: &Tensor) -> Result<(Tensor, Tensor)> {
+        let (latents, tape) = self.encode_t(image)?;
+        let d = self.encode_pullback(tape, d_latents)?;
+        Ok((latents, d))
     }
 
     /// Latents → raw decoder output in the diffusers `[-1, 1]` convention.

@@ -135,12 +135,23 @@ enum Layer {
     NormSilu(GroupNorm),
 }
 
+#[derive(Debug)]
 enum Tape {
     Conv(usize, usize),
     Res(super::nn::ResnetTape),
     Attn(super::nn::AttentionTape),
     Down(usize, usize),
     NormSilu(super::nn::GroupNormTape),
+}
+
+/// What the encoder's forward pass keeps for its VJP ([`AutoencoderKl::encode_t`]): one
+/// entry per encoder layer, the moments' spatial size and the latents' shape.
+#[derive(Debug)]
+pub struct EncodeTape {
+    layers: Vec<Tape>,
+    moments_hw: (usize, usize),
+    latent_dims: Vec<usize>,
+    dtype: candle_core::DType,
 }
 
 /// The encoder as a flat sequence of layers (diffusers order).
@@ -481,33 +492,56 @@ impl AutoencoderKl {
         Ok(self.scale_latents(&d.mean)?)
     }
 
-    /// Returns `(latents, J^T · d_latents)` for [`Self::encode`]: the gradient with respect to
-    /// the `[0, 1]` image, without any weight gradient.
-    pub fn encode_vjp(&self, image: &Tensor, d_latents: &Tensor) -> Result<(Tensor, Tensor)> {
+    /// [`Self::encode`] that also keeps what the encoder's VJP needs: the latents and an
+    /// [`EncodeTape`] for [`Self::encode_pullback`]. Encoding and pulling back at the same image
+    /// then cost one forward pass.
+    pub fn encode_t(&self, image: &Tensor) -> Result<(Tensor, EncodeTape)> {
         self.check_image(image)?;
         let x = ((image * 2.0)? - 1.0)?;
-        let (h, tapes) = self.encoder.forward_t(&x)?;
+        let (h, layers) = self.encoder.forward_t(&x)?;
         let m = self.moments(&h)?;
         let lc = self.config.latent_channels;
         let latents = self.scale_latents(&m.narrow(1, 0, lc)?)?;
-        if d_latents.dims() != latents.dims() {
+        let (_, _, hh, ww) = h.dims4()?;
+        let tape = EncodeTape {
+            layers,
+            moments_hw: (hh, ww),
+            latent_dims: latents.dims().to_vec(),
+            dtype: m.dtype(),
+        };
+        Ok((latents, tape))
+    }
+
+    /// `J^T · d_latents` at the image `tape` was recorded for, with respect to the `[0, 1]`
+    /// image, without any weight gradient. Consumes the tape, releasing it layer by layer.
+    pub fn encode_pullback(&self, tape: EncodeTape, d_latents: &Tensor) -> Result<Tensor> {
+        if d_latents.dims() != tape.latent_dims.as_slice() {
             return Err(ModelError::InvalidInput(format!(
                 "d_latents shape {:?} != latents shape {:?}",
                 d_latents.dims(),
-                latents.dims()
+                tape.latent_dims
             )));
         }
-        let d_mean = (d_latents.to_dtype(m.dtype())? * self.config.scaling_factor)?;
+        let lc = self.config.latent_channels;
+        let d_mean = (d_latents.to_dtype(tape.dtype)? * self.config.scaling_factor)?;
         // moments gradient: mean half gets d_mean, logvar half zero
         let d_m = d_mean.pad_with_zeros(1, 0, lc)?;
-        let (_, _, hh, ww) = h.dims4()?;
+        let (hh, ww) = tape.moments_hw;
         let d_h = match &self.quant_conv {
             Some(q) => q.backward(&d_m, hh, ww)?,
             None => d_m,
         };
-        let d_x = self.encoder.backward(tapes, &d_h)?;
+        let d_x = self.encoder.backward(tape.layers, &d_h)?;
         // x = 2 * image - 1
-        Ok((latents, (d_x * 2.0)?))
+        Ok((d_x * 2.0)?)
+    }
+
+    /// Returns `(latents, J^T · d_latents)` for [`Self::encode`]: the gradient with respect to
+    /// the `[0, 1]` image, without any weight gradient.
+    pub fn encode_vjp(&self, image: &Tensor, d_latents: &Tensor) -> Result<(Tensor, Tensor)> {
+        let (latents, tape) = self.encode_t(image)?;
+        let d = self.encode_pullback(tape, d_latents)?;
+        Ok((latents, d))
     }
 
     /// Decodes scaled latents to raw decoder output (≈ `[-1, 1]`).

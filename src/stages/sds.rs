@@ -361,9 +361,10 @@ pub fn sds_image_grad(
     guidance: f32,
     weighting: Weighting,
 ) -> Result<(Vec<f32>, f64), SdsError> {
-    let z = teacher.encode(image)?;
+    // One encoder pass serves the latent and the VJP (teachers with a taped encoder).
+    let (z, pullback) = teacher.encode_linearised(image)?;
     let (gz, loss) = sds_latent_grad(teacher, &z, t, noise, cond, guidance, weighting)?;
-    Ok((teacher.encode_vjp(image, &gz)?, loss))
+    Ok((pullback(&gz)?, loss))
 }
 
 /// Adds the gradient of `weight · mean_pixels((R²+G²+B²)/3)` (image composited over white and

@@ -77,6 +77,10 @@ pub struct Conditioning {
     pub uncond: Vec<f32>,
 }
 
+/// Pulls dL/d(latent) back to dL/d(image data), at the image an encoder pass was linearised at
+/// ([`Teacher::encode_linearised`]). Called at most once: it may consume the encoder's tape.
+pub type Pullback<'a> = Box<dyn FnOnce(&Latent) -> Result<Vec<f32>, TeacherError> + 'a>;
+
 /// A diffusion model seen through the needs of score distillation.
 pub trait Teacher: Send + Sync {
     /// Short human-readable name (the analytic teacher says it is a test teacher).
@@ -111,6 +115,19 @@ pub trait Teacher: Send + Sync {
     /// Vector-Jacobian product of [`Teacher::encode`] at `image`: returns dL/d(image data)
     /// (length `4 * w * h`, premultiplied RGBA layout) given dL/d(latent).
     fn encode_vjp(&self, image: &Image, d_latent: &Latent) -> Result<Vec<f32>, TeacherError>;
+
+    /// [`Teacher::encode`] linearised at `image`: the latent, and the [`Pullback`] that applies
+    /// [`Teacher::encode_vjp`] at the same image. Teachers whose encoder keeps a tape override
+    /// this so that the pair costs one encoder forward pass instead of two; the default encodes,
+    /// then runs `encode_vjp` from scratch when the pullback is called.
+    fn encode_linearised<'a>(
+        &'a self,
+        image: &Image,
+    ) -> Result<(Latent, Pullback<'a>), TeacherError> {
+        let z = self.encode(image)?;
+        let image = image.clone();
+        Ok((z, Box::new(move |d: &Latent| self.encode_vjp(&image, d))))
+    }
 
     /// Predicts the noise in `z_t` at timestep `t` with classifier-free guidance
     /// `ε̂ = ε_u + guidance · (ε_c − ε_u)`.

@@ -8,7 +8,7 @@
 //! Images cross the boundary composited over white as `[1, 3, H, W]` tensors in `[0, 1]`; the
 //! image gradient is mapped back to premultiplied RGBA (`d/dα = −Σ_c d/dc`).
 
-use super::{Conditioning, Latent, Teacher, TeacherError};
+use super::{Conditioning, Latent, Pullback, Teacher, TeacherError};
 use crate::image::Image;
 use crate::models::codec::CodecKind;
 use crate::models::{LoadOptions, StableDiffusion};
@@ -66,6 +66,31 @@ impl SdTeacher {
 
     pub fn model(&self) -> &StableDiffusion {
         &self.sd
+    }
+
+    /// The encoder VJP's `[1, 3, s, s]` gradient as dL/d(premultiplied RGBA data): the alpha
+    /// gradient is minus the sum of the colour gradients.
+    fn image_grad(&self, dx: &Tensor) -> Result<Vec<f32>, TeacherError> {
+        let (dx, _) = flat(dx)?;
+        let n = (self.image_size * self.image_size) as usize;
+        if dx.len() != 3 * n {
+            return Err(TeacherError::Model(format!(
+                "encoder VJP returned {} values, expected {}",
+                dx.len(),
+                3 * n
+            )));
+        }
+        let mut out = vec![0.0f32; 4 * n];
+        for i in 0..n {
+            let mut da = 0.0;
+            for c in 0..3 {
+                let g = dx[c * n + i];
+                out[4 * i + c] = g;
+                da -= g;
+            }
+            out[4 * i + 3] = da;
+        }
+        Ok(out)
     }
 
     fn image_tensor(&self, image: &Image) -> Result<Tensor, TeacherError> {
@@ -195,29 +220,23 @@ impl Teacher for SdTeacher {
     }
 
     fn encode_vjp(&self, image: &Image, d_latent: &Latent) -> Result<Vec<f32>, TeacherError> {
+        let (_, pullback) = self.encode_linearised(image)?;
+        pullback(d_latent)
+    }
+
+    fn encode_linearised<'a>(
+        &'a self,
+        image: &Image,
+    ) -> Result<(Latent, Pullback<'a>), TeacherError> {
         let x = self.image_tensor(image)?;
-        let dz = self.latent_tensor(d_latent)?;
-        let dx = self.sd.encode_vjp(&x, &dz).map_err(model_err)?;
-        let (dx, _) = flat(&dx)?;
-        let n = (self.image_size * self.image_size) as usize;
-        if dx.len() != 3 * n {
-            return Err(TeacherError::Model(format!(
-                "encoder VJP returned {} values, expected {}",
-                dx.len(),
-                3 * n
-            )));
-        }
-        let mut out = vec![0.0f32; 4 * n];
-        for i in 0..n {
-            let mut da = 0.0;
-            for c in 0..3 {
-                let g = dx[c * n + i];
-                out[4 * i + c] = g;
-                da -= g;
-            }
-            out[4 * i + 3] = da;
-        }
-        Ok(out)
+        let (z, tape) = self.sd.encode_t(&x).map_err(model_err)?;
+        let z = self.to_latent(&z)?;
+        let pullback = move |d_latent: &Latent| {
+            let dz = self.latent_tensor(d_latent)?;
+            let dx = self.sd.encode_pullback(tape, &dz).map_err(model_err)?;
+            self.image_grad(&dx)
+        };
+        Ok((z, Box::new(pullback)))
     }
 
     fn predict_noise(
