@@ -2,6 +2,7 @@
 //! environment variables `VECTORFUSION_<SECTION>_<KEY>` (e.g. `VECTORFUSION_SERVER_BIND`), then by
 //! command-line flags. Every setting has a default, so the service starts with no file at all.
 
+use crate::models::ComputeDevice;
 use crate::pipeline::{EncoderChoice, Limits, ModelDirs};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -90,6 +91,8 @@ pub struct ModelsConfig {
     pub taesd_dir: String,
     /// `auto`, `vae` or `taesd`.
     pub encoder: String,
+    /// `cpu`, `cuda` or `cuda:N` (CUDA needs a build with the `cuda` feature).
+    pub device: String,
 }
 
 impl Default for ModelsConfig {
@@ -99,6 +102,7 @@ impl Default for ModelsConfig {
             clip_dir: String::new(),
             taesd_dir: String::new(),
             encoder: "auto".into(),
+            device: "cpu".into(),
         }
     }
 }
@@ -280,6 +284,17 @@ impl Config {
                 reason: e,
             });
         }
+        if let Err(reason) = self
+            .models
+            .device
+            .parse::<ComputeDevice>()
+            .and_then(|d| d.check_built().map(|()| d))
+        {
+            return Err(ConfigError::Invalid {
+                key: "models.device",
+                reason,
+            });
+        }
         if self.server.max_body_bytes < 1024 {
             return bad("server.max_body_bytes", "must be at least 1024");
         }
@@ -306,6 +321,7 @@ impl Config {
             clip_dir: opt(&self.models.clip_dir),
             taesd_dir: opt(&self.models.taesd_dir),
             encoder: self.models.encoder.parse().unwrap_or_default(),
+            device: self.models.device.parse().unwrap_or_default(),
             ..ModelDirs::default()
         }
     }
@@ -373,5 +389,26 @@ mod tests {
         );
         assert!(Config::from_toml_and_env("[queue]\nwrokers = 1\n", Vec::new()).is_err());
         assert!(Config::from_toml_and_env("[queue]\nworkers = 0\n", Vec::new()).is_err());
+    }
+
+    #[test]
+    fn models_device_is_parsed_and_checked_against_the_build() {
+        let env = |v: &str| vec![("VECTORFUSION_MODELS_DEVICE".to_string(), v.to_string())];
+        let cfg = Config::from_toml_and_env("", env("cpu")).unwrap();
+        assert_eq!(cfg.model_dirs().device, ComputeDevice::Cpu);
+        let err = Config::from_toml_and_env("[models]\ndevice = \"tpu\"\n", Vec::new())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("models.device") && err.contains("tpu"),
+            "{err}"
+        );
+        let cuda = Config::from_toml_and_env("", env("cuda:1"));
+        if cfg!(feature = "cuda") {
+            assert_eq!(cuda.unwrap().model_dirs().device, ComputeDevice::Cuda(1));
+        } else {
+            let err = cuda.unwrap_err().to_string();
+            assert!(err.contains("--features cuda"), "{err}");
+        }
     }
 }

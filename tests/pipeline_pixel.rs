@@ -81,6 +81,7 @@ fn sd_live_sds_with_taesd_as_the_encoder() {
         Some(&fixture("clip-tiny")),
         32,
         Some(&fixture("taesd-tiny")),
+        vectorfusion::models::ComputeDevice::Cpu,
     )
     .unwrap();
     assert!(!m.is_pixel_space());

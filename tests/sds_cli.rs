@@ -144,6 +144,27 @@ fn generate_bad_input_is_a_clear_error() {
         Some(2),
         "no targets in dir is a usage error"
     );
+    // An unknown device, or CUDA in a build without the `cuda` feature, is a usage error.
+    let model = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/sd-tiny");
+    let mut devices = vec!["tpu"];
+    if !cfg!(feature = "cuda") {
+        devices.push("cuda");
+    }
+    for device in devices {
+        let st = bin()
+            .args(["generate", "a cat", "--device", device, "--model"])
+            .arg(&model)
+            .arg("-o")
+            .arg(&out)
+            .output()
+            .unwrap();
+        assert_eq!(st.status.code(), Some(2), "--device {device}");
+        assert!(
+            String::from_utf8_lossy(&st.stderr).contains("cuda"),
+            "--device {device}: {}",
+            String::from_utf8_lossy(&st.stderr)
+        );
+    }
     assert!(!out.exists());
 }
 

@@ -65,6 +65,10 @@ pub struct EvalArgs {
     /// --method: Stable Diffusion model directory (diffusers layout).
     #[arg(long, conflicts_with = "teacher")]
     pub model: Option<PathBuf>,
+    /// --method: where the diffusion model runs (cpu, cuda, cuda:N; CUDA needs the `cuda`
+    /// feature).
+    #[arg(long, default_value = "cpu")]
+    pub device: String,
     /// --method: `analytic:DIR`, the analytic TEST teacher over the PNG targets in DIR.
     #[arg(long)]
     pub teacher: Option<String>,
@@ -182,6 +186,7 @@ fn generate_and_evaluate(
         clip_dir: args.rerank_scorer.clone(),
         taesd_dir: None,
         encoder: Default::default(),
+        device: super::parse_device(&args.device)?,
         analytic_dir,
     }
     .or_default_model(crate::pipeline::default_model_dir().map_err(CliError::Usage)?);

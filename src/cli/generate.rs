@@ -64,6 +64,10 @@ pub struct GenerateArgs {
     /// TAESD directory (`madebyollin/taesd` diffusers layout) for `--encoder taesd|auto`.
     #[arg(long)]
     pub taesd: Option<PathBuf>,
+    /// Where the diffusion model runs: cpu, cuda or cuda:N (CUDA needs a build with the `cuda`
+    /// feature).
+    #[arg(long, default_value = "cpu")]
+    pub device: String,
     /// Teacher input size in pixels (the SVG is written at this width) [default: the preset's,
     /// 64 for plain scratch].
     #[arg(long)]
@@ -171,7 +175,8 @@ pub fn run(mut args: GenerateArgs) -> Result<(), CliError> {
     let teacher: Box<dyn Teacher> = if let Some(dir) = &args.model {
         let taesd =
             resolve_encoder(encoder, true, dir, args.taesd.as_deref()).map_err(pipeline_err)?;
-        let t = SdTeacher::load_with(dir, size, taesd.as_deref()).map_err(|e| match e {
+        let device = super::parse_device(&args.device)?;
+        let t = SdTeacher::load_on(dir, size, taesd.as_deref(), device).map_err(|e| match e {
             TeacherError::Setup(m) => CliError::Usage(m),
             other => CliError::Other(anyhow::Error::new(other).context("loading the model")),
         })?;
@@ -322,7 +327,8 @@ fn run_pipeline(
     let models = if let Some(dir) = &args.model {
         let taesd = resolve_encoder(encoder, ps.prefer_taesd, dir, args.taesd.as_deref())
             .map_err(pipeline_err)?;
-        Models::load_sd_with(dir, args.scorer.as_deref(), size, taesd.as_deref())
+        let device = super::parse_device(&args.device)?;
+        Models::load_sd_with(dir, args.scorer.as_deref(), size, taesd.as_deref(), device)
             .map_err(pipeline_err)?
     } else {
         let spec = args.teacher.as_deref().ok_or_else(no_model)?;

@@ -39,6 +39,89 @@ impl std::str::FromStr for Precision {
     }
 }
 
+/// Where the models run: `cpu` (the default) or `cuda` / `cuda:N`, a CUDA GPU, in builds with
+/// the `cuda` cargo feature. On the CPU, f32 layers run on our kernels ([`super::kernels`]);
+/// elsewhere the same graphs run on candle's ops.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(try_from = "String", into = "String")]
+pub enum ComputeDevice {
+    #[default]
+    Cpu,
+    /// CUDA device ordinal.
+    Cuda(usize),
+}
+
+impl ComputeDevice {
+    /// Whether this build can open the device: always for the CPU; for CUDA only with the
+    /// `cuda` feature (whether a GPU is present is known only when [`Self::open`] tries).
+    pub fn check_built(self) -> std::result::Result<(), String> {
+        match self {
+            ComputeDevice::Cpu => Ok(()),
+            ComputeDevice::Cuda(_) if cfg!(feature = "cuda") => Ok(()),
+            ComputeDevice::Cuda(_) => Err(format!(
+                "device {self} needs a build with CUDA support: \
+                 cargo build --release --features cuda (see docs/MODELS.md)"
+            )),
+        }
+    }
+
+    /// Opens the candle device.
+    pub fn open(self) -> Result<Device> {
+        self.check_built()
+            .map_err(|reason| ModelError::Unsupported {
+                component: "device",
+                path: self.to_string(),
+                reason,
+            })?;
+        match self {
+            ComputeDevice::Cpu => Ok(Device::Cpu),
+            ComputeDevice::Cuda(n) => Device::new_cuda(n).map_err(|e| ModelError::Unsupported {
+                component: "device",
+                path: self.to_string(),
+                reason: format!("cannot open CUDA device {n}: {e}"),
+            }),
+        }
+    }
+}
+
+impl std::fmt::Display for ComputeDevice {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            ComputeDevice::Cpu => f.write_str("cpu"),
+            ComputeDevice::Cuda(n) => write!(f, "cuda:{n}"),
+        }
+    }
+}
+
+impl std::str::FromStr for ComputeDevice {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        let t = s.trim().to_ascii_lowercase();
+        match t.as_str() {
+            "cpu" => Ok(Self::Cpu),
+            "cuda" | "gpu" => Ok(Self::Cuda(0)),
+            _ => t
+                .strip_prefix("cuda:")
+                .and_then(|n| n.parse().ok())
+                .map(Self::Cuda)
+                .ok_or_else(|| format!("unknown device {s:?} (expected cpu, cuda or cuda:N)")),
+        }
+    }
+}
+
+impl TryFrom<String> for ComputeDevice {
+    type Error = String;
+    fn try_from(s: String) -> std::result::Result<Self, String> {
+        s.parse()
+    }
+}
+
+impl From<ComputeDevice> for String {
+    fn from(d: ComputeDevice) -> String {
+        d.to_string()
+    }
+}
+
 /// Where the model comes from.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum ModelSource {
@@ -398,4 +481,48 @@ impl candle_nn::var_builder::SimpleBackend for RandomWeights {
 /// A var builder of random weights (see [`RandomWeights`]).
 pub fn random_var_builder(dtype: DType, device: &Device) -> VarBuilder<'static> {
     VarBuilder::from_backend(Box::new(RandomWeights { std: 0.02 }), dtype, device.clone())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn compute_device_parses_prints_and_round_trips() {
+        for (s, d) in [
+            ("cpu", ComputeDevice::Cpu),
+            (" CPU ", ComputeDevice::Cpu),
+            ("cuda", ComputeDevice::Cuda(0)),
+            ("gpu", ComputeDevice::Cuda(0)),
+            ("cuda:3", ComputeDevice::Cuda(3)),
+        ] {
+            assert_eq!(s.parse::<ComputeDevice>(), Ok(d), "{s}");
+            assert_eq!(d.to_string().parse::<ComputeDevice>(), Ok(d));
+        }
+        for bad in ["", "tpu", "cuda:", "cuda:x", "cuda:-1"] {
+            let e = bad.parse::<ComputeDevice>().unwrap_err();
+            assert!(e.contains("cpu, cuda or cuda:N"), "{bad}: {e}");
+        }
+        let json = serde_json::to_string(&ComputeDevice::Cuda(2)).unwrap();
+        assert_eq!(json, "\"cuda:2\"");
+        assert_eq!(
+            serde_json::from_str::<ComputeDevice>(&json).unwrap(),
+            ComputeDevice::Cuda(2)
+        );
+        assert!(serde_json::from_str::<ComputeDevice>("\"tpu\"").is_err());
+    }
+
+    #[test]
+    fn the_cpu_always_opens_and_cuda_needs_the_feature() {
+        assert!(ComputeDevice::Cpu.check_built().is_ok());
+        assert!(ComputeDevice::Cpu.open().unwrap().is_cpu());
+        if !cfg!(feature = "cuda") {
+            let e = ComputeDevice::Cuda(0).check_built().unwrap_err();
+            assert!(e.contains("--features cuda"), "{e}");
+            assert!(matches!(
+                ComputeDevice::Cuda(0).open(),
+                Err(ModelError::Unsupported { .. })
+            ));
+        }
+    }
 }

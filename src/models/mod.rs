@@ -6,7 +6,7 @@
 //! | file | component |
 //! |---|---|
 //! | [`loader`] | diffusers directory / Hugging Face hub resolution, safetensors, precision |
-//! | [`unet`] | `UNet2DConditionModel` (config → candle-transformers UNet), classifier-free guidance |
+//! | [`unet`] | `UNet2DConditionModel` built from its config on our layers and kernels |
 //! | [`vae`] | `AutoencoderKL`: encode, decode and the encoder VJP without weight gradients |
 //! | [`codec`] | the image ↔ latent map: VAE, TAESD or pixel space (models without `vae/`) |
 //! | [`taesd`] | `AutoencoderTiny` (madebyollin/taesd layout): encode (+VJP) and decode |
@@ -32,7 +32,7 @@ pub mod taesd;
 pub mod unet;
 pub mod vae;
 
-pub use loader::{LoadOptions, ModelSource, Precision};
+pub use loader::{ComputeDevice, LoadOptions, ModelSource, Precision};
 pub use pipeline::StableDiffusion;
 
 /// Errors of the models layer.

@@ -15,6 +15,7 @@
 use super::{JobContext, PipelineError, Preset};
 use crate::image::Image;
 use crate::image::ops::resize;
+use crate::models::ComputeDevice;
 use crate::models::pipeline::ModelHints;
 use crate::models::scheduler::SamplerKind;
 use crate::models::scorer::{ImageTextScorer, Scorer};
@@ -294,18 +295,19 @@ fn failed(what: &str, e: impl std::fmt::Display) -> PipelineError {
 impl Models {
     /// Loads Stable Diffusion from `sd_dir` for `size` px inputs and, when given, the CLIP scorer.
     pub fn load_sd(sd_dir: &Path, scorer: Option<&Path>, size: u32) -> Result<Self, PipelineError> {
-        Self::load_sd_with(sd_dir, scorer, size, None)
+        Self::load_sd_with(sd_dir, scorer, size, None, ComputeDevice::Cpu)
     }
 
     /// [`Models::load_sd`] with TAESD (`taesd`) as the SDS encoder instead of the VAE (see
-    /// [`super::EncoderChoice`]); pixel-space models ignore it.
+    /// [`super::EncoderChoice`]; pixel-space models ignore it), on `device`.
     pub fn load_sd_with(
         sd_dir: &Path,
         scorer: Option<&Path>,
         size: u32,
         taesd: Option<&Path>,
+        device: ComputeDevice,
     ) -> Result<Self, PipelineError> {
-        let teacher = SdTeacher::load_with(sd_dir, size, taesd).map_err(|e| {
+        let teacher = SdTeacher::load_on(sd_dir, size, taesd, device).map_err(|e| {
             PipelineError::ModelsNotConfigured(format!(
                 "cannot load Stable Diffusion from {}: {e}",
                 sd_dir.display()

@@ -9,6 +9,7 @@
 
 pub mod methods;
 
+use crate::models::ComputeDevice;
 use crate::progress::{CancelToken, NullSink, Progress, ProgressSink};
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
@@ -513,6 +514,9 @@ pub struct ModelDirs {
     /// SDS encoder of latent models (`auto`: TAESD when available and the preset prefers it).
     #[serde(default)]
     pub encoder: EncoderChoice,
+    /// Where the diffusion model runs (`cpu`, or `cuda:N` in builds with the `cuda` feature).
+    #[serde(default)]
+    pub device: ComputeDevice,
     /// Testing only: a directory of PNG targets for the analytic TEST teacher, used when no
     /// `sd_dir` is set.
     #[serde(default)]
@@ -608,7 +612,13 @@ impl DefaultExecutor {
         }
         let scorer = self.models.clip_dir.as_deref();
         let m = match (&self.models.sd_dir, &self.models.analytic_dir) {
-            (Some(sd), _) => methods::Models::load_sd_with(sd, scorer, size, taesd.as_deref())?,
+            (Some(sd), _) => methods::Models::load_sd_with(
+                sd,
+                scorer,
+                size,
+                taesd.as_deref(),
+                self.models.device,
+            )?,
             (None, Some(dir)) => methods::Models::load_analytic(dir, scorer, size)?,
             (None, None) => {
                 return Err(PipelineError::ModelsNotConfigured("no sd_dir".into()));

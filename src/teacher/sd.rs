@@ -11,7 +11,7 @@
 use super::{Conditioning, Latent, Pullback, Teacher, TeacherError};
 use crate::image::Image;
 use crate::models::codec::CodecKind;
-use crate::models::{LoadOptions, StableDiffusion};
+use crate::models::{ComputeDevice, LoadOptions, StableDiffusion};
 use candle_core::{DType, Tensor};
 use std::path::Path;
 
@@ -40,7 +40,18 @@ impl SdTeacher {
         image_size: u32,
         taesd: Option<&Path>,
     ) -> Result<Self, TeacherError> {
+        Self::load_on(dir, image_size, taesd, ComputeDevice::Cpu)
+    }
+
+    /// [`SdTeacher::load_with`] on `device` (CUDA needs the `cuda` feature).
+    pub fn load_on(
+        dir: &Path,
+        image_size: u32,
+        taesd: Option<&Path>,
+        device: ComputeDevice,
+    ) -> Result<Self, TeacherError> {
         let opts = LoadOptions {
+            device: device.open().map_err(model_err)?,
             allow_download: false,
             taesd: taesd.map(Path::to_path_buf),
             ..LoadOptions::default()
