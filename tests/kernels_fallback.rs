@@ -117,8 +117,21 @@ fn bench_models_reports_both_kernel_sets() {
         );
         let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
         assert_eq!(v["kernels"], name);
-        for k in ["encoder_fwd_ms", "encoder_vjp_ms", "decoder_ms"] {
+        assert_eq!(v["device"], "cpu");
+        for k in [
+            "encoder_fwd_ms",
+            "encoder_vjp_ms",
+            "encoder_bwd_ms",
+            "decoder_ms",
+        ] {
             assert!(v[k].as_f64().is_some_and(|ms| ms > 0.0), "{k}: {v}");
         }
     }
+    // A device this build cannot open is a usage error, not a panic.
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_vectorfusion"))
+        .args(["bench", "models", "--arch", "taesd", "--device", "tpu"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("tpu"));
 }

@@ -49,6 +49,10 @@ pub struct BenchModelsArgs {
     /// convolution, fused group norm, fused attention, linear layers with fused bias).
     #[arg(long)]
     pub candle_kernels: bool,
+    /// Where the models run: cpu, cuda or cuda:N (CUDA needs a build with the `cuda` feature;
+    /// each timed run ends with a device synchronisation).
+    #[arg(long, default_value = "cpu")]
+    pub device: String,
 }
 
 impl std::str::FromStr for Arch {
@@ -91,15 +95,22 @@ fn reset_peak_rss() {
     let _ = std::fs::write("/proc/self/clear_refs", "5");
 }
 
-/// Runs `f` `warmup` times untimed, then `reps` timed times; returns the median wall ms, the
-/// peak RSS (MiB) seen during the timed runs and the mean process CPU ms per run.
-fn time_it<F>(warmup: usize, reps: usize, mut f: F) -> Result<Timing, CliError>
+/// Waits for the work queued on `dev` (a no-op on the CPU), so wall times cover GPU work.
+fn sync(dev: &Device) -> Result<(), CliError> {
+    dev.synchronize().map_err(candle_err)
+}
+
+/// Runs `f` `warmup` times untimed, then `reps` timed times, each ending with a [`sync`] of
+/// `dev`; returns the median wall ms, the peak RSS (MiB) seen during the timed runs and the
+/// mean process CPU ms per run.
+fn time_it<F>(dev: &Device, warmup: usize, reps: usize, mut f: F) -> Result<Timing, CliError>
 where
     F: FnMut() -> Result<(), CliError>,
 {
     time_part(warmup, reps, || {
         let t0 = Instant::now();
         f()?;
+        sync(dev)?;
         Ok(t0.elapsed().as_secs_f64() * 1e3)
     })
 }
@@ -144,6 +155,8 @@ struct Report {
     arch: String,
     size: usize,
     unet_precision: String,
+    /// "cpu" or "cuda:N"
+    device: String,
     /// "ours" or "candle" (the `--candle-kernels` baseline)
     kernels: String,
     reps: usize,
@@ -191,6 +204,7 @@ fn time_autoencoder<E, V, B, D>(
     args: &BenchModelsArgs,
     want: &dyn Fn(&str) -> bool,
     say: &dyn Fn(&str),
+    dev: &Device,
     runs: AutoencoderRuns<E, V, B, D>,
 ) -> Result<(), CliError>
 where
@@ -207,14 +221,14 @@ where
     } = runs;
     if want("encoder") {
         say("encoder forward");
-        let Timing { ms, peak, cpu } = time_it(args.warmup, args.reps, &mut encode)?;
+        let Timing { ms, peak, cpu } = time_it(dev, args.warmup, args.reps, &mut encode)?;
         r.encoder_fwd_ms = Some(ms);
         r.cpu("encoder_fwd", cpu);
         r.encoder_fwd_peak_rss_mb = peak;
     }
     if want("vjp") {
         say("encoder VJP");
-        let Timing { ms, peak, cpu } = time_it(args.warmup, args.reps, &mut vjp)?;
+        let Timing { ms, peak, cpu } = time_it(dev, args.warmup, args.reps, &mut vjp)?;
         r.encoder_vjp_ms = Some(ms);
         r.cpu("encoder_vjp", cpu);
         r.encoder_vjp_peak_rss_mb = peak;
@@ -224,7 +238,7 @@ where
     }
     if want("decoder") {
         say("decoder");
-        let tm = time_it(args.warmup, args.reps, &mut decode)?;
+        let tm = time_it(dev, args.warmup, args.reps, &mut decode)?;
         r.decoder_ms = r.put("decoder", tm);
     }
     Ok(())
@@ -239,12 +253,14 @@ pub fn run(args: BenchModelsArgs) -> Result<(), CliError> {
     }
     let want = |c: &str| args.only.is_empty() || args.only.iter().any(|o| o == c);
     crate::models::kernels::set_enabled(!args.candle_kernels);
-    let dev = Device::Cpu;
+    let device = super::parse_device(&args.device)?;
+    let dev = device.open().map_err(model_err)?;
     let s = args.size;
     let mut r = Report {
         arch: format!("{:?}", args.arch).to_lowercase(),
         size: s,
         unet_precision: format!("{:?}", args.unet_precision).to_lowercase(),
+        device: device.to_string(),
         kernels: if args.candle_kernels {
             "candle"
         } else {
@@ -273,13 +289,15 @@ pub fn run(args: BenchModelsArgs) -> Result<(), CliError> {
                 vjp: || t.encode_vjp(&image, &lat).map(|_| ()).map_err(model_err),
                 pullback: || {
                     let (_, tape) = t.encode_t(&image).map_err(model_err)?;
+                    sync(&dev)?;
                     let t0 = Instant::now();
                     t.encode_pullback(tape, &lat).map_err(model_err)?;
+                    sync(&dev)?;
                     Ok(t0.elapsed().as_secs_f64() * 1e3)
                 },
                 decode: || t.decode(&lat).map(|_| ()).map_err(model_err),
             };
-            time_autoencoder(&mut r, &args, &want, &say, runs)?;
+            time_autoencoder(&mut r, &args, &want, &say, &dev, runs)?;
         }
         Arch::Sd15 | Arch::Sd21 => {
             let sd21 = args.arch == Arch::Sd21;
@@ -291,13 +309,15 @@ pub fn run(args: BenchModelsArgs) -> Result<(), CliError> {
                     vjp: || vae.encode_vjp(&image, &lat).map(|_| ()).map_err(model_err),
                     pullback: || {
                         let (_, tape) = vae.encode_t(&image).map_err(model_err)?;
+                        sync(&dev)?;
                         let t0 = Instant::now();
                         vae.encode_pullback(tape, &lat).map_err(model_err)?;
+                        sync(&dev)?;
                         Ok(t0.elapsed().as_secs_f64() * 1e3)
                     },
                     decode: || vae.decode(&lat).map(|_| ()).map_err(model_err),
                 };
-                time_autoencoder(&mut r, &args, &want, &say, runs)?;
+                time_autoencoder(&mut r, &args, &want, &say, &dev, runs)?;
             }
             let text_cfg: ClipTextConfig = if sd21 {
                 serde_json::from_value(serde_json::json!({
@@ -323,7 +343,7 @@ pub fn run(args: BenchModelsArgs) -> Result<(), CliError> {
                     *id = 320 + i as u32;
                 }
                 let ids = Tensor::from_vec(ids, (1, 77), &dev).map_err(candle_err)?;
-                let tm = time_it(args.warmup, args.reps, || {
+                let tm = time_it(&dev, args.warmup, args.reps, || {
                     text.forward(&ids).map(|_| ()).map_err(candle_err)
                 })?;
                 r.text_ms = r.put("text", tm);
@@ -344,7 +364,7 @@ pub fn run(args: BenchModelsArgs) -> Result<(), CliError> {
                 .map_err(model_err)?;
                 let ctx = Tensor::randn(0f32, 1f32, (2, 77, cross), &dev).map_err(candle_err)?;
                 let z2 = Tensor::cat(&[&lat, &lat], 0).map_err(candle_err)?;
-                let tm = time_it(args.warmup, args.unet_reps, || {
+                let tm = time_it(&dev, args.warmup, args.unet_reps, || {
                     let out = unet.forward(&z2, 500.0, &ctx).map_err(model_err)?;
                     // the guidance combination itself
                     let u = out.narrow(0, 0, 1).map_err(candle_err)?;
