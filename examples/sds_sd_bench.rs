@@ -107,6 +107,7 @@ fn step_times(teacher: &dyn Teacher, steps: u32, size: u32) -> Vec<f64> {
 }
 
 fn main() {
+    vectorfusion::alloc::tune();
     let args: Vec<String> = std::env::args().collect();
     let steps: u32 = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(3);
     let size: u32 = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(512);

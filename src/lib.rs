@@ -28,6 +28,7 @@
 #[global_allocator]
 static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
+pub mod alloc;
 pub mod augment;
 pub mod cli;
 pub mod config;

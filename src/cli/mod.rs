@@ -102,6 +102,7 @@ pub fn run(cli: Cli) -> Result<(), CliError> {
 
 /// Parses arguments, runs the command, prints errors and maps them to an exit code.
 pub fn main() -> ExitCode {
+    crate::alloc::tune();
     let cli = Cli::parse();
     match run(cli) {
         Ok(()) => ExitCode::SUCCESS,
