@@ -2,8 +2,10 @@
 //! compute does not depend on weight values) on this machine, next to an in-run baseline of the
 //! same loop with the analytic test teacher (everything but the model).
 //!
-//! `cargo run --example sds_sd_bench [STEPS] [SIZE] [vae|taesd]` (defaults 3, 512, vae): the
-//! encoder SDS backpropagates through, the full VAE (the paper's) or TAESD (the `fast` preset's).
+//! `cargo run --release --example sds_sd_bench [STEPS] [SIZE] [vae|taesd] [recompute]`
+//! (defaults 3, 512, vae): the encoder SDS backpropagates through, the full VAE (the paper's) or
+//! TAESD (the `fast` preset's). After the SD steps, `recompute` also times the steps the way
+//! they ran before the taped encoder was shared: an untaped encode, then the VJP from scratch.
 
 use candle_core::{DType, Device, Tensor};
 use std::path::Path;
@@ -24,8 +26,9 @@ use vectorfusion::teacher::{
     TeacherError,
 };
 
-/// SD with random weights has no text encoder: condition on random embeddings.
-struct RandomText(SdTeacher);
+/// SD with random weights has no text encoder: condition on random embeddings. With `share`
+/// off, the SDS step encodes and then runs the VJP from scratch (the trait's default).
+struct RandomText(SdTeacher, bool);
 
 impl Teacher for RandomText {
     fn name(&self) -> String {
@@ -62,7 +65,12 @@ impl Teacher for RandomText {
         self.0.encode_vjp(im, d)
     }
     fn encode_linearised<'a>(&'a self, im: &Image) -> Result<(Latent, Pullback<'a>), TeacherError> {
-        self.0.encode_linearised(im)
+        if self.1 {
+            return self.0.encode_linearised(im);
+        }
+        let z = self.encode(im)?;
+        let im = im.clone();
+        Ok((z, Box::new(move |d: &Latent| self.encode_vjp(&im, d))))
     }
     fn predict_noise(
         &self,
@@ -140,7 +148,7 @@ fn main() {
         }
     }
     .unwrap();
-    let teacher = RandomText(SdTeacher::new(sd, size).unwrap());
+    let mut teacher = RandomText(SdTeacher::new(sd, size).unwrap(), true);
     println!(
         "built random SD 1.5 (SDS encoder: {encoder}) in {:.1} s",
         t0.elapsed().as_secs_f64()
@@ -191,4 +199,13 @@ fn main() {
         s.len(),
         s
     );
+    if args.get(4).map(String::as_str) == Some("recompute") {
+        teacher.1 = false;
+        let s = step_times(&teacher, steps, size);
+        println!(
+            "same, encode then VJP from scratch (before the shared tape): median {:.2} s {:?}",
+            median(s.clone()),
+            s
+        );
+    }
 }
