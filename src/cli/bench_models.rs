@@ -3,6 +3,7 @@
 
 use super::CliError;
 use crate::models::clip::{ClipTextConfig, ClipTextModel};
+use crate::models::codec::Codec;
 use crate::models::loader::random_var_builder;
 use crate::models::taesd::{Taesd, TaesdConfig};
 use crate::models::unet::{Unet, UnetConfig};
@@ -187,58 +188,51 @@ impl Report {
     }
 }
 
-/// One autoencoder's timed runs: encoder forward, the VJP from scratch (taped forward +
-/// pullback), the pullback alone (returns its own wall ms) and the decoder.
-struct AutoencoderRuns<E, V, B, D> {
-    encode: E,
-    vjp: V,
-    pullback: B,
-    decode: D,
-}
-
-/// Times one autoencoder's (VAE or TAESD) encoder forward, encoder VJP (and its pullback alone)
-/// and decoder, each when selected by `--only`, and records them (with CPU time and peak RSS)
-/// in `r`.
-fn time_autoencoder<E, V, B, D>(
+/// Times one autoencoder's (VAE or TAESD) encoder forward, encoder VJP from scratch (taped
+/// forward + pullback), the pullback alone and the decoder, each when selected by `--only`, on
+/// `(image, latents)`, and records them (with CPU time and peak RSS) in `r`.
+fn time_autoencoder(
     r: &mut Report,
     args: &BenchModelsArgs,
     want: &dyn Fn(&str) -> bool,
     say: &dyn Fn(&str),
     dev: &Device,
-    runs: AutoencoderRuns<E, V, B, D>,
-) -> Result<(), CliError>
-where
-    E: FnMut() -> Result<(), CliError>,
-    V: FnMut() -> Result<(), CliError>,
-    B: FnMut() -> Result<f64, CliError>,
-    D: FnMut() -> Result<(), CliError>,
-{
-    let AutoencoderRuns {
-        mut encode,
-        mut vjp,
-        pullback,
-        mut decode,
-    } = runs;
+    codec: &Codec,
+    (image, lat): (&Tensor, &Tensor),
+) -> Result<(), CliError> {
     if want("encoder") {
         say("encoder forward");
-        let Timing { ms, peak, cpu } = time_it(dev, args.warmup, args.reps, &mut encode)?;
+        let Timing { ms, peak, cpu } = time_it(dev, args.warmup, args.reps, || {
+            codec.encode(image).map(|_| ()).map_err(model_err)
+        })?;
         r.encoder_fwd_ms = Some(ms);
         r.cpu("encoder_fwd", cpu);
         r.encoder_fwd_peak_rss_mb = peak;
     }
     if want("vjp") {
         say("encoder VJP");
-        let Timing { ms, peak, cpu } = time_it(dev, args.warmup, args.reps, &mut vjp)?;
+        let Timing { ms, peak, cpu } = time_it(dev, args.warmup, args.reps, || {
+            codec.encode_vjp(image, lat).map(|_| ()).map_err(model_err)
+        })?;
         r.encoder_vjp_ms = Some(ms);
         r.cpu("encoder_vjp", cpu);
         r.encoder_vjp_peak_rss_mb = peak;
         say("encoder VJP backward (pullback of a recorded tape)");
-        let tm = time_part(args.warmup, args.reps, pullback)?;
+        let tm = time_part(args.warmup, args.reps, || {
+            let (_, tape) = codec.encode_t(image).map_err(model_err)?;
+            sync(dev)?;
+            let t0 = Instant::now();
+            codec.encode_pullback(tape, lat).map_err(model_err)?;
+            sync(dev)?;
+            Ok(t0.elapsed().as_secs_f64() * 1e3)
+        })?;
         r.encoder_bwd_ms = Some(tm.ms);
     }
     if want("decoder") {
         say("decoder");
-        let tm = time_it(dev, args.warmup, args.reps, &mut decode)?;
+        let tm = time_it(dev, args.warmup, args.reps, || {
+            codec.decode(lat).map(|_| ()).map_err(model_err)
+        })?;
         r.decoder_ms = r.put("decoder", tm);
     }
     Ok(())
@@ -284,40 +278,16 @@ pub fn run(args: BenchModelsArgs) -> Result<(), CliError> {
         Arch::Taesd => {
             let t = Taesd::new(random_var_builder(DType::F32, &dev), TaesdConfig::taesd())
                 .map_err(candle_err)?;
-            let runs = AutoencoderRuns {
-                encode: || t.encode(&image).map(|_| ()).map_err(model_err),
-                vjp: || t.encode_vjp(&image, &lat).map(|_| ()).map_err(model_err),
-                pullback: || {
-                    let (_, tape) = t.encode_t(&image).map_err(model_err)?;
-                    sync(&dev)?;
-                    let t0 = Instant::now();
-                    t.encode_pullback(tape, &lat).map_err(model_err)?;
-                    sync(&dev)?;
-                    Ok(t0.elapsed().as_secs_f64() * 1e3)
-                },
-                decode: || t.decode(&lat).map(|_| ()).map_err(model_err),
-            };
-            time_autoencoder(&mut r, &args, &want, &say, &dev, runs)?;
+            let codec = Codec::from(t);
+            time_autoencoder(&mut r, &args, &want, &say, &dev, &codec, (&image, &lat))?;
         }
         Arch::Sd15 | Arch::Sd21 => {
             let sd21 = args.arch == Arch::Sd21;
             if want("encoder") || want("vjp") || want("decoder") {
                 let vae = AutoencoderKl::new(random_var_builder(DType::F32, &dev), VaeConfig::sd())
                     .map_err(candle_err)?;
-                let runs = AutoencoderRuns {
-                    encode: || vae.encode(&image).map(|_| ()).map_err(model_err),
-                    vjp: || vae.encode_vjp(&image, &lat).map(|_| ()).map_err(model_err),
-                    pullback: || {
-                        let (_, tape) = vae.encode_t(&image).map_err(model_err)?;
-                        sync(&dev)?;
-                        let t0 = Instant::now();
-                        vae.encode_pullback(tape, &lat).map_err(model_err)?;
-                        sync(&dev)?;
-                        Ok(t0.elapsed().as_secs_f64() * 1e3)
-                    },
-                    decode: || vae.decode(&lat).map(|_| ()).map_err(model_err),
-                };
-                time_autoencoder(&mut r, &args, &want, &say, &dev, runs)?;
+                let codec = Codec::from(vae);
+                time_autoencoder(&mut r, &args, &want, &say, &dev, &codec, (&image, &lat))?;
             }
             let text_cfg: ClipTextConfig = if sd21 {
                 serde_json::from_value(serde_json::json!({
