@@ -23,7 +23,7 @@ use vectorfusion::stages::sds::{RasterBackend, SdsConfig, run_sds};
 use vectorfusion::stages::styles::Style;
 use vectorfusion::teacher::{
     AnalyticTeacher, AnalyticTeacherConfig, Conditioning, Latent, Pullback, SdTeacher, Teacher,
-    TeacherError,
+    TeacherError, linearise_by_recomputing,
 };
 
 /// SD with random weights has no text encoder: condition on random embeddings. With `share`
@@ -66,11 +66,10 @@ impl Teacher for RandomText {
     }
     fn encode_linearised<'a>(&'a self, im: &Image) -> Result<(Latent, Pullback<'a>), TeacherError> {
         if self.1 {
-            return self.0.encode_linearised(im);
+            self.0.encode_linearised(im)
+        } else {
+            linearise_by_recomputing(self, im)
         }
-        let z = self.encode(im)?;
-        let im = im.clone();
-        Ok((z, Box::new(move |d: &Latent| self.encode_vjp(&im, d))))
     }
     fn predict_noise(
         &self,

@@ -124,9 +124,7 @@ pub trait Teacher: Send + Sync {
         &'a self,
         image: &Image,
     ) -> Result<(Latent, Pullback<'a>), TeacherError> {
-        let z = self.encode(image)?;
-        let image = image.clone();
-        Ok((z, Box::new(move |d: &Latent| self.encode_vjp(&image, d))))
+        linearise_by_recomputing(self, image)
     }
 
     /// Predicts the noise in `z_t` at timestep `t` with classifier-free guidance
@@ -138,6 +136,18 @@ pub trait Teacher: Send + Sync {
         cond: &Conditioning,
         guidance: f32,
     ) -> Result<Latent, TeacherError>;
+}
+
+/// [`Teacher::encode_linearised`] without a tape: encodes now, and runs
+/// [`Teacher::encode_vjp`] from scratch (a second encoder forward) when the pullback is called.
+/// The trait's default; also for wrappers that want this behaviour from a taped teacher.
+pub fn linearise_by_recomputing<'a, T: Teacher + ?Sized>(
+    teacher: &'a T,
+    image: &Image,
+) -> Result<(Latent, Pullback<'a>), TeacherError> {
+    let z = teacher.encode(image)?;
+    let image = image.clone();
+    Ok((z, Box::new(move |d: &Latent| teacher.encode_vjp(&image, d))))
 }
 
 /// The scaled-linear `ᾱ` schedule of Stable Diffusion (β from 0.00085 to 0.012, linear in √β),
