@@ -284,12 +284,7 @@ impl Config {
                 reason: e,
             });
         }
-        if let Err(reason) = self
-            .models
-            .device
-            .parse::<ComputeDevice>()
-            .and_then(|d| d.check_built().map(|()| d))
-        {
+        if let Err(reason) = ComputeDevice::parse_built(&self.models.device) {
             return Err(ConfigError::Invalid {
                 key: "models.device",
                 reason,

@@ -72,9 +72,7 @@ impl CliError {
 
 /// `--device` (cpu, cuda, cuda:N), refused up front when this build cannot open it.
 pub(crate) fn parse_device(s: &str) -> Result<crate::models::ComputeDevice, CliError> {
-    let d: crate::models::ComputeDevice = s.parse().map_err(CliError::Usage)?;
-    d.check_built().map_err(CliError::Usage)?;
-    Ok(d)
+    crate::models::ComputeDevice::parse_built(s).map_err(CliError::Usage)
 }
 
 /// The directory of a `--teacher analytic:DIR` spec (the only test teacher).

@@ -65,6 +65,14 @@ impl ComputeDevice {
         }
     }
 
+    /// Parses `s` and refuses a device this build cannot open ([`Self::check_built`]): what a
+    /// setting or a flag naming the device should accept.
+    pub fn parse_built(s: &str) -> std::result::Result<Self, String> {
+        let d: Self = s.parse()?;
+        d.check_built()?;
+        Ok(d)
+    }
+
     /// Opens the candle device.
     pub fn open(self) -> Result<Device> {
         self.check_built()
