@@ -13,9 +13,15 @@ use std::sync::{Arc, OnceLock};
 type R<T> = candle_core::Result<T>;
 
 /// 2-D convolution (`weight [co, ci, k, k]`, optional `bias [co]`).
+///
+/// Invariant: `weight` is `None` only for a 3×3 stride-1 layer loaded by
+/// [`Conv2d::load_forward_only`] on the kernel path; its Winograd transform is then in the
+/// cache, and only the forward pass is available.
 #[derive(Debug, Clone)]
 pub struct Conv2d {
-    pub weight: Tensor,
+    weight: Option<Tensor>,
+    /// `(co, ci, k)` of the weight.
+    dims: (usize, usize, usize),
     pub bias: Option<Tensor>,
     pub stride: usize,
     pub padding: usize,
@@ -48,7 +54,8 @@ impl Conv2d {
             None
         };
         Ok(Self {
-            weight,
+            weight: Some(weight),
+            dims: (co, ci, k),
             bias,
             stride,
             padding,
@@ -56,11 +63,58 @@ impl Conv2d {
         })
     }
 
+    /// [`Conv2d::load`] for a layer that only ever runs forward (the UNet's). On the kernel path
+    /// a 3×3 stride-1 layer keeps only its Winograd transform, computed here, and drops the
+    /// weights: 9/25 of the memory the two took together. [`Conv2d::backward`] then fails.
+    pub fn load_forward_only(
+        vb: VarBuilder,
+        ci: usize,
+        co: usize,
+        k: usize,
+        stride: usize,
+        padding: usize,
+        bias: bool,
+    ) -> R<Self> {
+        let mut c = Self::load(vb, ci, co, k, stride, padding, bias)?;
+        if k == 3 && stride == 1 {
+            if let Some(w) = c.weight.take_if(|w| kernels::applies(&[w])) {
+                let u = kernels::with_f32(&w, |w| Ok(winograd::transform_kernel(w, co, ci)))?;
+                if c.cache.wino.set(u).is_err() {
+                    candle_core::bail!("conv2d: Winograd cache filled before load");
+                }
+            }
+        }
+        Ok(c)
+    }
+
+    /// Whether only the forward pass is available ([`Conv2d::load_forward_only`]).
+    pub fn is_forward_only(&self) -> bool {
+        self.weight.is_none()
+    }
+
+    /// The weights, or an error for a forward-only layer.
+    pub fn weight(&self) -> R<&Tensor> {
+        match &self.weight {
+            Some(w) => Ok(w),
+            None => candle_core::bail!(
+                "conv2d: this layer was loaded forward-only and keeps only its Winograd kernel"
+            ),
+        }
+    }
+
+    /// Whether our kernels run this layer on `ts` (a forward-only layer always takes them).
+    fn on_kernels(&self, ts: &[&Tensor]) -> bool {
+        match &self.weight {
+            Some(w) => kernels::applies(ts) && kernels::applies(&[w]),
+            None => true,
+        }
+    }
+
     pub fn forward(&self, x: &Tensor) -> R<Tensor> {
-        if kernels::applies(&[x, &self.weight]) {
+        if self.on_kernels(&[x]) {
             return self.forward_padded(x, [self.padding; 4]);
         }
-        let y = x.conv2d(&self.weight, self.padding, self.stride, 1, 1)?;
+        let y = x.conv2d(self.weight()?, self.padding, self.stride, 1, 1)?;
         match &self.bias {
             Some(b) => y.broadcast_add(&b.reshape((1, b.dim(0)?, 1, 1))?),
             None => Ok(y),
@@ -68,7 +122,7 @@ impl Conv2d {
     }
 
     fn geom(&self, x_dims: (usize, usize, usize, usize), pad: [usize; 4]) -> R<ConvGeom> {
-        let (co, ci, k, _) = self.weight.dims4()?;
+        let (co, ci, k) = self.dims;
         let (b, xc, h, w) = x_dims;
         if xc != ci {
             candle_core::bail!("conv2d: input has {xc} channels, kernel expects {ci}");
@@ -79,7 +133,7 @@ impl Conv2d {
     /// Forward with explicit zero padding `[top, bottom, left, right]` (the kernel path; the
     /// candle fallback pads first).
     pub fn forward_padded(&self, x: &Tensor, pad: [usize; 4]) -> R<Tensor> {
-        if !kernels::applies(&[x, &self.weight]) {
+        if !self.on_kernels(&[x]) {
             let x = x
                 .pad_with_zeros(2, pad[0], pad[1])?
                 .pad_with_zeros(3, pad[2], pad[3])?;
@@ -95,7 +149,7 @@ impl Conv2d {
 
     /// `relu(conv(x))`, the ReLU applied to the kernel's output before it becomes a tensor.
     pub fn forward_relu(&self, x: &Tensor) -> R<Tensor> {
-        if !kernels::applies(&[x, &self.weight]) {
+        if !self.on_kernels(&[x]) {
             return self.forward(x)?.relu();
         }
         let (mut y, shape) = self.kernel_forward(x, [self.padding; 4])?;
@@ -107,7 +161,7 @@ impl Conv2d {
     /// added to the kernel's output in place.
     pub fn forward_channel_add(&self, x: &Tensor, v: &Tensor) -> R<Tensor> {
         let (b, c) = v.dims2()?;
-        if !kernels::applies(&[x, &self.weight, v]) {
+        if !self.on_kernels(&[x, v]) {
             return self.forward(x)?.broadcast_add(&v.reshape((b, c, 1, 1))?);
         }
         let (mut y, shape) = self.kernel_forward(x, [self.padding; 4])?;
@@ -124,8 +178,25 @@ impl Conv2d {
         let g = self.geom(x.dims4()?, pad)?;
         let (ho, wo) = g.out_hw();
         let bias = self.cached_bias()?;
+        if !kernels::cpu_f32(&[x]) {
+            candle_core::bail!(
+                "conv2d: our kernels need an f32 CPU input, got {:?} on {:?}",
+                x.dtype(),
+                x.device()
+            );
+        }
+        let Some(weight) = &self.weight else {
+            let u = match self.cache.wino.get() {
+                Some(u) if winograd::applies(&g) => u,
+                _ => candle_core::bail!("conv2d: forward-only layer without its Winograd kernel"),
+            };
+            let y = kernels::with_f32(x, |xs| {
+                winograd::conv2d(&g, xs, u, bias).map_err(kernels::err)
+            })?;
+            return Ok((y, [g.b, g.co, ho, wo]));
+        };
         // the weights are read in place (no copy); only their Winograd transform is cached
-        let y = kernels::with_f32(&self.weight, |weight| {
+        let y = kernels::with_f32(weight, |weight| {
             let wino = if winograd::applies(&g) {
                 Some(
                     self.cache
@@ -160,7 +231,8 @@ impl Conv2d {
 
     /// Input gradient of [`Conv2d::forward_padded`] for an input of spatial size `(h, w)`.
     pub fn backward_padded(&self, dy: &Tensor, h: usize, w: usize, pad: [usize; 4]) -> R<Tensor> {
-        if !kernels::applies(&[dy, &self.weight]) {
+        let weight = self.weight()?;
+        if !kernels::applies(&[dy, weight]) {
             let c = Conv2d {
                 padding: 0,
                 ..self.clone()
@@ -169,7 +241,7 @@ impl Conv2d {
             return d.narrow(2, pad[0], h)?.narrow(3, pad[2], w);
         }
         let (b, co, oh, ow) = dy.dims4()?;
-        let (_, ci, _, _) = self.weight.dims4()?;
+        let (_, ci, _) = self.dims;
         let g = self.geom((b, ci, h, w), pad)?;
         if g.co != co || g.out_hw() != (oh, ow) {
             candle_core::bail!(
@@ -178,7 +250,7 @@ impl Conv2d {
                 (b, g.co, g.out_hw())
             );
         }
-        let dx = kernels::with_f32(&self.weight, |weight| {
+        let dx = kernels::with_f32(weight, |weight| {
             let wino = if winograd::applies(&g) {
                 Some(self.cache.wino_flipped.get_or_init(|| {
                     winograd::transform_kernel(&conv::flip_transpose(weight, g.co, ci, 3), ci, g.co)
@@ -198,10 +270,11 @@ impl Conv2d {
     /// kernels' adjoint ([`Conv2d::backward_padded`]), or, off the kernel path, a stride-1
     /// candle convolution of the (dilated, padded) `dy` with the flipped, transposed kernel.
     pub fn backward(&self, dy: &Tensor, h: usize, w: usize) -> R<Tensor> {
-        if kernels::applies(&[dy, &self.weight]) {
+        let weight = self.weight()?;
+        if kernels::applies(&[dy, weight]) {
             return self.backward_padded(dy, h, w, [self.padding; 4]);
         }
-        let (_, _, k, _) = self.weight.dims4()?;
+        let (_, _, k) = self.dims;
         let (b, c, oh, ow) = dy.dims4()?;
         let s = self.stride;
         let dy = if s > 1 {
@@ -214,7 +287,7 @@ impl Conv2d {
         } else {
             dy.clone()
         };
-        let wt = flip_transpose(&self.weight)?;
+        let wt = flip_transpose(weight)?;
         // full correlation: pad by k-1, then remove the forward padding
         let full = dy
             .pad_with_zeros(2, k - 1, k - 1)?
@@ -864,5 +937,69 @@ impl Downsample {
 impl Module for Linear {
     fn forward(&self, xs: &Tensor) -> R<Tensor> {
         Linear::forward(self, xs)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use candle_core::Device;
+    use std::collections::HashMap;
+
+    fn vb(co: usize, ci: usize, k: usize, dtype: DType) -> VarBuilder<'static> {
+        let n = co * ci * k * k;
+        let w = Tensor::from_vec(kernels::test_values(n, 7), (co, ci, k, k), &Device::Cpu).unwrap();
+        let b = Tensor::from_vec(kernels::test_values(co, 8), co, &Device::Cpu).unwrap();
+        let ts = HashMap::from([("weight".to_string(), w), ("bias".to_string(), b)]);
+        VarBuilder::from_tensors(ts, dtype, &Device::Cpu)
+    }
+
+    fn input(c: usize) -> Tensor {
+        let v = kernels::test_values(2 * c * 9 * 7, 9);
+        Tensor::from_vec(v, (2, c, 9, 7), &Device::Cpu).unwrap()
+    }
+
+    #[test]
+    fn forward_only_conv_keeps_the_winograd_kernel_and_matches_the_full_layer() {
+        let (ci, co) = (5, 6);
+        let full = Conv2d::load(vb(co, ci, 3, DType::F32), ci, co, 3, 1, 1, true).unwrap();
+        let fwd =
+            Conv2d::load_forward_only(vb(co, ci, 3, DType::F32), ci, co, 3, 1, 1, true).unwrap();
+        assert!(fwd.is_forward_only() && !full.is_forward_only());
+        let x = input(ci);
+        let same = |a: Tensor, b: Tensor| {
+            let d = (a - b).unwrap().abs().unwrap().max_all().unwrap();
+            assert_eq!(d.to_scalar::<f32>().unwrap(), 0.0);
+        };
+        same(full.forward(&x).unwrap(), fwd.forward(&x).unwrap());
+        let v = Tensor::from_vec(kernels::test_values(2 * co, 3), (2, co), &Device::Cpu).unwrap();
+        same(
+            full.forward_channel_add(&x, &v).unwrap(),
+            fwd.forward_channel_add(&x, &v).unwrap(),
+        );
+        let dy = full.forward(&x).unwrap();
+        assert!(full.backward(&dy, 9, 7).is_ok());
+        let e = fwd.backward(&dy, 9, 7).unwrap_err().to_string();
+        assert!(e.contains("forward-only"), "{e}");
+        // a wrong input is an error, never a panic
+        let e = fwd.forward(&x.to_dtype(DType::F16).unwrap()).unwrap_err();
+        assert!(e.to_string().contains("f32 CPU input"), "{e}");
+        let e = fwd.forward(&input(ci + 1)).unwrap_err();
+        assert!(e.to_string().contains("channels"), "{e}");
+    }
+
+    #[test]
+    fn forward_only_keeps_weights_where_winograd_does_not_apply() {
+        let (ci, co) = (4, 3);
+        for (k, stride, pad, dtype) in [
+            (1, 1, 0, DType::F32),
+            (3, 2, 1, DType::F32),
+            (3, 1, 1, DType::F16),
+        ] {
+            let c = Conv2d::load_forward_only(vb(co, ci, k, dtype), ci, co, k, stride, pad, true)
+                .unwrap();
+            assert!(!c.is_forward_only(), "k {k} stride {stride} {dtype:?}");
+            assert!(c.weight().is_ok());
+        }
     }
 }

@@ -27,10 +27,13 @@ pub fn set_enabled(on: bool) {
 
 /// Whether the kernels apply to these tensors: enabled, all f32 and on the CPU.
 pub fn applies(ts: &[&Tensor]) -> bool {
-    ENABLED.load(Ordering::Relaxed)
-        && ts
-            .iter()
-            .all(|t| t.dtype() == DType::F32 && t.device().is_cpu())
+    ENABLED.load(Ordering::Relaxed) && cpu_f32(ts)
+}
+
+/// Whether the kernels can run on these tensors (all f32 and on the CPU), enabled or not.
+pub fn cpu_f32(ts: &[&Tensor]) -> bool {
+    ts.iter()
+        .all(|t| t.dtype() == DType::F32 && t.device().is_cpu())
 }
 
 /// Runs `f` on the contiguous f32 values of a CPU tensor.
