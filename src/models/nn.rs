@@ -15,7 +15,7 @@ type R<T> = candle_core::Result<T>;
 /// 2-D convolution (`weight [co, ci, k, k]`, optional `bias [co]`).
 ///
 /// Invariant: `weight` is `None` only for a 3×3 stride-1 layer loaded by
-/// [`Conv2d::load_forward_only`] on the kernel path; its Winograd transform is then in the
+/// [`Conv2d::forward_only`] on the kernel path; its Winograd transform is then in the
 /// cache, and only the forward pass is available.
 #[derive(Debug, Clone)]
 pub struct Conv2d {
@@ -63,31 +63,23 @@ impl Conv2d {
         })
     }
 
-    /// [`Conv2d::load`] for a layer that only ever runs forward (the UNet's). On the kernel path
-    /// a 3×3 stride-1 layer keeps only its Winograd transform, computed here, and drops the
-    /// weights: 9/25 of the memory the two took together. [`Conv2d::backward`] then fails.
-    pub fn load_forward_only(
-        vb: VarBuilder,
-        ci: usize,
-        co: usize,
-        k: usize,
-        stride: usize,
-        padding: usize,
-        bias: bool,
-    ) -> R<Self> {
-        let mut c = Self::load(vb, ci, co, k, stride, padding, bias)?;
-        if k == 3 && stride == 1 {
-            if let Some(w) = c.weight.take_if(|w| kernels::applies(&[w])) {
+    /// This layer for a model that only ever runs forward (the UNet). On the kernel path a 3×3
+    /// stride-1 layer computes its Winograd transform now and drops its weights: 9/25 of the
+    /// memory the two took together. [`Conv2d::backward`] then fails.
+    pub fn forward_only(mut self) -> R<Self> {
+        let (co, ci, k) = self.dims;
+        if k == 3 && self.stride == 1 {
+            if let Some(w) = self.weight.take_if(|w| kernels::applies(&[w])) {
                 let u = kernels::with_f32(&w, |w| Ok(winograd::transform_kernel(w, co, ci)))?;
-                if c.cache.wino.set(u).is_err() {
-                    candle_core::bail!("conv2d: Winograd cache filled before load");
+                if self.cache.wino.set(u).is_err() {
+                    candle_core::bail!("conv2d: Winograd kernel computed twice");
                 }
             }
         }
-        Ok(c)
+        Ok(self)
     }
 
-    /// Whether only the forward pass is available ([`Conv2d::load_forward_only`]).
+    /// Whether only the forward pass is available ([`Conv2d::forward_only`]).
     pub fn is_forward_only(&self) -> bool {
         self.weight.is_none()
     }
@@ -963,8 +955,9 @@ mod tests {
     fn forward_only_conv_keeps_the_winograd_kernel_and_matches_the_full_layer() {
         let (ci, co) = (5, 6);
         let full = Conv2d::load(vb(co, ci, 3, DType::F32), ci, co, 3, 1, 1, true).unwrap();
-        let fwd =
-            Conv2d::load_forward_only(vb(co, ci, 3, DType::F32), ci, co, 3, 1, 1, true).unwrap();
+        let fwd = Conv2d::load(vb(co, ci, 3, DType::F32), ci, co, 3, 1, 1, true)
+            .and_then(Conv2d::forward_only)
+            .unwrap();
         assert!(fwd.is_forward_only() && !full.is_forward_only());
         let x = input(ci);
         let same = |a: Tensor, b: Tensor| {
@@ -996,7 +989,8 @@ mod tests {
             (3, 2, 1, DType::F32),
             (3, 1, 1, DType::F16),
         ] {
-            let c = Conv2d::load_forward_only(vb(co, ci, k, dtype), ci, co, k, stride, pad, true)
+            let c = Conv2d::load(vb(co, ci, k, dtype), ci, co, k, stride, pad, true)
+                .and_then(Conv2d::forward_only)
                 .unwrap();
             assert!(!c.is_forward_only(), "k {k} stride {stride} {dtype:?}");
             assert!(c.weight().is_ok());

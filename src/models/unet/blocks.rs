@@ -21,7 +21,7 @@ pub struct Downsample2D {
 impl Downsample2D {
     pub fn load(vb: VarBuilder, c: usize, padding: usize) -> R<Self> {
         Ok(Self {
-            conv: Conv2d::load_forward_only(vb.pp("conv"), c, c, 3, 2, padding, true)?,
+            conv: Conv2d::load(vb.pp("conv"), c, c, 3, 2, padding, true)?.forward_only()?,
         })
     }
 
@@ -44,7 +44,7 @@ pub struct Upsample2D {
 impl Upsample2D {
     pub fn load(vb: VarBuilder, c: usize) -> R<Self> {
         Ok(Self {
-            conv: Conv2d::load_forward_only(vb.pp("conv"), c, c, 3, 1, 1, true)?,
+            conv: Conv2d::load(vb.pp("conv"), c, c, 3, 1, 1, true)?.forward_only()?,
         })
     }
 

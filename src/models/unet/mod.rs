@@ -73,30 +73,16 @@ impl Unet {
         Ok(Unet {
             config,
             arch: arch.clone(),
-            conv_in: Conv2d::load_forward_only(
-                vb.pp("conv_in"),
-                arch.in_channels,
-                c0,
-                3,
-                1,
-                1,
-                true,
-            )?,
+            conv_in: Conv2d::load(vb.pp("conv_in"), arch.in_channels, c0, 3, 1, 1, true)?
+                .forward_only()?,
             linear_1: Linear::load(vb.pp("time_embedding.linear_1"), c0, temb, true)?,
             linear_2: Linear::load(vb.pp("time_embedding.linear_2"), temb, temb, true)?,
             down_blocks,
             mid_block: MidBlock::load(vb.pp("mid_block"), arch)?,
             up_blocks,
             conv_norm_out: GroupNorm::load(vb.pp("conv_norm_out"), arch.groups, c0, arch.eps)?,
-            conv_out: Conv2d::load_forward_only(
-                vb.pp("conv_out"),
-                c0,
-                arch.out_channels,
-                3,
-                1,
-                1,
-                true,
-            )?,
+            conv_out: Conv2d::load(vb.pp("conv_out"), c0, arch.out_channels, 3, 1, 1, true)?
+                .forward_only()?,
             dtype: vb.dtype(),
         })
     }

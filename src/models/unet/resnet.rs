@@ -27,24 +27,16 @@ impl ResnetBlock2D {
         output_scale_factor: f64,
     ) -> R<Self> {
         let conv_shortcut = if ci != co {
-            Some(Conv2d::load_forward_only(
-                vb.pp("conv_shortcut"),
-                ci,
-                co,
-                1,
-                1,
-                0,
-                true,
-            )?)
+            Some(Conv2d::load(vb.pp("conv_shortcut"), ci, co, 1, 1, 0, true)?.forward_only()?)
         } else {
             None
         };
         Ok(Self {
             norm1: GroupNorm::load(vb.pp("norm1"), groups, ci, eps)?,
-            conv1: Conv2d::load_forward_only(vb.pp("conv1"), ci, co, 3, 1, 1, true)?,
+            conv1: Conv2d::load(vb.pp("conv1"), ci, co, 3, 1, 1, true)?.forward_only()?,
             time_emb_proj: Linear::load(vb.pp("time_emb_proj"), temb, co, true)?,
             norm2: GroupNorm::load(vb.pp("norm2"), groups, co, eps)?,
-            conv2: Conv2d::load_forward_only(vb.pp("conv2"), co, co, 3, 1, 1, true)?,
+            conv2: Conv2d::load(vb.pp("conv2"), co, co, 3, 1, 1, true)?.forward_only()?,
             conv_shortcut,
             output_scale_factor,
         })
