@@ -729,6 +729,15 @@ pub struct ResnetTape {
 }
 
 impl ResnetBlock {
+    /// This block for a model that only runs forward ([`Conv2d::forward_only`]).
+    pub fn forward_only(self) -> R<Self> {
+        Ok(Self {
+            conv1: self.conv1.forward_only()?,
+            conv2: self.conv2.forward_only()?,
+            ..self
+        })
+    }
+
     pub fn load(vb: VarBuilder, ci: usize, co: usize, groups: usize, eps: f64) -> R<Self> {
         let conv_shortcut = if ci != co {
             Some(Conv2d::load(vb.pp("conv_shortcut"), ci, co, 1, 1, 0, true)?)

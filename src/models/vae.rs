@@ -320,8 +320,16 @@ impl Decoder {
         let rev: Vec<usize> = cfg.block_out_channels.iter().rev().copied().collect();
         let g = cfg.norm_num_groups;
         let top = rev[0];
-        let conv_in = Conv2d::load(vb.pp("conv_in"), cfg.latent_channels, top, 3, 1, 1, true)?;
-        let mid = mid_block(vb.pp("mid_block"), top, cfg)?;
+        // the decoder only runs forward (see `Conv2d::forward_only`)
+        let conv_in = Conv2d::load(vb.pp("conv_in"), cfg.latent_channels, top, 3, 1, 1, true)?
+            .forward_only()?;
+        let mid = mid_block(vb.pp("mid_block"), top, cfg)?
+            .into_iter()
+            .map(|l| match l {
+                Layer::Res(r) => r.forward_only().map(Layer::Res),
+                l => Ok(l),
+            })
+            .collect::<candle_core::Result<Vec<_>>>()?;
         let mut up = Vec::new();
         let mut cin = top;
         for (i, &cout) in rev.iter().enumerate() {
@@ -329,24 +337,16 @@ impl Decoder {
             let mut resnets = Vec::new();
             for j in 0..=cfg.layers_per_block {
                 let c_in = if j == 0 { cin } else { cout };
-                resnets.push(ResnetBlock::load(
-                    vbb.pp("resnets").pp(j),
-                    c_in,
-                    cout,
-                    g,
-                    EPS,
-                )?);
+                resnets.push(
+                    ResnetBlock::load(vbb.pp("resnets").pp(j), c_in, cout, g, EPS)?
+                        .forward_only()?,
+                );
             }
             let upsample = if i + 1 < rev.len() {
-                Some(Conv2d::load(
-                    vbb.pp("upsamplers.0.conv"),
-                    cout,
-                    cout,
-                    3,
-                    1,
-                    1,
-                    true,
-                )?)
+                Some(
+                    Conv2d::load(vbb.pp("upsamplers.0.conv"), cout, cout, 3, 1, 1, true)?
+                        .forward_only()?,
+                )
             } else {
                 None
             };
@@ -358,7 +358,8 @@ impl Decoder {
             mid,
             up,
             conv_norm_out: GroupNorm::load(vb.pp("conv_norm_out"), g, cin, EPS)?,
-            conv_out: Conv2d::load(vb.pp("conv_out"), cin, cfg.out_channels, 3, 1, 1, true)?,
+            conv_out: Conv2d::load(vb.pp("conv_out"), cin, cfg.out_channels, 3, 1, 1, true)?
+                .forward_only()?,
         })
     }
 
