@@ -63,9 +63,9 @@ impl Conv2d {
         })
     }
 
-    /// This layer for a model that only ever runs forward (the UNet). On the kernel path a 3×3
-    /// stride-1 layer computes its Winograd transform now and drops its weights: 9/25 of the
-    /// memory the two took together. [`Conv2d::backward`] then fails.
+    /// This layer for a model that only ever runs forward (the UNet, the VAE decoder). On the
+    /// kernel path a 3×3 stride-1 layer computes its Winograd transform now and drops its
+    /// weights: 9/25 of the memory the two took together. [`Conv2d::backward`] then fails.
     pub fn forward_only(mut self) -> R<Self> {
         let (co, ci, k) = self.dims;
         if k == 3 && self.stride == 1 {
