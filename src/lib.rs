@@ -11,6 +11,8 @@
 //! | [`raster`] | differentiable CPU rasteriser: forward and backward |
 //! | [`image`] | RGBA f32 buffers, PNG in/out, metrics |
 //! | [`models`] | Stable Diffusion on candle: diffusers loading, UNet, VAE (+VJP), TAESD, samplers |
+//! | [`fetch`] | size-capped HTTPS downloads of pinned files (MiniLM wheel, icon sets) |
+//! | [`retrieval`] | the caption index over the training icons and the icons it returns |
 //! | [`optim`] | Adam with parameter groups, schedules, NaN guards |
 //! | [`progress`] | progress events and cancellation, the seam to CLI and service |
 //! | [`teacher`] | SDS teacher interface; exact analytic test teacher |
@@ -33,6 +35,7 @@ pub mod augment;
 pub mod cli;
 pub mod config;
 pub mod eval;
+pub mod fetch;
 pub mod image;
 pub mod losses;
 pub mod models;
@@ -40,6 +43,7 @@ pub mod optim;
 pub mod pipeline;
 pub mod progress;
 pub mod raster;
+pub mod retrieval;
 pub mod scene;
 pub mod server;
 pub mod stages;

