@@ -121,6 +121,54 @@ fn squaredcos_schedule_and_four_step_ddim_sample_match_diffusers() {
 }
 
 #[test]
+fn sdedit_keeps_its_start_at_strength_zero_and_runs_the_tail_of_the_schedule() {
+    let sd = pixel();
+    let r = pixel_refs();
+    let (cond, uncond) = (&r["text.cond"], &r["text.uncond"]);
+    let init = &r["ddim.init"];
+    let noise = (init * 0.5).unwrap();
+    let same = sd
+        .sample_from(init, &noise, 0.0, cond, uncond, 7.5, 4)
+        .unwrap();
+    assert_eq!(same.len(), 1);
+    assert_close("strength 0", &same[0], init, 0.0);
+    // strength 0.5 of 4 steps: the last two DDIM steps, from the schedule's third timestep
+    let half = sd
+        .sample_from(init, &noise, 0.5, cond, uncond, 7.5, 4)
+        .unwrap();
+    assert_eq!(half.len(), 2);
+    let full = sd
+        .sample_from(init, &noise, 1.0, cond, uncond, 7.5, 4)
+        .unwrap();
+    assert_eq!(full.len(), 4);
+    let d = (&half[1] - &full[3]).unwrap().abs().unwrap();
+    let d: f32 = d.max_all().unwrap().to_scalar().unwrap();
+    assert!(d > 1e-4, "a later start gives another sample");
+    for s in [-0.1, 1.5, f64::NAN] {
+        assert!(
+            sd.sample_from(init, &noise, s, cond, uncond, 7.5, 4)
+                .is_err(),
+            "{s}"
+        );
+    }
+    // strength 1 from a zero start, with the noise scaled by 1/sqrt(1 - ᾱ) of the first
+    // timestep, is sampling from that noise
+    let t0 = vectorfusion::models::scheduler::Sampler::new(&sd.scheduler, SamplerKind::Ddim, 4)
+        .unwrap()
+        .timesteps[0];
+    let abar = sd.alphas_cumprod()[t0 as usize];
+    let zero = init.zeros_like().unwrap();
+    let scaled = (init / (1.0 - abar).sqrt()).unwrap();
+    let a = sd
+        .sample_from(&zero, &scaled, 1.0, cond, uncond, 7.5, 4)
+        .unwrap();
+    let b = sd
+        .sample(init, cond, uncond, 7.5, 4, SamplerKind::Ddim)
+        .unwrap();
+    assert_close("strength 1 = sample", &a[3], &b[3], 1e-3);
+}
+
+#[test]
 fn pixel_encode_and_its_vjp_match_torch_area_interpolation() {
     let sd = pixel();
     let r = pixel_refs();
@@ -310,6 +358,7 @@ fn model_index_style_suffix_switch() {
     let models = vectorfusion::pipeline::methods::Models {
         teacher: vectorfusion::pipeline::methods::TeacherModel::Sd(Box::new(t)),
         scorer: None,
+        retrieval: Err("none".into()),
     };
     use vectorfusion::stages::styles::Style as S;
     assert_eq!(models.prompt(S::Iconography, " a crown "), "a crown");
@@ -318,6 +367,7 @@ fn model_index_style_suffix_switch() {
             vectorfusion::teacher::SdTeacher::load(&fixture("sd-tiny-pixel"), 64).unwrap(),
         )),
         scorer: None,
+        retrieval: Err("none".into()),
     };
     assert_eq!(
         with.prompt(S::Iconography, "a crown"),
@@ -327,7 +377,8 @@ fn model_index_style_suffix_switch() {
     let draw = |m: &vectorfusion::pipeline::methods::Models| {
         let sink = vectorfusion::progress::NullSink;
         let cancel = vectorfusion::progress::CancelToken::new();
-        m.sample("a crown", 1, 3, 7, &sink, &cancel).unwrap()[0]
+        m.sample("a crown", 1, 3, 7, &[], 0.6, &sink, &cancel)
+            .unwrap()[0]
             .data
             .clone()
     };

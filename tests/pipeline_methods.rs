@@ -47,6 +47,7 @@ fn req(method: Method, style: StageStyle, start: Start) -> TextRequest {
         samples: Some(2),
         seed: 7,
         guidance: None,
+        retrieval: true,
         start,
     }
 }
@@ -261,6 +262,7 @@ fn spec(kind: JobKind) -> JobSpec {
         samples: 2,
         preset: Preset::Draft,
         priority: 0,
+        retrieval: true,
     }
 }
 

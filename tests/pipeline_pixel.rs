@@ -37,6 +37,7 @@ fn req(method: Method, style: StageStyle) -> TextRequest {
         samples: Some(2),
         seed: 3,
         guidance: None,
+        retrieval: true,
         start: Start::Method,
     }
 }
@@ -45,7 +46,7 @@ fn req(method: Method, style: StageStyle) -> TextRequest {
 fn every_method_runs_on_the_pixel_space_model() {
     // 64 px renders for a 16 px prior; samples (16 px) are upscaled to the 64 px trace canvas.
     let m = Models::load_sd(&fixture("sd-tiny-pixel"), Some(&fixture("clip-tiny")), 64).unwrap();
-    assert!(m.is_pixel_space());
+    assert!(m.is_small_prior());
     for method in Method::ALL {
         for style in [StageStyle::Iconography, StageStyle::PixelArt] {
             let out = run_text(&m, &req(*method, style), &NullSink, &CancelToken::new())
@@ -84,7 +85,7 @@ fn sd_live_sds_with_taesd_as_the_encoder() {
         vectorfusion::models::ComputeDevice::Cpu,
     )
     .unwrap();
-    assert!(!m.is_pixel_space());
+    assert!(!m.is_small_prior());
     let out = run_text(
         &m,
         &req(Method::SdLiveSds, StageStyle::Iconography),
@@ -120,6 +121,7 @@ fn service_executor_runs_a_text_job_on_the_default_pixel_model() {
         samples: 1,
         preset: Preset::Draft,
         priority: 0,
+        retrieval: true,
     };
     let out = exec
         .run(&spec, &JobContext::detached(CancelToken::new()))
@@ -155,7 +157,7 @@ fn generate_without_model_uses_the_default_model() {
     assert!(err.contains("pixel-space"), "{err}");
     assert_valid_svg(&std::fs::read_to_string(&out).unwrap());
     // plain `generate CAPTION -o` (scratch, no preset) on a pixel model runs the pipeline with
-    // the pixel presets: the SVG is written at the default (balanced) pixel preset's 128 px
+    // the small-prior presets: the SVG is written at the default (balanced) preset's 64 px
     let out2 = dir.join("scratch.svg");
     let st = std::process::Command::new(env!("CARGO_BIN_EXE_vectorfusion"))
         .args(["generate", "a crown", "--steps", "2", "-o"])
@@ -170,7 +172,7 @@ fn generate_without_model_uses_the_default_model() {
         String::from_utf8_lossy(&st.stderr)
     );
     let svg = std::fs::read_to_string(&out2).unwrap();
-    assert!(svg.contains("width=\"128\""), "{svg}");
+    assert!(svg.contains("width=\"64\""), "{svg}");
     // a bad VF_DEFAULT_MODEL is a usage error naming the variable
     let st = std::process::Command::new(env!("CARGO_BIN_EXE_vectorfusion"))
         .args(["generate", "a crown", "-o"])

@@ -45,6 +45,7 @@ fn spec(method: Method, style: Style) -> JobSpec {
         samples: 2,
         preset: Preset::Draft,
         priority: 0,
+        retrieval: true,
     }
 }
 
@@ -226,6 +227,7 @@ fn vectorize_jobs_checkpoint_each_live_stage_and_resume_exactly() {
         samples: 1,
         preset: Preset::Draft,
         priority: 0,
+        retrieval: true,
     };
     let exec = DefaultExecutor::new(ModelDirs::default());
     let full = attempt(&exec, &spec, 100, None, None);

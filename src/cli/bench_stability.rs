@@ -204,12 +204,12 @@ pub const COLLAPSED_SPREAD: f64 = 0.01;
 
 pub fn run(args: BenchStabilityArgs) -> Result<(), CliError> {
     let preset: Preset = args.preset.parse().map_err(CliError::Usage)?;
-    // Pixel-space models (no vae/) have their own presets.
-    let pixel = args
+    // Small priors (the embedded model) have their own presets.
+    let small = args
         .model
         .as_deref()
-        .is_some_and(crate::pipeline::is_pixel_model);
-    let ps = preset.settings_for(pixel);
+        .is_some_and(crate::pipeline::is_small_model);
+    let ps = preset.settings_for(small);
     let a = Resolved {
         seeds: args.seeds,
         steps: args.steps.unwrap_or(if preset == Preset::Draft {
@@ -251,6 +251,7 @@ pub fn run(args: BenchStabilityArgs) -> Result<(), CliError> {
         Models {
             teacher: TeacherModel::Analytic(t),
             scorer: None,
+            retrieval: Err("the test teacher has no retrieval index".into()),
         }
     };
     let targets: Vec<Image> = match &models.teacher {
@@ -294,6 +295,7 @@ pub fn run(args: BenchStabilityArgs) -> Result<(), CliError> {
                     samples: Some(a.samples),
                     seed,
                     guidance: None,
+                    retrieval: false,
                     start: Start::Method,
                 };
                 let t0 = Instant::now();

@@ -88,6 +88,9 @@ pub struct EvalArgs {
     /// --method: seed of caption line N is SEED + N - 1.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// --method: sample from noise only (no retrieved icons as starting points).
+    #[arg(long)]
+    pub no_retrieval: bool,
 }
 
 fn map_err(e: EvalError) -> CliError {
@@ -219,7 +222,7 @@ fn generate_and_evaluate(
             let line = i + 1;
             let spec = job_spec(
                 args,
-                exec.pixel_space(),
+                exec.small_prior(),
                 *method,
                 style,
                 preset,
@@ -300,7 +303,7 @@ fn sample_and_evaluate(
         .map_err(pipeline_err)?;
     let stage_style = crate::pipeline::methods::stage_style(style);
     let k = preset
-        .resolve(exec.pixel_space(), stage_style, None, None, args.samples)
+        .resolve(exec.small_prior(), stage_style, None, None, args.samples)
         .samples
         .max(1);
     let cancel = CancelToken::new();
@@ -309,13 +312,14 @@ fn sample_and_evaluate(
     for (i, caption) in captions.iter().enumerate() {
         let line = i + 1;
         let t0 = std::time::Instant::now();
-        let ranked = models
+        let (ranked, _) = models
             .sample_and_rerank(
                 &models.prompt(stage_style, caption),
                 caption,
                 k,
                 ps.sample_steps,
                 args.seed.wrapping_add(line as u64 - 1),
+                !args.no_retrieval,
                 &NullSink,
                 &cancel,
             )
@@ -349,7 +353,7 @@ fn sample_and_evaluate(
 
 fn job_spec(
     args: &EvalArgs,
-    pixel_space: bool,
+    small_prior: bool,
     method: Method,
     style: Style,
     preset: Preset,
@@ -357,7 +361,7 @@ fn job_spec(
     line: usize,
 ) -> Result<JobSpec, CliError> {
     let r = preset.resolve(
-        pixel_space,
+        small_prior,
         crate::pipeline::methods::stage_style(style),
         args.paths.map(|p| p as usize),
         args.steps,
@@ -376,6 +380,7 @@ fn job_spec(
         samples: r.samples,
         preset,
         priority: 0,
+        retrieval: !args.no_retrieval,
     };
     spec.validate(&Limits::default())
         .map_err(|e| CliError::Usage(format!("line {line}: {e}")))?;

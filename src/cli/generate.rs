@@ -10,7 +10,7 @@
 use super::CliError;
 use crate::pipeline::methods::{self, Models, Start, TextRequest};
 use crate::pipeline::{
-    EncoderChoice, Method, PipelineError, Preset, default_model_dir, is_pixel_model,
+    EncoderChoice, Method, PipelineError, Preset, default_model_dir, is_small_model,
     resolve_encoder,
 };
 use crate::progress::{CancelToken, Progress};
@@ -84,6 +84,10 @@ pub struct GenerateArgs {
     /// model_index.json), 100 as in the paper for Stable Diffusion and the test teacher].
     #[arg(long)]
     pub guidance: Option<f32>,
+    /// Sample from noise only: no retrieved training icons as starting points (the embedded
+    /// model starts about half of its K samples from the icons nearest to the caption).
+    #[arg(long)]
+    pub no_retrieval: bool,
     /// Smallest timestep drawn.
     #[arg(long, default_value_t = 50)]
     pub t_min: usize,
@@ -148,8 +152,8 @@ pub fn run(mut args: GenerateArgs) -> Result<(), CliError> {
     if args.scorer.is_none() {
         args.scorer = default_scorer;
     }
-    let pixel = args.model.as_deref().is_some_and(is_pixel_model);
-    if pixel
+    let small = args.model.as_deref().is_some_and(is_small_model);
+    if small
         || method != Method::Scratch
         || args.preset.is_some()
         || args.scorer.is_some()
@@ -157,7 +161,7 @@ pub fn run(mut args: GenerateArgs) -> Result<(), CliError> {
         || args.image.is_some()
         || args.svg.is_some()
     {
-        return run_pipeline(args, method, encoder, pixel);
+        return run_pipeline(args, method, encoder, small);
     }
     let style: Style = args.style.parse().map_err(CliError::Usage)?;
     let size = args.size.unwrap_or(64);
@@ -305,14 +309,14 @@ fn run_pipeline(
     args: GenerateArgs,
     method: Method,
     encoder: EncoderChoice,
-    pixel: bool,
+    small: bool,
 ) -> Result<(), CliError> {
     let style: Style = args.style.parse().map_err(CliError::Usage)?;
     let preset: Preset = match &args.preset {
         Some(p) => p.parse().map_err(CliError::Usage)?,
         None => Preset::default(),
     };
-    let ps = preset.settings_for(pixel);
+    let ps = preset.settings_for(small);
     let size = args.size.unwrap_or(ps.size);
     if !(8..=2048).contains(&size) {
         return Err(CliError::Usage(format!(
@@ -327,6 +331,18 @@ fn run_pipeline(
     let models = if let Some(dir) = &args.model {
         let taesd = resolve_encoder(encoder, ps.prefer_taesd, dir, args.taesd.as_deref())
             .map_err(pipeline_err)?;
+        // The retrieval index is installed on first use, as the MiniLM weights are (the
+        // service never downloads; `vectorfusion setup` does both up front).
+        let rloc = crate::retrieval::RetrievalLocations::from_env();
+        if !args.no_retrieval
+            && method != Method::Scratch
+            && matches!(crate::retrieval::pinned_packages(dir), Ok(Some(_)))
+            && rloc.load(dir).is_err()
+            && !rloc.offline
+            && let Err(e) = super::setup::install_retrieval(dir, &rloc)
+        {
+            eprintln!("warning: no retrieval index ({e}); sampling from noise only");
+        }
         let device = super::parse_device(&args.device)?;
         Models::load_sd_with(dir, args.scorer.as_deref(), size, taesd.as_deref(), device)
             .map_err(pipeline_err)?
@@ -361,6 +377,7 @@ fn run_pipeline(
         samples: args.samples,
         seed: args.seed,
         guidance: args.guidance,
+        retrieval: !args.no_retrieval,
         start,
     };
     if let Some(d) = &args.snapshots {

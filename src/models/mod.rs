@@ -33,7 +33,7 @@ pub mod unet;
 pub mod vae;
 
 pub use loader::{ComputeDevice, LoadOptions, ModelSource, Precision};
-pub use pipeline::StableDiffusion;
+pub use pipeline::{ModelHints, StableDiffusion};
 
 /// Errors of the models layer.
 #[derive(Debug, thiserror::Error)]

@@ -161,6 +161,11 @@ pub struct ModelHints {
     /// `_sds_guidance`: classifier-free guidance of the SDS teacher (the paper uses 100).
     #[serde(rename = "_sds_guidance", default = "sds_guidance")]
     pub sds_guidance: f32,
+    /// `_small_prior`: a small prior (the embedded `vf-icon`) rather than Stable Diffusion: the
+    /// pipeline uses the presets sized for it ([`crate::pipeline::Preset::settings_for`]).
+    /// Pixel-space models are small priors whatever this says.
+    #[serde(rename = "_small_prior", default)]
+    pub small_prior: bool,
 }
 
 fn yes() -> bool {
@@ -179,6 +184,7 @@ impl Default for ModelHints {
             style_suffix: true,
             sample_guidance: sample_guidance(),
             sds_guidance: sds_guidance(),
+            small_prior: false,
         }
     }
 }
@@ -278,6 +284,19 @@ impl StableDiffusion {
     /// `(prompt embeddings, empty-prompt embeddings)` for classifier-free guidance.
     pub fn text_embeddings(&self, prompt: &str) -> Result<(Tensor, Tensor)> {
         Ok((self.embed_text(prompt)?, self.embed_text("")?))
+    }
+
+    /// The mean-pooled, L2-normalised sentence embedding of `text` over `len` positions when the
+    /// text encoder is BERT (the embedded model's MiniLM, as its retrieval index is built);
+    /// `None` for CLIP text encoders.
+    pub fn sentence_embedding(&self, text: &str, len: usize) -> Result<Option<Vec<f32>>> {
+        match &self.text {
+            Some(TextEncoder::Bert(b)) => {
+                let e = b.sentence_embeddings(&[text], len)?;
+                Ok(Some(e.flatten_all()?.to_vec1::<f32>()?))
+            }
+            _ => Ok(None),
+        }
     }
 
     pub fn device(&self) -> &Device {
@@ -400,6 +419,47 @@ impl StableDiffusion {
         let z_t = ((latents * a.sqrt())? + (noise * (1.0 - a).sqrt())?)?;
         let eps = self.predict_noise(&z_t, t, text_emb, uncond_emb, guidance)?;
         Ok(((eps - noise)? * (1.0 - a))?)
+    }
+
+    /// SDEdit (Meng et al., ICLR 2022) with DDIM: the clean latents `init` noised with `noise`
+    /// (standard normal, same shape) to the step `strength` of the way up a `steps`-step schedule
+    /// (0 returns `init`; 1 starts at the first step, like [`StableDiffusion::sample`]), then
+    /// denoised with CFG to the end. Returns the latents after each step run.
+    #[allow(clippy::too_many_arguments)]
+    pub fn sample_from(
+        &self,
+        init: &Tensor,
+        noise: &Tensor,
+        strength: f64,
+        text_emb: &Tensor,
+        uncond_emb: &Tensor,
+        guidance: f64,
+        steps: usize,
+    ) -> Result<Vec<Tensor>> {
+        if !(0.0..=1.0).contains(&strength) {
+            return Err(ModelError::InvalidInput(format!(
+                "SDEdit strength must be in 0..=1, got {strength}"
+            )));
+        }
+        let s = Sampler::new(&self.scheduler, SamplerKind::Ddim, steps)?;
+        let run = ((steps as f64 * strength).round() as usize).min(steps);
+        if run == 0 {
+            return Ok(vec![init.clone()]);
+        }
+        let start = steps - run;
+        let t0 = s.timesteps[start];
+        let a = *self
+            .alphas_cumprod
+            .get(t0 as usize)
+            .ok_or_else(|| ModelError::InvalidInput(format!("timestep {t0} out of range")))?;
+        let mut x = ((init * a.sqrt())? + (noise * (1.0 - a).sqrt())?)?;
+        let mut traj = Vec::with_capacity(run);
+        for i in start..steps {
+            let out = self.guided_raw(&x, s.timesteps[i], text_emb, uncond_emb, guidance)?;
+            x = s.step(&out, i, &x)?;
+            traj.push(x.clone());
+        }
+        Ok(traj)
     }
 
     /// Samples latents from `init_noise` (standard normal, `[b, 4, h, w]`) with CFG; returns the

@@ -17,18 +17,19 @@ use crate::image::Image;
 use crate::image::ops::resize;
 use crate::models::ComputeDevice;
 use crate::models::pipeline::ModelHints;
-use crate::models::scheduler::SamplerKind;
 use crate::models::scorer::{ImageTextScorer, Scorer};
 use crate::progress::{CancelToken, Progress, ProgressSink};
+use crate::retrieval::install::CAPTION_TOKENS;
+use crate::retrieval::{Hit, IconIndex, RetrievalLocations};
 use crate::scene::{Rgba, Scene, Shape, ShapeKind, Stroke};
 use crate::stages::live::prune::weak_paths;
 use crate::stages::live::{self, LiveConfig, PathBudget};
+use crate::stages::sample;
 use crate::stages::sds::{
-    RasterBackend, SdsCheckpoint, SdsConfig, SdsError, SdsState, gaussian, run_sds_resumable,
+    RasterBackend, SdsCheckpoint, SdsConfig, SdsError, SdsState, run_sds_resumable,
 };
 use crate::stages::styles::{Style, pixelate_l1, random_circle, random_stroke};
 use crate::teacher::{AnalyticTeacher, AnalyticTeacherConfig, SdTeacher, Teacher};
-use candle_core::{DType, Tensor};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
@@ -113,13 +114,14 @@ impl Preset {
         }
     }
 
-    /// The settings of this preset for a model of the given kind: Stable Diffusion (latent
-    /// space, [`Preset::settings`]) or a small pixel-space prior (`pixel_space`, e.g. the
-    /// embedded 32 px `models/vf-icon`): SDS renders at 64–256 px that the encoder area-resizes
-    /// to the prior's size, samples traced at 64–256 px, and step counts sized so that the
-    /// default (`balanced`) run of `generate` finishes in about a minute on 2 CPU cores.
-    pub fn settings_for(self, pixel_space: bool) -> PresetSettings {
-        if !pixel_space {
+    /// The settings of this preset for a model of the given kind: Stable Diffusion
+    /// ([`Preset::settings`]) or a small prior (`small_prior`: the embedded `models/vf-icon`,
+    /// 64 px through a 16x16x4 latent, or a 32 px pixel-space prior): SDS renders at the
+    /// prior's 64 px image side (a pixel-space encoder area-resizes it to its size), samples are
+    /// traced at 64–256 px, and step counts are sized so that the default (`balanced`) run of
+    /// `generate` stays within about 30 s on 2 CPU cores.
+    pub fn settings_for(self, small_prior: bool) -> PresetSettings {
+        if !small_prior {
             return self.settings();
         }
         match self {
@@ -138,7 +140,7 @@ impl Preset {
                 trace_size: 64,
             },
             Preset::Fast => PresetSettings {
-                size: 128,
+                size: 64,
                 steps: 25,
                 paths: 16,
                 samples: 2,
@@ -149,7 +151,7 @@ impl Preset {
                 trace_size: 128,
             },
             Preset::Balanced => PresetSettings {
-                size: 128,
+                size: 64,
                 steps: 50,
                 paths: 24,
                 samples: 2,
@@ -160,7 +162,7 @@ impl Preset {
                 trace_size: 128,
             },
             Preset::Paper => PresetSettings {
-                size: 256,
+                size: 64,
                 steps: 300,
                 paths: 64,
                 samples: 8,
@@ -178,13 +180,13 @@ impl Preset {
     /// resolution shared by `generate`, `eval --method`, the service and [`run_text`].
     pub fn resolve(
         self,
-        pixel_space: bool,
+        small_prior: bool,
         style: Style,
         paths: Option<usize>,
         steps: Option<u32>,
         samples: Option<u32>,
     ) -> Resolved {
-        let ps = self.settings_for(pixel_space);
+        let ps = self.settings_for(small_prior);
         Resolved {
             paths: paths.unwrap_or(match style {
                 Style::Iconography => ps.paths,
@@ -274,6 +276,9 @@ pub enum TeacherModel {
 pub struct Models {
     pub teacher: TeacherModel,
     pub scorer: Option<Scorer>,
+    /// The caption index of the model's training icons, when the model pins icon sets and
+    /// `vectorfusion setup` installed it; why not otherwise (reported in the run's detail).
+    pub retrieval: Result<std::sync::Arc<IconIndex>, String>,
 }
 
 impl std::fmt::Debug for Models {
@@ -313,9 +318,18 @@ impl Models {
                 sd_dir.display()
             ))
         })?;
+        let retrieval = match RetrievalLocations::from_env().load(sd_dir) {
+            Ok(Some(idx)) => Ok(std::sync::Arc::new(idx)),
+            Ok(None) => Err("the model pins no icon sets".to_string()),
+            Err(e) => {
+                tracing::warn!(model = %sd_dir.display(), "sampling from noise only: {e}");
+                Err(e.to_string())
+            }
+        };
         Ok(Models {
             teacher: TeacherModel::Sd(Box::new(teacher)),
             scorer: load_scorer(scorer)?,
+            retrieval,
         })
     }
 
@@ -342,13 +356,14 @@ impl Models {
         Ok(Models {
             teacher: TeacherModel::Analytic(teacher),
             scorer: load_scorer(scorer)?,
+            retrieval: Err("the test teacher has no retrieval index".into()),
         })
     }
 
-    /// Whether the teacher is a pixel-space model (presets differ: [`Preset::settings_for`]).
-    pub fn is_pixel_space(&self) -> bool {
+    /// Whether the teacher is a small prior (presets differ: [`Preset::settings_for`]).
+    pub fn is_small_prior(&self) -> bool {
         match &self.teacher {
-            TeacherModel::Sd(t) => t.model().is_pixel_space(),
+            TeacherModel::Sd(t) => t.model().is_pixel_space() || t.model().hints.small_prior,
             TeacherModel::Analytic(_) => false,
         }
     }
@@ -360,58 +375,87 @@ impl Models {
         }
     }
 
-    /// Samples `k` images for `prompt` (seeded), reporting stage `"sample"` progress.
+    /// Samples `k` images for `prompt` (seeded), reporting stage `"sample"` progress; the first
+    /// `starts.len()` begin from those images (SDEdit at `strength`, [`sample::draw`]).
+    #[allow(clippy::too_many_arguments)]
     pub fn sample(
         &self,
         prompt: &str,
         k: u32,
         sample_steps: usize,
         seed: u64,
+        starts: &[Image],
+        strength: f64,
         sink: &dyn ProgressSink,
         cancel: &CancelToken,
     ) -> Result<Vec<Image>, PipelineError> {
-        let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x5a3b_1e00);
-        let mut out = Vec::with_capacity(k as usize);
         match &self.teacher {
             TeacherModel::Sd(t) => {
-                let sd = t.model();
-                let (cond, uncond) = sd
-                    .text_embeddings(prompt)
-                    .map_err(|e| failed("text encoder", e))?;
-                let [c, h, w] = t.latent_shape();
-                for i in 0..k {
-                    if cancel.is_cancelled() {
-                        return Err(PipelineError::Cancelled);
-                    }
-                    let noise: Vec<f32> = (0..c * h * w).map(|_| gaussian(&mut rng)).collect();
-                    let noise = Tensor::from_vec(noise, (1, c, h, w), sd.device())
-                        .map_err(|e| failed("noise", e))?;
-                    let g = f64::from(sd.hints.sample_guidance);
-                    let traj = sd
-                        .sample(&noise, &cond, &uncond, g, sample_steps, SamplerKind::Ddim)
-                        .map_err(|e| failed("sampling", e))?;
-                    let z = traj
-                        .last()
-                        .ok_or_else(|| failed("sampling", "no sampler steps"))?;
-                    let img = sd.decode(z).map_err(|e| failed("decode", e))?;
-                    out.push(tensor_to_image(&img)?);
-                    sink.report(Progress::new("sample", i + 1, k));
-                }
+                let cfg = sample::SampleConfig {
+                    k,
+                    steps: sample_steps,
+                    guidance: f64::from(t.model().hints.sample_guidance),
+                    seed,
+                    strength,
+                };
+                sample::draw(
+                    t.model(),
+                    t.latent_shape(),
+                    prompt,
+                    starts,
+                    &cfg,
+                    sink,
+                    cancel,
+                )
+                .map_err(|e| match e {
+                    sample::SampleError::Cancelled => PipelineError::Cancelled,
+                    sample::SampleError::Failed(m) => PipelineError::Failed(m),
+                })
             }
             TeacherModel::Analytic(t) => {
                 use rand::RngExt;
+                let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x5a3b_1e00);
                 let targets = t.targets();
                 if targets.is_empty() {
                     return Err(failed("sampling", "the test teacher has no targets"));
                 }
+                let mut out = Vec::with_capacity(k as usize);
                 for i in 0..k {
                     let j = rng.random_range(0..targets.len());
                     out.push(targets[j].clone());
                     sink.report(Progress::new("sample", i + 1, k));
                 }
+                Ok(out)
             }
         }
-        Ok(out)
+    }
+
+    /// The training icons nearest to `caption` to start `n` samples from, rendered at the
+    /// teacher's image side; `Err` says why there are none (no index, a CLIP text encoder, ...).
+    pub fn retrieve(
+        &self,
+        caption: &str,
+        n: usize,
+        seed: u64,
+    ) -> Result<Vec<(Hit, Image)>, String> {
+        let idx = self.retrieval.as_ref().map_err(Clone::clone)?;
+        let TeacherModel::Sd(t) = &self.teacher else {
+            return Err("the test teacher has no retrieval index".into());
+        };
+        let q = t
+            .model()
+            .sentence_embedding(caption, CAPTION_TOKENS)
+            .map_err(|e| e.to_string())?
+            .ok_or("the model's text encoder is not the index's MiniLM")?;
+        let side = t.image_size();
+        idx.nearest(&q, n, 1, seed)
+            .map_err(|e| e.to_string())?
+            .into_iter()
+            .map(|h| {
+                let img = idx.render(&h.icon, side).map_err(|e| e.to_string())?;
+                Ok((h, img))
+            })
+            .collect()
     }
 }
 
@@ -423,6 +467,8 @@ pub struct Ranked {
     images: Vec<Image>,
     best: usize,
     scores: Vec<f32>,
+    /// The retrieved icon each sample started from (`None`: from noise); as long as `images`.
+    sources: Vec<Option<Hit>>,
 }
 
 impl Ranked {
@@ -439,6 +485,14 @@ impl Ranked {
     }
     pub fn best_image(&self) -> &Image {
         &self.images[self.best]
+    }
+    /// Per sample, the icon it started from (`None`: pure noise).
+    pub fn sources(&self) -> &[Option<Hit>] {
+        &self.sources
+    }
+    /// The icon the kept sample started from.
+    pub fn best_source(&self) -> Option<&Hit> {
+        self.sources.get(self.best).and_then(Option::as_ref)
     }
 }
 
@@ -459,6 +513,8 @@ impl Models {
 
     /// Samples `k` images with `prompt` ([`Models::prompt`]) and keeps the one the
     /// scorer matches best to `caption` (rejection sampling, the first stage of `sd_live*`).
+    /// With `retrieval`, half of them start from the training icons nearest to `caption`
+    /// ([`Models::retrieve`]); the second value says why none did, when none did.
     #[allow(clippy::too_many_arguments)]
     pub fn sample_and_rerank(
         &self,
@@ -467,10 +523,29 @@ impl Models {
         k: u32,
         sample_steps: usize,
         seed: u64,
+        retrieval: bool,
         sink: &dyn ProgressSink,
         cancel: &CancelToken,
-    ) -> Result<Ranked, PipelineError> {
-        let images = self.sample(prompt, k, sample_steps, seed, sink, cancel)?;
+    ) -> Result<(Ranked, Option<String>), PipelineError> {
+        let (hits, why_not) = if retrieval {
+            match self.retrieve(caption, sample::retrieved_count(k), seed) {
+                Ok(h) => (h, None),
+                Err(e) => (Vec::new(), Some(e)),
+            }
+        } else {
+            (Vec::new(), Some("turned off".to_string()))
+        };
+        let (hits, starts): (Vec<Hit>, Vec<Image>) = hits.into_iter().unzip();
+        let images = self.sample(
+            prompt,
+            k,
+            sample_steps,
+            seed,
+            &starts,
+            sample::DEFAULT_STRENGTH,
+            sink,
+            cancel,
+        )?;
         if images.is_empty() {
             return Err(failed("sampling", "no samples drawn (K = 0)"));
         }
@@ -483,11 +558,17 @@ impl Models {
         if best >= images.len() {
             return Err(failed("rerank", "best index out of range"));
         }
-        Ok(Ranked {
-            images,
-            best,
-            scores,
-        })
+        let mut sources: Vec<Option<Hit>> = hits.into_iter().map(Some).collect();
+        sources.resize(images.len(), None);
+        Ok((
+            Ranked {
+                images,
+                best,
+                scores,
+                sources,
+            },
+            why_not,
+        ))
     }
 }
 
@@ -501,31 +582,6 @@ fn load_scorer(dir: Option<&Path>) -> Result<Option<Scorer>, PipelineError> {
         })
     })
     .transpose()
-}
-
-/// `[1, 3, H, W]` in `[0, 1]` → opaque [`Image`]; non-finite values become an error.
-fn tensor_to_image(t: &Tensor) -> Result<Image, PipelineError> {
-    let dims = t.dims().to_vec();
-    let (h, w) = match dims.as_slice() {
-        [1, 3, h, w] => (*h, *w),
-        _ => return Err(failed("VAE decode", format!("unexpected shape {dims:?}"))),
-    };
-    let v: Vec<f32> = t
-        .to_dtype(DType::F32)
-        .and_then(|x| x.flatten_all())
-        .and_then(|x| x.to_vec1())
-        .map_err(|e| failed("VAE decode", e))?;
-    if v.iter().any(|x| !x.is_finite()) {
-        return Err(failed("VAE decode", "non-finite pixels"));
-    }
-    let mut im = Image::new(w as u32, h as u32);
-    for p in 0..h * w {
-        for c in 0..3 {
-            im.data[4 * p + c] = v[c * h * w + p].clamp(0.0, 1.0);
-        }
-        im.data[4 * p + 3] = 1.0;
-    }
-    Ok(im)
 }
 
 /// Where a text run starts.
@@ -553,6 +609,8 @@ pub struct TextRequest {
     pub seed: u64,
     /// SDS guidance scale [default: the model's, [`ModelHints::sds_guidance`]].
     pub guidance: Option<f32>,
+    /// Start some of the K samples from retrieved icons (when the model has an index).
+    pub retrieval: bool,
     pub start: Start,
 }
 
@@ -679,8 +737,16 @@ pub fn checkpoint_key(req: &TextRequest, models: &Models, size: u32) -> String {
         Start::Svg(_) => "svg",
     };
     format!(
-        "v2|{:?}|{:?}|{:?}|{:?}|{:?}|{:?}|{:?}|{}|{start}|{teacher}|{size}|{prompt:?}|{guidance}",
-        req.method, req.style, req.preset, req.paths, req.steps, req.samples, req.caption, req.seed
+        "v3|{:?}|{:?}|{:?}|{:?}|{:?}|{:?}|{:?}|{}|{start}|{teacher}|{size}|{prompt:?}|{guidance}|{}",
+        req.method,
+        req.style,
+        req.preset,
+        req.paths,
+        req.steps,
+        req.samples,
+        req.caption,
+        req.seed,
+        req.retrieval
     )
 }
 
@@ -733,7 +799,7 @@ pub fn run_text_resumable(
     cancel: &CancelToken,
     ctx: Option<&JobContext>,
 ) -> Result<MethodOutput, PipelineError> {
-    let ps = req.preset.settings_for(models.is_pixel_space());
+    let ps = req.preset.settings_for(models.is_small_prior());
     let teacher = models.teacher();
     let size = teacher.image_size();
     let Resolved {
@@ -741,7 +807,7 @@ pub fn run_text_resumable(
         steps,
         samples: k,
     } = req.preset.resolve(
-        models.is_pixel_space(),
+        models.is_small_prior(),
         req.style,
         req.paths,
         req.steps,
@@ -806,12 +872,13 @@ pub fn run_text_resumable(
         }
         Start::Method => {
             augment = false;
-            let ranked = models.sample_and_rerank(
+            let (ranked, why_not) = models.sample_and_rerank(
                 &prompt,
                 &req.caption,
                 k,
                 ps.sample_steps,
                 req.seed,
+                req.retrieval,
                 sink,
                 cancel,
             )?;
@@ -820,6 +887,13 @@ pub fn run_text_resumable(
                 "scores": ranked.scores(),
                 "best": ranked.best(),
                 "samples": k,
+                "sources": ranked.sources(),
+            });
+            detail["retrieval"] = json!({
+                "strength": sample::DEFAULT_STRENGTH,
+                "starts": ranked.sources().iter().flatten().collect::<Vec<_>>(),
+                "chosen": ranked.best_source(),
+                "unavailable": why_not,
             });
             let mut ev = Progress::new("rerank", 1, 1);
             ev.detail = Some(rerank.clone());
@@ -945,6 +1019,23 @@ pub fn run_text_resumable(
     detail["seconds"] = json!(t0.elapsed().as_secs_f64());
     scene.validate().map_err(|e| failed("final scene", e))?;
     let svg = RasterBackend::svg_text(&scene);
+    // A drawing that started from a retrieved icon names it and its licence.
+    let svg = match serde_json::from_value::<Hit>(detail["retrieval"]["chosen"].clone()) {
+        Ok(h) => crate::svg::with_metadata(
+            &svg,
+            &format!(
+                "Started from the icon \"{}\" of the {} {} icon set ({}, licence {}), redrawn by \
+                 vectorfusion for the caption \"{}\".",
+                h.icon.name,
+                h.icon.set,
+                h.icon.version,
+                h.icon.caption,
+                h.icon.license,
+                req.caption
+            ),
+        ),
+        Err(_) => svg,
+    };
     let mut done = Progress::new("done", 1, 1);
     done.svg = Some(svg.clone());
     sink.report(done);

@@ -128,6 +128,14 @@ pub struct JobSpec {
     pub samples: u32,
     pub preset: Preset,
     pub priority: i32,
+    /// Text jobs: start some samples from the training icons nearest to the caption
+    /// (retrieval, when the model has an installed index); false samples from noise only.
+    #[serde(default = "default_retrieval")]
+    pub retrieval: bool,
+}
+
+fn default_retrieval() -> bool {
+    true
 }
 
 /// Why a [`JobSpec`] is invalid: which field, and why.
@@ -373,9 +381,9 @@ pub trait Executor: Send + Sync {
     /// this is an error.
     fn text_ready(&self) -> Result<(), String>;
 
-    /// Whether text jobs run on a pixel-space model, whose presets differ
+    /// Whether text jobs run on a small prior, whose presets differ
     /// ([`methods::PresetSettings`]); the service resolves omitted fields with it.
-    fn pixel_space(&self) -> bool {
+    fn small_prior(&self) -> bool {
         false
     }
 }
@@ -464,6 +472,14 @@ pub fn is_pixel_model(dir: &Path) -> bool {
     is_model_dir(dir) && crate::models::codec::is_pixel_space(dir).unwrap_or(false)
 }
 
+/// Whether `dir` is a small prior (a pixel-space model, or one whose `model_index.json` says
+/// `"_small_prior": true`, as the embedded latent `vf-icon` does): its presets are
+/// [`Preset::settings_for`]`(true)`, not Stable Diffusion's.
+pub fn is_small_model(dir: &Path) -> bool {
+    is_pixel_model(dir)
+        || (is_model_dir(dir) && crate::models::ModelHints::read(dir).is_ok_and(|h| h.small_prior))
+}
+
 /// The default model directory: `env_value` (from [`DEFAULT_MODEL_ENV`]) when set — an error if
 /// it is not a model directory — else [`EMBEDDED_MODEL`] under `cwd`, then under `crate_root`.
 /// `Ok(None)` when none is present.
@@ -541,9 +557,9 @@ impl ModelDirs {
         self
     }
 
-    /// Whether the configured model works in pixel space (presets differ).
-    pub fn is_pixel_space(&self) -> bool {
-        self.sd_dir.as_deref().is_some_and(is_pixel_model)
+    /// Whether the configured model is a small prior (presets differ: [`is_small_model`]).
+    pub fn is_small_prior(&self) -> bool {
+        self.sd_dir.as_deref().is_some_and(is_small_model)
     }
 }
 
@@ -574,9 +590,9 @@ impl DefaultExecutor {
         }
     }
 
-    /// The settings of `preset` for the configured model (pixel-space models have their own).
+    /// The settings of `preset` for the configured model (small priors have their own).
     pub fn settings(&self, preset: Preset) -> methods::PresetSettings {
-        preset.settings_for(self.models.is_pixel_space())
+        preset.settings_for(self.models.is_small_prior())
     }
 
     /// The models for `size` px teacher inputs with the VAE (loaded once).
@@ -651,6 +667,7 @@ impl DefaultExecutor {
             samples: Some(spec.samples),
             seed: spec.seed,
             guidance: None,
+            retrieval: spec.retrieval,
             start,
         };
         let out =
@@ -712,8 +729,8 @@ impl Executor for DefaultExecutor {
         }
     }
 
-    fn pixel_space(&self) -> bool {
-        self.models.is_pixel_space()
+    fn small_prior(&self) -> bool {
+        self.models.is_small_prior()
     }
 
     fn text_ready(&self) -> Result<(), String> {
@@ -810,6 +827,7 @@ mod tests {
             samples: 4,
             preset: Preset::Balanced,
             priority: 0,
+            retrieval: true,
         }
     }
 
@@ -919,7 +937,7 @@ mod tests {
         let dirs = ModelDirs::default().or_default_model(Some(model.clone()));
         assert_eq!(dirs.sd_dir.as_deref(), Some(model.as_path()));
         assert_eq!(dirs.clip_dir, Some(model.join("scorer")));
-        assert!(dirs.is_pixel_space());
+        assert!(dirs.is_small_prior());
         assert!(DefaultExecutor::new(dirs.clone()).text_ready().is_ok());
         // the pixel-space presets apply
         let e = DefaultExecutor::new(dirs);
@@ -1025,13 +1043,13 @@ mod tests {
                 sd.trace_size, sd.size,
                 "{p:?}: SD traces at the teacher size"
             );
-            assert!((64..=256).contains(&px.size), "{p:?}");
+            assert_eq!(px.size, 64, "{p:?}: the small prior's image side");
             assert!((64..=256).contains(&px.trace_size), "{p:?}");
             assert!(px.steps <= sd.steps.max(20), "{p:?}");
             assert!(!px.prefer_taesd);
         }
         let b = Preset::default().settings_for(true);
-        assert_eq!((b.size, b.trace_size), (128, 128));
+        assert_eq!((b.size, b.trace_size), (64, 128));
     }
 
     #[test]

@@ -108,15 +108,15 @@ pub(super) async fn submit(
             .map_err(|_| ApiError::Internal("uuid has 16 bytes".into()))?,
     );
     let limits = state.limits.clone();
-    let pixel = state.executor.pixel_space();
+    let small = state.executor.small_prior();
     // Small bodies are parsed in place (microseconds); big ones, and image decoding and SVG
     // parsing, are CPU work that runs off the async threads.
     let spec = if body.len() <= INLINE_PARSE_BYTES {
-        parse_submit(&body, &limits, default_seed, pixel)?
+        parse_submit(&body, &limits, default_seed, small)?
     } else {
         let b = body.clone();
         let l = limits.clone();
-        tokio::task::spawn_blocking(move || parse_submit(&b, &l, default_seed, pixel))
+        tokio::task::spawn_blocking(move || parse_submit(&b, &l, default_seed, small))
             .await
             .map_err(|e| ApiError::Internal(format!("validation task failed: {e}")))??
     };

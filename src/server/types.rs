@@ -10,8 +10,19 @@ use serde_json::{Map, Value};
 
 /// Fields accepted by `POST /jobs` (anything else is rejected as unknown).
 pub const SUBMIT_FIELDS: &[&str] = &[
-    "kind", "caption", "image", "svg", "style", "method", "paths", "steps", "seed", "samples",
-    "preset", "priority",
+    "kind",
+    "caption",
+    "image",
+    "svg",
+    "style",
+    "method",
+    "paths",
+    "steps",
+    "seed",
+    "samples",
+    "preset",
+    "priority",
+    "retrieval",
 ];
 
 /// Fields whose omission means "the preset decides" ([`Preset::resolve`]); the resolved values
@@ -34,7 +45,7 @@ pub fn parse_submit(
     body: &[u8],
     limits: &Limits,
     default_seed: u64,
-    pixel_space: bool,
+    small_prior: bool,
 ) -> Result<JobSpec, ApiError> {
     let value: Value =
         serde_json::from_slice(body).map_err(|e| ApiError::MalformedJson(e.to_string()))?;
@@ -85,7 +96,7 @@ pub fn parse_submit(
     let samples: Option<u32> = field(&obj, "samples")?;
     // Omitted paths/steps/samples are the preset's, resolved exactly as the CLI resolves them.
     let resolved = preset.resolve(
-        pixel_space,
+        small_prior,
         crate::pipeline::methods::stage_style(style),
         paths.map(|p| p as usize),
         steps,
@@ -108,6 +119,7 @@ pub fn parse_submit(
         samples: resolved.samples,
         preset,
         priority: field(&obj, "priority")?.unwrap_or(0),
+        retrieval: field(&obj, "retrieval")?.unwrap_or(true),
     };
     spec.validate(limits).map_err(|e| {
         let from_preset =

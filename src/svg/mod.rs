@@ -177,6 +177,30 @@ pub fn to_svg(scene: &Scene, opts: &SvgOptions) -> String {
     out
 }
 
+/// `svg` (a document [`to_svg`] wrote) with a `<metadata>` element holding `text` (XML-escaped;
+/// control characters dropped) right after the opening `<svg ...>` tag. A document without an
+/// opening tag is returned unchanged.
+pub fn with_metadata(svg: &str, text: &str) -> String {
+    let Some(end) = svg
+        .find("<svg")
+        .and_then(|i| svg[i..].find('>').map(|j| i + j + 1))
+    else {
+        return svg.to_string();
+    };
+    let mut esc = String::with_capacity(text.len() + 16);
+    for ch in text.chars() {
+        match ch {
+            '&' => esc.push_str("&amp;"),
+            '<' => esc.push_str("&lt;"),
+            '>' => esc.push_str("&gt;"),
+            '"' => esc.push_str("&quot;"),
+            c if c.is_control() => {}
+            c => esc.push(c),
+        }
+    }
+    format!("{}\n<metadata>{esc}</metadata>{}", &svg[..end], &svg[end..])
+}
+
 /// One subpath as cubic segments `[p1, p2, p3]` after a start point.
 #[derive(Clone, Debug)]
 struct SubPath {

@@ -180,3 +180,18 @@ fn bench_scene_json_loads() {
     let again = scene_from_json(&serde_json::to_string(&s).unwrap()).unwrap();
     assert_eq!(again, s);
 }
+
+#[test]
+fn metadata_is_escaped_and_the_document_still_parses() {
+    let svg = to_svg(&sample_scene(), &SvgOptions::default());
+    let out = with_metadata(&svg, "icon \"a<b>&c\" (CC-BY-4.0)\u{7}");
+    assert!(
+        out.contains("<metadata>icon &quot;a&lt;b&gt;&amp;c&quot; (CC-BY-4.0)</metadata>"),
+        "{out}"
+    );
+    assert!(out.starts_with("<svg "));
+    assert!(out.find("<metadata>").unwrap() > out.find('>').unwrap());
+    assert!(parse_usvg(&out).is_ok());
+    assert_eq!(from_svg(&out).unwrap().width, 64);
+    assert_eq!(with_metadata("not svg", "x"), "not svg");
+}
