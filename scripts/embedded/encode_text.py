@@ -7,6 +7,8 @@ Writes into each split directory:
   text_index.npy       int32 [N]: caption index of each image (captions.jsonl order)
   text_tokens.f16      fp16 [U, 32, 384]: `vf_icon.encode_tokens` (UNet conditioning, L=32)
   text_sentence.f16    fp16 [U, 384]:     `vf_icon.encode_sentence` (IconClip text input, L=64)
+  text_tokens_article.f16  fp16 [U, 32, 384]: the same for `vf_icon.with_article(caption)` ("a horse"),
+                       the second caption template of train_prior.py
 """
 
 import json
@@ -30,7 +32,7 @@ def main():
         index = {c: i for i, c in enumerate(uniq)}
         np.save(os.path.join(split, "text_index.npy"), np.array([index[c] for c in caps], dtype=np.int32))
         json.dump(uniq, open(os.path.join(split, "text_captions.json"), "w"))
-        toks, sents = [], []
+        toks, sents, arts = [], [], []
         for i in range(0, len(uniq), 256):
             batch = uniq[i : i + 256]
             h = vf_icon.encode_tokens(tok, model, batch)
@@ -46,10 +48,12 @@ def main():
                 ref = vf_icon.encode_sentence(tok, model, batch[:16])
                 assert torch.allclose(ref, s[:16], atol=1e-4), (ref - s[:16]).abs().max()
             toks.append(h.half().numpy())
+            arts.append(vf_icon.encode_tokens(tok, model, [vf_icon.with_article(c) for c in batch]).half().numpy())
             sents.append(s.half().numpy())
             print(f"  {i + len(batch)}/{len(uniq)}", flush=True)
         np.concatenate(toks).tofile(os.path.join(split, "text_tokens.f16"))
         np.concatenate(sents).tofile(os.path.join(split, "text_sentence.f16"))
+        np.concatenate(arts).tofile(os.path.join(split, "text_tokens_article.f16"))
         print(f"{split}: {len(caps)} images, {len(uniq)} unique captions")
 
 

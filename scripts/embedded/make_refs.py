@@ -11,13 +11,17 @@ Keys:
   unet_input_ids        i64 [3, 32]   BertTokenizer ids for CAPTIONS, padded to 32
   unet_attention_mask   i64 [3, 32]
   unet_cond             [3, 32, 384]  vf_icon.encode_tokens (MiniLM last_hidden_state, all 32 positions)
-  unet_x_t              [1, 3, 32, 32] torch.randn(generator seed 0)
+  unet_x_t              [1, C, S, S] torch.randn(generator seed 0); C, S = the UNet's in_channels and
+                                      sample_size (latent model: 4, 16; pixel model: 3, 32)
   unet_t                [1]           500.0 (timestep)
-  unet_eps              [1, 3, 32, 32] UNet(unet_x_t, 500, encoder_hidden_states=unet_cond[0:1]) ("a crown")
+  unet_eps              [1, C, S, S]  UNet(unet_x_t, 500, encoder_hidden_states=unet_cond[0:1]) ("a crown")
   ddim_uncond           [1, 32, 384]  encode_tokens([""])
-  ddim_init             [1, 3, 32, 32] torch.randn(generator seed 2)
-  ddim_step{0..3}       [1, 3, 32, 32] x after each step of a 4-step DDIM (eta 0) with the shipped
+  ddim_init             [1, C, S, S]  torch.randn(generator seed 2)
+  ddim_step{0..3}       [1, C, S, S]  x after each step of a 4-step DDIM (eta 0) with the shipped
                                       scheduler, guidance 5 on unet_cond[0:1]
+  vae_image             [1, 3, 64, 64] (latent model only) clip_images[0:1] in [0, 1]
+  vae_latent            [1, 4, 16, 16] scaling_factor * VAE posterior mean of vae_image*2-1
+  vae_decoded           [1, 3, 64, 64] (VAE.decode(ddim_step3 / scaling_factor) + 1) / 2, clamped to [0, 1]
   ddim_timesteps        i64 [4]       the scheduler's timesteps for 4 steps
   clip_images           [2, 3, 64, 64] RGB in [0,1]: seeded (seed 1) 8x8 uniform noise upsampled bilinearly
   clip_image_emb        [2, 384]      IconClip.encode_image(clip_images), L2-normalised
@@ -74,7 +78,8 @@ def main():
     out["unet_attention_mask"] = enc.attention_mask
     cond = vf_icon.encode_tokens(tok, text, CAPTIONS)
     out["unet_cond"] = cond
-    x_t = torch.randn((1, 3, 32, 32), generator=torch.Generator().manual_seed(0))
+    shape = (1, unet.config.in_channels, unet.config.sample_size, unet.config.sample_size)
+    x_t = torch.randn(shape, generator=torch.Generator().manual_seed(0))
     out["unet_x_t"] = x_t
     out["unet_t"] = torch.tensor([500.0])
     out["unet_eps"] = unet(x_t, torch.tensor([500]), encoder_hidden_states=cond[0:1]).sample
@@ -84,7 +89,7 @@ def main():
     sched.set_timesteps(4)
     uncond = vf_icon.encode_tokens(tok, text, [""])
     out["ddim_uncond"] = uncond
-    x = torch.randn((1, 3, 32, 32), generator=torch.Generator().manual_seed(2))
+    x = torch.randn(shape, generator=torch.Generator().manual_seed(2))
     out["ddim_init"] = x
     for i, t in enumerate(sched.timesteps):
         eu = unet(x, t, encoder_hidden_states=uncond).sample
@@ -106,6 +111,16 @@ def main():
     out["clip_logit_scale"] = clip.logit_scale.detach().reshape(1)
     out["clip_logits"] = clip.logits(out["clip_image_emb"], out["clip_text_emb"])
 
+    vae_dir = os.path.join(args.model, "vae")
+    if os.path.isdir(vae_dir):
+        from diffusers import AutoencoderKL
+
+        vae = AutoencoderKL.from_pretrained(vae_dir).float().eval()
+        k = vae.config.scaling_factor
+        out["vae_image"] = imgs[0:1].clone()
+        out["vae_latent"] = vae.encode(imgs[0:1] * 2 - 1).latent_dist.mean * k
+        out["vae_decoded"] = ((vae.decode(out["ddim_step3"] / k).sample + 1) / 2).clamp(0, 1)
+
     out = {k: v.contiguous() if v.dtype == torch.int64 else v.float().contiguous() for k, v in out.items()}
     meta = {
         "captions": json.dumps(CAPTIONS),
@@ -115,6 +130,8 @@ def main():
         "model_sha256_unet": sha(os.path.join(args.model, "unet", "diffusion_pytorch_model.safetensors")),
         "model_sha256_scorer": sha(os.path.join(args.model, "scorer", "model.safetensors")),
     }
+    if os.path.isdir(vae_dir):
+        meta["model_sha256_vae"] = sha(os.path.join(vae_dir, "diffusion_pytorch_model.safetensors"))
     os.makedirs(os.path.dirname(args.out), exist_ok=True)
     save_file(out, args.out, metadata=meta)
     print(f"wrote {args.out} ({os.path.getsize(args.out)} bytes): {sorted(out)}")

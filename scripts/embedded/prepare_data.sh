@@ -14,7 +14,7 @@ set -euo pipefail
 cd "$(dirname "$0")/../.."
 ROOT=$PWD
 OUT=${VF_DATA_DIR:-data/icons}
-TRAIN="twemoji@1.2.5 noto@1.2.9 noto-v1@1.2.5 emojione@1.2.3 emojione-v1@1.2.3 fxemoji@1.2.2 streamline-emojis@1.2.4 flat-color-icons@1.2.3"
+TRAIN="twemoji@1.2.5 noto@1.2.9 noto-v1@1.2.5 emojione@1.2.3 emojione-v1@1.2.3 fxemoji@1.2.2 streamline-emojis@1.2.4 flat-color-icons@1.2.3 streamline-color@1.2.2 streamline-plump-color@1.2.2 streamline-flex-color@1.2.2 streamline-kameleon-color@1.2.2 streamline-ultimate-color@1.2.2 streamline-stickies-color@1.2.2"
 EVAL="fluent-emoji-flat@1.2.6 openmoji@1.2.29"
 for s in $TRAIN; do
   case "${s%@*}" in fluent-emoji*|openmoji) echo "refusing to train on held-out set $s" >&2; exit 1 ;; esac

@@ -26,15 +26,29 @@ CAPTIONS = [
 
 
 @torch.no_grad()
-def sample(unet, sched, cond, uncond, steps, cfg, gen):
+def sample(unet, sched, cond, uncond, steps, cfg, gen, vae=None):
+    """Images in [0, 1]; a latent model (`vae`) decodes its latents at the end."""
     b = cond.shape[0]
-    x = torch.randn((b, 3, unet.config.sample_size, unet.config.sample_size), generator=gen)
+    c = unet.config.in_channels
+    x = torch.randn((b, c, unet.config.sample_size, unet.config.sample_size), generator=gen)
     sched.set_timesteps(steps)
     for t in sched.timesteps:
         eps = unet(torch.cat([x, x]), t, encoder_hidden_states=torch.cat([uncond.expand(b, -1, -1), cond])).sample
         eu, ec = eps.chunk(2)
         x = sched.step(eu + cfg * (ec - eu), t, x).prev_sample
+    if vae is not None:
+        x = torch.cat([vae.decode(x[i : i + 16] / vae.config.scaling_factor).sample for i in range(0, b, 16)])
     return ((x + 1) / 2).clamp(0, 1)
+
+
+def load_vae(model):
+    """The model's AutoencoderKL (fp32), or None for a pixel-space model."""
+    path = os.path.join(model, "vae")
+    if not os.path.isdir(path):
+        return None
+    from diffusers import AutoencoderKL
+
+    return AutoencoderKL.from_pretrained(path).float().eval()
 
 
 def main():
@@ -68,7 +82,10 @@ def main():
     gen = torch.Generator().manual_seed(args.seed)
     n, k = len(CAPTIONS), args.per_caption
     cond = vf_icon.encode_tokens(tok, text, [c for c in CAPTIONS for _ in range(k)])
-    rows = sample(unet, sched, cond, uncond, args.steps, args.cfg, gen).split(k)
+    vae = load_vae(args.model)
+    imgs_all = sample(unet, sched, cond, uncond, args.steps, args.cfg, gen, vae)
+    side = imgs_all.shape[-1]
+    rows = imgs_all.split(k)
     cols = 2
     fig, axes = plt.subplots((n + cols - 1) // cols, cols, figsize=(cols * k * 0.9 + 1, (n // cols) * 1.05 + 0.6))
     for i, (c, imgs) in enumerate(zip(CAPTIONS, rows)):
@@ -79,7 +96,7 @@ def main():
         ax.set_title(c, fontsize=8)
         ax.axis("off")
     fig.suptitle(f"vf-icon prior, DDIM {args.steps} steps, CFG {args.cfg}, clip_sample {sched.config.clip_sample}, "
-                 f"seed {args.seed} (32x32)", fontsize=9)
+                 f"seed {args.seed} ({side}x{side})", fontsize=9)
     fig.tight_layout()
     fig.savefig(args.out, dpi=110)
     print("wrote", args.out)
@@ -93,6 +110,11 @@ def main():
             s = [int(x["step"]) for x in r]
             name = os.path.basename(os.path.dirname(os.path.abspath(path))) or path
             plt.plot(s, [float(x["loss"]) for x in r], lw=0.5, alpha=0.35)
+            val = os.path.join(os.path.dirname(path), "val.csv")
+            if os.path.exists(val):
+                v = list(csv.DictReader(open(val)))
+                plt.plot([int(x["step"]) for x in v], [float(x["val_loss"]) for x in v], "k.-", lw=1, ms=3,
+                         label=f"{name} validation (unweighted, held-out captions)")
             plt.plot(s, [float(x["ema_loss"]) for x in r], lw=1.5, label=f"{name} (EMA 0.98)")
             top = max(top, min(1.0, max(float(x["ema_loss"]) for x in r[len(r) // 10:]) * 1.3))
         plt.xlabel(f"step (batch {args.batch})")

@@ -6,8 +6,12 @@ embeddings, and evaluates retrieval on the held-out split.
 
 Symmetric InfoNCE; images that share a caption in a batch (the same emoji from several sets) are
 all positives (soft targets). Light augmentation: horizontal flip and a random shift/scale
-(pad with white, crop/resize back). Writes OUT/metrics.json, OUT/loss.csv, a restartable
-OUT/ckpt.pt, and EXPORT/{config.json, model.safetensors}.
+(pad with white, crop/resize back); colours are never changed (they are part of the caption).
+`--hard F`: a fraction F of each batch is the nearest other captions (by MiniLM similarity) of
+the rest, so the scorer learns "red heart" from "orange heart", not only from "taxi". `--bf16`:
+autocast on CPUs with AVX-512 BF16. `--minutes` bounds the wall time (the cosine schedule runs
+over --epochs). Writes OUT/metrics.json, OUT/loss.csv, a restartable OUT/ckpt.pt, and
+EXPORT/{config.json, model.safetensors}.
 """
 
 import argparse
@@ -112,6 +116,10 @@ def main():
     ap.add_argument("--seed", type=int, default=4321)
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--eval-only", action="store_true")
+    ap.add_argument("--hard", type=float, default=0.0, help="fraction of each batch drawn as hard negatives")
+    ap.add_argument("--bf16", action="store_true")
+    ap.add_argument("--minutes", type=float, default=1e9)
+    ap.add_argument("--distractors", type=int, default=63, help="R-Precision: the true caption among this many + 1")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
     os.makedirs(args.out, exist_ok=True)
@@ -140,11 +148,31 @@ def main():
     t0 = time.time()
     last = t0
     print(f"train {len(raw)} images, {total} steps", flush=True)
-    while step < total and not args.eval_only:
-        b = torch.randint(0, len(raw), (args.batch,), generator=gen)
+    # hard negatives: for each caption its 8 nearest other captions (MiniLM cosine), and the images of each caption
+    by_cap = [[] for _ in caps]
+    for i, c in enumerate(idx.tolist()):
+        by_cap[c].append(i)
+    near = None
+    if args.hard > 0:
+        with torch.no_grad():
+            sims = sent @ sent.t()
+            sims.fill_diagonal_(-2)
+            sims[:, 0] = -2
+            near = sims.topk(8, dim=1).indices
+    amp = torch.autocast("cpu", dtype=torch.bfloat16, enabled=args.bf16)
+    while step < total and not args.eval_only and time.time() - t0 < args.minutes * 60:
+        nh = int(args.hard * args.batch) if near is not None else 0
+        b = torch.randint(0, len(raw), (args.batch - nh,), generator=gen)
+        if nh:
+            src = idx[b[:nh]]
+            pick = near[src, torch.randint(0, 8, (nh,), generator=gen)]
+            extra = [by_cap[int(c)][int(torch.randint(0, len(by_cap[int(c)]), (1,), generator=gen))]
+                     if by_cap[int(c)] else int(b[0]) for c in pick]
+            b = torch.cat([b, torch.tensor(extra)])
         x = augment(to01(raw[b]), gen)
         ci = idx[b]
-        img = model.encode_image(x)
+        with amp:
+            img = model.encode_image(x).float()
         txt = model.encode_text(sent[ci])
         logits = model.logits(img, txt)
         same = (ci[:, None] == ci[None, :]).float()
@@ -168,7 +196,7 @@ def main():
                         "elapsed": elapsed0 + time.time() - t0}, ckpt)
             export(model, args.export)
             last = time.time()
-    m = evaluate(model, *ev)
+    m = evaluate(model, *ev, distractors=args.distractors)
     m["train_steps"] = step
     m["train_wall_s"] = elapsed0 + time.time() - t0
     m["args"] = vars(args)

@@ -103,3 +103,52 @@ class IconClip(nn.Module):
         return self.logit_scale.exp() * img @ txt.t()
 
 
+
+
+def val_caption_ids(n_captions, seed=1234, frac=0.02):
+    """Caption indices (1..n_captions-1) held out for validation: `frac` of the captions, by a fixed
+    permutation, so every image of a held-out caption is unseen in training."""
+    g = torch.Generator().manual_seed(seed)
+    perm = torch.randperm(n_captions - 1, generator=g) + 1
+    return set(perm[: max(1, int(frac * (n_captions - 1)))].tolist())
+
+
+def load_images_split(path, seed=1234, frac=0.02):
+    """64x64 training images as fp16 [N, 3, 64, 64] in [-1, 1], with train / validation image indices
+    (validation: the images of `val_caption_ids`)."""
+    import json
+
+    import numpy as np
+
+    raw = np.fromfile(os.path.join(path, "images_64.u8"), dtype=np.uint8).reshape(-1, 64, 64, 3)
+    x = (torch.from_numpy(raw).permute(0, 3, 1, 2).float() / 127.5 - 1).half().contiguous()
+    idx = np.load(os.path.join(path, "text_index.npy")).astype(np.int64)
+    n_caps = len(json.load(open(os.path.join(path, "text_captions.json"))))
+    val = val_caption_ids(n_caps, seed, frac)
+    is_val = torch.tensor([int(i) in val for i in idx])
+    return x, torch.nonzero(~is_val).flatten(), torch.nonzero(is_val).flatten()
+
+
+class CsvLog:
+    """Appends rows to a CSV file (header written once), flushed per row: survives a kill."""
+
+    def __init__(self, path, header):
+        import csv
+
+        new = not os.path.exists(path)
+        self.f = open(path, "a", newline="")
+        self.w = csv.writer(self.f)
+        if new:
+            self.w.writerow(header)
+            self.f.flush()
+
+    def row(self, values):
+        self.w.writerow(values)
+        self.f.flush()
+
+
+def with_article(caption):
+    """"horse" -> "a horse", "owl" -> "an owl"; "" and captions that start with an article stay."""
+    if not caption or caption.split(" ", 1)[0] in ("a", "an", "the"):
+        return caption
+    return ("an " if caption[0] in "aeiou" else "a ") + caption
