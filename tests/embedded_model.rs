@@ -1,7 +1,8 @@
 //! The shipped embedded model (`models/vf-icon/`) against reference outputs of the same exported
-//! files in PyTorch (`scripts/embedded/make_refs.py` → `tests/fixtures/vf-icon-refs/`): the
-//! pixel-space UNet and the IconClip image tower always; the MiniLM conditioning and the scorer's
-//! text tower when the MiniLM weights are installed (`vectorfusion setup`; CI runs it).
+//! files in PyTorch (`scripts/embedded/make_refs.py` → `tests/fixtures/vf-icon-refs/`): the UNet,
+//! the autoencoder (latent model) and the IconClip image tower always; the MiniLM conditioning,
+//! the scorer's text tower and a retrieval run when the MiniLM weights and the retrieval index
+//! are installed (`vectorfusion setup`; CI runs it).
 
 mod common;
 use common::max_abs;
@@ -10,7 +11,8 @@ use candle_core::{DType, Device, Tensor};
 use sha2::{Digest, Sha256};
 use std::path::{Path, PathBuf};
 use vectorfusion::models::bert::weights::MiniLmLocations;
-use vectorfusion::models::pipeline::load_unet;
+use vectorfusion::models::codec::Codec;
+use vectorfusion::models::pipeline::{load_unet, load_vae};
 use vectorfusion::models::scheduler::{Sampler, SamplerKind, SchedulerConfig};
 use vectorfusion::models::scorer::{IconClip, IconClipConfig, IconClipScorer};
 use vectorfusion::models::{LoadOptions, Precision, StableDiffusion};
@@ -52,10 +54,38 @@ fn reference_fixture_matches_the_committed_weights() {
         Some(sha256(&scorer).as_str()),
         "stale refs: run scripts/embedded/make_refs.py"
     );
+    let vae = root().join("vae/diffusion_pytorch_model.safetensors");
+    if vae.is_file() {
+        assert_eq!(
+            meta["model_sha256_vae"].as_str(),
+            Some(sha256(&vae).as_str()),
+            "stale refs: run scripts/embedded/make_refs.py"
+        );
+    }
+}
+
+/// The latent model's autoencoder: encode (scaled posterior mean) and decode as diffusers.
+#[test]
+fn autoencoder_matches_diffusers_on_the_shipped_weights() {
+    let dir = root().join("vae");
+    if !dir.is_dir() {
+        assert!(vectorfusion::models::codec::is_pixel_space(&root()).unwrap());
+        return;
+    }
+    let (r, _) = refs();
+    let vae = load_vae(&dir, Precision::F32, &Device::Cpu).unwrap();
+    let codec = Codec::from(vae);
+    assert_eq!(codec.latent_side(64), Ok(16));
+    let z = codec.encode(&r["vae_image"]).unwrap();
+    let d = max_abs(&z, &r["vae_latent"]);
+    assert!(d < 1e-3, "VAE latents max abs diff {d}");
+    let x = codec.decode(&r["ddim_step3"]).unwrap();
+    let d = max_abs(&x, &r["vae_decoded"]);
+    assert!(d < 1e-3, "VAE decode max abs diff {d}");
 }
 
 #[test]
-fn pixel_unet_matches_diffusers_on_the_shipped_weights() {
+fn unet_matches_diffusers_on_the_shipped_weights() {
     let (r, _) = refs();
     let unet = load_unet(&root().join("unet"), Precision::F32, &Device::Cpu).unwrap();
     let cond = r["unet_cond"].narrow(0, 0, 1).unwrap();
@@ -151,4 +181,74 @@ fn text_conditioning_and_scorer_text_match_when_minilm_is_installed() {
     let t = Tensor::from_vec(t.concat(), (caps.len(), t[0].len()), &Device::Cpu).unwrap();
     let d = max_abs(&t, &r["clip_text_emb"]);
     assert!(d < 1e-4, "scorer text embeddings max abs diff {d}");
+}
+
+/// `generate` on the embedded model with the installed retrieval index: half the samples start
+/// from training icons, the result names them (set, name, licence), and `retrieval: false`
+/// samples from noise only.
+#[test]
+fn retrieval_names_its_source_icons_when_the_index_is_installed() {
+    use vectorfusion::pipeline::methods::{Method, Models, Start, TextRequest, run_text};
+    use vectorfusion::progress::{CancelToken, NullSink};
+    use vectorfusion::retrieval::RetrievalLocations;
+    if let Err(e) = MiniLmLocations::from_env().ensure(false) {
+        eprintln!("SKIP retrieval_names_its_source_icons_when_the_index_is_installed: {e}");
+        return;
+    }
+    if let Err(e) = RetrievalLocations::from_env().load(&root()) {
+        eprintln!("SKIP retrieval_names_its_source_icons_when_the_index_is_installed: {e}");
+        return;
+    }
+    let m = Models::load_sd(&root(), Some(&root().join("scorer")), 64).unwrap();
+    assert!(m.is_small_prior());
+    let hits = m.retrieve("red heart", 2, 0).unwrap();
+    assert_eq!(hits.len(), 2);
+    assert!(hits[0].0.icon.caption.contains("heart"), "{:?}", hits[0].0);
+    assert!(!vectorfusion::retrieval::is_held_out(&hits[0].0.icon.set));
+    assert_eq!((hits[0].1.width, hits[0].1.height), (64, 64));
+    let req = TextRequest {
+        caption: "red heart".into(),
+        style: vectorfusion::stages::styles::Style::Iconography,
+        method: Method::SdLive,
+        preset: vectorfusion::pipeline::Preset::Draft,
+        paths: Some(8),
+        steps: Some(2),
+        samples: Some(2),
+        seed: 3,
+        guidance: None,
+        retrieval: true,
+        start: Start::Method,
+    };
+    let out = run_text(&m, &req, &NullSink, &CancelToken::new()).unwrap();
+    let starts = out.detail["retrieval"]["starts"].as_array().unwrap();
+    assert_eq!(starts.len(), 1, "{}", out.detail);
+    for key in ["set", "name", "license", "caption"] {
+        assert!(starts[0][key].is_string(), "{key}: {}", out.detail);
+    }
+    if out.detail["retrieval"]["chosen"].is_object() {
+        assert!(
+            out.svg.contains("<metadata>Started from the icon"),
+            "{}",
+            out.svg
+        );
+    } else {
+        assert!(!out.svg.contains("<metadata>"));
+    }
+    let off = run_text(
+        &m,
+        &TextRequest {
+            retrieval: false,
+            ..req
+        },
+        &NullSink,
+        &CancelToken::new(),
+    )
+    .unwrap();
+    assert!(
+        off.detail["retrieval"]["starts"]
+            .as_array()
+            .unwrap()
+            .is_empty()
+    );
+    assert_eq!(off.detail["retrieval"]["unavailable"], "turned off");
 }
