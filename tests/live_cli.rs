@@ -45,6 +45,7 @@ fn vectorize_writes_svg_and_preview() {
     );
     let svg = std::fs::read_to_string(d.join("out.svg")).unwrap();
     assert!(svg.contains("<path"));
+    vectorfusion::svg::check_safe_output(&svg).unwrap();
     let scene = vectorfusion::svg::from_svg(&svg).unwrap();
     assert!(!scene.shapes.is_empty() && scene.shapes.len() <= 4);
     assert!(d.join("prev.png").exists());

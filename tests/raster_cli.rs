@@ -42,8 +42,45 @@ fn render_writes_png_of_requested_size() {
         .args(["render", svg.to_str().unwrap(), "-o", out.to_str().unwrap()])
         .output()
         .unwrap();
-    assert_eq!(o.status.code(), Some(1));
+    assert_eq!(o.status.code(), Some(2), "bad input exits 2 (README)");
     assert!(String::from_utf8_lossy(&o.stderr).contains("cannot parse SVG"));
+
+    // Hostile input is refused at once, without growing: a circle of radius 1e38, an entity
+    // bomb, and /dev/zero (read with a size cap, never to the end).
+    let hostile = [
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="64" height="64"><circle cx="1e38" cy="-1e38" r="1e38"/></svg>"#.to_string(),
+        format!(
+            r#"<!DOCTYPE svg [<!ENTITY a "{}">]><svg xmlns="http://www.w3.org/2000/svg" width="8" height="8"><text>{}</text></svg>"#,
+            "x".repeat(100_000),
+            "&a;".repeat(19_000)
+        ),
+    ];
+    for text in &hostile {
+        std::fs::write(&svg, text).unwrap();
+        let o = bin()
+            .args(["render", svg.to_str().unwrap(), "-o", out.to_str().unwrap()])
+            .output()
+            .unwrap();
+        assert_eq!(
+            o.status.code(),
+            Some(2),
+            "{}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+    }
+    if std::path::Path::new("/dev/zero").exists() {
+        let o = bin()
+            .args(["render", "/dev/zero", "-o", out.to_str().unwrap()])
+            .output()
+            .unwrap();
+        assert_eq!(
+            o.status.code(),
+            Some(2),
+            "{}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        assert!(String::from_utf8_lossy(&o.stderr).contains("larger than"));
+    }
 }
 
 #[test]

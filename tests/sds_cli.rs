@@ -58,6 +58,9 @@ fn generate_with_analytic_teacher_writes_svg_and_snapshots() {
         );
         let svg = std::fs::read_to_string(&out).unwrap();
         assert!(svg.contains("<svg") && !svg.contains("NaN"), "{style}");
+        vectorfusion::svg::check_safe_output(&svg).unwrap();
+        let snap = std::fs::read_to_string(snaps.join("step_00010.svg")).unwrap();
+        vectorfusion::svg::check_safe_output(&snap).unwrap();
         let scene = vectorfusion::svg::from_svg(&svg).unwrap();
         assert_eq!(scene.width, 32);
         assert!(String::from_utf8_lossy(&st.stderr).contains("TEST teacher"));

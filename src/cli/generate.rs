@@ -358,10 +358,8 @@ fn run_pipeline(
                 .map_err(|e| CliError::Usage(format!("{}: {e}", p.display())))?,
         )
     } else if let Some(p) = &args.svg {
-        let text = std::fs::read_to_string(p)
-            .map_err(|e| CliError::Usage(format!("{}: {e}", p.display())))?;
         Start::Svg(
-            crate::svg::from_svg(&text)
+            crate::svg::load_scene(p)
                 .map_err(|e| CliError::Usage(format!("{}: {e}", p.display())))?,
         )
     } else {

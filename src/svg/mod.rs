@@ -31,10 +31,17 @@
 //! - if the first shape is a filled rectangle covering the whole canvas (what [`to_svg`] writes
 //!   for the background) it becomes the scene background.
 
+mod file;
+mod guard;
+mod profile;
+
+pub use file::{SCENE_FILE_MAX_BYTES, load_scene, read_text_capped, scene_from_json};
+pub use guard::SvgLimits;
+pub use profile::check_safe_output;
+
 use crate::scene::{MAX_SIDE, Point, Rgba, Scene, SceneError, Shape, ShapeKind, Stroke};
 use resvg::usvg;
 use std::fmt::Write as _;
-use std::path::Path;
 
 /// Why an SVG (or scene JSON) could not be turned into a scene.
 #[derive(Debug, thiserror::Error)]
@@ -47,6 +54,8 @@ pub enum SvgError {
     Json(String),
     #[error("imported scene is invalid: {0}")]
     Invalid(#[from] SceneError),
+    #[error("{path} is larger than {max} bytes")]
+    TooLarge { path: String, max: u64 },
     #[error("I/O error on {path}: {source}")]
     Io {
         path: String,
@@ -512,9 +521,10 @@ fn orient_even_odd(subs: &mut [SubPath]) {
     }
 }
 
-/// Parses untrusted SVG text with usvg. This is the only place the crate parses SVG: it never
-/// reads files or decodes embedded images (`<image href="/dev/zero">` must not be followed), so
-/// every caller — HTTP submissions, previews, evaluation, tracing — is safe on hostile input.
+/// Parses untrusted SVG text with usvg. This is the only place the crate parses SVG: it checks
+/// [`SvgLimits::DEFAULT`] before any geometry work ([`guard`]), never reads files and never decodes
+/// embedded images (`<image href="/dev/zero">` must not be followed), so every caller — HTTP
+/// submissions, previews, the worker, evaluation, tracing — is bounded on hostile input.
 pub fn parse_usvg(text: &str) -> Result<usvg::Tree, String> {
     let opts = usvg::Options {
         image_href_resolver: usvg::ImageHrefResolver {
@@ -523,7 +533,7 @@ pub fn parse_usvg(text: &str) -> Result<usvg::Tree, String> {
         },
         ..usvg::Options::default()
     };
-    usvg::Tree::from_str(text, &opts).map_err(|e| e.to_string())
+    guard::parse(text, &SvgLimits::DEFAULT, &opts)
 }
 
 /// Parses SVG text into a scene (see the module docs for what is kept). Bad SVG gives an error,
@@ -575,83 +585,6 @@ fn is_canvas_rect(s: &Shape, w: f32, h: f32) -> bool {
         near(l[0], seg[1]) && near(l[1], seg[2])
     });
     straight && corners.iter().all(|c| anchors.iter().any(|a| near(*a, *c)))
-}
-
-#[derive(serde::Deserialize)]
-struct JsonPath {
-    points: Vec<[f64; 2]>,
-    fill: Vec<f32>,
-    #[serde(default = "one")]
-    opacity: f32,
-}
-
-fn one() -> f32 {
-    1.0
-}
-
-#[derive(serde::Deserialize)]
-struct JsonScene {
-    width: u32,
-    height: u32,
-    #[serde(default)]
-    background: Option<[f32; 4]>,
-    paths: Vec<JsonPath>,
-}
-
-/// Loads the benchmark scene format of `shared/bench/scene64.json`: `width`, `height`,
-/// `background` RGBA, `paths` of closed cubic paths (`points` 3n pairs, `fill` RGB or RGBA,
-/// `opacity` multiplied into the alpha). Falls back to the serde form of [`Scene`].
-pub fn scene_from_json(text: &str) -> Result<Scene, SvgError> {
-    let js: JsonScene = match serde_json::from_str(text) {
-        Ok(j) => j,
-        Err(bench_err) => {
-            return match serde_json::from_str::<Scene>(text) {
-                Ok(s) => {
-                    s.validate()?;
-                    Ok(s)
-                }
-                Err(_) => Err(SvgError::Json(bench_err.to_string())),
-            };
-        }
-    };
-    let bg = js.background.unwrap_or([0.0; 4]);
-    let mut scene = Scene::new(js.width, js.height, Rgba::from_array(bg))?;
-    for (i, p) in js.paths.iter().enumerate() {
-        let (r, g, b, a) = match p.fill.as_slice() {
-            [r, g, b] => (*r, *g, *b, 1.0),
-            [r, g, b, a] => (*r, *g, *b, *a),
-            _ => {
-                return Err(SvgError::Json(format!(
-                    "path {i}: fill needs 3 or 4 channels"
-                )));
-            }
-        };
-        let pts = p
-            .points
-            .iter()
-            .map(|q| Point::new(q[0] as f32, q[1] as f32))
-            .collect();
-        let shape = Shape::closed_cubic(pts, Rgba::new(r, g, b, a * p.opacity))
-            .map_err(|e| SvgError::Json(format!("path {i}: {e}")))?;
-        scene.shapes.push(shape);
-    }
-    Ok(scene)
-}
-
-/// Loads a scene from a `.json` (bench or serde scene format) or SVG file.
-pub fn load_scene(path: &Path) -> Result<Scene, SvgError> {
-    let text = std::fs::read_to_string(path).map_err(|source| SvgError::Io {
-        path: path.display().to_string(),
-        source,
-    })?;
-    if path
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("json"))
-    {
-        scene_from_json(&text)
-    } else {
-        from_svg(&text)
-    }
 }
 
 #[cfg(test)]

@@ -1,0 +1,499 @@
+//! Bounds on untrusted SVG text, checked before usvg builds any geometry.
+//!
+//! [`super::parse_usvg`] is the crate's one SVG entry point (HTTP submissions, previews, the
+//! worker, `render`, `vectorize`, evaluation, retrieval); it runs [`parse`] with
+//! [`SvgLimits::DEFAULT`], so the CLI and the server refuse the same inputs. In order:
+//! 1. at most [`SvgLimits::max_bytes`] of text;
+//! 2. DTD entities only as plain text (no markup, no references, not external, no parameter
+//!    entities), expanding to at most `max_bytes` in all: billion laughs and external entities
+//!    are refused, Illustrator's `<!ENTITY ns_svg "http://…">` lines are fine;
+//! 3. at most [`SvgLimits::max_nodes`] XML nodes (elements, text, comments: roxmltree stops
+//!    parsing there);
+//! 4. at most [`SvgLimits::max_path_numbers`] numbers in all `d` and `points` attributes, and
+//!    every number of an attribute usvg reads, a `style` attribute or a `<style>` sheet finite
+//!    and within ±[`SvgLimits::max_number`] (numbers inside `url(…)` and quoted strings, ids,
+//!    names and hex colours are not numbers);
+//! 5. once `<use>`, `href` and `url(#…)` references and markers are expanded (as usvg and resvg
+//!    expand them): at most [`SvgLimits::max_expanded`] elements, nesting at most
+//!    [`SvgLimits::max_depth`] deep, at most [`SvgLimits::max_layers`] clip-path, mask, filter
+//!    and pattern uses (each costs the renderer a layer), and no reference cycles;
+//! 6. after conversion, the drawing's layer bounding box (strokes and filter regions included,
+//!    through every transform) and every pattern tile within ±[`SvgLimits::max_coord_ratio`] ×
+//!    the canvas size.
+//!
+//! Every check is linear in the input (references are memoised), so refusing an SVG costs no
+//! more than reading it.
+
+use resvg::usvg;
+use resvg::usvg::roxmltree::{self, Node, NodeId};
+use std::collections::{HashMap, HashSet};
+
+const SVG_NS: &str = "http://www.w3.org/2000/svg";
+const XLINK: &str = "http://www.w3.org/1999/xlink";
+
+/// Limits on one SVG document. Invariant: every field is positive.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SvgLimits {
+    /// Bytes of SVG text, and bytes of entity text once expanded.
+    pub max_bytes: usize,
+    /// XML nodes as parsed (elements, text, comments).
+    pub max_nodes: u32,
+    /// Elements once references and markers are expanded.
+    pub max_expanded: u64,
+    /// Nesting depth once references are expanded (the root is depth 1).
+    pub max_depth: usize,
+    /// Clip-path, mask, filter and pattern uses once references are expanded.
+    pub max_layers: u64,
+    /// Numbers in all `d` and `points` attributes together.
+    pub max_path_numbers: usize,
+    /// Largest magnitude of any number in attributes and style sheets.
+    pub max_number: f64,
+    /// The converted drawing must lie within ± this × the canvas size.
+    pub max_coord_ratio: f64,
+}
+
+impl SvgLimits {
+    /// The limits every entry point uses (stated in docs/SERVICE.md).
+    pub const DEFAULT: SvgLimits = SvgLimits {
+        max_bytes: 16 << 20,
+        max_nodes: 500_000,
+        max_expanded: 500_000,
+        max_depth: 128,
+        max_layers: 10_000,
+        max_path_numbers: 2_000_000,
+        max_number: 1e7,
+        max_coord_ratio: 64.0,
+    };
+}
+
+impl Default for SvgLimits {
+    fn default() -> Self {
+        Self::DEFAULT
+    }
+}
+
+/// Parses `text` within `limits`, then converts it with usvg (`opts`).
+pub fn parse(text: &str, limits: &SvgLimits, opts: &usvg::Options) -> Result<usvg::Tree, String> {
+    if text.len() > limits.max_bytes {
+        return Err(format!(
+            "is {} bytes; at most {} allowed",
+            text.len(),
+            limits.max_bytes
+        ));
+    }
+    check_entities(text, limits.max_bytes)?;
+    let xml = roxmltree::ParsingOptions {
+        allow_dtd: true,
+        nodes_limit: limits.max_nodes,
+        ..Default::default()
+    };
+    let doc = roxmltree::Document::parse_with_options(text, xml).map_err(|e| match e {
+        roxmltree::Error::NodesLimitReached => {
+            format!("has more than {} XML nodes", limits.max_nodes)
+        }
+        e => e.to_string(),
+    })?;
+    check_document(&doc, limits)?;
+    let tree = usvg::Tree::from_xmltree(&doc, opts).map_err(|e| e.to_string())?;
+    check_extent(&tree, limits)?;
+    Ok(tree)
+}
+
+/// Step 2: every `<!ENTITY` is a plain internal general entity, and all uses together expand to
+/// at most `max_bytes`.
+fn check_entities(text: &str, max_bytes: usize) -> Result<(), String> {
+    let mut total = 0usize;
+    let mut rest = text;
+    while let Some(p) = rest.find("<!ENTITY") {
+        rest = rest[p + "<!ENTITY".len()..].trim_start();
+        if rest.starts_with('%') {
+            return Err("declares a parameter entity, which is not allowed".into());
+        }
+        let name_end = rest
+            .find(|c: char| c.is_whitespace())
+            .ok_or("has a malformed entity declaration")?;
+        let name = &rest[..name_end];
+        rest = rest[name_end..].trim_start();
+        let Some(quote) = rest.chars().next().filter(|c| *c == '"' || *c == '\'') else {
+            return Err(format!(
+                "declares the external entity {name:?}, which is not allowed"
+            ));
+        };
+        let body = &rest[1..];
+        let end = body
+            .find(quote)
+            .ok_or("has a malformed entity declaration")?;
+        let value = &body[..end];
+        if value.contains('&') || value.contains('<') || value.contains('%') {
+            return Err(format!(
+                "declares the entity {name:?} with markup or references in it, which is not allowed"
+            ));
+        }
+        let uses = text.matches(&format!("&{name};")).count();
+        total = total.saturating_add(uses.saturating_mul(value.len()));
+        if total > max_bytes {
+            return Err(format!("expands entities to more than {max_bytes} bytes"));
+        }
+        rest = &body[end..];
+    }
+    Ok(())
+}
+
+/// Steps 4–5, on the parsed XML.
+fn check_document(doc: &roxmltree::Document, limits: &SvgLimits) -> Result<(), String> {
+    let mut ids: HashMap<&str, Node> = HashMap::new();
+    let mut path_numbers = 0usize;
+    let mut uses_markers = false;
+    let mut sheet_refs = Vec::new();
+    for node in doc.descendants().filter(Node::is_element) {
+        // usvg keeps the first element of an id, in document order.
+        if let Some(id) = node.attribute("id") {
+            ids.entry(id).or_insert(node);
+        }
+        if !svg_element(node) {
+            continue;
+        }
+        let tag = node.tag_name().name();
+        for a in node.attributes().filter(|a| read_by_usvg(a.namespace())) {
+            let name = a.name();
+            if skipped(name) {
+                continue;
+            }
+            uses_markers |= name.starts_with("marker") || a.value().contains("marker");
+            let path_like = name == "d" || name == "points";
+            let n = scan_numbers(a.value(), path_like, |v| in_range(v, limits, tag, name))?;
+            if path_like {
+                path_numbers = path_numbers.saturating_add(n);
+            }
+        }
+        if tag == "style" {
+            for t in node.children().filter_map(|c| c.text()) {
+                scan_numbers(t, false, |v| in_range(v, limits, tag, "sheet"))?;
+                uses_markers |= t.contains("marker");
+                sheet_refs.extend(url_ids(t).map(str::to_string));
+            }
+        }
+    }
+    if path_numbers > limits.max_path_numbers {
+        return Err(format!(
+            "has {path_numbers} path numbers; at most {} allowed",
+            limits.max_path_numbers
+        ));
+    }
+    // Sheet rules may apply to any element: every element is charged each sheet reference.
+    let sheet_targets: Vec<Node> = sheet_refs
+        .iter()
+        .filter_map(|id| ids.get(id.as_str()).copied())
+        .collect();
+    let mut e = Expansion {
+        ids: &ids,
+        sheet_targets,
+        memo: HashMap::new(),
+        visiting: HashSet::new(),
+        limits,
+        marker_cost: 0,
+    };
+    if uses_markers {
+        let markers: Vec<Node> = doc
+            .descendants()
+            .filter(|n| n.is_element() && n.tag_name().name() == "marker")
+            .collect();
+        for m in markers {
+            e.marker_cost = e.marker_cost.max(e.cost(m, 1)?.elements);
+        }
+    }
+    e.cost(doc.root_element(), 1)?;
+    Ok(())
+}
+
+/// Elements usvg reads: the SVG namespace, or none (a file without `xmlns`).
+fn svg_element(node: Node) -> bool {
+    node.tag_name().namespace().is_none_or(|ns| ns == SVG_NS)
+}
+
+/// Attribute namespaces usvg reads (editor namespaces such as `inkscape:` it ignores).
+fn read_by_usvg(ns: Option<&str>) -> bool {
+    ns.is_none_or(|ns| ns == SVG_NS || ns == XLINK)
+}
+
+/// Attributes whose text is no geometry (names and links).
+fn skipped(name: &str) -> bool {
+    matches!(
+        name,
+        "id" | "class" | "href" | "font-family" | "version" | "baseProfile" | "lang" | "title"
+    ) || name.starts_with("data-")
+        || name.starts_with("aria-")
+}
+
+fn in_range(v: f64, limits: &SvgLimits, tag: &str, attr: &str) -> Result<(), String> {
+    if v.is_finite() && v.abs() <= limits.max_number {
+        Ok(())
+    } else {
+        Err(format!(
+            "<{tag}> {attr} has the number {v}, outside ±{}",
+            limits.max_number
+        ))
+    }
+}
+
+/// The ids of the `url(#id)` references in `s`.
+fn url_ids(s: &str) -> impl Iterator<Item = &str> {
+    s.match_indices("url(").filter_map(move |(p, _)| {
+        let inner = &s[p + 4..];
+        let inner = &inner[..inner.find(')')?];
+        let inner = inner.trim().trim_matches(|c| c == '"' || c == '\'').trim();
+        inner.strip_prefix('#')
+    })
+}
+
+/// The element an `href` names (usvg: the plain attribute first, then `xlink:href`).
+fn href_target<'a, 'i>(
+    node: Node<'a, 'i>,
+    ids: &HashMap<&str, Node<'a, 'i>>,
+) -> Option<Node<'a, 'i>> {
+    // roxmltree's `attribute("href")` matches the local name in any namespace: look for the
+    // unprefixed one explicitly, as usvg does.
+    let plain = node
+        .attributes()
+        .find(|a| a.namespace().is_none() && a.name() == "href")
+        .map(|a| a.value());
+    let h = plain.or_else(|| node.attribute((XLINK, "href")))?;
+    ids.get(h.trim().strip_prefix('#')?.trim()).copied()
+}
+
+/// Calls `f` on every number in `s`; returns how many there were. `path_like` (path data and
+/// point lists) reads a letter before a digit as a command; elsewhere a digit glued to a name
+/// (`cls1e5`, `#1e3838`) belongs to the name, and `url(…)` and quoted strings are skipped.
+fn scan_numbers(
+    s: &str,
+    path_like: bool,
+    mut f: impl FnMut(f64) -> Result<(), String>,
+) -> Result<usize, String> {
+    let b = s.as_bytes();
+    let name_char = |c: u8| c.is_ascii_alphanumeric() || c == b'_' || c == b'-';
+    let mut i = 0;
+    let mut n = 0;
+    while i < b.len() {
+        let c = b[i];
+        if !path_like {
+            if b[i..].starts_with(b"url(") {
+                i += b[i..]
+                    .iter()
+                    .position(|&x| x == b')')
+                    .unwrap_or(b.len() - i);
+                continue;
+            }
+            if c == b'"' || c == b'\'' {
+                i += 1;
+                i += b[i..]
+                    .iter()
+                    .position(|&x| x == c)
+                    .map_or(b.len() - i, |p| p + 1);
+                continue;
+            }
+            if c == b'#' || c.is_ascii_alphabetic() || c == b'_' {
+                i += 1;
+                while i < b.len() && name_char(b[i]) {
+                    i += 1;
+                }
+                continue;
+            }
+        }
+        let digit_at = |j: usize| b.get(j).is_some_and(u8::is_ascii_digit);
+        let starts = c.is_ascii_digit()
+            || (c == b'.' && digit_at(i + 1))
+            || ((c == b'+' || c == b'-')
+                && (digit_at(i + 1) || (b.get(i + 1) == Some(&b'.') && digit_at(i + 2))));
+        if !starts {
+            i += 1;
+            continue;
+        }
+        let start = i;
+        if c == b'+' || c == b'-' {
+            i += 1;
+        }
+        while digit_at(i) {
+            i += 1;
+        }
+        if b.get(i) == Some(&b'.') {
+            i += 1;
+            while digit_at(i) {
+                i += 1;
+            }
+        }
+        if matches!(b.get(i), Some(b'e' | b'E')) {
+            let mut j = i + 1;
+            if matches!(b.get(j), Some(b'+' | b'-')) {
+                j += 1;
+            }
+            if digit_at(j) {
+                i = j;
+                while digit_at(i) {
+                    i += 1;
+                }
+            }
+        }
+        // The slice is ASCII digits, signs, '.', 'e': it always parses (overflow gives ±inf).
+        let v = s[start..i].parse::<f64>().unwrap_or(f64::INFINITY);
+        f(v)?;
+        n += 1;
+    }
+    Ok(n)
+}
+
+/// What one element costs once its references are expanded.
+#[derive(Clone, Copy, Debug, Default)]
+struct Cost {
+    elements: u64,
+    layers: u64,
+    /// Nesting below and including this element.
+    height: usize,
+}
+
+/// Counts elements, layers and depth with references expanded, memoised per element.
+struct Expansion<'d, 'a, 'i> {
+    ids: &'d HashMap<&'a str, Node<'a, 'i>>,
+    sheet_targets: Vec<Node<'a, 'i>>,
+    memo: HashMap<NodeId, Cost>,
+    visiting: HashSet<NodeId>,
+    limits: &'d SvgLimits,
+    /// Elements of the largest marker, charged per vertex of every drawn shape.
+    marker_cost: u64,
+}
+
+impl<'a, 'i> Expansion<'_, 'a, 'i> {
+    fn cost(&mut self, node: Node<'a, 'i>, depth: usize) -> Result<Cost, String> {
+        let l = self.limits;
+        let deep = || {
+            format!(
+                "nests elements (through references) more than {} deep",
+                l.max_depth
+            )
+        };
+        if let Some(&c) = self.memo.get(&node.id()) {
+            if depth + c.height - 1 > l.max_depth {
+                return Err(deep());
+            }
+            return Ok(c);
+        }
+        if depth > l.max_depth {
+            return Err(deep());
+        }
+        if !self.visiting.insert(node.id()) {
+            return Err("has references that form a cycle".into());
+        }
+        let mut c = Cost {
+            elements: 1,
+            layers: 0,
+            height: 1,
+        };
+        let mut refs: Vec<Node<'a, 'i>> = href_target(node, self.ids).into_iter().collect();
+        if svg_element(node) {
+            for a in node.attributes().filter(|a| read_by_usvg(a.namespace())) {
+                refs.extend(url_ids(a.value()).filter_map(|id| self.ids.get(id).copied()));
+            }
+            refs.extend(self.sheet_targets.iter().copied());
+            let tag = node.tag_name().name();
+            if self.marker_cost > 0 {
+                let vertices = match tag {
+                    "path" | "polygon" | "polyline" => {
+                        let d = node.attribute("d").or_else(|| node.attribute("points"));
+                        d.map_or(0, |d| {
+                            scan_numbers(d, true, |_| Ok(())).unwrap_or(0) / 2 + 1
+                        })
+                    }
+                    "line" | "rect" | "circle" | "ellipse" => 5,
+                    _ => 0,
+                };
+                c.elements = c
+                    .elements
+                    .saturating_add((vertices as u64).saturating_mul(self.marker_cost));
+            }
+        }
+        for r in refs {
+            let layer = matches!(
+                r.tag_name().name(),
+                "clipPath" | "mask" | "filter" | "pattern"
+            );
+            let rc = self.cost(r, depth + 1)?;
+            c.elements = c.elements.saturating_add(rc.elements);
+            c.layers = c.layers.saturating_add(rc.layers + u64::from(layer));
+            c.height = c.height.max(rc.height + 1);
+            self.within(&c)?;
+        }
+        for child in node.children().filter(Node::is_element) {
+            let rc = self.cost(child, depth + 1)?;
+            c.elements = c.elements.saturating_add(rc.elements);
+            c.layers = c.layers.saturating_add(rc.layers);
+            c.height = c.height.max(rc.height + 1);
+            self.within(&c)?;
+        }
+        self.within(&c)?;
+        self.visiting.remove(&node.id());
+        self.memo.insert(node.id(), c);
+        Ok(c)
+    }
+
+    fn within(&self, c: &Cost) -> Result<(), String> {
+        let l = self.limits;
+        if c.elements > l.max_expanded {
+            return Err(format!(
+                "expands (through references and markers) to more than {} elements",
+                l.max_expanded
+            ));
+        }
+        if c.layers > l.max_layers {
+            return Err(format!(
+                "uses clip paths, masks, filters or patterns more than {} times",
+                l.max_layers
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Step 6: the converted drawing and its pattern tiles stay near the canvas.
+fn check_extent(tree: &usvg::Tree, limits: &SvgLimits) -> Result<(), String> {
+    let size = tree.size();
+    let range = limits.max_coord_ratio * f64::from(size.width().max(size.height()));
+    let b = tree.root().abs_layer_bounding_box();
+    let far = [b.left(), b.top(), b.right(), b.bottom()]
+        .into_iter()
+        .map(f64::from)
+        .find(|v| !v.is_finite() || v.abs() > range);
+    if let Some(v) = far {
+        return Err(format!(
+            "draws as far as {v} px, outside ±{range} px ({} × the canvas size)",
+            limits.max_coord_ratio
+        ));
+    }
+    pattern_tiles(tree.root(), range)
+}
+
+fn pattern_tiles(g: &usvg::Group, range: f64) -> Result<(), String> {
+    for node in g.children() {
+        match node {
+            usvg::Node::Group(child) => pattern_tiles(child, range)?,
+            usvg::Node::Path(p) => {
+                let paints = [p.fill().map(|f| f.paint()), p.stroke().map(|s| s.paint())];
+                for paint in paints.into_iter().flatten() {
+                    if let usvg::Paint::Pattern(pat) = paint {
+                        let (sx, sy) = p.abs_transform().pre_concat(pat.transform()).get_scale();
+                        let r = pat.rect();
+                        let side = f64::from(r.width() * sx).max(f64::from(r.height() * sy));
+                        if !side.is_finite() || side > range {
+                            return Err(format!(
+                                "has a pattern tile of {side} px, over {range} px"
+                            ));
+                        }
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,191 @@
+//! The bounds of `guard`, each tried with the input it exists for.
+use super::*;
+
+fn check(text: &str) -> Result<usvg::Tree, String> {
+    parse(text, &SvgLimits::DEFAULT, &usvg::Options::default())
+}
+
+fn numbers(s: &str, path_like: bool) -> Vec<f64> {
+    let mut v = Vec::new();
+    scan_numbers(s, path_like, |x| {
+        v.push(x);
+        Ok(())
+    })
+    .unwrap();
+    v
+}
+
+fn svg(body: &str) -> String {
+    format!(r#"<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 24 24">{body}</svg>"#)
+}
+
+#[test]
+fn scans_numbers_as_svg_writes_them() {
+    assert_eq!(
+        numbers("M.5.5L1e3-2 3E+1z", true),
+        [0.5, 0.5, 1000.0, -2.0, 30.0]
+    );
+    assert_eq!(numbers("12px 1em 50%", false), [12.0, 1.0, 50.0]);
+    // Names, hex colours, url(…) and quoted strings hold no numbers; nor does a lone sign.
+    assert!(
+        numbers(
+            "#1e3838 url(#a1e99) cls-1e9 - . 'F 9e99' url(data:a+3e99)",
+            false
+        )
+        .is_empty()
+    );
+    assert_eq!(numbers("translate(-.5,+2)", false), [-0.5, 2.0]);
+    assert_eq!(numbers("1e999", true), [f64::INFINITY]);
+}
+
+#[test]
+fn ordinary_svgs_pass() {
+    let icon = r##"<?xml version="1.0"?>
+<!DOCTYPE svg PUBLIC "-//W3C//DTD SVG 1.1//EN" "http://www.w3.org/Graphics/SVG/1.1/DTD/svg11.dtd" [
+  <!ENTITY ns_svg "http://www.w3.org/2000/svg">
+  <!ENTITY ns_xlink "http://www.w3.org/1999/xlink">
+]>
+<svg xmlns="&ns_svg;" xmlns:xlink="&ns_xlink;"
+ xmlns:inkscape="http://www.inkscape.org/namespaces/inkscape"
+ xmlns:sodipodi="http://sodipodi.sourceforge.net/DTD/sodipodi-0.dtd"
+ inkscape:version="1.0 (4035a4f, 2020-05-01)" width="4096" height="4096" viewBox="0 0 24 24">
+  <sodipodi:namedview inkscape:zoom="1e30"><sodipodi:guide position="1e30,0"/></sodipodi:namedview>
+  <style>@font-face{font-family:"F 9e99";src:url(data:font/woff2;base64,AAA+3e99)} .cls-1{fill:#1e3838;stroke-width:1.5px}</style>
+  <defs><path id="p" d="M2 2h20v20H2z"/><marker id="m"><path d="M0 0L1 1"/></marker></defs>
+  <g transform="translate(-3500 -2200)"><use xlink:href="#p" class="cls-1" transform="translate(3500 2200) rotate(45 12 12)"/></g>
+  <path d="M1 1L5 5L9 1" marker-end="url(#m)" stroke="black"/>
+  <circle cx="12" cy="12" r="5" style="fill:#ff0000;opacity:.5"/>
+</svg>"##;
+    check(icon).unwrap();
+    check(r#"<svg xmlns="http://www.w3.org/2000/svg"><rect width="10" height="10"/></svg>"#)
+        .unwrap();
+}
+
+#[test]
+fn refuses_entity_bombs_and_huge_numbers() {
+    let cases = [
+        (
+            r#"<!DOCTYPE svg [<!ENTITY b "x"><!ENTITY a "&b;&b;">]><svg xmlns="http://www.w3.org/2000/svg">&a;</svg>"#.to_string(),
+            "references",
+        ),
+        (
+            r#"<!DOCTYPE svg [<!ENTITY x SYSTEM "file:///etc/passwd">]><svg xmlns="http://www.w3.org/2000/svg">&x;</svg>"#.to_string(),
+            "external",
+        ),
+        (
+            // The issue's 157 KB request: one 100 KB entity used 19,000 times.
+            format!(
+                r#"<!DOCTYPE svg [<!ENTITY a "{}">]>{}"#,
+                "x".repeat(100_000),
+                svg(&format!("<text>{}</text>", "&a;".repeat(19_000)))
+            ),
+            "expands entities",
+        ),
+        (svg(r#"<circle r="1e38"/>"#), "outside"),
+        (svg(r#"<path d="M0 0L1e39 0"/>"#), "outside"),
+        (svg(r#"<path d="M0 0L9 9" style="stroke-width:1e30"/>"#), "outside"),
+        (svg(r#"<style>path{stroke-width:1e30}</style>"#), "outside"),
+        (svg(r#"<g transform="matrix(1e20 0 0 1 0 0)"/>"#), "outside"),
+        (
+            r#"<svg xmlns="http://www.w3.org/2000/svg" xmlns:s="http://www.w3.org/2000/svg"><circle s:r="1e38"/></svg>"#.to_string(),
+            "outside",
+        ),
+        (
+            r#"<svg xmlns="http://www.w3.org/2000/svg" width="2e7" height="8"/>"#.to_string(),
+            "outside",
+        ),
+        (svg(r#"<circle cx="12" cy="12" r="1537"/>"#), "draws as far"),
+        (
+            svg(&format!(
+                "{}<rect width=\"9\" height=\"9\"/>{}",
+                r#"<g transform="scale(50)">"#.repeat(4),
+                "</g>".repeat(4)
+            )),
+            "draws as far",
+        ),
+        (
+            svg(r#"<defs><pattern id="p" width="3000" height="3000" patternUnits="userSpaceOnUse"><rect width="9" height="9"/></pattern></defs><rect width="24" height="24" fill="url(#p)"/>"#),
+            "pattern tile",
+        ),
+    ];
+    for (text, want) in &cases {
+        let e = check(text)
+            .err()
+            .unwrap_or_else(|| panic!("accepted: {text:.200}"));
+        assert!(e.contains(want), "{text:.200}: {e}");
+    }
+}
+
+/// A `<use>` tree doubling at each of 40 levels (2^40 elements once expanded), with an
+/// `href` written `before` the id (to try a spelling the counter might miss).
+fn doubling(before: &str) -> String {
+    let mut doc = String::from(
+        r#"<svg xmlns="http://www.w3.org/2000/svg" xmlns:xlink="http://www.w3.org/1999/xlink"><defs><path id="u0" d="M0 0L1 1"/>"#,
+    );
+    for i in 1..=40 {
+        doc.push_str(&format!(
+            r##"<g id="u{i}"><use {before}"#u{p}"/><use {before}"#u{p}"/></g>"##,
+            p = i - 1
+        ));
+    }
+    doc.push_str(r##"</defs><use href="#u40"/></svg>"##);
+    doc
+}
+
+#[test]
+fn refuses_expansion_bombs_deep_nesting_and_cycles() {
+    for before in ["href=", "href= ' ' + ", "xlink:href=\"#u0\" href="] {
+        let doc = doubling(before).replace("' ' + \"", "\" ");
+        let e = check(&doc).unwrap_err();
+        assert!(e.contains("expands"), "{before}: {e}");
+    }
+    // A decoy with the same id after the real one: usvg keeps the first.
+    let mut doc = doubling("href=");
+    doc = doc.replace("</defs>", r#"<g id="u40"/></defs>"#);
+    assert!(check(&doc).unwrap_err().contains("expands"));
+    // Clip paths doubling through url(#…): each use is a renderer layer.
+    let mut clips = String::from(r#"<clipPath id="c0"><rect width="1" height="1"/></clipPath>"#);
+    for i in 1..=30 {
+        clips.push_str(&format!(
+            r#"<clipPath id="c{i}"><rect width="1" height="1" clip-path="url(#c{p})"/><rect width="2" height="2" clip-path="url(#c{p})"/></clipPath>"#,
+            p = i - 1
+        ));
+    }
+    let e = check(&svg(&format!(
+        r#"<defs>{clips}</defs><rect width="9" height="9" clip-path="url(#c30)"/>"#
+    )))
+    .unwrap_err();
+    assert!(e.contains("times") || e.contains("expands"), "{e}");
+    // Markers count once per vertex.
+    let marker = svg(&format!(
+        r##"<marker id="m">{}</marker><path marker-mid="url(#m)" d="M0 0{}"/>"##,
+        "<g/>".repeat(1000),
+        " 1 1".repeat(1000)
+    ));
+    assert!(check(&marker).unwrap_err().contains("expands"));
+    // Deep nesting, directly or through a chain of references.
+    let deep = svg(&format!("{}{}", "<g>".repeat(200), "</g>".repeat(200)));
+    assert!(check(&deep).unwrap_err().contains("deep"));
+    let mut chain = String::from(r#"<defs><g id="g0"/>"#);
+    for i in 1..=200 {
+        chain.push_str(&format!(
+            r##"<g id="g{i}"><use href="#g{p}"/></g>"##,
+            p = i - 1
+        ));
+    }
+    chain.push_str(r##"</defs><use href="#g200"/>"##);
+    assert!(check(&svg(&chain)).unwrap_err().contains("deep"));
+    let cycle = svg(r##"<g id="a"><use href="#b"/></g><g id="b"><use href="#a"/></g>"##);
+    assert!(check(&cycle).unwrap_err().contains("cycle"));
+    assert!(
+        check(&svg(&"<g/>".repeat(600_000)))
+            .unwrap_err()
+            .contains("XML nodes")
+    );
+    let limits = SvgLimits {
+        max_bytes: 10,
+        ..SvgLimits::DEFAULT
+    };
+    let e = parse(&svg(""), &limits, &usvg::Options::default()).unwrap_err();
+    assert!(e.contains("bytes"), "{e}");
+}

@@ -1,0 +1,144 @@
+//! The safe-output profile: what every SVG this project writes must satisfy, so it opens the
+//! same, and harmlessly, in browsers, design tools and renderers. Checked by tests on every
+//! output path (results, snapshots, `vectorize`, `generate`).
+//!
+//! - XML without a DTD, entities or processing instructions other than the XML declaration;
+//! - elements from an allowlist (`svg`, `g`, `path`, `rect`, `metadata`, `title`, `desc`) in the
+//!   SVG namespace, each with attributes from its allowlist: no `<script>`, `<foreignObject>`,
+//!   `<image>`, `<use>`, event handlers (`on*`), `href`, `style`, or `url(…)` values, so nothing
+//!   runs and nothing outside the file is fetched;
+//! - the root has `viewBox`, `width` and `height`; every number is finite.
+//!
+//! Our writer ([`super::to_svg`], [`super::with_metadata`]) builds documents from a scene, so an
+//! imported SVG's scripts and handlers never reach the output.
+
+use resvg::usvg::roxmltree::{self, Node, NodeType};
+
+const SVG_NS: &str = "http://www.w3.org/2000/svg";
+
+/// Attributes allowed on each element (presentation attributes our writer uses).
+fn allowed(tag: &str, attr: &str) -> bool {
+    const PAINT: &[&str] = &[
+        "fill",
+        "fill-opacity",
+        "fill-rule",
+        "stroke",
+        "stroke-width",
+        "stroke-opacity",
+        "stroke-linecap",
+        "stroke-linejoin",
+        "opacity",
+        "transform",
+    ];
+    match tag {
+        "svg" => matches!(attr, "width" | "height" | "viewBox" | "version"),
+        "g" => PAINT.contains(&attr),
+        "path" => attr == "d" || PAINT.contains(&attr),
+        "rect" => matches!(attr, "x" | "y" | "width" | "height") || PAINT.contains(&attr),
+        _ => false,
+    }
+}
+
+/// Checks `svg` against the profile; the error names the first violation.
+pub fn check_safe_output(svg: &str) -> Result<(), String> {
+    if svg.contains("<!DOCTYPE") || svg.contains("<!ENTITY") {
+        return Err("has a DTD".into());
+    }
+    let doc = roxmltree::Document::parse(svg).map_err(|e| format!("is not XML: {e}"))?;
+    let root = doc.root_element();
+    if root.tag_name().name() != "svg" {
+        return Err("the root element is not <svg>".into());
+    }
+    for a in ["viewBox", "width", "height"] {
+        if root.attribute(a).is_none() {
+            return Err(format!("the root has no {a}"));
+        }
+    }
+    for node in doc.descendants() {
+        match node.node_type() {
+            NodeType::PI => return Err("has a processing instruction".into()),
+            NodeType::Element => check_element(node)?,
+            _ => {}
+        }
+    }
+    Ok(())
+}
+
+fn check_element(node: Node) -> Result<(), String> {
+    let tag = node.tag_name().name();
+    if node.tag_name().namespace() != Some(SVG_NS) {
+        return Err(format!("<{tag}> is not in the SVG namespace"));
+    }
+    if !matches!(
+        tag,
+        "svg" | "g" | "path" | "rect" | "metadata" | "title" | "desc"
+    ) {
+        return Err(format!("has the element <{tag}>"));
+    }
+    let text_only = matches!(tag, "metadata" | "title" | "desc");
+    if text_only && node.children().any(|c| c.is_element()) {
+        return Err(format!("<{tag}> holds elements"));
+    }
+    for a in node.attributes() {
+        let name = a.name();
+        if a.namespace().is_some() || !allowed(tag, name) {
+            return Err(format!("<{tag}> has the attribute {name}"));
+        }
+        let v = a.value();
+        if v.contains("url(") {
+            return Err(format!("<{tag} {name}> refers to another resource"));
+        }
+        // Our number writer spells non-finite values as Rust does: NaN, inf, -inf.
+        let bad_number = v.contains("NaN") || v.contains("inf");
+        if bad_number {
+            return Err(format!("<{tag} {name}> has a non-finite number: {v:.80}"));
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::check_safe_output;
+    use crate::scene::{Point, Rgba, Scene, Shape};
+    use crate::svg::{SvgOptions, from_svg, to_svg, with_metadata};
+
+    #[test]
+    fn written_svgs_pass_and_hostile_imports_come_out_clean() {
+        let hostile = r##"<svg xmlns="http://www.w3.org/2000/svg" xmlns:xlink="http://www.w3.org/1999/xlink" width="32" height="32" onload="alert(1)">
+  <script>alert(2)</script>
+  <foreignObject width="9" height="9"><div xmlns="http://www.w3.org/1999/xhtml">x</div></foreignObject>
+  <a xlink:href="javascript:alert(3)"><rect width="32" height="32" fill="#102030" onclick="alert(4)"/></a>
+  <path d="M4 4L28 4L16 28Z" fill="red" style="fill:url(#x)" onmouseover="alert(5)"/>
+  <image href="https://example.com/x.png" width="8" height="8"/>
+</svg>"##;
+        let scene = from_svg(hostile).unwrap();
+        let out = to_svg(&scene, &SvgOptions::default());
+        check_safe_output(&out).unwrap();
+        assert!(!out.contains("alert") && !out.contains("script") && !out.contains("href"));
+        // A caption or icon name with markup in the metadata stays text.
+        let meta = with_metadata(&out, "<script>alert(6)</script> & \"x\"");
+        check_safe_output(&meta).unwrap();
+        assert!(meta.contains("&lt;script&gt;"));
+        // The checker itself refuses what it exists to refuse.
+        for bad in [
+            hostile,
+            r#"<svg xmlns="http://www.w3.org/2000/svg" width="4" height="4"/>"#,
+            r#"<svg xmlns="http://www.w3.org/2000/svg" width="4" height="4" viewBox="0 0 4 4"><path d="MNaN 0"/></svg>"#,
+            r#"<svg xmlns="http://www.w3.org/2000/svg" width="4" height="4" viewBox="0 0 4 4"><path d="M0 0" fill="url(#a)"/></svg>"#,
+        ] {
+            assert!(check_safe_output(bad).is_err(), "{bad}");
+        }
+        let mut s = Scene::new(8, 8, Rgba::new(1.0, 1.0, 1.0, 1.0)).unwrap();
+        s.shapes.push(
+            Shape::closed_cubic(
+                (0..6)
+                    .map(|i| Point::new(i as f32, (i * i) as f32 / 4.0))
+                    .collect(),
+                Rgba::new(0.2, 0.4, 0.6, 0.5),
+            )
+            .unwrap(),
+        );
+        check_safe_output(&to_svg(&s, &SvgOptions::default())).unwrap();
+    }
+}
