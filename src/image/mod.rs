@@ -47,6 +47,19 @@ impl Image {
         }
     }
 
+    /// The RGB planes (`[3 * H * W]`, channel-major) of this image composited over white:
+    /// `c + (1 - a)` per premultiplied channel, the input layout of the diffusion models.
+    pub fn planar_rgb_over_white(&self) -> Vec<f32> {
+        let n = (self.width * self.height) as usize;
+        let mut planar = vec![0.0f32; 3 * n];
+        for (i, p) in self.data.chunks_exact(4).enumerate().take(n) {
+            for c in 0..3 {
+                planar[c * n + i] = p[c] + (1.0 - p[3]);
+            }
+        }
+        planar
+    }
+
     /// An image filled with one premultiplied colour.
     pub fn filled(width: u32, height: u32, rgba: [f32; 4]) -> Self {
         let mut im = Self::new(width, height);

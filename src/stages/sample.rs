@@ -51,14 +51,8 @@ fn failed(what: &str, e: impl std::fmt::Display) -> SampleError {
 /// An opaque RGB image as `[1, 3, H, W]` in `[0, 1]` (alpha composited over white).
 pub fn image_tensor(image: &Image, device: &candle_core::Device) -> Result<Tensor, SampleError> {
     let (w, h) = (image.width as usize, image.height as usize);
-    let n = w * h;
-    let mut planar = vec![0.0f32; 3 * n];
-    for (i, p) in image.data.chunks_exact(4).enumerate().take(n) {
-        for c in 0..3 {
-            planar[c * n + i] = (p[c] + (1.0 - p[3])).clamp(0.0, 1.0);
-        }
-    }
-    Tensor::from_vec(planar, (1, 3, h, w), device).map_err(|e| failed("image", e))
+    Tensor::from_vec(image.planar_rgb_over_white(), (1, 3, h, w), device)
+        .map_err(|e| failed("image", e))
 }
 
 /// `[1, 3, H, W]` in `[0, 1]` → opaque [`Image`]; non-finite values are an error.

@@ -114,15 +114,12 @@ impl SdTeacher {
                 want_h: s,
             });
         }
-        let n = (s * s) as usize;
-        let mut planar = vec![0.0f32; 3 * n];
-        for (i, p) in image.data.chunks_exact(4).enumerate() {
-            for c in 0..3 {
-                planar[c * n + i] = p[c] + 1.0 - p[3];
-            }
-        }
-        Tensor::from_vec(planar, (1, 3, s as usize, s as usize), self.sd.device())
-            .map_err(model_err)
+        Tensor::from_vec(
+            image.planar_rgb_over_white(),
+            (1, 3, s as usize, s as usize),
+            self.sd.device(),
+        )
+        .map_err(model_err)
     }
 
     fn latent_tensor(&self, z: &Latent) -> Result<Tensor, TeacherError> {
