@@ -38,13 +38,35 @@ pub struct Config {
 #[serde(default, deny_unknown_fields)]
 pub struct ServerConfig {
     pub bind: String,
+    /// The operator's key (sees every job, reads /metrics); empty with no tenants: no auth.
     pub api_key: String,
+    /// When set, `/metrics` needs this key (and no other).
+    pub metrics_key: String,
+    /// Tenants: each key sees only its own jobs (`server::tenant`).
+    pub tenants: Vec<TenantConfig>,
     pub max_body_bytes: usize,
     pub max_queue_depth: i64,
+    /// Uploads (PNG/JPEG, SVG) validated at once; more wait up to 10 s, then get 429 `busy`.
+    pub max_concurrent_decodes: usize,
+    /// Event streams open at once; more get 429 `busy`.
+    pub max_sse_streams: usize,
     pub sse_heartbeat_secs: u64,
     pub progress_interval_ms: u64,
     pub snapshot_interval_ms: u64,
     pub shutdown_grace_secs: u64,
+}
+
+/// One `[[server.tenants]]` entry.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TenantConfig {
+    /// 1–64 of `A-Z a-z 0-9 . _ -`, unique.
+    pub name: String,
+    /// At least 16 characters, unique among all keys.
+    pub key: String,
+    /// Queued + running jobs at most; 0: no cap.
+    #[serde(default)]
+    pub max_active_jobs: u32,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -62,6 +84,8 @@ pub struct QueueConfig {
     pub heartbeat_secs: u64,
     pub poll_interval_ms: u64,
     pub max_attempts: u32,
+    /// Attempts lost with their worker (crash, OOM kill) after which a job fails as `poison`.
+    pub max_lost_attempts: u32,
     pub retry_backoff_ms: u64,
     pub retry_backoff_max_ms: u64,
     pub checkpoint_every_steps: u32,
@@ -121,8 +145,12 @@ impl Default for ServerConfig {
         ServerConfig {
             bind: "127.0.0.1:8080".into(),
             api_key: String::new(),
+            metrics_key: String::new(),
+            tenants: Vec::new(),
             max_body_bytes: 16 * 1024 * 1024,
             max_queue_depth: 1000,
+            max_concurrent_decodes: 2,
+            max_sse_streams: 256,
             sse_heartbeat_secs: 15,
             progress_interval_ms: 250,
             snapshot_interval_ms: 1000,
@@ -148,6 +176,7 @@ impl Default for QueueConfig {
             heartbeat_secs: 5,
             poll_interval_ms: 250,
             max_attempts: 3,
+            max_lost_attempts: 2,
             retry_backoff_ms: 2000,
             retry_backoff_max_ms: 60_000,
             checkpoint_every_steps: 25,
@@ -272,6 +301,9 @@ impl Config {
         if self.queue.max_attempts == 0 {
             return bad("queue.max_attempts", "must be at least 1");
         }
+        if self.queue.max_lost_attempts == 0 {
+            return bad("queue.max_lost_attempts", "must be at least 1");
+        }
         if !matches!(self.log.format.as_str(), "text" | "json") {
             return bad("log.format", "must be \"text\" or \"json\"");
         }
@@ -289,6 +321,41 @@ impl Config {
                 key: "models.device",
                 reason,
             });
+        }
+        let mut keys: Vec<&str> = [&self.server.api_key, &self.server.metrics_key]
+            .into_iter()
+            .map(String::as_str)
+            .filter(|k| !k.is_empty())
+            .collect();
+        let mut names = std::collections::HashSet::new();
+        for t in &self.server.tenants {
+            let ok_name = (1..=64).contains(&t.name.len())
+                && t.name
+                    .chars()
+                    .all(|c| c.is_ascii_alphanumeric() || matches!(c, '.' | '_' | '-'));
+            if !ok_name || !names.insert(t.name.as_str()) {
+                return bad(
+                    "server.tenants.name",
+                    "must be 1 to 64 of A-Z a-z 0-9 . _ - and unique",
+                );
+            }
+            if t.key.trim().len() < 16 || t.key.trim() != t.key {
+                return bad(
+                    "server.tenants.key",
+                    "must be at least 16 characters without surrounding spaces",
+                );
+            }
+            keys.push(&t.key);
+        }
+        let distinct: std::collections::HashSet<&str> = keys.iter().copied().collect();
+        if distinct.len() != keys.len() {
+            return bad("server.tenants.key", "every key must be different");
+        }
+        if self.server.max_sse_streams == 0 {
+            return bad("server.max_sse_streams", "must be at least 1");
+        }
+        if self.server.max_concurrent_decodes == 0 {
+            return bad("server.max_concurrent_decodes", "must be at least 1");
         }
         if self.server.max_body_bytes < 1024 {
             return bad("server.max_body_bytes", "must be at least 1024");

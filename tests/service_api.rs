@@ -5,65 +5,17 @@
 mod common;
 
 use common::http::{self, get, post_json, request, sse};
+use common::server::TestServer;
 use common::{png_b64, wait_status};
 use serde_json::{Value, json};
-use std::net::SocketAddr;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::Duration;
-use vectorfusion::config::Config;
 use vectorfusion::pipeline::{
     DefaultExecutor, Executor, JobContext, JobOutput, JobSpec, PipelineError,
 };
 use vectorfusion::progress::Progress;
 use vectorfusion::worker::test_executor::{TestExecutor, scene_at, scene_svg};
-
-struct TestServer {
-    addr: SocketAddr,
-    _dir: tempfile::TempDir,
-    stop: Option<tokio::sync::oneshot::Sender<()>>,
-    task: tokio::task::JoinHandle<Result<(), vectorfusion::server::ServerError>>,
-}
-
-impl TestServer {
-    async fn start(exec: Arc<dyn Executor>, tweak: impl FnOnce(&mut Config)) -> TestServer {
-        let dir = tempfile::tempdir().unwrap();
-        let mut cfg = Config::default();
-        cfg.database.path = dir.path().join("jobs.db");
-        cfg.queue.workers = 2;
-        cfg.queue.poll_interval_ms = 20;
-        cfg.queue.heartbeat_secs = 1;
-        cfg.queue.lease_secs = 5;
-        cfg.queue.retry_backoff_ms = 50;
-        cfg.server.progress_interval_ms = 0;
-        cfg.server.snapshot_interval_ms = 0;
-        cfg.server.shutdown_grace_secs = 5;
-        tweak(&mut cfg);
-        let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
-        let addr = listener.local_addr().unwrap();
-        let (tx, rx) = tokio::sync::oneshot::channel::<()>();
-        let task = tokio::spawn(vectorfusion::server::run(cfg, exec, listener, async move {
-            let _ = rx.await;
-        }));
-        TestServer {
-            addr,
-            _dir: dir,
-            stop: Some(tx),
-            task,
-        }
-    }
-
-    async fn stop(mut self) {
-        if let Some(tx) = self.stop.take() {
-            let _ = tx.send(());
-        }
-        tokio::time::timeout(Duration::from_secs(20), &mut self.task)
-            .await
-            .expect("server stops")
-            .unwrap()
-            .unwrap();
-    }
-}
 
 fn vectorize_body(paths: u32, steps: u32, seed: u64) -> Value {
     json!({"kind": "vectorize", "image": png_b64(8), "paths": paths, "steps": steps, "seed": seed})
@@ -118,6 +70,7 @@ async fn vectorize_job_end_to_end_with_events_and_results() {
     let expected = scene_svg(&scene_at(42, 6, 12, 12).unwrap());
     assert_eq!(r.text(), expected);
     resvg::usvg::Tree::from_str(&r.text(), &resvg::usvg::Options::default()).unwrap();
+    vectorfusion::svg::check_safe_output(&r.text()).unwrap();
 
     let r = get(a, &format!("/jobs/{id}/result.png")).await;
     assert_eq!(r.status, 200);
@@ -128,6 +81,7 @@ async fn vectorize_job_end_to_end_with_events_and_results() {
     let r = get(a, &format!("/jobs/{id}/snapshots/1.svg")).await;
     assert_eq!(r.status, 200);
     assert!(r.text().starts_with("<svg"));
+    vectorfusion::svg::check_safe_output(&r.text()).unwrap();
 
     let v = wait_status(a, &id, &["succeeded"], Duration::from_secs(1)).await;
     assert_eq!(v["attempts"], 1);
@@ -472,6 +426,24 @@ async fn bad_input_gets_clear_4xx_json_never_500() {
             "bad status filter",
             "GET",
             "/jobs?status=done",
+            None,
+            None,
+            400,
+            "invalid_query",
+        ),
+        raw(
+            "empty status filter (not in the enum)",
+            "GET",
+            "/jobs?status=",
+            None,
+            None,
+            400,
+            "invalid_query",
+        ),
+        raw(
+            "empty cursor",
+            "GET",
+            "/jobs?cursor=",
             None,
             None,
             400,

@@ -63,14 +63,18 @@ pub fn run(args: ServeArgs) -> Result<(), CliError> {
         .thread_name("vf-http")
         .build()
         .map_err(|e| CliError::Other(e.into()))?;
-    rt.block_on(async move {
+    let result = rt.block_on(async move {
         let listener = tokio::net::TcpListener::bind(&cfg.server.bind)
             .await
             .map_err(|e| CliError::Usage(format!("cannot listen on {}: {e}", cfg.server.bind)))?;
         crate::server::run(cfg, executor, listener, shutdown_signal())
             .await
             .map_err(|e| CliError::Other(e.into()))
-    })
+    });
+    // A worker still inside a long step after the grace period holds a blocking task; dropping
+    // the runtime would wait for it. Its lease expires and the job is reclaimed after restart.
+    rt.shutdown_timeout(std::time::Duration::from_secs(1));
+    result
 }
 
 fn init_logging(cfg: &Config) {

@@ -33,6 +33,15 @@ pub enum ApiError {
     IdempotencyConflict,
     #[error("the queue is full ({depth} jobs waiting); retry later")]
     QueueFull { depth: i64, retry_after_secs: u64 },
+    #[error(
+        "this key already has {limit} queued or running jobs (its max_active_jobs); retry later"
+    )]
+    QuotaExceeded { limit: u32, retry_after_secs: u64 },
+    #[error("the server is busy ({what}); retry later")]
+    Busy {
+        what: &'static str,
+        retry_after_secs: u64,
+    },
     #[error("{0}")]
     ModelsNotConfigured(String),
     #[error("the server is shutting down")]
@@ -72,7 +81,9 @@ impl ApiError {
             ApiError::NotFound { .. } | ApiError::NoRoute { .. } => StatusCode::NOT_FOUND,
             ApiError::MethodNotAllowed(_) => StatusCode::METHOD_NOT_ALLOWED,
             ApiError::Conflict(_) | ApiError::IdempotencyConflict => StatusCode::CONFLICT,
-            ApiError::QueueFull { .. } => StatusCode::TOO_MANY_REQUESTS,
+            ApiError::QueueFull { .. } | ApiError::Busy { .. } | ApiError::QuotaExceeded { .. } => {
+                StatusCode::TOO_MANY_REQUESTS
+            }
             ApiError::ModelsNotConfigured(_) | ApiError::ShuttingDown => {
                 StatusCode::SERVICE_UNAVAILABLE
             }
@@ -94,6 +105,8 @@ impl ApiError {
             ApiError::Conflict(_) => "conflict",
             ApiError::IdempotencyConflict => "idempotency_conflict",
             ApiError::QueueFull { .. } => "queue_full",
+            ApiError::Busy { .. } => "busy",
+            ApiError::QuotaExceeded { .. } => "quota_exceeded",
             ApiError::ModelsNotConfigured(_) => "models_not_configured",
             ApiError::ShuttingDown => "shutting_down",
             ApiError::Internal(_) => "internal",
@@ -114,9 +127,31 @@ impl ApiError {
             }
             // never leak internals to clients; they are logged instead
             ApiError::Internal(_) => "internal error; see the server log".to_string(),
+            // the settings to change, not where this server keeps its files
+            ApiError::ModelsNotConfigured(m) => without_paths(m),
             other => other.to_string(),
         }
     }
+}
+
+/// `text` with every absolute filesystem path replaced by `<path>`, for messages that reach
+/// clients (the full message goes to the log).
+pub fn without_paths(text: &str) -> String {
+    text.split(' ')
+        .map(|w| {
+            if w.starts_with('/') || w.starts_with("~/") {
+                let tail: String = w
+                    .chars()
+                    .rev()
+                    .take_while(|c| matches!(c, ')' | ',' | ';' | ':' | '.'))
+                    .collect();
+                format!("<path>{}", tail.chars().rev().collect::<String>())
+            } else {
+                w.to_string()
+            }
+        })
+        .collect::<Vec<_>>()
+        .join(" ")
 }
 
 impl From<crate::store::StoreError> for ApiError {
@@ -141,6 +176,12 @@ impl IntoResponse for ApiError {
         let mut resp = (status, Json(body)).into_response();
         if let ApiError::QueueFull {
             retry_after_secs, ..
+        }
+        | ApiError::Busy {
+            retry_after_secs, ..
+        }
+        | ApiError::QuotaExceeded {
+            retry_after_secs, ..
         } = &self
             && let Ok(v) = HeaderValue::from_str(&retry_after_secs.to_string())
         {
@@ -153,5 +194,18 @@ impl IntoResponse for ApiError {
             );
         }
         resp
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn paths_are_removed_from_client_messages() {
+        assert_eq!(
+            super::without_paths(
+                "the directory /srv/models/sd (from sd_dir) does not exist: set ~/x."
+            ),
+            "the directory <path> (from sd_dir) does not exist: set <path>."
+        );
     }
 }

@@ -7,8 +7,10 @@
 //! (they checkpoint and return to the queue) and waits for the workers.
 
 pub mod error;
+mod page;
 mod routes;
 mod sse;
+pub mod tenant;
 pub mod types;
 
 use crate::config::Config;
@@ -21,7 +23,7 @@ use axum::Router;
 use axum::extract::DefaultBodyLimit;
 use axum::http::Method;
 use axum::routing::{MethodRouter, delete, get, post};
-use std::future::Future;
+use std::future::{Future, IntoFuture};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicI64, Ordering};
 use std::time::Duration;
@@ -51,6 +53,11 @@ pub struct Inner {
     /// Queued jobs as last counted plus jobs submitted since: admission control reads this and
     /// only counts exactly (one SQL query) when it says the queue is full.
     pub queued_estimate: AtomicI64,
+    /// Admission for upload validation (`server.max_concurrent_decodes` permits), so concurrent
+    /// submits cannot multiply decode memory.
+    pub decode_permits: Arc<tokio::sync::Semaphore>,
+    /// One permit per open event stream (`server.max_sse_streams`).
+    pub sse_permits: Arc<tokio::sync::Semaphore>,
 }
 
 /// Shared state of all handlers.
@@ -91,6 +98,9 @@ fn route_table() -> Vec<(Method, &'static str, MethodRouter<AppState>)> {
         (Method::GET, "/healthz", get(routes::healthz)),
         (Method::GET, "/readyz", get(routes::readyz)),
         (Method::GET, "/metrics", get(routes::metrics)),
+        (Method::GET, "/", get(page::index)),
+        (Method::GET, "/app.js", get(page::app_js)),
+        (Method::GET, "/style.css", get(page::style_css)),
     ]
 }
 
@@ -141,6 +151,10 @@ pub async fn run(
         tokio::runtime::Handle::current(),
     )?;
     let (stop_tx, stop_rx) = watch::channel(false);
+    let decode_permits = Arc::new(tokio::sync::Semaphore::new(
+        cfg.server.max_concurrent_decodes,
+    ));
+    let sse_permits = Arc::new(tokio::sync::Semaphore::new(cfg.server.max_sse_streams));
     let state = AppState(Arc::new(Inner {
         store: store.clone(),
         hub,
@@ -151,6 +165,8 @@ pub async fn run(
         cfg,
         shutdown: stop_rx,
         queued_estimate: AtomicI64::new(0),
+        decode_permits,
+        sse_permits,
     }));
     let pruner = tokio::spawn(prune_loop(state.clone()));
     let counter = tokio::spawn(depth_loop(state.clone()));
@@ -158,23 +174,44 @@ pub async fn run(
     let addr = listener.local_addr()?;
     info!(%addr, workers = state.pool.workers(), db = %state.cfg.database.path.display(), "listening");
 
+    // Shutdown is bounded: open connections (SSE streams end on the stop signal; a half-sent
+    // request may not) and then the workers share one `shutdown_grace_secs` deadline, counted
+    // from the signal. `cli::serve` then gives abandoned blocking tasks a second at most.
+    let grace = Duration::from_secs(state.cfg.server.shutdown_grace_secs);
+    let stop_at = Arc::new(std::sync::OnceLock::new());
     let st = state.clone();
+    let at = stop_at.clone();
     let graceful = async move {
         shutdown.await;
+        let _ = at.set(std::time::Instant::now());
         info!("shutdown requested: no new jobs are claimed, running jobs checkpoint and requeue");
         let _ = stop_tx.send(true);
         st.pool.begin_shutdown();
     };
-    let served = axum::serve(listener, app)
+    let serve = axum::serve(listener, app)
         .with_graceful_shutdown(graceful)
-        .await;
+        .into_future();
+    tokio::pin!(serve);
+    let mut stop_seen = state.shutdown.clone();
+    let served = tokio::select! {
+        r = &mut serve => r,
+        _ = async {
+            let _ = stop_seen.wait_for(|s| *s).await;
+            tokio::time::sleep(grace).await;
+        } => {
+            warn!("connections still open {}s after the shutdown request; closing them", grace.as_secs());
+            Ok(())
+        }
+    };
     pruner.abort();
     counter.abort();
     // Workers finish their current step, record the interruption and exit.
-    let grace = Duration::from_secs(state.cfg.server.shutdown_grace_secs);
+    let left = stop_at.get().map_or(grace, |t: &std::time::Instant| {
+        grace.saturating_sub(t.elapsed())
+    });
     let st = state.clone();
     let joined =
-        tokio::time::timeout(grace, tokio::task::spawn_blocking(move || st.pool.join())).await;
+        tokio::time::timeout(left, tokio::task::spawn_blocking(move || st.pool.join())).await;
     if joined.is_err() {
         warn!(
             "workers did not stop within {}s; their leases will expire and the jobs will be reclaimed",

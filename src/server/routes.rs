@@ -2,6 +2,7 @@
 
 use super::AppState;
 use super::error::ApiError;
+use super::tenant::Caller;
 use super::types::{JobList, JobView, check_image, check_svg, parse_submit};
 use crate::pipeline::JobKind;
 use crate::store::{JobRow, JobStatus, NewJob, now_ms};
@@ -10,7 +11,7 @@ use crate::worker::metrics::Metrics;
 use axum::Json;
 use axum::body::Body;
 use axum::extract::rejection::QueryRejection;
-use axum::extract::{Path, Query, Request, State};
+use axum::extract::{Extension, Path, Query, Request, State};
 use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
@@ -28,11 +29,17 @@ pub(super) fn job_id(raw: &str) -> Result<String, ApiError> {
         })
 }
 
-pub(super) async fn load_job(state: &AppState, id: &str) -> Result<JobRow, ApiError> {
+/// The job `id` as `caller` may see it: another tenant's job is not found.
+pub(super) async fn load_job(
+    state: &AppState,
+    id: &str,
+    caller: &Caller,
+) -> Result<JobRow, ApiError> {
     state
         .store
         .get_job(id)
         .await?
+        .filter(|row| caller.may_see(row.tenant.as_deref()))
         .ok_or_else(|| ApiError::NotFound {
             what: "job",
             id: id.to_string(),
@@ -43,8 +50,12 @@ const IDEMPOTENCY_HEADER: &str = "idempotency-key";
 /// Request bodies up to this size are parsed on the async thread.
 const INLINE_PARSE_BYTES: usize = 16 * 1024;
 
+/// How long a submit waits for an upload-validation permit before answering 429 `busy`.
+const DECODE_WAIT: std::time::Duration = std::time::Duration::from_secs(10);
+
 pub(super) async fn submit(
     State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
     headers: HeaderMap,
     body: Body,
 ) -> Result<Response, ApiError> {
@@ -98,7 +109,7 @@ pub(super) async fn submit(
                         "must be 1 to 255 visible ASCII characters",
                     )
                 })?;
-            Some(s.to_string())
+            Some(caller.scoped_key(s))
         }
     };
     let id = uuid::Uuid::new_v4();
@@ -121,7 +132,19 @@ pub(super) async fn submit(
             .map_err(|e| ApiError::Internal(format!("validation task failed: {e}")))??
     };
     let spec = if spec.image.is_some() || spec.svg.is_some() {
+        let permit =
+            tokio::time::timeout(DECODE_WAIT, state.decode_permits.clone().acquire_owned())
+                .await
+                .ok()
+                .and_then(Result::ok)
+                .ok_or(ApiError::Busy {
+                    what: "too many uploads are being validated at once",
+                    retry_after_secs: 2,
+                })?;
+        // The permit moves into the task: it is held until decoding ends, even if the client
+        // goes away meanwhile.
         tokio::task::spawn_blocking(move || {
+            let _permit = permit;
             if let Some(img) = &spec.image {
                 check_image(img, &limits)?;
             }
@@ -139,11 +162,32 @@ pub(super) async fn submit(
     if spec.kind == JobKind::Text
         && let Err(msg) = state.executor.text_ready()
     {
+        tracing::warn!(reason = %msg, "text job refused: text models are not configured");
         return Err(ApiError::ModelsNotConfigured(msg));
     }
     let hash = key
         .as_ref()
         .map(|_| format!("{:x}", sha2::Sha256::digest(&body)));
+    if let Caller::Tenant {
+        name,
+        max_active_jobs,
+    } = &caller
+        && *max_active_jobs > 0
+    {
+        let active = state.store.active_jobs(name).await?;
+        if active >= i64::from(*max_active_jobs) {
+            // A retry of a known Idempotency-Key adds nothing: it gets its job back.
+            if let Some(k) = &key
+                && let Some(row) = state.store.get_job_by_key(k).await?
+            {
+                return replay(row, &hash);
+            }
+            return Err(ApiError::QuotaExceeded {
+                limit: *max_active_jobs,
+                retry_after_secs: 5,
+            });
+        }
+    }
     let max_depth = state.cfg.server.max_queue_depth;
     if state.queued_estimate.load(Ordering::Relaxed) >= max_depth {
         // A retried submit (known Idempotency-Key) gets its job back even when the queue is
@@ -175,6 +219,8 @@ pub(super) async fn submit(
         idempotency_key: key,
         request_hash: hash.clone(),
         max_attempts: state.cfg.queue.max_attempts as i64,
+        max_lost_attempts: state.cfg.queue.max_lost_attempts as i64,
+        tenant: caller.tenant().map(str::to_string),
     };
     let (row, created) = state.store.insert_job(&new, now_ms()).await?;
     if !created {
@@ -210,10 +256,11 @@ fn replay(row: JobRow, hash: &Option<String>) -> Result<Response, ApiError> {
 
 pub(super) async fn get_job(
     State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
     Path(raw): Path<String>,
 ) -> Result<Json<JobView>, ApiError> {
     let id = job_id(&raw)?;
-    let row = load_job(&state, &id).await?;
+    let row = load_job(&state, &id, &caller).await?;
     let mut view = JobView::from_row(&row);
     if row.status == JobStatus::Succeeded.as_str()
         && let Some(result) = state.store.result(&id).await?
@@ -236,6 +283,7 @@ pub(super) struct ListQuery {
 
 pub(super) async fn list(
     State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
     query: Result<Query<ListQuery>, QueryRejection>,
 ) -> Result<Json<JobList>, ApiError> {
     let Query(q) = query.map_err(|e| ApiError::InvalidQuery {
@@ -250,7 +298,7 @@ pub(super) async fn list(
         reason,
     };
     let status = match q.status.as_deref() {
-        None | Some("") => None,
+        None => None,
         Some(s) => Some(s.parse::<JobStatus>().map_err(|_| {
             bad(
                 "status",
@@ -271,7 +319,7 @@ pub(super) async fn list(
         },
     };
     let cursor = match q.cursor.as_deref() {
-        None | Some("") => None,
+        None => None,
         Some(s) => Some(s.parse::<i64>().ok().filter(|n| *n > 0).ok_or_else(|| {
             bad(
                 "cursor",
@@ -279,7 +327,10 @@ pub(super) async fn list(
             )
         })?),
     };
-    let rows = state.store.list_jobs(status, cursor, limit).await?;
+    let rows = state
+        .store
+        .list_jobs(status, cursor, limit, caller.tenant())
+        .await?;
     let next_cursor = if rows.len() as i64 == limit {
         rows.last().map(|r| r.seq.to_string())
     } else {
@@ -293,10 +344,11 @@ pub(super) async fn list(
 
 pub(super) async fn cancel(
     State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
     Path(raw): Path<String>,
 ) -> Result<Json<JobView>, ApiError> {
     let id = job_id(&raw)?;
-    let before = load_job(&state, &id).await?;
+    let before = load_job(&state, &id, &caller).await?;
     match before.status().map_err(ApiError::from)? {
         JobStatus::Succeeded | JobStatus::Failed => {
             return Err(ApiError::Conflict(format!(
@@ -329,8 +381,12 @@ pub(super) async fn cancel(
     Ok(Json(JobView::from_row(&row)))
 }
 
-async fn finished_result(state: &AppState, id: &str) -> Result<crate::store::ResultRow, ApiError> {
-    let row = load_job(state, id).await?;
+async fn finished_result(
+    state: &AppState,
+    id: &str,
+    caller: &Caller,
+) -> Result<crate::store::ResultRow, ApiError> {
+    let row = load_job(state, id, caller).await?;
     if row.status != JobStatus::Succeeded.as_str() {
         return Err(ApiError::Conflict(format!(
             "job {id} has no result: its status is {}",
@@ -357,10 +413,13 @@ fn svg_response(svg: String) -> Response {
 
 pub(super) async fn result_svg(
     State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
     Path(raw): Path<String>,
 ) -> Result<Response, ApiError> {
     let id = job_id(&raw)?;
-    Ok(svg_response(finished_result(&state, &id).await?.svg))
+    Ok(svg_response(
+        finished_result(&state, &id, &caller).await?.svg,
+    ))
 }
 
 /// Longest side of PNG previews.
@@ -386,10 +445,11 @@ pub fn render_png(svg: &str) -> Result<Vec<u8>, String> {
 
 pub(super) async fn result_png(
     State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
     Path(raw): Path<String>,
 ) -> Result<Response, ApiError> {
     let id = job_id(&raw)?;
-    let result = finished_result(&state, &id).await?;
+    let result = finished_result(&state, &id, &caller).await?;
     let png = tokio::task::spawn_blocking(move || render_png(&result.svg))
         .await
         .map_err(|e| ApiError::Internal(e.to_string()))?
@@ -399,6 +459,7 @@ pub(super) async fn result_png(
 
 pub(super) async fn snapshot(
     State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
     Path((raw, file)): Path<(String, String)>,
 ) -> Result<Response, ApiError> {
     let id = job_id(&raw)?;
@@ -410,7 +471,7 @@ pub(super) async fn snapshot(
             what: "snapshot",
             id: format!("{id}/{file} (snapshots are named N.svg, N = 1, 2, ...)"),
         })?;
-    load_job(&state, &id).await?;
+    load_job(&state, &id, &caller).await?;
     let snap = state
         .store
         .snapshot(&id, n)
@@ -436,7 +497,10 @@ pub(super) async fn readyz(State(state): State<AppState>) -> Response {
         "database": match &db { Ok(()) => "ok".to_string(), Err(e) => e.to_string() },
         "shutting_down": shutting_down,
         "workers": state.pool.workers(),
-        "text_models": match &text { Ok(()) => "ready".to_string(), Err(m) => m.clone() },
+        "text_models": match &text {
+            Ok(()) => "ready".to_string(),
+            Err(m) => super::error::without_paths(m),
+        },
         "text_jobs_accepted": text.is_ok(),
     });
     let status = if ready {
@@ -473,33 +537,35 @@ pub(super) async fn method_not_allowed(req: Request) -> ApiError {
     ApiError::MethodNotAllowed(req.method().to_string())
 }
 
-fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
-    a.len() == b.len() && a.iter().zip(b).fold(0u8, |acc, (x, y)| acc | (x ^ y)) == 0
-}
-
-/// API-key check (all routes except `/healthz` and `/readyz`) and response counting.
+/// Resolves the caller from its API key (`server::tenant`; every route except `/healthz`,
+/// `/readyz` and the page needs one when keys are configured), then counts the response.
 pub(super) async fn auth_and_count(
     State(state): State<AppState>,
-    req: Request,
+    mut req: Request,
     next: Next,
 ) -> Response {
     let started = std::time::Instant::now();
-    let route = route_label(req.method().as_str(), req.uri().path());
-    let key = &state.cfg.server.api_key;
-    let open = matches!(req.uri().path(), "/healthz" | "/readyz");
-    let resp = if key.is_empty() || open {
-        next.run(req).await
+    let path = req.uri().path();
+    let route = route_label(req.method().as_str(), path);
+    let open = matches!(path, "/healthz" | "/readyz") || super::page::is_page(path);
+    let metrics = path == "/metrics";
+    let h = req.headers();
+    let given = h
+        .get(header::AUTHORIZATION)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.strip_prefix("Bearer "))
+        .or_else(|| h.get("x-api-key").and_then(|v| v.to_str().ok()));
+    let caller = if open {
+        Some(Caller::Operator)
     } else {
-        let h = req.headers();
-        let given = h
-            .get(header::AUTHORIZATION)
-            .and_then(|v| v.to_str().ok())
-            .and_then(|v| v.strip_prefix("Bearer "))
-            .or_else(|| h.get("x-api-key").and_then(|v| v.to_str().ok()));
-        match given {
-            Some(g) if constant_time_eq(g.trim().as_bytes(), key.as_bytes()) => next.run(req).await,
-            _ => ApiError::Unauthorized.into_response(),
+        super::tenant::resolve(&state.cfg.server, given, metrics)
+    };
+    let resp = match caller {
+        Some(c) => {
+            req.extensions_mut().insert(c);
+            next.run(req).await
         }
+        None => ApiError::Unauthorized.into_response(),
     };
     state.metrics.http_response(resp.status().as_u16());
     state

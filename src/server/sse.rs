@@ -14,10 +14,11 @@
 use super::AppState;
 use super::error::ApiError;
 use super::routes::{job_id, load_job};
+use super::tenant::Caller;
 use super::types::JobView;
 use crate::store::{JobRow, JobStatus, SnapshotRow};
 use crate::worker::events::JobEvent;
-use axum::extract::{Path, State};
+use axum::extract::{Extension, Path, State};
 use axum::http::HeaderMap;
 use axum::response::sse::{Event, KeepAlive, Sse};
 use futures_util::Stream;
@@ -30,19 +31,33 @@ const REPLAY_LIMIT: i64 = 500;
 
 pub(super) async fn events(
     State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
     Path(raw): Path<String>,
     headers: HeaderMap,
 ) -> Result<Sse<impl Stream<Item = Result<Event, Infallible>>>, ApiError> {
     let id = job_id(&raw)?;
+    let permit = state
+        .sse_permits
+        .clone()
+        .try_acquire_owned()
+        .map_err(|_| ApiError::Busy {
+            what: "too many event streams are open",
+            retry_after_secs: 5,
+        })?;
     let last_seen: Option<i64> = headers
         .get("last-event-id")
         .and_then(|v| v.to_str().ok())
         .and_then(|s| s.trim().parse().ok());
     // Subscribe before reading the stored state so nothing falls between the two.
     let rx = state.hub.subscribe(&id);
-    let row = load_job(&state, &id).await?;
+    let row = load_job(&state, &id, &caller).await?;
     let (tx, out) = mpsc::channel::<Event>(64);
-    tokio::spawn(feed(state.clone(), row, last_seen, rx, tx));
+    let state_for_feed = state.clone();
+    // The feed task holds the stream's permit: it ends when the client goes away.
+    tokio::spawn(async move {
+        let _permit = permit;
+        feed(state_for_feed, row, last_seen, rx, tx).await
+    });
     let stream = futures_util::stream::unfold(out, |mut out| async move {
         out.recv().await.map(|e| (Ok(e), out))
     });

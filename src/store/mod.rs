@@ -92,6 +92,8 @@ pub struct JobRow {
     pub loss: Option<f64>,
     pub attempts: i64,
     pub max_attempts: i64,
+    pub lost_attempts: i64,
+    pub max_lost_attempts: i64,
     pub run_after: i64,
     pub lease_owner: Option<String>,
     pub lease_expires_at: Option<i64>,
@@ -105,6 +107,8 @@ pub struct JobRow {
     pub started_at: Option<i64>,
     pub finished_at: Option<i64>,
     pub updated_at: i64,
+    /// The tenant that submitted it (`server::tenant`); `None`: the operator.
+    pub tenant: Option<String>,
 }
 
 impl JobRow {
@@ -156,6 +160,9 @@ pub struct NewJob {
     pub idempotency_key: Option<String>,
     pub request_hash: Option<String>,
     pub max_attempts: i64,
+    /// Lost attempts (worker died) after which the job fails as `poison`; at least 1.
+    pub max_lost_attempts: i64,
+    pub tenant: Option<String>,
 }
 
 /// Identifies one attempt of one job held by one worker; every worker write carries it.
@@ -290,6 +297,8 @@ impl Store {
             .bind(&job.request_hash)
             .bind(job.max_attempts)
             .bind(now)
+            .bind(job.max_lost_attempts)
+            .bind(&job.tenant)
             .fetch_optional(&self.writer)
             .await?;
         if let Some(row) = inserted {
@@ -319,18 +328,29 @@ impl Store {
             .await?)
     }
 
-    /// Newest first; `before_seq` is the cursor.
+    /// Newest first; `before_seq` is the cursor; `tenant` filters (`None`: every job). The rows
+    /// leave the upload and the checkpoint in the database (see `sql/list_jobs.sql`).
     pub async fn list_jobs(
         &self,
         status: Option<JobStatus>,
         before_seq: Option<i64>,
         limit: i64,
+        tenant: Option<&str>,
     ) -> Result<Vec<JobRow>, StoreError> {
         Ok(sqlx::query_as(include_str!("sql/list_jobs.sql"))
             .bind(status.map(JobStatus::as_str))
             .bind(before_seq)
             .bind(limit)
+            .bind(tenant)
             .fetch_all(&self.pool)
+            .await?)
+    }
+
+    /// Queued and running jobs of `tenant`.
+    pub async fn active_jobs(&self, tenant: &str) -> Result<i64, StoreError> {
+        Ok(sqlx::query_scalar(include_str!("sql/active_jobs.sql"))
+            .bind(tenant)
+            .fetch_one(&self.pool)
             .await?)
     }
 

@@ -18,6 +18,8 @@ fn new_job(i: usize) -> NewJob {
         idempotency_key: None,
         request_hash: None,
         max_attempts: 3,
+        max_lost_attempts: 2,
+        tenant: None,
     }
 }
 
@@ -178,6 +180,45 @@ async fn lease_expiry_after_last_attempt_fails_job() {
     assert_eq!(row.status().unwrap(), JobStatus::Failed);
     assert_eq!(row.error_code.as_deref(), Some("lease_expired"));
     assert_eq!(store.attempts(&job.id).await.unwrap()[0].outcome, "lost");
+}
+
+#[tokio::test]
+async fn job_lost_max_lost_attempts_times_fails_as_poison() {
+    let (_d, store) = temp_store(2).await;
+    let mut j = new_job(0);
+    j.max_attempts = 5;
+    j.max_lost_attempts = 2;
+    let job = store.insert_job(&j, 0).await.unwrap().0;
+    // First worker dies: its lease expires and another worker reclaims the job (lost once).
+    store.claim("a", 0, 100).await.unwrap().unwrap();
+    assert!(store.reap_expired(200).await.unwrap().is_empty());
+    let (row, _) = store.claim("b", 200, 100).await.unwrap().unwrap();
+    assert_eq!((row.attempts, row.lost_attempts), (2, 1));
+    // Second worker dies too: not reclaimed although attempts are left, reaped as poison.
+    assert!(store.claim("c", 400, 100).await.unwrap().is_none());
+    let reaped = store.reap_expired(400).await.unwrap();
+    assert_eq!(reaped.len(), 1);
+    let row = store.get_job(&job.id).await.unwrap().unwrap();
+    assert_eq!(row.status().unwrap(), JobStatus::Failed);
+    assert_eq!(row.error_code.as_deref(), Some("poison"));
+    assert_eq!(row.lost_attempts, 2);
+    let outcomes: Vec<String> = store
+        .attempts(&job.id)
+        .await
+        .unwrap()
+        .into_iter()
+        .map(|a| a.outcome)
+        .collect();
+    assert_eq!(outcomes, vec!["lost", "lost"]);
+    // A job lost once with max_lost_attempts 1 is never reclaimed.
+    let mut k = new_job(1);
+    k.max_lost_attempts = 1;
+    let k = store.insert_job(&k, 500).await.unwrap().0;
+    store.claim("a", 500, 100).await.unwrap().unwrap();
+    assert!(store.claim("b", 700, 100).await.unwrap().is_none());
+    store.reap_expired(700).await.unwrap();
+    let row = store.get_job(&k.id).await.unwrap().unwrap();
+    assert_eq!(row.error_code.as_deref(), Some("poison"));
 }
 
 #[tokio::test]

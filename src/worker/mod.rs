@@ -249,7 +249,8 @@ fn worker_loop(s: &Shared, worker_id: &str) {
                         s.hub.publish(&row.id, JobEvent::Finished(st));
                     }
                     if row.status == "failed" {
-                        s.metrics.job_failed("lease_expired");
+                        s.metrics
+                            .job_failed(row.error_code.as_deref().unwrap_or("lease_expired"));
                     }
                 }
             }

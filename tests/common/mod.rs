@@ -2,7 +2,9 @@
 #![allow(dead_code)]
 
 pub mod http;
+pub mod server;
 pub mod tensors;
+pub mod webdriver;
 
 #[allow(unused_imports)]
 pub use tensors::{abs_max, fixture, max_abs};

@@ -1,0 +1,128 @@
+//! The playground page in a real browser (headless Chromium through chromedriver): a vectorize
+//! job of a committed image draws live and ends with a download of exactly `result.svg`; a bad
+//! upload shows the API's message. Screenshots go to `target/tmp/playground/` (and to
+//! `$VF_PAGE_SCREENSHOTS` when set, e.g. `docs/img`). `.ci/run` installs chromium and
+//! chromium-driver when it can; without them the test prints SKIP.
+
+mod common;
+
+use common::server::TestServer;
+use common::webdriver::{Browser, installed};
+use serde_json::json;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Duration;
+use vectorfusion::worker::test_executor::TestExecutor;
+
+const IMAGE: &str = concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/tests/fixtures/clip-tiny/images/gradient_48x40.png"
+);
+
+fn save(b: &Browser, name: &str) {
+    let Ok(png) = b.screenshot() else { return };
+    let mut dirs = vec![PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("playground")];
+    if let Some(d) = std::env::var_os("VF_PAGE_SCREENSHOTS") {
+        dirs.push(PathBuf::from(d));
+    }
+    for d in dirs {
+        let _ = std::fs::create_dir_all(&d);
+        let _ = std::fs::write(d.join(name), &png);
+    }
+}
+
+#[test]
+fn playground_page_runs_a_job_in_a_real_browser() {
+    let Some((driver, chromium)) = installed() else {
+        eprintln!(
+            "SKIP: chromium / chromedriver not installed (apt-get install chromium chromium-driver)"
+        );
+        return;
+    };
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .unwrap();
+    let srv = rt.block_on(TestServer::start(Arc::new(TestExecutor::new(20)), |c| {
+        c.queue.workers = 1;
+    }));
+    let base = format!("http://{}", srv.addr);
+    let b = Browser::start(&driver, &chromium);
+    let wait = Duration::from_secs(30);
+    let run = || -> Result<(), String> {
+        b.goto(&format!("{base}/"));
+        let file = b.find("#file", wait)?;
+        b.type_into(&file, IMAGE)?;
+        // Few steps, so the job takes about a second.
+        b.eval(
+            "const s = document.getElementById('steps'); if (s) { s.value = '40'; } \
+             const p = document.getElementById('paths'); p.value = '4';",
+            json!([]),
+        )?;
+        b.click(&b.find("#submit", wait)?)?;
+        // Snapshots draw live, then the result appears.
+        b.wait_for(
+            "const i = document.getElementById('snapshot'); return i && i.src.startsWith('blob:');",
+            wait,
+        )?;
+        save(&b, "playground-running.png");
+        b.wait_for(
+            "const i = document.getElementById('result'); return i && i.src.startsWith('blob:') && i.offsetParent !== null;",
+            wait,
+        )?;
+        b.wait_for(
+            "const a = document.getElementById('download-svg'); return a && a.href.startsWith('blob:');",
+            wait,
+        )?;
+        save(&b, "playground-done.png");
+        // The download link holds exactly the bytes of GET /jobs/{id}/result.svg.
+        let downloaded = b.eval_async(
+            "const done = arguments[arguments.length - 1]; \
+             fetch(document.getElementById('download-svg').href).then(r => r.text()).then(done, e => done('ERR ' + e));",
+            json!([]),
+        )?;
+        let list: serde_json::Value = ureq::get(&format!("{base}/jobs"))
+            .call()
+            .map_err(|e| e.to_string())?
+            .into_json()
+            .map_err(|e| e.to_string())?;
+        let id = list["jobs"][0]["id"].as_str().ok_or("no job listed")?;
+        let served = ureq::get(&format!("{base}/jobs/{id}/result.svg"))
+            .call()
+            .map_err(|e| e.to_string())?
+            .into_string()
+            .map_err(|e| e.to_string())?;
+        if downloaded.as_str() != Some(served.as_str()) {
+            return Err(format!(
+                "download differs from result.svg: {downloaded:.200} vs {served:.200}"
+            ));
+        }
+        // A bad upload shows the API's message.
+        let bad = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("not-an-image.png");
+        std::fs::write(&bad, b"this is not a PNG").map_err(|e| e.to_string())?;
+        b.type_into(&b.find("#file", wait)?, bad.to_str().ok_or("path")?)?;
+        b.click(&b.find("#submit", wait)?)?;
+        let msg = b.wait_for(
+            "const e = document.getElementById('error'); return e && e.textContent.trim();",
+            wait,
+        )?;
+        let msg = msg.as_str().unwrap_or("");
+        if !msg.contains("image") {
+            return Err(format!("error region says {msg:?}"));
+        }
+        b.eval(
+            "document.getElementById('error').scrollIntoView({block: 'center'});",
+            json!([]),
+        )?;
+        save(&b, "playground-error.png");
+        Ok(())
+    };
+    let result = run();
+    if let Err(e) = &result {
+        save(&b, "playground-failure.png");
+        panic!("{e} (screenshot: target/tmp/playground/playground-failure.png)");
+    }
+    drop(b);
+    rt.block_on(srv.stop());
+}
