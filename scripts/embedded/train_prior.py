@@ -146,12 +146,15 @@ def main():
     ap.add_argument("--ema", type=float, default=0.9995)
     ap.add_argument("--min-snr", type=float, default=5.0, help="min-SNR gamma (0: plain v loss)")
     ap.add_argument("--p-uncond", type=float, default=0.1)
-    ap.add_argument("--guidance", type=float, default=3.0, help="sampling CFG scale written to model_index.json")
+    ap.add_argument("--guidance", type=float, default=5.0, help="sampling CFG scale written to model_index.json")
     ap.add_argument("--seed", type=int, default=1234)
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--bf16", action="store_true", help="bf16 autocast (AVX-512 BF16 / AMX CPUs)")
     ap.add_argument("--max-steps", type=int, default=10**9)
     ap.add_argument("--until", default=None, help="stop at this UTC time HH:MM")
+    ap.add_argument("--cooldown-min", type=float, default=0.0,
+                    help="warmup-stable-decay: over the last M minutes before --until the LR falls linearly to --lr-floor x --lr")
+    ap.add_argument("--lr-floor", type=float, default=0.05)
     ap.add_argument("--export-every-min", type=float, default=15.0)
     ap.add_argument("--val-every", type=int, default=500)
     ap.add_argument("--init", default=None,
@@ -253,8 +256,9 @@ def main():
     vnoise = torch.randn(vz0.shape, generator=vgen)
 
     @torch.no_grad()
-    def validate():
-        per = torch.cat([v_loss(ema, vz0[i : i + 64], vcond[i : i + 64], vt[i : i + 64], vnoise[i : i + 64], weighted=False)
+    def validate(model=None):
+        model = ema if model is None else model
+        per = torch.cat([v_loss(model, vz0[i : i + 64], vcond[i : i + 64], vt[i : i + 64], vnoise[i : i + 64], weighted=False)
                          for i in range(0, len(vids), 64)])
         k = len(per) // 3
         return per.mean().item(), per[:k].mean().item(), per[k : 2 * k].mean().item(), per[2 * k :].mean().item()
@@ -279,6 +283,10 @@ def main():
         t = torch.randint(0, 1000, (args.batch,), generator=gen)
         noise = torch.randn(z0.shape, generator=gen)
         lr = args.lr * min(1.0, (step + 1) / args.warmup)
+        if deadline and args.cooldown_min > 0:
+            left = (deadline - dt.datetime.now(dt.timezone.utc)).total_seconds() / 60
+            f = min(1.0, max(0.0, left / args.cooldown_min))
+            lr *= args.lr_floor + (1 - args.lr_floor) * f
         for g in opt.param_groups:
             g["lr"] = lr
         loss = v_loss(unet, z0, cond, t, noise).mean()
@@ -303,7 +311,15 @@ def main():
         if time.time() - last_save > args.export_every_min * 60:
             save()
             last_save = time.time()
+    # After a cooldown the raw weights can beat the EMA (its horizon spans the pre-decay weights):
+    # export whichever has the lower held-out loss.
+    unet.eval()
+    v_ema, v_raw = validate()[0], validate(unet)[0]
+    print(f"final val loss: ema {v_ema:.5f} raw {v_raw:.5f}", flush=True)
     save(final=True)
+    if v_raw < v_ema:
+        export(unet, args.export, vae_dir, args.guidance)
+        print("exported the raw weights instead (the checkpoint keeps both)", flush=True)
 
 
 if __name__ == "__main__":
