@@ -176,11 +176,8 @@ pub(super) async fn submit(
     {
         let active = state.store.active_jobs(name).await?;
         if active >= i64::from(*max_active_jobs) {
-            // A retry of a known Idempotency-Key adds nothing: it gets its job back.
-            if let Some(k) = &key
-                && let Some(row) = state.store.get_job_by_key(k).await?
-            {
-                return replay(row, &hash);
+            if let Some(resp) = replay_known(&state, &key, &hash).await? {
+                return Ok(resp);
             }
             return Err(ApiError::QuotaExceeded {
                 limit: *max_active_jobs,
@@ -190,12 +187,8 @@ pub(super) async fn submit(
     }
     let max_depth = state.cfg.server.max_queue_depth;
     if state.queued_estimate.load(Ordering::Relaxed) >= max_depth {
-        // A retried submit (known Idempotency-Key) gets its job back even when the queue is
-        // full: it adds nothing to the queue.
-        if let Some(k) = &key
-            && let Some(row) = state.store.get_job_by_key(k).await?
-        {
-            return replay(row, &hash);
+        if let Some(resp) = replay_known(&state, &key, &hash).await? {
+            return Ok(resp);
         }
         let depth = state.store.queue_depth().await?;
         state.queued_estimate.store(depth, Ordering::Relaxed);
@@ -240,6 +233,21 @@ fn accepted(row: &JobRow) -> Response {
         resp.headers_mut().insert(header::LOCATION, loc);
     }
     resp
+}
+
+/// A retried submit (a known Idempotency-Key) adds nothing to the queue, so it gets its job back
+/// even past an admission limit (queue depth, a tenant's quota): the replay, or `None` when the
+/// key is new (or absent). Admission calls it only once a limit is hit, to spare the lookup.
+async fn replay_known(
+    state: &AppState,
+    key: &Option<String>,
+    hash: &Option<String>,
+) -> Result<Option<Response>, ApiError> {
+    let Some(k) = key else { return Ok(None) };
+    match state.store.get_job_by_key(k).await? {
+        Some(row) => replay(row, hash).map(Some),
+        None => Ok(None),
+    }
 }
 
 /// The answer to a submit whose Idempotency-Key is known: the same job (marked replayed), or a
