@@ -29,7 +29,7 @@ pub struct Config {
     pub server: ServerConfig,
     pub database: DatabaseConfig,
     pub queue: QueueConfig,
-    pub limits: LimitsConfig,
+    pub limits: Limits,
     pub models: ModelsConfig,
     pub log: LogConfig,
 }
@@ -92,17 +92,6 @@ pub struct QueueConfig {
     pub max_snapshots_per_job: u32,
     pub retention_hours: u64,
     pub prune_interval_secs: u64,
-}
-
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct LimitsConfig {
-    pub max_paths: u32,
-    pub max_steps: u32,
-    pub max_samples: u32,
-    pub max_caption_chars: usize,
-    pub max_svg_bytes: usize,
-    pub max_image_side: u32,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -183,20 +172,6 @@ impl Default for QueueConfig {
             max_snapshots_per_job: 200,
             retention_hours: 168,
             prune_interval_secs: 3600,
-        }
-    }
-}
-
-impl Default for LimitsConfig {
-    fn default() -> Self {
-        let l = Limits::default();
-        LimitsConfig {
-            max_paths: l.max_paths,
-            max_steps: l.max_steps,
-            max_samples: l.max_samples,
-            max_caption_chars: l.max_caption_chars,
-            max_svg_bytes: l.max_svg_bytes,
-            max_image_side: l.max_image_side,
         }
     }
 }
@@ -360,18 +335,14 @@ impl Config {
         if self.server.max_body_bytes < 1024 {
             return bad("server.max_body_bytes", "must be at least 1024");
         }
-        Ok(())
+        self.limits
+            .validate()
+            .map_err(|(key, reason)| ConfigError::Invalid { key, reason })
     }
 
+    /// The job limits (`[limits]`).
     pub fn limits(&self) -> Limits {
-        Limits {
-            max_paths: self.limits.max_paths,
-            max_steps: self.limits.max_steps,
-            max_samples: self.limits.max_samples,
-            max_caption_chars: self.limits.max_caption_chars,
-            max_svg_bytes: self.limits.max_svg_bytes,
-            max_image_side: self.limits.max_image_side,
-        }
+        self.limits.clone()
     }
 
     /// The configured model directories (no default applied: see
@@ -472,5 +443,22 @@ mod tests {
             let err = cuda.unwrap_err().to_string();
             assert!(err.contains("--features cuda"), "{err}");
         }
+    }
+
+    #[test]
+    fn limits_load_from_the_config_and_max_paths_is_what_the_stages_can_run() {
+        let cfg = Config::from_toml_and_env("[limits]\nmax_paths = 512\n", Vec::new()).unwrap();
+        assert_eq!(cfg.limits().max_paths, 512);
+        assert_eq!(cfg.limits().max_steps, Limits::default().max_steps);
+        // Raising it past what LIVE and the pipeline accept would admit jobs the workers fail.
+        let err = Config::from_toml_and_env("[limits]\nmax_paths = 5000\n", Vec::new())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("limits.max_paths") && err.contains(&crate::scene::MAX_PATHS.to_string()),
+            "{err}"
+        );
+        assert!(Config::from_toml_and_env("[limits]\nmax_steps = 0\n", Vec::new()).is_err());
+        assert!(Config::from_toml_and_env("[limits]\nmax_pahts = 5\n", Vec::new()).is_err());
     }
 }

@@ -188,8 +188,7 @@ fn text_conditioning_and_scorer_text_match_when_minilm_is_installed() {
 /// samples from noise only.
 #[test]
 fn retrieval_names_its_source_icons_when_the_index_is_installed() {
-    use vectorfusion::pipeline::methods::{Method, Models, Start, TextRequest, run_text};
-    use vectorfusion::progress::{CancelToken, NullSink};
+    use vectorfusion::pipeline::{Method, PlanRequest, Preset};
     use vectorfusion::retrieval::RetrievalLocations;
     if let Err(e) = MiniLmLocations::from_env().ensure(false) {
         eprintln!("SKIP retrieval_names_its_source_icons_when_the_index_is_installed: {e}");
@@ -199,27 +198,27 @@ fn retrieval_names_its_source_icons_when_the_index_is_installed() {
         eprintln!("SKIP retrieval_names_its_source_icons_when_the_index_is_installed: {e}");
         return;
     }
-    let m = Models::load_sd(&root(), Some(&root().join("scorer")), 64).unwrap();
-    assert!(m.is_small_prior());
-    let hits = m.retrieve("red heart", 2, 0).unwrap();
-    assert_eq!(hits.len(), 2);
-    assert!(hits[0].0.icon.caption.contains("heart"), "{:?}", hits[0].0);
-    assert!(!vectorfusion::retrieval::is_held_out(&hits[0].0.icon.set));
-    assert_eq!((hits[0].1.width, hits[0].1.height), (64, 64));
-    let req = TextRequest {
-        caption: "red heart".into(),
-        style: vectorfusion::stages::styles::Style::Iconography,
+    let m = common::runs::executor(root(), Some(root().join("scorer")));
+    assert!(m.small_prior());
+    let req = PlanRequest {
         method: Method::SdLive,
-        preset: vectorfusion::pipeline::Preset::Draft,
+        preset: Preset::Draft,
         paths: Some(8),
         steps: Some(2),
         samples: Some(2),
         seed: 3,
-        guidance: None,
-        retrieval: true,
-        start: Start::Method,
+        ..PlanRequest::text("red heart")
     };
-    let out = run_text(&m, &req, &NullSink, &CancelToken::new()).unwrap();
+    let plan = common::runs::plan(&m, &req);
+    let models = m.load_models(plan.text.as_ref().unwrap()).unwrap();
+    let index = models.retrieval.as_ref().unwrap();
+    let hits =
+        vectorfusion::stages::sample::retrieve(models.teacher(), index, "red heart", 2, 0).unwrap();
+    assert_eq!(hits.len(), 2);
+    assert!(hits[0].0.icon.caption.contains("heart"), "{:?}", hits[0].0);
+    assert!(!vectorfusion::retrieval::is_held_out(&hits[0].0.icon.set));
+    assert_eq!((hits[0].1.width, hits[0].1.height), (64, 64));
+    let out = common::runs::run(&m, &req).unwrap();
     let starts = out.detail["retrieval"]["starts"].as_array().unwrap();
     assert_eq!(starts.len(), 1, "{}", out.detail);
     for key in ["set", "name", "license", "caption"] {
@@ -234,14 +233,12 @@ fn retrieval_names_its_source_icons_when_the_index_is_installed() {
     } else {
         assert!(!out.svg.contains("<metadata>"));
     }
-    let off = run_text(
+    let off = common::runs::run(
         &m,
-        &TextRequest {
+        &PlanRequest {
             retrieval: false,
             ..req
         },
-        &NullSink,
-        &CancelToken::new(),
     )
     .unwrap();
     assert!(

@@ -354,35 +354,43 @@ fn model_index_style_suffix_switch() {
     assert_eq!(sd.hints.sample_guidance, 3.0);
     assert_eq!(sd.hints.sds_guidance, 100.0, "absent: the default");
 
-    let t = vectorfusion::teacher::SdTeacher::load(&dir, 64).unwrap();
-    let models = vectorfusion::pipeline::methods::Models {
-        teacher: vectorfusion::pipeline::methods::TeacherModel::Sd(Box::new(t)),
-        scorer: None,
-        retrieval: Err("none".into()),
-    };
+    // The hints reach the plan: the bare caption and the sampling guidance.
+    use vectorfusion::pipeline::{DefaultExecutor, Executor, Limits, ModelDirs, PlanRequest};
     use vectorfusion::stages::styles::Style as S;
-    assert_eq!(models.prompt(S::Iconography, " a crown "), "a crown");
-    let with = vectorfusion::pipeline::methods::Models {
-        teacher: vectorfusion::pipeline::methods::TeacherModel::Sd(Box::new(
-            vectorfusion::teacher::SdTeacher::load(&fixture("sd-tiny-pixel"), 64).unwrap(),
-        )),
-        scorer: None,
-        retrieval: Err("none".into()),
+    use vectorfusion::teacher::Teacher;
+    let plan_of = |d: &Path| {
+        DefaultExecutor::with_downloads(ModelDirs {
+            sd_dir: Some(d.to_path_buf()),
+            ..ModelDirs::default()
+        })
+        .plan(&PlanRequest::text(" a crown "), &Limits::default())
+        .unwrap()
+        .text
+        .unwrap()
     };
-    assert_eq!(
-        with.prompt(S::Iconography, "a crown"),
-        S::Iconography.prompt("a crown")
-    );
+    let bare = plan_of(&dir);
+    assert_eq!(bare.prompt, "a crown");
+    assert_eq!(bare.sample.as_ref().unwrap().guidance, 3.0);
+    let with = plan_of(&fixture("sd-tiny-pixel"));
+    assert_eq!(with.prompt, S::Iconography.prompt("a crown"));
+    assert_eq!(with.sample.as_ref().unwrap().guidance, 7.5);
     // `_sample_guidance` reaches the sampler: the same prompt, seed and noise, another image.
-    let draw = |m: &vectorfusion::pipeline::methods::Models| {
+    let draw = |d: &Path| {
+        let t = vectorfusion::teacher::SdTeacher::load(d, 64).unwrap();
+        let cfg = vectorfusion::teacher::SampleConfig {
+            k: 1,
+            steps: 3,
+            guidance: f64::from(t.hints().sample_guidance),
+            seed: 7,
+            strength: 0.6,
+        };
         let sink = vectorfusion::progress::NullSink;
         let cancel = vectorfusion::progress::CancelToken::new();
-        m.sample("a crown", 1, 3, 7, &[], 0.6, &sink, &cancel)
-            .unwrap()[0]
+        t.sample("a crown", &[], &cfg, &sink, &cancel).unwrap()[0]
             .data
             .clone()
     };
-    assert_ne!(draw(&models), draw(&with));
+    assert_ne!(draw(&dir), draw(&fixture("sd-tiny-pixel")));
 
     v["_style_suffix"] = serde_json::json!("no");
     std::fs::write(&index, v.to_string()).unwrap();

@@ -1,22 +1,23 @@
-//! The shared pipeline (`pipeline::methods`) on the tiny Stable Diffusion and CLIP fixtures:
+//! The shared pipeline (the executor and its plans) on the tiny Stable Diffusion and CLIP fixtures:
 //! every method × style, starts from an image or SVG, the `generate` binary, the real
 //! `DefaultExecutor` on vectorize and text jobs, and a text job through the real service.
 
 mod common;
 
 use common::http::{get, post_json, sse};
+use common::runs;
 use common::wait_status;
 use serde_json::json;
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Duration;
 use vectorfusion::image::Image;
-use vectorfusion::pipeline::methods::{Models, Start, TextRequest, run_text};
 use vectorfusion::pipeline::{
-    DefaultExecutor, Executor, JobContext, JobKind, JobSpec, Method, ModelDirs, Preset, Style,
+    DefaultExecutor, Executor, JobContext, JobKind, JobSpec, Method, ModelDirs, PlanRequest,
+    Preset, RunInput, StartKind, Style, Tuning,
 };
-use vectorfusion::progress::{CancelToken, NullSink, Progress};
-use vectorfusion::stages::styles::Style as StageStyle;
+use vectorfusion::progress::{CancelToken, Progress};
+use vectorfusion::scene::Scene;
 
 fn fixture(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -24,8 +25,8 @@ fn fixture(name: &str) -> PathBuf {
         .join(name)
 }
 
-fn models() -> Models {
-    Models::load_sd(&fixture("sd-tiny"), Some(&fixture("clip-tiny")), 32).unwrap()
+fn models() -> DefaultExecutor {
+    runs::executor(fixture("sd-tiny"), Some(fixture("clip-tiny")))
 }
 
 fn assert_finite_svg(svg: &str) {
@@ -36,34 +37,41 @@ fn assert_finite_svg(svg: &str) {
     resvg::usvg::Tree::from_str(svg, &resvg::usvg::Options::default()).unwrap();
 }
 
-fn req(method: Method, style: StageStyle, start: Start) -> TextRequest {
-    TextRequest {
-        caption: "a crown".into(),
+fn req(method: Method, style: Style, start: StartKind) -> PlanRequest {
+    PlanRequest {
         style,
         method,
+        start,
         preset: Preset::Draft,
-        paths: None,
         steps: Some(4),
         samples: Some(2),
         seed: 7,
-        guidance: None,
-        retrieval: true,
-        start,
+        ..PlanRequest::text("a crown")
     }
+}
+
+/// Runs `r` from `input` (image or SVG).
+fn run_from(
+    m: &DefaultExecutor,
+    r: &PlanRequest,
+    image: Option<Image>,
+    svg: Option<Scene>,
+) -> vectorfusion::pipeline::MethodOutput {
+    let input = RunInput {
+        caption: r.caption.clone(),
+        image,
+        svg,
+    };
+    runs::run_with(m, r, &input, |_| {}, CancelToken::new()).unwrap()
 }
 
 #[test]
 fn every_method_and_style_runs_on_the_tiny_model_without_nan() {
     let m = models();
     for method in Method::ALL {
-        for style in StageStyle::ALL {
-            let out = run_text(
-                &m,
-                &req(*method, style, Start::Method),
-                &NullSink,
-                &CancelToken::new(),
-            )
-            .unwrap_or_else(|e| panic!("{method:?} {style:?}: {e}"));
+        for style in Style::ALL {
+            let out = runs::run(&m, &req(*method, style, StartKind::Method))
+                .unwrap_or_else(|e| panic!("{method:?} {style:?}: {e}"));
             assert_finite_svg(&out.svg);
             assert!(out.paths > 0, "{method:?} {style:?}: empty scene");
             assert_eq!(out.scene.width, 32);
@@ -88,7 +96,7 @@ fn every_method_and_style_runs_on_the_tiny_model_without_nan() {
                     assert_eq!(d["sds"]["steps_done"], 4);
                 }
             }
-            if style == StageStyle::PixelArt {
+            if style == Style::PixelArt {
                 assert_eq!(out.paths, 32 * 32, "pixel art keeps its grid");
             }
         }
@@ -98,14 +106,12 @@ fn every_method_and_style_runs_on_the_tiny_model_without_nan() {
 #[test]
 fn rerank_keeps_the_highest_clip_score() {
     let m = models();
-    let out = run_text(
+    let out = runs::run(
         &m,
-        &TextRequest {
+        &PlanRequest {
             samples: Some(3),
-            ..req(Method::SdLive, StageStyle::Iconography, Start::Method)
+            ..req(Method::SdLive, Style::Iconography, StartKind::Method)
         },
-        &NullSink,
-        &CancelToken::new(),
     )
     .unwrap();
     let scores: Vec<f64> = out.detail["rerank"]["scores"]
@@ -122,16 +128,19 @@ fn rerank_keeps_the_highest_clip_score() {
 #[test]
 fn same_seed_same_svg() {
     let m = models();
-    let r = req(Method::SdLiveSds, StageStyle::Iconography, Start::Method);
-    let a = run_text(&m, &r, &NullSink, &CancelToken::new()).unwrap();
-    let b = run_text(&m, &r, &NullSink, &CancelToken::new()).unwrap();
+    let r = req(Method::SdLiveSds, Style::Iconography, StartKind::Method);
+    let a = runs::run(&m, &r).unwrap();
+    let b = runs::run(&m, &r).unwrap();
     assert_eq!(a.svg, b.svg);
     // An explicit SDS guidance replaces the model's default (100): another drawing.
-    let g = TextRequest {
-        guidance: Some(1.0),
+    let g = PlanRequest {
+        tuning: Tuning {
+            guidance: Some(1.0),
+            ..Tuning::default()
+        },
         ..r
     };
-    let c = run_text(&m, &g, &NullSink, &CancelToken::new()).unwrap();
+    let c = runs::run(&m, &g).unwrap();
     assert_ne!(a.svg, c.svg);
 }
 
@@ -153,17 +162,12 @@ fn disc_image(side: u32) -> Image {
 #[test]
 fn starts_from_a_user_image_or_svg() {
     let m = models();
-    let out = run_text(
+    let out = run_from(
         &m,
-        &req(
-            Method::SdLiveSds,
-            StageStyle::Iconography,
-            Start::Image(disc_image(48)),
-        ),
-        &NullSink,
-        &CancelToken::new(),
-    )
-    .unwrap();
+        &req(Method::SdLiveSds, Style::Iconography, StartKind::Image),
+        Some(disc_image(48)),
+        None,
+    );
     assert_finite_svg(&out.svg);
     assert!(out.detail["live"]["psnr"].as_f64().unwrap() > 10.0);
     assert!(out.detail["rerank"].is_null(), "no sampling from an image");
@@ -173,13 +177,12 @@ fn starts_from_a_user_image_or_svg() {
         <rect width="64" height="64" fill="#ffffff"/>
         <path d="M10 10 L50 10 L50 50 L10 50 Z" fill="#3366cc"/></svg>"##;
     let scene = vectorfusion::svg::from_svg(svg).unwrap();
-    let out = run_text(
+    let out = run_from(
         &m,
-        &req(Method::Scratch, StageStyle::Iconography, Start::Svg(scene)),
-        &NullSink,
-        &CancelToken::new(),
-    )
-    .unwrap();
+        &req(Method::Scratch, Style::Iconography, StartKind::Svg),
+        None,
+        Some(scene),
+    );
     assert_finite_svg(&out.svg);
     assert_eq!(out.scene.width, 32, "scaled to the teacher size");
     assert_eq!(out.paths, 1);
@@ -195,11 +198,15 @@ fn cancellation_stops_a_run() {
             c2.cancel();
         }
     };
-    let r = run_text(
+    let r = runs::run_with(
         &m,
-        &req(Method::SdLiveSds, StageStyle::Iconography, Start::Method),
-        &sink,
-        &cancel,
+        &req(Method::SdLiveSds, Style::Iconography, StartKind::Method),
+        &RunInput {
+            caption: Some("a crown".into()),
+            ..RunInput::default()
+        },
+        sink,
+        cancel,
     );
     assert!(
         matches!(r, Err(vectorfusion::pipeline::PipelineError::Cancelled)),
@@ -263,6 +270,7 @@ fn spec(kind: JobKind) -> JobSpec {
         preset: Preset::Draft,
         priority: 0,
         retrieval: true,
+        plan: None,
     }
 }
 
@@ -416,7 +424,7 @@ fn bench_stability_reports_every_method_and_style_as_json() {
     );
     let v: serde_json::Value = serde_json::from_slice(&st.stdout).unwrap();
     let cells = v["cells"].as_array().unwrap();
-    assert_eq!(cells.len(), 9);
+    assert_eq!(cells.len(), 3 * vectorfusion::pipeline::Style::ALL.len());
     for c in cells {
         assert_eq!(c["runs"], 2);
         assert_eq!(c["errors"], 0, "{c}");
@@ -430,4 +438,42 @@ fn bench_stability_reports_every_method_and_style_as_json() {
         .find(|c| c["method"] == "sd_live" && c["style"] == "iconography")
         .unwrap();
     assert!(live["psnr_median"].as_f64().unwrap() > 20.0, "{live}");
+}
+
+/// A job runs the plan stored with it, whatever its preset (and the preset table) says now.
+#[test]
+fn a_stored_plan_runs_as_stored() {
+    let exec = DefaultExecutor::new(ModelDirs {
+        sd_dir: Some(fixture("sd-tiny")),
+        clip_dir: Some(fixture("clip-tiny")),
+        ..ModelDirs::default()
+    });
+    let body = json!({"kind": "text", "caption": "a crown", "method": "scratch",
+        "preset": "draft", "steps": 3, "seed": 5});
+    let mut spec = vectorfusion::server::types::parse_submit(
+        body.to_string().as_bytes(),
+        &vectorfusion::pipeline::Limits::default(),
+        1,
+        &exec,
+    )
+    .unwrap();
+    let plan = spec.plan.clone().expect("a plan is resolved at submit");
+    let text = plan.text.as_ref().unwrap();
+    assert_eq!((text.size, text.sds.as_ref().unwrap().steps), (32, 3));
+    // The spec's own fields say "fast" and 1000 steps now; the stored plan still decides.
+    spec.preset = Preset::Fast;
+    spec.steps = 1000;
+    let out = exec
+        .run(&spec, &JobContext::detached(CancelToken::new()))
+        .unwrap();
+    assert_eq!(out.detail["sds"]["steps_done"], 3);
+    assert_eq!(out.detail["size"], 32);
+    // Without a stored plan (a job from before plans) the spec's fields are resolved.
+    spec.plan = None;
+    spec.steps = 2;
+    let out = exec
+        .run(&spec, &JobContext::detached(CancelToken::new()))
+        .unwrap();
+    assert_eq!(out.detail["sds"]["steps_done"], 2);
+    assert_eq!(out.detail["size"], 64, "the fast preset's size");
 }

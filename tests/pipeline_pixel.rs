@@ -2,13 +2,15 @@
 //! 16 px prior): every method produces a valid SVG; TAESD as the SDS encoder of the tiny SD
 //! model; the default-model resolution of `generate` and the service executor.
 
+mod common;
+
+use common::runs;
 use std::path::PathBuf;
-use vectorfusion::pipeline::methods::{Models, Start, TextRequest, run_text};
 use vectorfusion::pipeline::{
-    DefaultExecutor, Executor, JobContext, JobKind, JobSpec, Method, ModelDirs, Preset, Style,
+    DefaultExecutor, EncoderChoice, Executor, JobContext, JobKind, JobSpec, Method, ModelDirs,
+    PlanRequest, Preset, Style,
 };
-use vectorfusion::progress::{CancelToken, NullSink};
-use vectorfusion::stages::styles::Style as StageStyle;
+use vectorfusion::progress::CancelToken;
 
 fn fixture(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -26,30 +28,26 @@ fn assert_valid_svg(svg: &str) {
     resvg::usvg::Tree::from_str(svg, &resvg::usvg::Options::default()).unwrap();
 }
 
-fn req(method: Method, style: StageStyle) -> TextRequest {
-    TextRequest {
-        caption: "a crown".into(),
+fn req(method: Method, style: Style) -> PlanRequest {
+    PlanRequest {
         style,
         method,
         preset: Preset::Draft,
-        paths: None,
         steps: Some(3),
         samples: Some(2),
         seed: 3,
-        guidance: None,
-        retrieval: true,
-        start: Start::Method,
+        ..PlanRequest::text("a crown")
     }
 }
 
 #[test]
 fn every_method_runs_on_the_pixel_space_model() {
     // 64 px renders for a 16 px prior; samples (16 px) are upscaled to the 64 px trace canvas.
-    let m = Models::load_sd(&fixture("sd-tiny-pixel"), Some(&fixture("clip-tiny")), 64).unwrap();
-    assert!(m.is_small_prior());
+    let m = runs::executor(fixture("sd-tiny-pixel"), Some(fixture("clip-tiny")));
+    assert!(m.small_prior());
     for method in Method::ALL {
-        for style in [StageStyle::Iconography, StageStyle::PixelArt] {
-            let out = run_text(&m, &req(*method, style), &NullSink, &CancelToken::new())
+        for style in [Style::Iconography, Style::PixelArt] {
+            let out = runs::run(&m, &req(*method, style))
                 .unwrap_or_else(|e| panic!("{method:?} {style:?}: {e}"));
             assert_valid_svg(&out.svg);
             assert!(out.paths > 0, "{method:?} {style:?}: empty scene");
@@ -67,7 +65,7 @@ fn every_method_runs_on_the_pixel_space_model() {
                     assert_eq!(d["sds"]["augment"], false);
                 }
             }
-            if style == StageStyle::Iconography && *method != Method::Scratch {
+            if style == Style::Iconography && *method != Method::Scratch {
                 // traced at the pixel preset's canvas, not at the 16 px sample size
                 assert!(d["live"]["paths"].as_u64().unwrap() > 0, "{d}");
             }
@@ -77,22 +75,21 @@ fn every_method_runs_on_the_pixel_space_model() {
 
 #[test]
 fn sd_live_sds_with_taesd_as_the_encoder() {
-    let m = Models::load_sd_with(
-        &fixture("sd-tiny"),
-        Some(&fixture("clip-tiny")),
-        32,
-        Some(&fixture("taesd-tiny")),
-        vectorfusion::models::ComputeDevice::Cpu,
-    )
-    .unwrap();
-    assert!(!m.is_small_prior());
-    let out = run_text(
-        &m,
-        &req(Method::SdLiveSds, StageStyle::Iconography),
-        &NullSink,
-        &CancelToken::new(),
-    )
-    .unwrap();
+    let m = DefaultExecutor::with_downloads(ModelDirs {
+        sd_dir: Some(fixture("sd-tiny")),
+        clip_dir: Some(fixture("clip-tiny")),
+        taesd_dir: Some(fixture("taesd-tiny")),
+        encoder: EncoderChoice::Taesd,
+        ..ModelDirs::default()
+    });
+    assert!(!m.small_prior());
+    let r = req(Method::SdLiveSds, Style::Iconography);
+    let plan = runs::plan(&m, &r);
+    assert_eq!(
+        plan.text.as_ref().unwrap().model.encoder,
+        EncoderChoice::Taesd
+    );
+    let out = runs::run(&m, &r).unwrap();
     assert_valid_svg(&out.svg);
     assert_eq!(out.detail["encoder"], "taesd");
     assert_eq!(out.detail["sds"]["steps_done"], 3);
@@ -122,6 +119,7 @@ fn service_executor_runs_a_text_job_on_the_default_pixel_model() {
         preset: Preset::Draft,
         priority: 0,
         retrieval: true,
+        plan: None,
     };
     let out = exec
         .run(&spec, &JobContext::detached(CancelToken::new()))

@@ -29,7 +29,7 @@ fn generate_with_analytic_teacher_writes_svg_and_snapshots() {
     im.save_png(&targets.join("red.png")).unwrap();
     let out = dir.join("out.svg");
     let snaps = dir.join("snaps");
-    for style in ["iconography", "pixel-art", "sketch"] {
+    for style in ["iconography", "pixel-art", "sketch", "low-poly", "painting"] {
         let st = bin()
             .args([
                 "generate",
@@ -59,13 +59,13 @@ fn generate_with_analytic_teacher_writes_svg_and_snapshots() {
         let svg = std::fs::read_to_string(&out).unwrap();
         assert!(svg.contains("<svg") && !svg.contains("NaN"), "{style}");
         vectorfusion::svg::check_safe_output(&svg).unwrap();
-        let snap = std::fs::read_to_string(snaps.join("step_00010.svg")).unwrap();
+        let snap = std::fs::read_to_string(snaps.join("sds_00010.svg")).unwrap();
         vectorfusion::svg::check_safe_output(&snap).unwrap();
         let scene = vectorfusion::svg::from_svg(&svg).unwrap();
         assert_eq!(scene.width, 32);
         assert!(String::from_utf8_lossy(&st.stderr).contains("TEST teacher"));
-        assert!(snaps.join("step_00010.svg").exists());
-        assert!(snaps.join("step_00020.svg").exists());
+        assert!(snaps.join("sds_00010.svg").exists());
+        assert!(snaps.join("sds_00020.svg").exists());
     }
     let st = bin()
         .args([

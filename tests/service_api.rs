@@ -814,7 +814,7 @@ async fn omitted_paths_steps_samples_are_the_presets_and_are_recorded() {
         let p = &job["params"];
         (p["paths"].clone(), p["steps"].clone(), p["samples"].clone())
     };
-    // The same resolution as `generate --preset` (Preset::resolve).
+    // The same resolution as `generate --preset` (the run plan).
     let text = |preset: &str, style: &str| json!({"kind": "text", "caption": "a crown", "preset": preset, "style": style});
     assert_eq!(
         params(text("draft", "iconography")).await,
@@ -842,6 +842,23 @@ async fn omitted_paths_steps_samples_are_the_presets_and_are_recorded() {
     // Vectorize: the preset's LIVE budget.
     let v = json!({"kind": "vectorize", "image": png_b64(8), "preset": "fast"});
     assert_eq!(params(v).await.0, json!(64));
+    // The new styles, in any accepted spelling, are stored and shown in the canonical one,
+    // with the plan the job runs with.
+    for (given, canonical, paths) in [("low-poly", "low_poly", 8), ("painting", "painting", 8)] {
+        let r = post_json(srv.addr, "/jobs", &text("draft", given)).await;
+        assert_eq!(r.status, 202, "{}", r.text());
+        let id = r.json()["id"].as_str().unwrap().to_string();
+        let job = get(srv.addr, &format!("/jobs/{id}")).await.json();
+        assert_eq!(job["params"]["style"], canonical, "{job}");
+        let plan = &job["params"]["plan"]["text"];
+        assert_eq!(plan["style"], canonical, "{job}");
+        assert_eq!(plan["paths"], paths, "{job}");
+        assert_eq!(plan["sds"]["steps"], 8, "{job}");
+        assert_eq!(plan["size"], 32, "{job}");
+        assert!(plan["seeds"]["init"].is_u64(), "{job}");
+    }
+    let r = post_json(srv.addr, "/jobs", &text("draft", "oil")).await;
+    assert_eq!(r.status, 400, "{}", r.text());
     // A preset value above this server's limit names the preset.
     let r = post_json(srv.addr, "/jobs", &text("paper", "iconography")).await;
     assert_eq!(r.status, 400, "{}", r.text());

@@ -166,7 +166,7 @@ fn submit_request_fields_and_enums_match_the_code() {
             .collect()
     };
     assert_eq!(enum_of("kind"), serde_names(JobKind::ALL));
-    assert_eq!(enum_of("style"), serde_names(Style::ALL));
+    assert_eq!(enum_of("style"), serde_names(&Style::ALL));
     assert_eq!(enum_of("method"), serde_names(Method::ALL));
     assert_eq!(enum_of("preset"), serde_names(Preset::ALL));
     let statuses: BTreeSet<String> = spec

@@ -1,15 +1,17 @@
 //! `vectorfusion bench stability`: where the methods fail. Runs seeds × method × style through
-//! the shared pipeline ([`crate::pipeline::methods`]) with the analytic TEST teacher (built-in
+//! the executor every entry point shares ([`crate::pipeline::DefaultExecutor`]) with the analytic TEST teacher (built-in
 //! targets, or `--teacher analytic:DIR`) or real weights (`--model DIR`), and reports per
 //! method × style: failure rate (error/NaN, empty or collapsed SVG, oversaturation, diverged
 //! loss), final quality spread (PSNR of the render against the nearest teacher target, analytic
 //! teacher only) and seconds per run.
 
 use super::CliError;
+use super::generate::{cli_limits, spec_err};
 use crate::image::{Image, psnr};
-use crate::pipeline::methods::{Models, Start, TeacherModel, TextRequest, run_text};
-use crate::pipeline::{Method, Preset};
-use crate::progress::{CancelToken, NullSink};
+use crate::pipeline::{
+    DefaultExecutor, Executor, JobContext, Method, ModelDirs, PlanRequest, Preset, RunInput, Tuning,
+};
+use crate::progress::CancelToken;
 use crate::scene::{Rgba, Scene, Shape};
 use crate::stages::styles::Style;
 use crate::teacher::{AnalyticTeacher, AnalyticTeacherConfig};
@@ -202,6 +204,24 @@ pub const PSNR_CAP: f64 = 99.0;
 /// Collapsed: the render is (nearly) one flat colour.
 pub const COLLAPSED_SPREAD: f64 = 0.01;
 
+/// A directory removed when dropped.
+struct TempDir(PathBuf);
+
+impl TempDir {
+    fn new(prefix: &str) -> Result<Self, CliError> {
+        let dir = std::env::temp_dir().join(format!("{prefix}-{}", std::process::id()));
+        std::fs::create_dir_all(&dir)
+            .map_err(|e| CliError::Other(anyhow::anyhow!("{}: {e}", dir.display())))?;
+        Ok(TempDir(dir))
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
 pub fn run(args: BenchStabilityArgs) -> Result<(), CliError> {
     let preset: Preset = args.preset.parse().map_err(CliError::Usage)?;
     // Small priors (the embedded model) have their own presets.
@@ -234,34 +254,45 @@ pub fn run(args: BenchStabilityArgs) -> Result<(), CliError> {
     if !(8..=512).contains(&a.size) {
         return Err(CliError::Usage("--size must be in 8..=512".into()));
     }
-    let usage = |e: crate::pipeline::PipelineError| CliError::Usage(e.to_string());
-    let models = if let Some(dir) = &a.model {
-        Models::load_sd(dir, a.scorer.as_deref(), a.size).map_err(usage)?
-    } else if let Some(spec) = &a.teacher {
-        let dir = super::analytic_teacher_dir(spec)?;
-        Models::load_analytic(dir, a.scorer.as_deref(), a.size).map_err(usage)?
-    } else {
-        let cfg = AnalyticTeacherConfig {
-            image_size: a.size,
-            pool: 1,
-            num_train_timesteps: 1000,
-        };
-        let t = AnalyticTeacher::new(cfg, builtin_targets(a.size)?)
+    // The built-in targets reach the executor as the analytic teacher's PNG directory.
+    let builtin_dir;
+    let (analytic_dir, targets) = match (&a.model, &a.teacher) {
+        (Some(_), _) => (None, Vec::new()),
+        (None, Some(spec)) => {
+            let dir = super::analytic_teacher_dir(spec)?.to_path_buf();
+            let t = AnalyticTeacher::from_dir(
+                &dir,
+                AnalyticTeacherConfig {
+                    image_size: a.size,
+                    pool: 1,
+                    num_train_timesteps: 1000,
+                },
+            )
             .map_err(|e| CliError::Usage(e.to_string()))?;
-        Models {
-            teacher: TeacherModel::Analytic(t),
-            scorer: None,
-            retrieval: Err("the test teacher has no retrieval index".into()),
+            (Some(dir), t.targets().to_vec())
+        }
+        (None, None) => {
+            builtin_dir = TempDir::new("vf-stability-targets")?;
+            let mut targets = Vec::new();
+            for (name, t) in builtin_targets(a.size)? {
+                t.save_png(&builtin_dir.0.join(format!("{name}.png")))
+                    .map_err(|e| CliError::Other(anyhow::anyhow!("built-in targets: {e}")))?;
+                targets.push(t);
+            }
+            (Some(builtin_dir.0.clone()), targets)
         }
     };
-    let targets: Vec<Image> = match &models.teacher {
-        TeacherModel::Analytic(t) => t.targets().to_vec(),
-        TeacherModel::Sd(_) => Vec::new(),
-    };
+    let exec = DefaultExecutor::with_downloads(ModelDirs {
+        sd_dir: a.model.clone(),
+        clip_dir: a.scorer.clone(),
+        analytic_dir,
+        ..ModelDirs::default()
+    });
     if let Some(dir) = &a.save {
         std::fs::create_dir_all(dir)
             .map_err(|e| CliError::Usage(format!("--save {}: {e}", dir.display())))?;
     }
+    let mut teacher = String::new();
     let mut cells = Vec::new();
     let mut runs = Vec::new();
     for method in Method::ALL {
@@ -285,21 +316,28 @@ pub fn run(args: BenchStabilityArgs) -> Result<(), CliError> {
             };
             let (mut psnrs, mut secs, mut paths) = (Vec::new(), Vec::new(), Vec::new());
             for seed in 0..a.seeds {
-                let req = TextRequest {
-                    caption: "an icon".into(),
+                let req = PlanRequest {
                     style,
                     method: *method,
                     preset,
-                    paths: (style != Style::PixelArt).then_some(a.paths),
+                    paths: Some(a.paths as u32),
                     steps: Some(a.steps),
                     samples: Some(a.samples),
                     seed,
-                    guidance: None,
                     retrieval: false,
-                    start: Start::Method,
+                    tuning: Tuning {
+                        size: Some(a.size),
+                        ..Tuning::default()
+                    },
+                    ..PlanRequest::text("an icon")
                 };
+                let plan = exec.plan(&req, &cli_limits()).map_err(spec_err)?;
                 let t0 = Instant::now();
-                let r = run_text(&models, &req, &NullSink, &CancelToken::new());
+                let input = RunInput {
+                    caption: Some("an icon".into()),
+                    ..RunInput::default()
+                };
+                let r = exec.run_plan(&plan, &input, &JobContext::detached(CancelToken::new()));
                 let seconds = t0.elapsed().as_secs_f64();
                 secs.push(seconds);
                 let mut run = StabilityRun {
@@ -327,6 +365,9 @@ pub fn run(args: BenchStabilityArgs) -> Result<(), CliError> {
                         continue;
                     }
                 };
+                if let Some(t) = out.detail["teacher"].as_str() {
+                    t.clone_into(&mut teacher);
+                }
                 let img = crate::raster::render(&out.scene);
                 let nan = out.svg.contains("NaN") || img.data.iter().any(|v| !v.is_finite());
                 let collapsed = out.paths == 0 || spread(&img) < COLLAPSED_SPREAD;
@@ -399,7 +440,7 @@ pub fn run(args: BenchStabilityArgs) -> Result<(), CliError> {
         }
     }
     let report = StabilityReport {
-        teacher: models.teacher().name(),
+        teacher,
         preset,
         seeds: a.seeds,
         steps: a.steps,

@@ -13,8 +13,8 @@ use crate::eval::clip::{
 };
 use crate::models::scorer::Scorer;
 use crate::pipeline::{
-    DefaultExecutor, Executor, JobContext, JobKind, JobSpec, Limits, Method, ModelDirs,
-    PipelineError, Preset, Style,
+    DefaultExecutor, Executor, JobContext, Limits, Method, ModelDirs, PipelineError, PlanRequest,
+    Preset, RunInput, Style,
 };
 use crate::progress::{CancelToken, NullSink};
 use serde::Serialize;
@@ -220,18 +220,19 @@ fn generate_and_evaluate(
         let mut seconds = 0.0;
         for (i, caption) in captions.iter().enumerate() {
             let line = i + 1;
-            let spec = job_spec(
-                args,
-                exec.small_prior(),
-                *method,
-                style,
-                preset,
-                caption,
-                line,
-            )?;
+            let plan = exec
+                .plan(
+                    &request(args, *method, style, preset, caption, line),
+                    &Limits::default(),
+                )
+                .map_err(|e| CliError::Usage(format!("line {line}: {e}")))?;
             let t0 = std::time::Instant::now();
+            let input = RunInput {
+                caption: Some(caption.clone()),
+                ..RunInput::default()
+            };
             let out = exec
-                .run(&spec, &JobContext::detached(CancelToken::new()))
+                .run_plan(&plan, &input, &JobContext::detached(CancelToken::new()))
                 .map_err(pipeline_err)?;
             // The pipeline's own time (model loading excluded); wall time as a fallback.
             let secs = out.detail["seconds"]
@@ -297,33 +298,27 @@ fn sample_and_evaluate(
     scorers: &[Scorer],
     dir: &Path,
 ) -> Result<EvalReport, CliError> {
-    let ps = exec.settings(preset);
-    let models = exec
-        .load_models_for(ps.size, ps.prefer_taesd)
-        .map_err(pipeline_err)?;
-    let stage_style = crate::pipeline::methods::stage_style(style);
-    let k = preset
-        .resolve(exec.small_prior(), stage_style, None, None, args.samples)
-        .samples
-        .max(1);
     let cancel = CancelToken::new();
+    let plan_of = |caption: &str, line: usize| {
+        exec.plan(
+            &request(args, Method::SdLive, style, preset, caption, line),
+            &Limits::default(),
+        )
+        .map_err(|e| CliError::Usage(format!("line {line}: {e}")))?
+        .text
+        .ok_or_else(|| CliError::Usage("samples need a text model".into()))
+    };
     let mut images = Vec::with_capacity(captions.len());
     let mut seconds = 0.0;
     for (i, caption) in captions.iter().enumerate() {
         let line = i + 1;
+        let plan = plan_of(caption, line)?;
+        let k = plan.sample.as_ref().map_or(1, |s| s.samples);
+        let models = exec.load_models(&plan).map_err(pipeline_err)?;
         let t0 = std::time::Instant::now();
-        let (ranked, _) = models
-            .sample_and_rerank(
-                &models.prompt(stage_style, caption),
-                caption,
-                k,
-                ps.sample_steps,
-                args.seed.wrapping_add(line as u64 - 1),
-                !args.no_retrieval,
-                &NullSink,
-                &cancel,
-            )
-            .map_err(pipeline_err)?;
+        let (ranked, _) =
+            crate::pipeline::sample_ranked(&models, &plan, caption, &NullSink, &cancel)
+                .map_err(pipeline_err)?;
         let secs = t0.elapsed().as_secs_f64();
         seconds += secs;
         let path = dir.join(format!("{line:04}.png"));
@@ -351,40 +346,26 @@ fn sample_and_evaluate(
     })
 }
 
-fn job_spec(
+/// The request `eval --method` makes for caption `line` (seeds advance by line).
+fn request(
     args: &EvalArgs,
-    small_prior: bool,
     method: Method,
     style: Style,
     preset: Preset,
     caption: &str,
     line: usize,
-) -> Result<JobSpec, CliError> {
-    let r = preset.resolve(
-        small_prior,
-        crate::pipeline::methods::stage_style(style),
-        args.paths.map(|p| p as usize),
-        args.steps,
-        args.samples,
-    );
-    let spec = JobSpec {
-        kind: JobKind::Text,
-        caption: Some(caption.to_string()),
-        image: None,
-        svg: None,
-        style,
+) -> PlanRequest {
+    PlanRequest {
         method,
-        paths: u32::try_from(r.paths).unwrap_or(u32::MAX),
-        steps: r.steps,
-        seed: args.seed.wrapping_add(line as u64 - 1),
-        samples: r.samples,
+        style,
         preset,
-        priority: 0,
+        paths: args.paths,
+        steps: args.steps,
+        samples: args.samples,
+        seed: args.seed.wrapping_add(line as u64 - 1),
         retrieval: !args.no_retrieval,
-    };
-    spec.validate(&Limits::default())
-        .map_err(|e| CliError::Usage(format!("line {line}: {e}")))?;
-    Ok(spec)
+        ..PlanRequest::text(caption)
+    }
 }
 
 fn write(path: &Path, text: &str) -> Result<(), CliError> {

@@ -1,26 +1,24 @@
-//! `vectorfusion generate`: caption → SVG by score distillation from scratch.
+//! `vectorfusion generate`: caption → SVG, through the executor the service uses: the request
+//! is resolved into a [`crate::pipeline::RunPlan`] (printed in the JSON summary) and run.
 //!
 //! `--teacher analytic:DIR` uses the analytic TEST teacher (the exact denoiser of the PNG targets
 //! in DIR; the caption is only recorded and may name a target). `--model DIR` loads a Stable
 //! Diffusion diffusers directory (local files only) as the teacher. Without either (and without
 //! `VECTORFUSION_MODELS_SD_DIR`), the embedded default model is used ([`default_model_dir`]:
 //! `VF_DEFAULT_MODEL`, else `models/vf-icon`), with its `scorer/` as the default scorer.
-//! Pixel-space models always run the shared pipeline with their own presets.
 
 use super::CliError;
-use crate::pipeline::methods::{self, Models, Start, TextRequest};
 use crate::pipeline::{
-    EncoderChoice, Method, PipelineError, Preset, default_model_dir, is_small_model,
-    resolve_encoder,
+    DefaultExecutor, EncoderChoice, Executor, JobContext, JobKind, Limits, Method, ModelDirs,
+    PipelineError, PlanRequest, Preset, RunInput, SpecError, StartKind, Style, Tuning,
+    default_model_dir,
 };
 use crate::progress::{CancelToken, Progress};
-use crate::stages::sds::{RasterBackend, SdsConfig, run_sds};
-use crate::stages::styles::Style;
-use crate::teacher::{AnalyticTeacher, AnalyticTeacherConfig, SdTeacher, Teacher, TeacherError};
+use crate::scene::MAX_PATHS;
 use anyhow::Context;
 use indicatif::{ProgressBar, ProgressStyle};
-use rand::SeedableRng;
 use std::path::PathBuf;
+use std::sync::{Arc, Mutex};
 
 #[derive(clap::Args, Debug)]
 pub struct GenerateArgs {
@@ -30,9 +28,9 @@ pub struct GenerateArgs {
     /// diffusion model (the paper's full pipeline), scratch with `--teacher`].
     #[arg(long)]
     pub method: Option<String>,
-    /// Preset: draft, fast, balanced or paper (resolution, steps, paths, samples). Any of
-    /// --preset, --scorer, --samples, --image, --svg or a method other than scratch runs the
-    /// shared pipeline (the one the service runs).
+    /// Preset: draft, fast, balanced or paper (resolution, steps, paths, samples, sampler
+    /// steps, LIVE iterations; `default` and `quality` are older names of balanced and paper)
+    /// [default: balanced].
     #[arg(long)]
     pub preset: Option<String>,
     /// CLIP scorer directory used to keep the best of the sampled images.
@@ -47,7 +45,8 @@ pub struct GenerateArgs {
     /// Start from this SVG: import it, then fine-tune it to the caption with SDS.
     #[arg(long)]
     pub svg: Option<PathBuf>,
-    /// Style: iconography, pixel-art or sketch.
+    /// Style: iconography, pixel_art, sketch, low_poly or painting (`pixel-art`, `low-poly`,
+    /// `icon`, `line` are accepted too).
     #[arg(long, default_value = "iconography")]
     pub style: String,
     /// Stable Diffusion model directory (diffusers layout).
@@ -68,16 +67,15 @@ pub struct GenerateArgs {
     /// feature).
     #[arg(long, default_value = "cpu")]
     pub device: String,
-    /// Teacher input size in pixels (the SVG is written at this width) [default: the preset's,
-    /// 64 for plain scratch].
+    /// Teacher input size in pixels (the SVG is written at this width) [default: the preset's].
     #[arg(long)]
     pub size: Option<u32>,
-    /// SDS steps [default: the preset's, 500 for plain scratch].
+    /// SDS steps [default: the preset's].
     #[arg(long)]
     pub steps: Option<u32>,
-    /// Number of paths (iconography, sketch; pixel art is always a 32x32 grid).
+    /// Number of paths or strokes (pixel art is always a 32x32 grid) [default: the preset's].
     #[arg(long)]
-    pub paths: Option<usize>,
+    pub paths: Option<u32>,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     /// SDS classifier-free guidance scale [default: the model's (`_sds_guidance` in its
@@ -88,32 +86,34 @@ pub struct GenerateArgs {
     /// model starts about half of its K samples from the icons nearest to the caption).
     #[arg(long)]
     pub no_retrieval: bool,
-    /// Smallest timestep drawn.
-    #[arg(long, default_value_t = 50)]
-    pub t_min: usize,
-    /// Largest timestep drawn (at the start, see `--t-max-end`).
-    #[arg(long, default_value_t = 950)]
-    pub t_max: usize,
+    /// Smallest timestep drawn [default: 50].
+    #[arg(long)]
+    pub t_min: Option<usize>,
+    /// Largest timestep drawn (at the start, see `--t-max-end`) [default: 950].
+    #[arg(long)]
+    pub t_max: Option<usize>,
     /// Anneal the largest timestep linearly to this value by the last step.
     #[arg(long)]
     pub t_max_end: Option<usize>,
     /// Clip each parameter group's gradient to this L2 norm.
     #[arg(long)]
     pub grad_clip: Option<f32>,
-    /// Also re-initialise closed paths whose area is below this many px² (iconography).
+    /// Also re-initialise closed paths whose area is below this many px² (iconography) [default:
+    /// the paper's 64 px² at 512 px when the run starts from a sample, image or SVG].
     #[arg(long)]
     pub reinit_min_area: Option<f32>,
-    /// Turn off the random perspective + crop augmentation.
+    /// Turn off the random perspective + crop augmentation (from-scratch runs use it).
     #[arg(long)]
     pub no_augment: bool,
     /// Output SVG path.
     #[arg(short, long)]
     pub output: PathBuf,
-    /// Write an SVG snapshot here every `--snapshot-every` steps.
+    /// Write SVG snapshots here (`STAGE_STEP.svg`, every `--snapshot-every` steps).
     #[arg(long)]
     pub snapshots: Option<PathBuf>,
-    #[arg(long, default_value_t = 50)]
-    pub snapshot_every: u32,
+    /// Snapshot period of the LIVE and SDS stages [default: the preset's].
+    #[arg(long)]
+    pub snapshot_every: Option<u32>,
 }
 
 /// `--model`, else `VECTORFUSION_MODELS_SD_DIR` (and `..._CLIP_DIR` as the scorer), else the
@@ -140,160 +140,6 @@ fn no_model() -> CliError {
     ))
 }
 
-pub fn run(mut args: GenerateArgs) -> Result<(), CliError> {
-    let method: Method = match &args.method {
-        Some(m) => m.parse().map_err(CliError::Usage)?,
-        None if args.teacher.is_some() => Method::Scratch,
-        None => Method::SdLiveSds,
-    };
-    let encoder: EncoderChoice = args.encoder.parse().map_err(CliError::Usage)?;
-    let (model, default_scorer) = model_and_scorer(&args)?;
-    args.model = model;
-    if args.scorer.is_none() {
-        args.scorer = default_scorer;
-    }
-    let small = args.model.as_deref().is_some_and(is_small_model);
-    if small
-        || method != Method::Scratch
-        || args.preset.is_some()
-        || args.scorer.is_some()
-        || args.samples.is_some()
-        || args.image.is_some()
-        || args.svg.is_some()
-    {
-        return run_pipeline(args, method, encoder, small);
-    }
-    let style: Style = args.style.parse().map_err(CliError::Usage)?;
-    let size = args.size.unwrap_or(64);
-    let steps = args.steps.unwrap_or(500);
-    if !(8..=2048).contains(&size) {
-        return Err(CliError::Usage(format!(
-            "--size {size} out of range 8..=2048"
-        )));
-    }
-    if steps == 0 {
-        return Err(CliError::Usage("--steps must be positive".into()));
-    }
-    // The model's prompt/guidance defaults (the paper's for the analytic test teacher).
-    let mut hints = crate::models::pipeline::ModelHints::default();
-    let teacher: Box<dyn Teacher> = if let Some(dir) = &args.model {
-        let taesd =
-            resolve_encoder(encoder, true, dir, args.taesd.as_deref()).map_err(pipeline_err)?;
-        let device = super::parse_device(&args.device)?;
-        let t = SdTeacher::load_on(dir, size, taesd.as_deref(), device).map_err(|e| match e {
-            TeacherError::Setup(m) => CliError::Usage(m),
-            other => CliError::Other(anyhow::Error::new(other).context("loading the model")),
-        })?;
-        hints = t.model().hints;
-        Box::new(t)
-    } else {
-        let spec = args.teacher.as_deref().ok_or_else(no_model)?;
-        let dir = super::analytic_teacher_dir(spec)?;
-        let pool = if size >= 64 && size % 64 == 0 {
-            size / 64
-        } else {
-            1
-        };
-        Box::new(
-            AnalyticTeacher::from_dir(
-                dir,
-                AnalyticTeacherConfig {
-                    image_size: size,
-                    pool,
-                    num_train_timesteps: 1000,
-                },
-            )
-            .map_err(|e| CliError::Usage(e.to_string()))?,
-        )
-    };
-    eprintln!("teacher: {}", teacher.name());
-
-    let mut cfg = SdsConfig::for_style(style, &args.caption, steps, size);
-    cfg.prompt = style.prompt_with(&args.caption, hints.style_suffix);
-    cfg.seed = args.seed;
-    cfg.guidance = args.guidance.unwrap_or(hints.sds_guidance);
-    cfg.snapshot_every = if args.snapshots.is_some() {
-        args.snapshot_every
-    } else {
-        0
-    };
-    cfg.t_min = args.t_min;
-    cfg.t_max = args.t_max;
-    cfg.t_max_end = args.t_max_end;
-    cfg.grad_clip = args.grad_clip;
-    if let Some(r) = cfg.reinit.as_mut() {
-        r.min_area = args.reinit_min_area;
-    }
-    if args.no_augment {
-        cfg.augment = None;
-    }
-    let render = cfg.render_size(size);
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(args.seed ^ 0x5eed_1a17);
-    let paths = args.paths.unwrap_or(style.default_paths());
-    if paths == 0 || paths > 4096 {
-        return Err(CliError::Usage("--paths must be in 1..=4096".into()));
-    }
-    let scene = style
-        .init_scene(render, paths, &mut rng)
-        .context("initial scene")?;
-
-    if let Some(d) = &args.snapshots {
-        std::fs::create_dir_all(d)
-            .with_context(|| format!("cannot create snapshot directory {}", d.display()))?;
-    }
-    let bar = ProgressBar::new(steps as u64);
-    bar.set_style(
-        ProgressStyle::with_template("sds [{bar:40}] {pos}/{len} {msg} ({eta})")
-            .unwrap_or_else(|_| ProgressStyle::default_bar())
-            .progress_chars("=> "),
-    );
-    let snap_dir = args.snapshots.clone();
-    let snap_err = std::sync::Mutex::new(None::<String>);
-    let sink = |p: Progress| {
-        bar.set_position(p.step as u64);
-        if let Some(l) = p.loss {
-            bar.set_message(format!("loss {l:.4}"));
-        }
-        if let (Some(dir), Some(svg)) = (&snap_dir, &p.svg) {
-            let path = dir.join(format!("step_{:05}.svg", p.step));
-            if let Err(e) = std::fs::write(&path, svg)
-                && let Ok(mut g) = snap_err.lock()
-            {
-                *g = Some(format!("{}: {e}", path.display()));
-            }
-        }
-    };
-    let out = run_sds(
-        &RasterBackend,
-        teacher.as_ref(),
-        scene,
-        &cfg,
-        &sink,
-        &CancelToken::new(),
-    )
-    .map_err(|e| match e {
-        crate::stages::sds::SdsError::Config(m) => CliError::Usage(m),
-        other => CliError::Other(anyhow::Error::new(other).context("score distillation")),
-    })?;
-    bar.finish();
-    if let Ok(Some(e)) = snap_err.into_inner() {
-        eprintln!("warning: could not write a snapshot: {e}");
-    }
-    let final_scene = out.scene.scaled_to_width(size);
-    let svg = RasterBackend::svg_text(&final_scene);
-    std::fs::write(&args.output, svg)
-        .with_context(|| format!("cannot write {}", args.output.display()))?;
-    eprintln!(
-        "wrote {} ({} steps, {} skipped non-finite, {} lr halvings, {} re-inits)",
-        args.output.display(),
-        out.stats.steps_done,
-        out.stats.skipped_nonfinite,
-        out.stats.lr_halvings,
-        out.stats.reinits
-    );
-    Ok(())
-}
-
 pub(crate) fn pipeline_err(e: PipelineError) -> CliError {
     match e {
         PipelineError::InvalidInput(m) | PipelineError::ModelsNotConfigured(m) => {
@@ -303,36 +149,88 @@ pub(crate) fn pipeline_err(e: PipelineError) -> CliError {
     }
 }
 
-/// The shared pipeline ([`crate::pipeline::methods`]): every method, presets, starts from an
-/// image or SVG, rerank, pruning.
-fn run_pipeline(
-    args: GenerateArgs,
-    method: Method,
-    encoder: EncoderChoice,
-    small: bool,
-) -> Result<(), CliError> {
+pub(crate) fn spec_err(e: SpecError) -> CliError {
+    CliError::Usage(format!("--{}: {}", e.field.replace('_', "-"), e.reason))
+}
+
+/// Limits of a command-line run: only what the stages themselves cap.
+pub(crate) fn cli_limits() -> Limits {
+    Limits {
+        max_paths: MAX_PATHS as u32,
+        max_steps: u32::MAX,
+        max_samples: u32::MAX,
+        ..Limits::default()
+    }
+}
+
+/// The model directories of a command-line run (`--model`/`--teacher`, `--scorer`, `--taesd`,
+/// `--encoder`, `--device`, else the configured or embedded model).
+fn model_dirs(args: &GenerateArgs) -> Result<ModelDirs, CliError> {
+    let encoder: EncoderChoice = args.encoder.parse().map_err(CliError::Usage)?;
+    let (model, default_scorer) = model_and_scorer(args)?;
+    let analytic_dir = match (&model, &args.teacher) {
+        (Some(_), _) => None,
+        (None, Some(spec)) => Some(super::analytic_teacher_dir(spec)?.to_path_buf()),
+        (None, None) => return Err(no_model()),
+    };
+    Ok(ModelDirs {
+        sd_dir: model,
+        clip_dir: args.scorer.clone().or(default_scorer),
+        taesd_dir: args.taesd.clone(),
+        encoder,
+        device: super::parse_device(&args.device)?,
+        analytic_dir,
+    })
+}
+
+/// A progress bar per stage on stderr; snapshots written to `snap_dir`.
+fn progress_sink(snap_dir: Option<PathBuf>) -> (ProgressBar, impl Fn(Progress) + Send + Sync) {
+    let bar = ProgressBar::new(1);
+    bar.set_style(
+        ProgressStyle::with_template("{msg:>8} [{bar:40}] {pos}/{len} ({eta})")
+            .unwrap_or_else(|_| ProgressStyle::default_bar())
+            .progress_chars("=> "),
+    );
+    let stage = Mutex::new(String::new());
+    let b = bar.clone();
+    let sink = move |p: Progress| {
+        if let Ok(mut s) = stage.lock()
+            && *s != p.stage
+        {
+            s.clone_from(&p.stage);
+            b.reset();
+            b.set_message(p.stage.clone());
+        }
+        b.set_length(u64::from(p.total));
+        b.set_position(u64::from(p.step));
+        if let (Some(d), "rerank") = (&p.detail, p.stage.as_str()) {
+            b.suspend(|| eprintln!("rerank: {d}"));
+        }
+        if let (Some(dir), Some(svg)) = (&snap_dir, &p.svg) {
+            let path = dir.join(format!("{}_{:05}.svg", p.stage, p.step));
+            if let Err(e) = std::fs::write(&path, svg) {
+                b.suspend(|| eprintln!("warning: could not write {}: {e}", path.display()));
+            }
+        }
+    };
+    (bar, sink)
+}
+
+pub fn run(args: GenerateArgs) -> Result<(), CliError> {
+    let method: Method = match &args.method {
+        Some(m) => m.parse().map_err(CliError::Usage)?,
+        None if args.teacher.is_some() => Method::Scratch,
+        None => Method::SdLiveSds,
+    };
     let style: Style = args.style.parse().map_err(CliError::Usage)?;
     let preset: Preset = match &args.preset {
         Some(p) => p.parse().map_err(CliError::Usage)?,
         None => Preset::default(),
     };
-    let ps = preset.settings_for(small);
-    let size = args.size.unwrap_or(ps.size);
-    if !(8..=2048).contains(&size) {
-        return Err(CliError::Usage(format!(
-            "--size {size} out of range 8..=2048"
-        )));
-    }
-    if args.steps == Some(0) || args.samples == Some(0) || args.paths == Some(0) {
-        return Err(CliError::Usage(
-            "--steps, --samples and --paths must be positive".into(),
-        ));
-    }
-    let models = if let Some(dir) = &args.model {
-        let taesd = resolve_encoder(encoder, ps.prefer_taesd, dir, args.taesd.as_deref())
-            .map_err(pipeline_err)?;
-        // The retrieval index is installed on first use, as the MiniLM weights are (the
-        // service never downloads; `vectorfusion setup` does both up front).
+    let dirs = model_dirs(&args)?;
+    // The retrieval index is installed on first use, as the MiniLM weights are (the service
+    // never downloads; `vectorfusion setup` does both up front).
+    if let Some(dir) = &dirs.sd_dir {
         let rloc = crate::retrieval::RetrievalLocations::from_env();
         if !args.no_retrieval
             && method != Method::Scratch
@@ -343,30 +241,22 @@ fn run_pipeline(
         {
             eprintln!("warning: no retrieval index ({e}); sampling from noise only");
         }
-        let device = super::parse_device(&args.device)?;
-        Models::load_sd_with(dir, args.scorer.as_deref(), size, taesd.as_deref(), device)
-            .map_err(pipeline_err)?
-    } else {
-        let spec = args.teacher.as_deref().ok_or_else(no_model)?;
-        let dir = super::analytic_teacher_dir(spec)?;
-        Models::load_analytic(dir, args.scorer.as_deref(), size).map_err(pipeline_err)?
-    };
-    eprintln!("teacher: {}", models.teacher().name());
-    let start = if let Some(p) = &args.image {
-        Start::Image(
-            crate::image::Image::open(p)
-                .map_err(|e| CliError::Usage(format!("{}: {e}", p.display())))?,
-        )
+    }
+    let (start, image, svg) = if let Some(p) = &args.image {
+        let im = crate::image::Image::open(p)
+            .map_err(|e| CliError::Usage(format!("{}: {e}", p.display())))?;
+        (StartKind::Image, Some(im), None)
     } else if let Some(p) = &args.svg {
-        Start::Svg(
-            crate::svg::load_scene(p)
-                .map_err(|e| CliError::Usage(format!("{}: {e}", p.display())))?,
-        )
+        let sc = crate::svg::load_scene(p)
+            .map_err(|e| CliError::Usage(format!("{}: {e}", p.display())))?;
+        (StartKind::Svg, None, Some(sc))
     } else {
-        Start::Method
+        (StartKind::Method, None, None)
     };
-    let req = TextRequest {
-        caption: args.caption.clone(),
+    let request = PlanRequest {
+        kind: JobKind::Text,
+        caption: Some(args.caption.clone()),
+        start,
         style,
         method,
         preset,
@@ -374,41 +264,56 @@ fn run_pipeline(
         steps: args.steps,
         samples: args.samples,
         seed: args.seed,
-        guidance: args.guidance,
         retrieval: !args.no_retrieval,
-        start,
+        tuning: Tuning {
+            size: args.size,
+            guidance: args.guidance,
+            t_min: args.t_min,
+            t_max: args.t_max,
+            t_max_end: args.t_max_end,
+            grad_clip: args.grad_clip,
+            reinit_min_area: args.reinit_min_area,
+            augment: args.no_augment.then_some(false),
+            snapshot_every: args.snapshot_every,
+            live: None,
+        },
     };
+    let exec = DefaultExecutor::with_downloads(dirs);
+    let plan = exec.plan(&request, &cli_limits()).map_err(spec_err)?;
+    let text = plan
+        .text
+        .as_ref()
+        .ok_or_else(|| CliError::Usage("the request resolved to no text run".into()))?;
+    let models = exec.load_models(text).map_err(pipeline_err)?;
+    eprintln!("teacher: {}", models.teacher().name());
     if let Some(d) = &args.snapshots {
         std::fs::create_dir_all(d)
             .with_context(|| format!("cannot create snapshot directory {}", d.display()))?;
     }
-    let snap_dir = args.snapshots.clone();
-    let sink = |p: Progress| {
-        if let Some(l) = p.loss
-            && p.step % 10 == 0
-        {
-            eprintln!("{} {}/{} loss {l:.4}", p.stage, p.step, p.total);
-        }
-        if let Some(d) = &p.detail
-            && p.stage == "rerank"
-        {
-            eprintln!("rerank: {d}");
-        }
-        if let (Some(dir), Some(svg)) = (&snap_dir, &p.svg) {
-            let path = dir.join(format!("{}_{:05}.svg", p.stage, p.step));
-            if let Err(e) = std::fs::write(&path, svg) {
-                eprintln!("warning: could not write {}: {e}", path.display());
-            }
-        }
+    let (bar, sink) = progress_sink(args.snapshots.clone());
+    let ctx = JobContext::new(
+        Arc::new(sink),
+        CancelToken::new(),
+        u32::MAX,
+        Box::new(|_| Ok(())),
+        None,
+    );
+    let input = RunInput {
+        caption: Some(args.caption.clone()),
+        image,
+        svg,
     };
-    let out = methods::run_text(&models, &req, &sink, &CancelToken::new()).map_err(pipeline_err)?;
+    let out = exec.run_plan(&plan, &input, &ctx).map_err(pipeline_err)?;
+    bar.finish_and_clear();
     std::fs::write(&args.output, &out.svg)
         .with_context(|| format!("cannot write {}", args.output.display()))?;
-    eprintln!(
-        "wrote {} ({} paths; detail {})",
-        args.output.display(),
-        out.paths,
-        out.detail
-    );
+    eprintln!("wrote {} ({} paths)", args.output.display(), out.paths);
+    let summary = serde_json::json!({
+        "output": args.output,
+        "paths": out.paths,
+        "plan": plan,
+        "detail": out.detail,
+    });
+    println!("{summary}");
     Ok(())
 }

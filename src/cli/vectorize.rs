@@ -3,8 +3,11 @@
 
 use super::CliError;
 use crate::image::Image;
+use crate::pipeline::{
+    DefaultExecutor, Executor, JobContext, JobKind, PlanRequest, RunInput, Tuning,
+};
 use crate::progress::{CancelToken, Progress};
-use crate::stages::live::{self, InitMode, LiveConfig, PathBudget, Preset};
+use crate::stages::live::{self, InitMode, LiveConfig, PathBudget};
 use std::path::{Path, PathBuf};
 
 /// Largest input side the command accepts (larger images are refused before decoding).
@@ -31,8 +34,10 @@ pub struct VectorizeArgs {
     pub iters: Option<u32>,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    #[arg(long, value_enum, default_value = "balanced")]
-    pub preset: Preset,
+    /// Preset: draft, fast, balanced or paper (`quality` is an older name of paper): the
+    /// working size and iterations; the same vocabulary as `generate` and the service.
+    #[arg(long, default_value = "balanced")]
+    pub preset: String,
     /// Start from vtracer's trace instead of circles.
     #[arg(long, value_enum, default_value = "circles")]
     pub init: InitArg,
@@ -84,7 +89,8 @@ pub fn load_input(path: &Path) -> Result<Image, CliError> {
 
 /// Builds the LIVE configuration from the command-line options.
 pub fn config_from_args(a: &VectorizeArgs) -> Result<LiveConfig, CliError> {
-    let mut cfg = LiveConfig::preset(a.preset);
+    let preset: crate::pipeline::Preset = a.preset.parse().map_err(CliError::Usage)?;
+    let mut cfg = preset.live_config();
     cfg.budget = if let Some(s) = &a.schedule {
         PathBudget::Schedule {
             stages: live::schedule::parse_schedule(s, live::MAX_PATHS)
@@ -156,7 +162,35 @@ pub fn run(a: VectorizeArgs) -> Result<(), CliError> {
         }
     };
     let t0 = std::time::Instant::now();
-    let result = live::vectorize(&target, &cfg, &sink, &CancelToken::new())
+    // The same executor and plan as the service's vectorize jobs, with this command's LIVE
+    // configuration as the plan.
+    let exec = DefaultExecutor::default();
+    let request = PlanRequest {
+        kind: JobKind::Vectorize,
+        caption: None,
+        seed: a.seed,
+        tuning: Tuning {
+            live: Some(cfg),
+            ..Tuning::default()
+        },
+        ..PlanRequest::text("")
+    };
+    let plan = exec
+        .plan(&request, &super::generate::cli_limits())
+        .map_err(super::generate::spec_err)?;
+    let ctx = JobContext::new(
+        std::sync::Arc::new(sink),
+        CancelToken::new(),
+        u32::MAX,
+        Box::new(|_| Ok(())),
+        None,
+    );
+    let input = RunInput {
+        image: Some(target),
+        ..RunInput::default()
+    };
+    let result = exec
+        .run_plan(&plan, &input, &ctx)
         .map_err(|e| CliError::Other(anyhow::anyhow!("vectorize failed: {e}")))?;
     bar.finish_and_clear();
     let svg = crate::svg::to_svg(
@@ -177,12 +211,11 @@ pub fn run(a: VectorizeArgs) -> Result<(), CliError> {
         "{}: {} paths{}, PSNR {:.2} dB, {} bytes, {:.1} s",
         a.output.display(),
         result.paths,
-        if result.pruned > 0 {
-            format!(" ({} pruned)", result.pruned)
-        } else {
-            String::new()
+        match result.detail["paths_pruned"].as_u64() {
+            Some(n) if n > 0 => format!(" ({n} pruned)"),
+            _ => String::new(),
         },
-        result.psnr,
+        result.detail["psnr"].as_f64().unwrap_or(f64::NAN),
         svg.len(),
         t0.elapsed().as_secs_f64()
     );
@@ -206,7 +239,13 @@ mod tests {
     #[test]
     fn options_map_to_config() {
         let c = config_from_args(&parse(&[])).unwrap();
-        assert_eq!(c, LiveConfig::preset(Preset::Balanced));
+        assert_eq!(c, LiveConfig::preset(live::Preset::Balanced));
+        // One preset vocabulary: `quality` is paper's older name, draft cuts the work.
+        let q = config_from_args(&parse(&["--preset", "quality"])).unwrap();
+        assert_eq!(q.size, LiveConfig::preset(live::Preset::Quality).size);
+        let d = config_from_args(&parse(&["--preset", "draft"])).unwrap();
+        assert_eq!((d.size, d.iters_per_stage), (64, 20));
+        assert!(config_from_args(&parse(&["--preset", "best"])).is_err());
         let c = config_from_args(&parse(&["--paths", "auto", "--seed", "7"])).unwrap();
         assert!(matches!(c.budget, PathBudget::Auto { .. }));
         assert_eq!(c.seed, 7);

@@ -162,7 +162,7 @@ pub struct ModelHints {
     #[serde(rename = "_sds_guidance", default = "sds_guidance")]
     pub sds_guidance: f32,
     /// `_small_prior`: a small prior (the embedded `vf-icon`) rather than Stable Diffusion: the
-    /// pipeline uses the presets sized for it ([`crate::pipeline::Preset::settings_for`]).
+    /// pipeline plans with the presets sized for it ([`crate::pipeline::Preset::settings_for`]).
     /// Pixel-space models are small priors whatever this says.
     #[serde(rename = "_small_prior", default)]
     pub small_prior: bool,

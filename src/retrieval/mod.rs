@@ -1,6 +1,6 @@
 //! Retrieval for the sampler (after RDM and kNN-Diffusion): a caption index over the icons the
 //! embedded prior was trained on, so that some of the K samples start from the icons whose names
-//! are nearest to the caption (SDEdit in [`crate::pipeline::methods::Models::sample`]).
+//! are nearest to the caption (SDEdit in [`crate::stages::sample::sample_and_rerank`]).
 //!
 //! The model directory pins the icon sets (`retrieval/packages.json`: npm package, version,
 //! licence, tarball sha256). `vectorfusion setup` ([`install`]) fetches each tarball (or takes it

@@ -22,6 +22,10 @@ use serde::{Deserialize, Serialize};
 /// Largest canvas side we accept, in pixels.
 pub const MAX_SIDE: u32 = 8192;
 
+/// Most paths (shapes) a run may create or a job may ask for: the one cap that LIVE, the
+/// pipeline, the request limits and `Config::validate` all read.
+pub const MAX_PATHS: usize = 1024;
+
 /// A 2-D point in canvas pixels (x right, y down).
 #[derive(Clone, Copy, Debug, PartialEq, Default, Serialize, Deserialize)]
 pub struct Point {

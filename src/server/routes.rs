@@ -119,15 +119,15 @@ pub(super) async fn submit(
             .map_err(|_| ApiError::Internal("uuid has 16 bytes".into()))?,
     );
     let limits = state.limits.clone();
-    let small = state.executor.small_prior();
+    let executor = state.executor.clone();
     // Small bodies are parsed in place (microseconds); big ones, and image decoding and SVG
     // parsing, are CPU work that runs off the async threads.
     let spec = if body.len() <= INLINE_PARSE_BYTES {
-        parse_submit(&body, &limits, default_seed, small)?
+        parse_submit(&body, &limits, default_seed, executor.as_ref())?
     } else {
         let b = body.clone();
         let l = limits.clone();
-        tokio::task::spawn_blocking(move || parse_submit(&b, &l, default_seed, small))
+        tokio::task::spawn_blocking(move || parse_submit(&b, &l, default_seed, executor.as_ref()))
             .await
             .map_err(|e| ApiError::Internal(format!("validation task failed: {e}")))??
     };

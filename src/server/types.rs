@@ -1,7 +1,9 @@
 //! Request parsing/validation and response shapes of the HTTP API (see `openapi.yaml`).
 
 use super::error::ApiError;
-use crate::pipeline::{JobKind, JobSpec, Limits, Method, Preset, Style};
+use crate::pipeline::{
+    Executor, JobKind, JobSpec, Limits, Method, PlanRequest, Preset, RunPlan, Style, request_of,
+};
 use crate::store::{AttemptRow, JobRow, JobStatus};
 use base64::Engine;
 use serde::Serialize;
@@ -25,8 +27,8 @@ pub const SUBMIT_FIELDS: &[&str] = &[
     "retrieval",
 ];
 
-/// Fields whose omission means "the preset decides" ([`Preset::resolve`]); the resolved values
-/// are stored in the job.
+/// Fields whose omission means "the preset decides" (the job's [`crate::pipeline::RunPlan`]);
+/// the resolved values are stored in the job.
 pub const PRESET_FIELDS: &[&str] = &["paths", "steps", "samples"];
 
 fn field<T: DeserializeOwned>(obj: &Map<String, Value>, name: &str) -> Result<Option<T>, ApiError> {
@@ -45,7 +47,7 @@ pub fn parse_submit(
     body: &[u8],
     limits: &Limits,
     default_seed: u64,
-    small_prior: bool,
+    executor: &dyn Executor,
 ) -> Result<JobSpec, ApiError> {
     let value: Value =
         serde_json::from_slice(body).map_err(|e| ApiError::MalformedJson(e.to_string()))?;
@@ -94,34 +96,38 @@ pub fn parse_submit(
     let paths: Option<u32> = field(&obj, "paths")?;
     let steps: Option<u32> = field(&obj, "steps")?;
     let samples: Option<u32> = field(&obj, "samples")?;
-    // Omitted paths/steps/samples are the preset's, resolved exactly as the CLI resolves them.
-    let resolved = preset.resolve(
-        small_prior,
-        crate::pipeline::methods::stage_style(style),
-        paths.map(|p| p as usize),
-        steps,
-        samples,
-    );
-    let preset_paths = match kind {
-        JobKind::Text => resolved.paths,
-        JobKind::Vectorize => preset.vectorize_paths(),
-    };
-    let spec = JobSpec {
+    let mut spec = JobSpec {
         kind,
         caption: field(&obj, "caption")?,
         image,
         svg: field(&obj, "svg")?,
         style,
         method: method.unwrap_or_default(),
-        paths: paths.unwrap_or(u32::try_from(preset_paths).unwrap_or(u32::MAX)),
-        steps: resolved.steps,
+        paths: paths.unwrap_or(1),
+        steps: steps.unwrap_or(1),
         seed: field(&obj, "seed")?.unwrap_or(default_seed),
-        samples: resolved.samples,
+        samples: samples.unwrap_or(1),
         preset,
         priority: field(&obj, "priority")?.unwrap_or(0),
         retrieval: field(&obj, "retrieval")?.unwrap_or(true),
+        plan: None,
     };
-    spec.validate(limits).map_err(|e| {
+    // The request's own fields first (omitted numbers stand in as 1) ...
+    spec.validate(limits)
+        .map_err(|e| ApiError::invalid(e.field, e.reason))?;
+    // ... then the plan: omitted paths/steps/samples are the preset's, resolved once, exactly
+    // as the CLI resolves them, and checked against the limits. A text job the executor cannot
+    // run yet is refused by the caller with the configuration hint, not here.
+    if kind == JobKind::Text && executor.text_ready().is_err() {
+        return Ok(spec);
+    }
+    let request = PlanRequest {
+        paths,
+        steps,
+        samples,
+        ..request_of(&spec)
+    };
+    let plan = executor.plan(&request, limits).map_err(|e| {
         let from_preset =
             PRESET_FIELDS.contains(&e.field) && obj.get(e.field).is_none_or(Value::is_null);
         let reason = if from_preset {
@@ -139,6 +145,23 @@ pub fn parse_submit(
         };
         ApiError::invalid(e.field, reason)
     })?;
+    // The stored fields show the resolved numbers.
+    let ps = preset.settings_for(plan.text.as_ref().is_some_and(|t| t.model.small_prior));
+    spec.paths = match (&plan.text, &plan.vectorize) {
+        (Some(t), _) => t.paths,
+        (None, Some(v)) => u32::try_from(v.budget.max_paths()).unwrap_or(u32::MAX),
+        (None, None) => spec.paths,
+    };
+    let text = plan.text.as_ref();
+    spec.steps = text
+        .and_then(|t| t.sds.as_ref().map(|s| s.steps))
+        .or(steps)
+        .unwrap_or(ps.steps);
+    spec.samples = text
+        .and_then(|t| t.sample.as_ref().map(|s| s.samples))
+        .or(samples)
+        .unwrap_or(ps.samples);
+    spec.plan = Some(plan);
     Ok(spec)
 }
 
@@ -212,6 +235,10 @@ pub struct ParamsView {
     pub preset: Preset,
     pub has_image: bool,
     pub has_svg: bool,
+    pub retrieval: bool,
+    /// The run plan resolved when the job was accepted: every number the job runs with.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub plan: Option<RunPlan>,
 }
 
 #[derive(Serialize)]
@@ -366,6 +393,8 @@ impl JobView {
                 preset: s.preset,
                 has_image: s.image.is_some(),
                 has_svg: s.svg.is_some(),
+                retrieval: s.retrieval,
+                plan: s.plan,
             }),
             links: Links {
                 events: format!("{base}/events"),

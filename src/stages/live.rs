@@ -60,6 +60,14 @@ pub enum PathBudget {
 }
 
 impl PathBudget {
+    /// The most paths this budget can create.
+    pub fn max_paths(&self) -> usize {
+        match self {
+            PathBudget::Schedule { stages } => stages.iter().sum(),
+            PathBudget::Auto { max_paths, .. } => *max_paths,
+        }
+    }
+
     /// `n` paths in LIVE's proportions ([`schedule::schedule_for`]).
     pub fn fixed(n: usize) -> Self {
         PathBudget::Schedule {
@@ -199,14 +207,18 @@ impl LiveConfig {
                     return bad("schedule stages must add at least one path");
                 }
                 if stages.iter().fold(0usize, |a, &n| a.saturating_add(n)) > MAX_PATHS {
-                    return bad("schedule adds more than 1024 paths");
+                    return Err(LiveError::Config(format!(
+                        "schedule adds more than {MAX_PATHS} paths"
+                    )));
                 }
             }
             PathBudget::Auto {
                 stage, max_paths, ..
             } => {
                 if *stage == 0 || *max_paths == 0 || *max_paths > MAX_PATHS {
-                    return bad("auto budget needs stage >= 1 and 1 <= max_paths <= 1024");
+                    return Err(LiveError::Config(format!(
+                        "auto budget needs stage >= 1 and 1 <= max_paths <= {MAX_PATHS}"
+                    )));
                 }
             }
         }
@@ -240,8 +252,7 @@ impl Default for LiveConfig {
     }
 }
 
-/// Most paths a run may create.
-pub const MAX_PATHS: usize = 1024;
+pub use crate::scene::MAX_PATHS;
 
 use crate::image::Image;
 use crate::image::ops::resize;

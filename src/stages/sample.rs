@@ -1,16 +1,13 @@
-//! Stage 1 of `sd_live*`: K raster samples of a prompt from a diffusion model. The first
-//! `starts.len()` samples begin from given images (SDEdit: encoded, noised to `strength`, then
-//! denoised with the caption-conditioned prior; the retrieval sampler passes the training icons
-//! nearest to the caption), the others from pure noise. Reranking is the caller's.
+//! Stage 1 of `sd_live*`: K raster samples of the caption, about half of them started from the
+//! training icons nearest to it (retrieval, when the model has an index), and the scorer's pick
+//! among them (rejection sampling). Sampling itself is the teacher's ([`Teacher::sample`]).
 
 use crate::image::Image;
-use crate::models::StableDiffusion;
-use crate::models::scheduler::SamplerKind;
-use crate::progress::{CancelToken, Progress, ProgressSink};
-use crate::stages::sds::gaussian;
-use candle_core::{DType, Tensor};
-use rand::SeedableRng;
-use rand_chacha::ChaCha8Rng;
+use crate::models::scorer::{ImageTextScorer, Scorer};
+use crate::progress::{CancelToken, ProgressSink};
+use crate::retrieval::install::CAPTION_TOKENS;
+use crate::retrieval::{Hit, IconIndex};
+use crate::teacher::{SampleConfig, SampleError, Teacher};
 
 /// How many of the K samples start from retrieved images: half, rounded up (one of two).
 pub fn retrieved_count(k: u32) -> usize {
@@ -23,136 +20,118 @@ pub fn retrieved_count(k: u32) -> usize {
 /// at (`docs/embedded/sdedit.png`), so higher values only lose more of the icon.
 pub const DEFAULT_STRENGTH: f64 = 0.4;
 
-/// What to draw.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct SampleConfig {
-    /// Number of samples K.
-    pub k: u32,
-    /// Sampler (DDIM) steps for a sample from noise; an SDEdit sample runs `strength` of them.
-    pub steps: usize,
-    pub guidance: f64,
-    pub seed: u64,
-    pub strength: f64,
-}
-
-/// Why sampling stopped.
-#[derive(Debug, thiserror::Error)]
-pub enum SampleError {
-    #[error("cancelled")]
-    Cancelled,
-    #[error("{0}")]
-    Failed(String),
-}
-
 fn failed(what: &str, e: impl std::fmt::Display) -> SampleError {
     SampleError::Failed(format!("{what}: {e}"))
 }
 
-/// An opaque RGB image as `[1, 3, H, W]` in `[0, 1]` (alpha composited over white).
-pub fn image_tensor(image: &Image, device: &candle_core::Device) -> Result<Tensor, SampleError> {
-    let (w, h) = (image.width as usize, image.height as usize);
-    Tensor::from_vec(image.planar_rgb_over_white(), (1, 3, h, w), device)
-        .map_err(|e| failed("image", e))
+/// The K raster samples of one caption and the scorer's pick among them.
+///
+/// Invariant: `images` is not empty and `best < images.len()` (checked where it is built).
+#[derive(Debug, Clone)]
+pub struct Ranked {
+    images: Vec<Image>,
+    best: usize,
+    scores: Vec<f32>,
+    /// The retrieved icon each sample started from (`None`: from noise); as long as `images`.
+    sources: Vec<Option<Hit>>,
 }
 
-/// `[1, 3, H, W]` in `[0, 1]` → opaque [`Image`]; non-finite values are an error.
-pub fn tensor_image(t: &Tensor) -> Result<Image, SampleError> {
-    let dims = t.dims().to_vec();
-    let (h, w) = match dims.as_slice() {
-        [1, 3, h, w] => (*h, *w),
-        _ => return Err(failed("decode", format!("unexpected shape {dims:?}"))),
-    };
-    let v: Vec<f32> = t
-        .to_dtype(DType::F32)
-        .and_then(|x| x.flatten_all())
-        .and_then(|x| x.to_vec1())
-        .map_err(|e| failed("decode", e))?;
-    if v.iter().any(|x| !x.is_finite()) {
-        return Err(failed("decode", "non-finite pixels"));
+impl Ranked {
+    pub fn images(&self) -> &[Image] {
+        &self.images
     }
-    let mut im = Image::new(w as u32, h as u32);
-    for p in 0..h * w {
-        for c in 0..3 {
-            im.data[4 * p + c] = v[c * h * w + p].clamp(0.0, 1.0);
-        }
-        im.data[4 * p + 3] = 1.0;
+    /// Index of the kept image (0 without a scorer).
+    pub fn best(&self) -> usize {
+        self.best
     }
-    Ok(im)
+    /// One score per image (empty without a scorer).
+    pub fn scores(&self) -> &[f32] {
+        &self.scores
+    }
+    pub fn best_image(&self) -> &Image {
+        &self.images[self.best]
+    }
+    /// Per sample, the icon it started from (`None`: pure noise).
+    pub fn sources(&self) -> &[Option<Hit>] {
+        &self.sources
+    }
+    /// The icon the kept sample started from.
+    pub fn best_source(&self) -> Option<&Hit> {
+        self.sources.get(self.best).and_then(Option::as_ref)
+    }
 }
 
-/// Draws `cfg.k` samples of `prompt` at the latent shape `[c, h, w]`; `starts` (at most K used)
-/// are SDEdit starting images at the model's image side. Seeded: the same inputs give the same
-/// samples, and the noise of the samples from noise does not depend on `starts`.
-pub fn draw(
-    sd: &StableDiffusion,
-    latent_shape: [usize; 3],
+/// The training icons of `index` nearest to `caption` to start `n` samples from, rendered at
+/// the teacher's image side; `Err` says why there are none (a text encoder that is not the
+/// index's MiniLM, ...).
+pub fn retrieve(
+    teacher: &dyn Teacher,
+    index: &IconIndex,
+    caption: &str,
+    n: usize,
+    seed: u64,
+) -> Result<Vec<(Hit, Image)>, String> {
+    let q = teacher
+        .caption_embedding(caption, CAPTION_TOKENS)
+        .map_err(|e| e.to_string())?
+        .ok_or("the model's text encoder is not the index's MiniLM")?;
+    let side = teacher.image_size();
+    index
+        .nearest(&q, n, 1, seed)
+        .map_err(|e| e.to_string())?
+        .into_iter()
+        .map(|h| {
+            let img = index.render(&h.icon, side).map_err(|e| e.to_string())?;
+            Ok((h, img))
+        })
+        .collect()
+}
+
+/// Samples `cfg.k` images of `prompt` and keeps the one `scorer` matches best to `caption`.
+/// With `index` (`Err`: why there is none, or retrieval is off), [`retrieved_count`] of them
+/// start from the training icons nearest to `caption` at `cfg.strength`; the second value says
+/// why none did, when none did.
+#[allow(clippy::too_many_arguments)]
+pub fn sample_and_rerank(
+    teacher: &dyn Teacher,
+    scorer: Option<&Scorer>,
+    index: Result<&IconIndex, String>,
     prompt: &str,
-    starts: &[Image],
+    caption: &str,
     cfg: &SampleConfig,
     sink: &dyn ProgressSink,
     cancel: &CancelToken,
-) -> Result<Vec<Image>, SampleError> {
-    let (cond, uncond) = sd
-        .text_embeddings(prompt)
-        .map_err(|e| failed("text encoder", e))?;
-    let [c, h, w] = latent_shape;
-    // noise samples draw from the sampler's historical stream; SDEdit noise from its own
-    let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed ^ 0x5a3b_1e00);
-    let mut start_rng = ChaCha8Rng::seed_from_u64(cfg.seed ^ 0x5de0_17a1);
-    let n_starts = starts.len().min(cfg.k as usize);
-    let mut out = Vec::with_capacity(cfg.k as usize);
-    for i in 0..cfg.k as usize {
-        let start = starts.get(i).filter(|_| i < n_starts);
-        if cancel.is_cancelled() {
-            return Err(SampleError::Cancelled);
-        }
-        let r = if i < n_starts {
-            &mut start_rng
-        } else {
-            &mut rng
+) -> Result<(Ranked, Option<String>), SampleError> {
+    let (hits, why_not) =
+        match index.and_then(|i| retrieve(teacher, i, caption, retrieved_count(cfg.k), cfg.seed)) {
+            Ok(h) => (h, None),
+            Err(e) => (Vec::new(), Some(e)),
         };
-        let noise: Vec<f32> = (0..c * h * w).map(|_| gaussian(r)).collect();
-        let noise =
-            Tensor::from_vec(noise, (1, c, h, w), sd.device()).map_err(|e| failed("noise", e))?;
-        let traj = if let Some(start) = start {
-            let x = image_tensor(start, sd.device())?;
-            let z = sd
-                .encode(&x)
-                .map_err(|e| failed("encode the start image", e))?;
-            if z.dims() != [1, c, h, w] {
-                return Err(failed(
-                    "encode the start image",
-                    format!("latent {:?}, expected {:?}", z.dims(), [1, c, h, w]),
-                ));
-            }
-            sd.sample_from(
-                &z,
-                &noise,
-                cfg.strength,
-                &cond,
-                &uncond,
-                cfg.guidance,
-                cfg.steps,
-            )
-        } else {
-            sd.sample(
-                &noise,
-                &cond,
-                &uncond,
-                cfg.guidance,
-                cfg.steps,
-                SamplerKind::Ddim,
-            )
-        }
-        .map_err(|e| failed("sampling", e))?;
-        let z = traj
-            .last()
-            .ok_or_else(|| failed("sampling", "no sampler steps"))?;
-        let img = sd.decode(z).map_err(|e| failed("decode", e))?;
-        out.push(tensor_image(&img)?);
-        sink.report(Progress::new("sample", i as u32 + 1, cfg.k));
+    let (hits, starts): (Vec<Hit>, Vec<Image>) = hits.into_iter().unzip();
+    let images = teacher.sample(prompt, &starts, cfg, sink, cancel)?;
+    if images.is_empty() {
+        return Err(failed("sampling", "no samples drawn (K = 0)"));
     }
-    Ok(out)
+    let (best, scores) = match scorer {
+        Some(scorer) => scorer
+            .best_of(&images, caption)
+            .map_err(|e| failed("CLIP rerank", e))?,
+        None => (0, Vec::new()),
+    };
+    if best >= images.len() {
+        return Err(failed("rerank", "best index out of range"));
+    }
+    let mut sources: Vec<Option<Hit>> = hits.into_iter().map(Some).collect();
+    sources.resize(images.len(), None);
+    Ok((
+        Ranked {
+            images,
+            best,
+            scores,
+            sources,
+        },
+        why_not,
+    ))
 }
 
 #[cfg(test)]
@@ -162,20 +141,5 @@ mod tests {
     #[test]
     fn half_the_samples_start_from_retrieval() {
         assert_eq!([1, 2, 3, 8].map(retrieved_count), [1, 1, 2, 4]);
-    }
-
-    #[test]
-    fn image_tensor_round_trips_and_composites_over_white() {
-        let mut im = Image::filled(2, 1, [0.25, 0.5, 0.75, 1.0]);
-        im.data[4..8].copy_from_slice(&[0.0, 0.0, 0.0, 0.0]);
-        let t = image_tensor(&im, &candle_core::Device::Cpu).unwrap();
-        let back = tensor_image(&t).unwrap();
-        assert_eq!(back.pixel(0, 0), [0.25, 0.5, 0.75, 1.0]);
-        assert_eq!(back.pixel(1, 0), [1.0, 1.0, 1.0, 1.0]);
-        let bad = Tensor::new(&[f32::NAN; 3], &candle_core::Device::Cpu)
-            .unwrap()
-            .reshape((1, 3, 1, 1))
-            .unwrap();
-        assert!(tensor_image(&bad).is_err());
     }
 }

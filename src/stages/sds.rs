@@ -150,6 +150,9 @@ pub struct SdsConfig {
     pub adam: AdamConfig,
     pub schedules: GroupSchedules,
     pub trainable: Trainable,
+    /// Fill opacities stay as they are (their gradient is dropped): low-poly's opaque fills.
+    #[serde(default)]
+    pub opaque_fills: bool,
     pub reinit: Option<ReinitConfig>,
     /// Weight of the pixel-art saturation penalty `mean(R²+G²+B²)/3` on the render scaled to
     /// `[-1, 1]` (paper: 0.05 for pixel art, 0 otherwise).
@@ -165,6 +168,7 @@ impl SdsConfig {
     /// The paper's settings for `style` over `steps` steps, with augmentation producing
     /// `teacher_size` px encoder inputs (render at [`AugmentConfig::render_size`]).
     pub fn for_style(style: Style, caption: &str, steps: u32, teacher_size: u32) -> Self {
+        let spec = style.spec();
         Self {
             steps,
             prompt: style.prompt(caption),
@@ -177,15 +181,12 @@ impl SdsConfig {
             grad_clip: None,
             augment: Some(AugmentConfig::vectorfusion(teacher_size)),
             adam: AdamConfig::default(),
-            schedules: style.schedules(steps),
-            trainable: style.trainable(),
-            reinit: style.reinit_faint_paths().then(ReinitConfig::default),
-            saturation_penalty: if style == Style::PixelArt { 0.05 } else { 0.0 },
-            xing_weight: if style == Style::Iconography {
-                0.01
-            } else {
-                0.0
-            },
+            schedules: spec.schedules(steps),
+            trainable: spec.trainable(),
+            opaque_fills: spec.opaque_fills(),
+            reinit: spec.reinit_faint_paths().then(ReinitConfig::default),
+            saturation_penalty: spec.saturation_penalty(),
+            xing_weight: spec.xing_weight(),
             snapshot_every: 50,
             seed: 0,
         }
@@ -289,12 +290,7 @@ pub trait SdsCheckpoint {
     fn save(&self, state: &SdsState) -> Result<(), String>;
 }
 
-/// Standard normal sample (Box–Muller).
-pub fn gaussian<R: Rng>(rng: &mut R) -> f32 {
-    let u1: f64 = rng.random::<f64>().max(1e-12);
-    let u2: f64 = rng.random::<f64>();
-    ((-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()) as f32
-}
+pub use crate::teacher::gaussian;
 
 /// The SDS latent gradient `w(t)(ε̂ − ε)` for an encoded latent `z`, timestep `t` and noise `ε`.
 /// Returns the gradient and the mean `w·|ε̂ − ε|²`.
@@ -611,6 +607,11 @@ pub fn run_sds_resumable<B: Backend>(
             }
         }
         grad.mask(&cfg.trainable);
+        if cfg.opaque_fills {
+            for rgba in grad.get_mut(ParamGroup::Fill).chunks_exact_mut(4) {
+                rgba[3] = 0.0;
+            }
+        }
         if let Some(c) = cfg.grad_clip
             && grad.all_finite()
             && clip_groups(&mut grad, c)

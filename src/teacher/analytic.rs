@@ -21,8 +21,11 @@
 
 #![allow(clippy::needless_range_loop)] // index loops read clearest in pixel code
 
-use super::{Conditioning, Latent, Teacher, TeacherError, sd_alphas_cumprod};
+use super::{
+    Conditioning, Latent, SampleConfig, SampleError, Teacher, TeacherError, sd_alphas_cumprod,
+};
 use crate::image::Image;
+use crate::progress::{CancelToken, Progress, ProgressSink};
 use std::path::Path;
 
 /// Settings of the analytic test teacher.
@@ -243,6 +246,32 @@ impl AnalyticTeacher {
 }
 
 impl Teacher for AnalyticTeacher {
+    /// Its exact distribution is uniform over the targets, so a sample is a target drawn at
+    /// random (`starts` are ignored: a test teacher has no retrieval).
+    fn sample(
+        &self,
+        _prompt: &str,
+        _starts: &[Image],
+        cfg: &SampleConfig,
+        sink: &dyn ProgressSink,
+        _cancel: &CancelToken,
+    ) -> Result<Vec<Image>, SampleError> {
+        use rand::{RngExt, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(cfg.seed ^ 0x5a3b_1e00);
+        if self.targets.is_empty() {
+            return Err(SampleError::Failed(
+                "sampling: the test teacher has no targets".into(),
+            ));
+        }
+        let mut out = Vec::with_capacity(cfg.k as usize);
+        for i in 0..cfg.k {
+            let j = rng.random_range(0..self.targets.len());
+            out.push(self.targets[j].clone());
+            sink.report(Progress::new("sample", i + 1, cfg.k));
+        }
+        Ok(out)
+    }
+
     fn name(&self) -> String {
         format!(
             "analytic TEST teacher (exact denoiser of {} target image(s); not a generative model)",

@@ -7,12 +7,24 @@
 //! pretrained weights.
 
 pub mod analytic;
+pub mod sample;
 pub mod sd;
 
 pub use analytic::{AnalyticTeacher, AnalyticTeacherConfig};
+pub use sample::{SampleConfig, SampleError};
 pub use sd::SdTeacher;
 
 use crate::image::Image;
+use crate::models::pipeline::ModelHints;
+use crate::progress::{CancelToken, ProgressSink};
+use rand::{Rng, RngExt};
+
+/// A standard normal draw (Box–Muller over two uniforms): the noise of SDS and of sampling.
+pub fn gaussian<R: Rng + ?Sized>(rng: &mut R) -> f32 {
+    let u1: f64 = rng.random::<f64>().max(1e-12);
+    let u2: f64 = rng.random::<f64>();
+    ((-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()) as f32
+}
 
 /// Why a teacher call failed.
 #[derive(Debug, thiserror::Error)]
@@ -83,6 +95,39 @@ pub type Pullback<'a> = Box<dyn FnOnce(&Latent) -> Result<Vec<f32>, TeacherError
 
 /// A diffusion model seen through the needs of score distillation.
 pub trait Teacher: Send + Sync {
+    /// The model's defaults: prompt suffix, sampling and SDS guidance, whether presets for a
+    /// small prior apply (the paper's for teachers without a model directory).
+    fn hints(&self) -> ModelHints {
+        ModelHints::default()
+    }
+
+    /// Draws `cfg.k` raster samples of `prompt` at [`Teacher::image_size`]; the first
+    /// `starts.len()` start from those images (SDEdit). Seeded by `cfg.seed`. A teacher that
+    /// only distils says so.
+    fn sample(
+        &self,
+        _prompt: &str,
+        _starts: &[Image],
+        _cfg: &SampleConfig,
+        _sink: &dyn ProgressSink,
+        _cancel: &CancelToken,
+    ) -> Result<Vec<Image>, SampleError> {
+        Err(SampleError::Failed(format!(
+            "sampling: {} cannot draw samples",
+            self.name()
+        )))
+    }
+
+    /// The sentence embedding (of at most `tokens` tokens) the model's retrieval index is keyed
+    /// by (MiniLM), when the model's text encoder makes one; `Ok(None)` otherwise.
+    fn caption_embedding(
+        &self,
+        _text: &str,
+        _tokens: usize,
+    ) -> Result<Option<Vec<f32>>, TeacherError> {
+        Ok(None)
+    }
+
     /// Short human-readable name (the analytic teacher says it is a test teacher).
     fn name(&self) -> String;
 

@@ -8,10 +8,12 @@
 //! Images cross the boundary composited over white as `[1, 3, H, W]` tensors in `[0, 1]`; the
 //! image gradient is mapped back to premultiplied RGBA (`d/dα = −Σ_c d/dc`).
 
-use super::{Conditioning, Latent, Pullback, Teacher, TeacherError};
+use super::{Conditioning, Latent, Pullback, SampleConfig, SampleError, Teacher, TeacherError};
 use crate::image::Image;
 use crate::models::codec::CodecKind;
+use crate::models::pipeline::ModelHints;
 use crate::models::{ComputeDevice, LoadOptions, StableDiffusion};
+use crate::progress::{CancelToken, ProgressSink};
 use candle_core::{DType, Tensor};
 use std::path::Path;
 
@@ -174,6 +176,40 @@ fn flat(t: &Tensor) -> Result<(Vec<f32>, Vec<usize>), TeacherError> {
 }
 
 impl Teacher for SdTeacher {
+    /// The model's `model_index.json` hints; a pixel-space model is always a small prior.
+    fn hints(&self) -> ModelHints {
+        let mut h = self.sd.hints;
+        h.small_prior |= self.sd.is_pixel_space();
+        h
+    }
+
+    fn sample(
+        &self,
+        prompt: &str,
+        starts: &[Image],
+        cfg: &SampleConfig,
+        sink: &dyn ProgressSink,
+        cancel: &CancelToken,
+    ) -> Result<Vec<Image>, SampleError> {
+        super::sample::draw(
+            &self.sd,
+            self.latent_shape,
+            prompt,
+            starts,
+            cfg,
+            sink,
+            cancel,
+        )
+    }
+
+    fn caption_embedding(
+        &self,
+        text: &str,
+        tokens: usize,
+    ) -> Result<Option<Vec<f32>>, TeacherError> {
+        self.sd.sentence_embedding(text, tokens).map_err(model_err)
+    }
+
     fn name(&self) -> String {
         let s = self.image_size;
         match self.sd.codec.kind() {

@@ -2,6 +2,7 @@
 #![allow(dead_code)]
 
 pub mod http;
+pub mod runs;
 pub mod server;
 pub mod tensors;
 pub mod webdriver;

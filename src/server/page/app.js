@@ -522,6 +522,14 @@
       rows.push(['Caption', p.caption ?? '—'], ['Style', p.style], ['Method', p.method ?? '—'],
         ['Preset', p.preset], ['Paths', p.paths], ['Steps', p.steps], ['Samples', p.samples], ['Seed', p.seed],
         ['Started from', p.has_image ? 'an image' : p.has_svg ? 'an SVG' : 'noise']);
+      // The run plan the job runs with (every number, resolved when it was accepted).
+      const t = p.plan && p.plan.text, v = p.plan && p.plan.vectorize;
+      if (t) {
+        rows.push(['Size', `${t.size} px`], ['Model', `${t.model.name} (${t.model.encoder})`]);
+        if (t.sample) rows.push(['Sampler', `K=${t.sample.samples}, ${t.sample.steps} steps, retrieval ${t.sample.retrieval ? 'on' : 'off'}`]);
+        if (t.sds) rows.push(['SDS', `${t.sds.steps} steps, guidance ${t.sds.guidance}, t ${t.sds.t_min}–${t.sds.t_max}`]);
+      }
+      if (v) rows.push(['LIVE', `${v.size} px, ${v.iters_per_stage} iterations per stage`]);
     }
     rows.push(['Priority', job.priority ?? 0], ['Queued for', fmtMs(job.queued_ms)], ['Ran for', fmtMs(job.run_ms)]);
     if (d && d.seconds != null) rows.push(['Compute', `${Number(d.seconds).toFixed(1)} s`]);

@@ -1,0 +1,434 @@
+//! The run plan: every number of a run, resolved once at the edge (HTTP submit, the command
+//! line, `eval`, `bench stability`) from the request, the preset table and the model's hints,
+//! checked against the limits, stored with the job and shown to the caller. Workers, stages and
+//! checkpoints read the plan and nothing else, so a queued job runs the same whatever the preset
+//! table says later, and the CLI and the service cannot disagree.
+
+use super::presets::PresetSettings;
+use super::{EncoderChoice, JobKind, Limits, Method, Preset, SpecError, Style};
+use crate::augment::AugmentConfig;
+use crate::models::pipeline::ModelHints;
+use crate::stages::live::{LiveConfig, PathBudget};
+use crate::stages::sample::DEFAULT_STRENGTH;
+use serde::{Deserialize, Serialize};
+
+/// Version of the plan format (stored with jobs; part of every checkpoint key).
+pub const PLAN_VERSION: u32 = 1;
+
+/// Paths below this area (px² at 512 px) are re-initialised in `sd_live_sds` and pruned at the
+/// end (paper: 64 px²).
+pub const MIN_AREA_512: f32 = 64.0;
+/// Paths with fill opacity below this are faint.
+pub const MIN_OPACITY: f32 = 0.05;
+
+/// [`MIN_AREA_512`] at a `size` px canvas.
+pub fn min_area_at(size: u32) -> f32 {
+    let k = size as f32 / 512.0;
+    MIN_AREA_512 * k * k
+}
+
+/// Where a text run starts.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum StartKind {
+    /// From the method: a random init (`scratch`) or the best sampled image (`sd_live*`).
+    #[default]
+    Method,
+    /// A given image, traced with LIVE, then fine-tuned with SDS.
+    Image,
+    /// A given SVG, fine-tuned with SDS.
+    Svg,
+}
+
+/// What a caller asks for, before the preset and the model's hints are applied. Omitted
+/// numbers are the preset's.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PlanRequest {
+    pub kind: JobKind,
+    /// Text runs (and vectorize jobs fine-tuned to it).
+    pub caption: Option<String>,
+    pub start: StartKind,
+    pub style: Style,
+    pub method: Method,
+    pub preset: Preset,
+    pub paths: Option<u32>,
+    pub steps: Option<u32>,
+    pub samples: Option<u32>,
+    pub seed: u64,
+    pub retrieval: bool,
+    /// Settings only the command line exposes (none from HTTP).
+    pub tuning: Tuning,
+}
+
+impl PlanRequest {
+    /// A text request for `caption` with every other field at its default.
+    pub fn text(caption: impl Into<String>) -> Self {
+        PlanRequest {
+            kind: JobKind::Text,
+            caption: Some(caption.into()),
+            start: StartKind::Method,
+            style: Style::default(),
+            method: Method::default(),
+            preset: Preset::default(),
+            paths: None,
+            steps: None,
+            samples: None,
+            seed: 0,
+            retrieval: true,
+            tuning: Tuning::default(),
+        }
+    }
+}
+
+/// Settings of a run beyond the request's, from the command line; `None` = the plan's default.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Tuning {
+    /// Teacher input side (the SVG's width).
+    pub size: Option<u32>,
+    /// SDS classifier-free guidance.
+    pub guidance: Option<f32>,
+    pub t_min: Option<usize>,
+    pub t_max: Option<usize>,
+    pub t_max_end: Option<usize>,
+    pub grad_clip: Option<f32>,
+    pub reinit_min_area: Option<f32>,
+    /// `Some(false)`: no augmentation even where the method uses it.
+    pub augment: Option<bool>,
+    pub snapshot_every: Option<u32>,
+    /// Vectorize runs: this LIVE configuration as it is (the `vectorize` command's options).
+    pub live: Option<LiveConfig>,
+}
+
+/// What the executor knows about its model before loading it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ModelFacts {
+    /// What the model is: the model directory's name, or the test teacher (never a path).
+    pub name: String,
+    pub hints: ModelHints,
+    /// The configured SDS encoder.
+    pub encoder_choice: EncoderChoice,
+    /// A TAESD encoder was found for this model.
+    pub taesd_found: bool,
+}
+
+impl ModelFacts {
+    /// The SDS encoder a run uses, `prefer_taesd` being its preset's wish.
+    pub fn encoder(&self, prefer_taesd: bool) -> EncoderChoice {
+        match self.encoder_choice {
+            EncoderChoice::Auto if prefer_taesd && self.taesd_found => EncoderChoice::Taesd,
+            EncoderChoice::Auto => EncoderChoice::Vae,
+            fixed => fixed,
+        }
+    }
+}
+
+/// The model a text plan runs on.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ModelPlan {
+    pub name: String,
+    /// Presets sized for a small prior were used.
+    pub small_prior: bool,
+    /// SDS encoder of a latent model: `vae` or `taesd` (pixel-space models have none).
+    pub encoder: EncoderChoice,
+}
+
+/// Sampling and rerank (`sd_live*`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SamplePlan {
+    /// K.
+    pub samples: u32,
+    /// Sampler (DDIM) steps for a sample from noise.
+    pub steps: u32,
+    pub guidance: f32,
+    /// Start about half of the samples from retrieved training icons.
+    pub retrieval: bool,
+    /// SDEdit strength of those.
+    pub strength: f64,
+}
+
+/// LIVE tracing of the kept sample (or of a given image).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TracePlan {
+    /// Canvas side LIVE traces a sample at (smaller samples are upscaled to it first).
+    pub size: u32,
+    /// Iterations per stage and for the final pass.
+    pub iters: u32,
+}
+
+/// Score distillation.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SdsPlan {
+    pub steps: u32,
+    pub guidance: f32,
+    pub t_min: usize,
+    pub t_max: usize,
+    pub t_max_end: Option<usize>,
+    pub grad_clip: Option<f32>,
+    /// Random perspective + crop of the render (from-scratch runs).
+    pub augment: bool,
+    /// Closed paths below this area (px²) are re-initialised too.
+    pub reinit_min_area: Option<f32>,
+}
+
+/// The seed of each stage, derived from the request's seed in one place.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Seeds {
+    pub sample: u64,
+    pub trace: u64,
+    /// The from-scratch scene.
+    pub init: u64,
+    /// Shapes added to a starting scene that traced to too few.
+    pub top_up: u64,
+    pub sds: u64,
+}
+
+impl Seeds {
+    pub fn from_seed(seed: u64) -> Self {
+        Seeds {
+            sample: seed,
+            trace: seed,
+            init: seed ^ 0x5eed_1a17,
+            top_up: seed ^ 0x7095_0f11,
+            sds: seed,
+        }
+    }
+}
+
+/// A caption → SVG run.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TextPlan {
+    pub method: Method,
+    pub style: Style,
+    pub start: StartKind,
+    /// What the diffusion model is conditioned on (the caption, with the style suffix unless
+    /// the model was trained on bare captions).
+    pub prompt: String,
+    /// Teacher input side in pixels; the SVG is written at this width.
+    pub size: u32,
+    /// Paths (iconography, low-poly), strokes (sketch, painting) or cells (pixel art).
+    pub paths: u32,
+    /// `None`: the start needs no samples.
+    pub sample: Option<SamplePlan>,
+    pub trace: TracePlan,
+    /// `None`: no distillation (`sd_live`).
+    pub sds: Option<SdsPlan>,
+    /// SVG snapshot period of the LIVE and SDS stages (steps).
+    pub snapshot_every: u32,
+    pub seeds: Seeds,
+    pub model: ModelPlan,
+}
+
+/// The fully numeric plan of a run.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RunPlan {
+    pub version: u32,
+    pub kind: JobKind,
+    /// The preset the omitted numbers came from (the numbers below are what runs).
+    pub preset: Preset,
+    pub seed: u64,
+    /// Set for text runs, including vectorize jobs fine-tuned to a caption.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub text: Option<TextPlan>,
+    /// Set for plain vectorize runs: LIVE's configuration.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub vectorize: Option<LiveConfig>,
+}
+
+impl RunPlan {
+    /// Identifies the run for its checkpoints: a state saved under another plan is ignored.
+    pub fn key(&self) -> String {
+        format!(
+            "plan-v{}|{}",
+            self.version,
+            serde_json::to_string(self).unwrap_or_default()
+        )
+    }
+}
+
+fn range(field: &'static str, v: u32, max: u32) -> Result<u32, SpecError> {
+    if v == 0 || v > max {
+        return Err(SpecError::new(
+            field,
+            format!("must be between 1 and {max}, got {v}"),
+        ));
+    }
+    Ok(v)
+}
+
+/// Resolves `req`: the preset's numbers for everything it omits (sized for `model`, whose
+/// hints also give the prompt form and the guidance), checked against `limits`. `model` is
+/// `None` when no text model is configured: text requests are then refused, and a vectorize
+/// request with a caption is only traced.
+pub fn resolve(
+    req: &PlanRequest,
+    model: Option<&ModelFacts>,
+    limits: &Limits,
+) -> Result<RunPlan, SpecError> {
+    let base = RunPlan {
+        version: PLAN_VERSION,
+        kind: req.kind,
+        preset: req.preset,
+        seed: req.seed,
+        text: None,
+        vectorize: None,
+    };
+    let text_model = match (req.kind, &req.caption, model) {
+        (JobKind::Text, _, None) => {
+            return Err(SpecError::new(
+                "kind",
+                "text jobs need a diffusion model, and none is configured",
+            ));
+        }
+        (_, Some(_), Some(m)) => Some(m),
+        _ => None,
+    };
+    let Some(model) = text_model else {
+        return Ok(RunPlan {
+            vectorize: Some(vectorize_plan(req, limits)?),
+            ..base
+        });
+    };
+    Ok(RunPlan {
+        text: Some(text_plan(req, model, limits)?),
+        ..base
+    })
+}
+
+fn vectorize_plan(req: &PlanRequest, limits: &Limits) -> Result<LiveConfig, SpecError> {
+    if let Some(cfg) = &req.tuning.live {
+        cfg.validate()
+            .map_err(|e| SpecError::new("paths", e.to_string()))?;
+        return Ok(cfg.clone());
+    }
+    let paths = range(
+        "paths",
+        req.paths
+            .unwrap_or(u32::try_from(req.preset.vectorize_paths()).unwrap_or(u32::MAX)),
+        limits.max_paths,
+    )? as usize;
+    let mut cfg = req.preset.live_config();
+    cfg.seed = req.seed;
+    if let PathBudget::Auto { max_paths: m, .. } = &mut cfg.budget {
+        *m = paths;
+    } else {
+        cfg.budget = PathBudget::Auto {
+            stage: 8.min(paths),
+            max_paths: paths,
+            min_gain_db_per_path: 0.05,
+            prune_tolerance: 2e-5,
+        };
+    }
+    Ok(cfg)
+}
+
+fn text_plan(
+    req: &PlanRequest,
+    model: &ModelFacts,
+    limits: &Limits,
+) -> Result<TextPlan, SpecError> {
+    let caption = req
+        .caption
+        .as_deref()
+        .ok_or_else(|| SpecError::new("caption", "is required for a text run"))?;
+    let ps: PresetSettings = req.preset.settings_for(model.hints.small_prior);
+    let t = &req.tuning;
+    let size = t.size.unwrap_or(ps.size);
+    if !(8..=2048).contains(&size) {
+        return Err(SpecError::new(
+            "size",
+            format!("must be between 8 and 2048, got {size}"),
+        ));
+    }
+    // A vectorize job fine-tuned to its caption keeps a vectorize job's path budget.
+    let preset_paths = match req.kind {
+        JobKind::Vectorize => req.preset.vectorize_paths(),
+        JobKind::Text => req.style.spec().preset_paths(ps.paths),
+    };
+    let preset_paths = u32::try_from(preset_paths).unwrap_or(u32::MAX);
+    let paths = range("paths", req.paths.unwrap_or(preset_paths), limits.max_paths)?;
+    let steps = range("steps", req.steps.unwrap_or(ps.steps), limits.max_steps)?;
+    let samples = range(
+        "samples",
+        req.samples.unwrap_or(ps.samples),
+        limits.max_samples,
+    )?;
+    let start = match req.kind {
+        JobKind::Vectorize => StartKind::Image,
+        JobKind::Text => req.start,
+    };
+    let from_method = start == StartKind::Method;
+    let sample = (from_method && req.method != Method::Scratch).then_some(SamplePlan {
+        samples,
+        steps: ps.sample_steps as u32,
+        guidance: model.hints.sample_guidance,
+        retrieval: req.retrieval,
+        strength: DEFAULT_STRENGTH,
+    });
+    let distil = !from_method || req.method != Method::SdLive;
+    let augment = from_method && req.method == Method::Scratch && t.augment != Some(false);
+    let sds = distil.then(|| SdsPlan {
+        steps,
+        guidance: t.guidance.unwrap_or(model.hints.sds_guidance),
+        t_min: t.t_min.unwrap_or(50),
+        t_max: t.t_max.unwrap_or(950),
+        t_max_end: t.t_max_end,
+        grad_clip: t.grad_clip,
+        augment,
+        reinit_min_area: if augment {
+            t.reinit_min_area
+        } else {
+            Some(t.reinit_min_area.unwrap_or(min_area_at(size)))
+        },
+    });
+    if let Some(s) = &sds {
+        if s.t_min > s.t_max || s.t_max_end.is_some_and(|e| e < s.t_min) {
+            return Err(SpecError::new(
+                "t_min",
+                format!(
+                    "the timestep range [{}, {}] must be ordered",
+                    s.t_min, s.t_max
+                ),
+            ));
+        }
+        if !s.guidance.is_finite() || s.grad_clip.is_some_and(|c| c.is_nan() || c <= 0.0) {
+            return Err(SpecError::new(
+                "guidance",
+                "guidance must be finite and grad_clip positive",
+            ));
+        }
+    }
+    Ok(TextPlan {
+        method: req.method,
+        style: req.style,
+        start,
+        prompt: req.style.prompt_with(caption, model.hints.style_suffix),
+        size,
+        paths,
+        sample,
+        trace: TracePlan {
+            size: if from_method { ps.trace_size } else { size },
+            iters: ps.live_iters,
+        },
+        sds,
+        snapshot_every: t.snapshot_every.unwrap_or(ps.snapshot_every),
+        seeds: Seeds::from_seed(req.seed),
+        model: ModelPlan {
+            name: model.name.clone(),
+            small_prior: model.hints.small_prior,
+            encoder: model.encoder(ps.prefer_taesd),
+        },
+    })
+}
+
+/// The render size of an SDS run with `augment` at a `size` px teacher (augmentation renders
+/// larger and crops).
+pub fn render_size(size: u32, augment: bool) -> u32 {
+    if augment {
+        AugmentConfig::vectorfusion(size).render_size()
+    } else {
+        size
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,260 @@
+use super::*;
+use crate::scene::MAX_PATHS;
+
+fn facts(small_prior: bool) -> ModelFacts {
+    ModelFacts {
+        name: "m".into(),
+        hints: ModelHints {
+            small_prior,
+            ..ModelHints::default()
+        },
+        encoder_choice: EncoderChoice::Auto,
+        taesd_found: false,
+    }
+}
+
+fn text(req: PlanRequest, small: bool) -> TextPlan {
+    resolve(&req, Some(&facts(small)), &Limits::default())
+        .unwrap()
+        .text
+        .unwrap()
+}
+
+#[test]
+fn omitted_numbers_are_the_presets_and_explicit_ones_win() {
+    for small in [false, true] {
+        for preset in Preset::ALL {
+            let ps = preset.settings_for(small);
+            let t = text(
+                PlanRequest {
+                    preset: *preset,
+                    ..PlanRequest::text("a crown")
+                },
+                small,
+            );
+            assert_eq!(t.size, ps.size);
+            assert_eq!(t.paths as usize, ps.paths);
+            assert_eq!(t.sds.as_ref().unwrap().steps, ps.steps);
+            let s = t.sample.as_ref().unwrap();
+            assert_eq!((s.samples, s.steps as usize), (ps.samples, ps.sample_steps));
+            assert_eq!(
+                (t.trace.size, t.trace.iters),
+                (ps.trace_size, ps.live_iters)
+            );
+            assert_eq!(t.snapshot_every, ps.snapshot_every);
+            assert_eq!(t.model.small_prior, small);
+        }
+    }
+    let t = text(
+        PlanRequest {
+            paths: Some(5),
+            steps: Some(7),
+            samples: Some(3),
+            seed: 9,
+            ..PlanRequest::text("a crown")
+        },
+        false,
+    );
+    assert_eq!((t.paths, t.sds.unwrap().steps), (5, 7));
+    assert_eq!(t.sample.unwrap().samples, 3);
+    assert_eq!(t.seeds, Seeds::from_seed(9));
+    // Per style: pixel art is its grid, sketch at most 16 strokes.
+    let px = text(
+        PlanRequest {
+            style: Style::PixelArt,
+            ..PlanRequest::text("a crown")
+        },
+        false,
+    );
+    assert_eq!(px.paths, 1024);
+    let sk = text(
+        PlanRequest {
+            style: Style::Sketch,
+            ..PlanRequest::text("a crown")
+        },
+        false,
+    );
+    assert_eq!(sk.paths, 16);
+}
+
+#[test]
+fn methods_decide_the_stages() {
+    let plan = |method, start| {
+        text(
+            PlanRequest {
+                method,
+                start,
+                ..PlanRequest::text("x")
+            },
+            false,
+        )
+    };
+    let scratch = plan(Method::Scratch, StartKind::Method);
+    assert!(scratch.sample.is_none());
+    let s = scratch.sds.unwrap();
+    assert!(s.augment && s.reinit_min_area.is_none());
+    let live = plan(Method::SdLive, StartKind::Method);
+    assert!(live.sample.is_some() && live.sds.is_none());
+    let full = plan(Method::SdLiveSds, StartKind::Method);
+    let s = full.sds.unwrap();
+    assert!(!s.augment);
+    assert_eq!(s.reinit_min_area, Some(min_area_at(full.size)));
+    // A given SVG or image is always distilled, never sampled, and traced at the run's size.
+    for start in [StartKind::Svg, StartKind::Image] {
+        let p = plan(Method::SdLive, start);
+        assert!(p.sample.is_none() && p.sds.is_some());
+        assert_eq!(p.trace.size, p.size);
+    }
+}
+
+#[test]
+fn limits_are_checked_and_name_the_field() {
+    let small = Limits {
+        max_paths: 10,
+        max_steps: 20,
+        max_samples: 2,
+        ..Limits::default()
+    };
+    for (req, field) in [
+        (
+            PlanRequest {
+                paths: Some(11),
+                ..PlanRequest::text("x")
+            },
+            "paths",
+        ),
+        (
+            PlanRequest {
+                paths: Some(1),
+                steps: Some(21),
+                ..PlanRequest::text("x")
+            },
+            "steps",
+        ),
+        (
+            PlanRequest {
+                paths: Some(1),
+                steps: Some(1),
+                samples: Some(0),
+                ..PlanRequest::text("x")
+            },
+            "samples",
+        ),
+        (PlanRequest::text("x"), "paths"), // the balanced preset's 64 paths
+    ] {
+        let e = resolve(&req, Some(&facts(false)), &small).unwrap_err();
+        assert_eq!(e.field, field, "{e}");
+    }
+    let e = resolve(
+        &PlanRequest {
+            tuning: Tuning {
+                t_min: Some(900),
+                t_max: Some(100),
+                ..Tuning::default()
+            },
+            ..PlanRequest::text("x")
+        },
+        Some(&facts(false)),
+        &Limits::default(),
+    )
+    .unwrap_err();
+    assert_eq!(e.field, "t_min");
+    // No model: text is refused, a vectorize job with a caption is only traced.
+    assert!(resolve(&PlanRequest::text("x"), None, &Limits::default()).is_err());
+    let v = PlanRequest {
+        kind: JobKind::Vectorize,
+        ..PlanRequest::text("x")
+    };
+    let p = resolve(&v, None, &Limits::default()).unwrap();
+    assert!(p.text.is_none() && p.vectorize.is_some());
+    let p = resolve(&v, Some(&facts(false)), &Limits::default()).unwrap();
+    let t = p.text.unwrap();
+    assert_eq!(t.start, StartKind::Image);
+    assert_eq!(t.paths as usize, Preset::Balanced.vectorize_paths());
+    assert!(Preset::Balanced.vectorize_paths() <= MAX_PATHS);
+}
+
+#[test]
+fn vectorize_plans_follow_the_preset_and_budget() {
+    let req = |preset, paths| PlanRequest {
+        kind: JobKind::Vectorize,
+        caption: None,
+        preset,
+        paths,
+        seed: 4,
+        ..PlanRequest::text("")
+    };
+    let d = resolve(&req(Preset::Draft, Some(6)), None, &Limits::default())
+        .unwrap()
+        .vectorize
+        .unwrap();
+    assert_eq!(
+        (d.size, d.iters_per_stage, d.final_iters, d.seed),
+        (64, 20, 10, 4)
+    );
+    assert!(matches!(
+        d.budget,
+        PathBudget::Auto {
+            max_paths: 6,
+            stage: 6,
+            ..
+        }
+    ));
+    let p = resolve(&req(Preset::Paper, None), None, &Limits::default())
+        .unwrap()
+        .vectorize
+        .unwrap();
+    assert_eq!(
+        p.size,
+        LiveConfig::preset(crate::stages::live::Preset::Quality).size
+    );
+}
+
+#[test]
+fn encoder_and_prompt_follow_the_model() {
+    let mut f = facts(false);
+    f.taesd_found = true;
+    let t = resolve(&PlanRequest::text("a cat"), Some(&f), &Limits::default())
+        .unwrap()
+        .text
+        .unwrap();
+    assert_eq!(
+        t.model.encoder,
+        EncoderChoice::Taesd,
+        "balanced prefers TAESD"
+    );
+    assert!(t.prompt.starts_with("a cat. minimal flat 2d vector icon"));
+    let paper = PlanRequest {
+        preset: Preset::Paper,
+        ..PlanRequest::text("a cat")
+    };
+    let t = resolve(&paper, Some(&f), &Limits::default())
+        .unwrap()
+        .text
+        .unwrap();
+    assert_eq!(t.model.encoder, EncoderChoice::Vae, "paper uses the VAE");
+    f.hints.style_suffix = false;
+    f.hints.sds_guidance = 12.0;
+    let t = resolve(&PlanRequest::text(" a cat "), Some(&f), &Limits::default())
+        .unwrap()
+        .text
+        .unwrap();
+    assert_eq!(t.prompt, "a cat");
+    assert_eq!(t.sds.unwrap().guidance, 12.0);
+}
+
+#[test]
+fn plans_round_trip_through_json_and_key_their_checkpoints() {
+    let p = resolve(
+        &PlanRequest::text("a crown"),
+        Some(&facts(true)),
+        &Limits::default(),
+    )
+    .unwrap();
+    let back: RunPlan = serde_json::from_str(&serde_json::to_string(&p).unwrap()).unwrap();
+    assert_eq!(back, p);
+    let mut q = p.clone();
+    q.text.as_mut().unwrap().paths += 1;
+    assert_ne!(p.key(), q.key());
+    assert_eq!(p.key(), back.key());
+}

@@ -1,0 +1,172 @@
+//! The preset tables: what `draft`, `fast`, `balanced` and `paper` mean for Stable Diffusion and
+//! for a small prior. Read only by [`super::plan`] when a request is resolved; a stored plan
+//! keeps the numbers, so editing these tables changes new jobs only.
+
+use super::Preset;
+use crate::stages::live::{self, LiveConfig};
+use serde::Serialize;
+
+/// What a preset sets. Explicit `paths`/`steps`/`samples` in a request override it.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct PresetSettings {
+    /// Teacher input side in pixels (the SVG is written at this width).
+    pub size: u32,
+    /// SDS steps.
+    pub steps: u32,
+    /// Paths (iconography) or strokes (sketch); pixel art is always a 32x32 grid.
+    pub paths: usize,
+    /// Images sampled for `sd_live*` (K).
+    pub samples: u32,
+    /// Sampler steps per image.
+    pub sample_steps: usize,
+    /// LIVE iterations per stage (and for the final pass).
+    pub live_iters: u32,
+    /// SVG snapshot period of the SDS and LIVE stages.
+    pub snapshot_every: u32,
+    /// Encoder for SDS: `"taesd"` when a TAESD directory is configured and the preset allows it,
+    /// otherwise `"vae"`.
+    pub prefer_taesd: bool,
+    /// Canvas side LIVE traces the best sample at (pixel-space samples, 32 px, are upscaled to
+    /// it first); the traced scene is then scaled to `size`.
+    pub trace_size: u32,
+}
+
+impl Preset {
+    /// The settings of this preset.
+    pub fn settings(self) -> PresetSettings {
+        match self {
+            Preset::Draft => PresetSettings {
+                size: 32,
+                steps: 8,
+                paths: 8,
+                samples: 2,
+                sample_steps: 3,
+                live_iters: 8,
+                snapshot_every: 4,
+                prefer_taesd: true,
+                trace_size: 32,
+            },
+            Preset::Fast => PresetSettings {
+                size: 64,
+                steps: 100,
+                paths: 16,
+                samples: 4,
+                sample_steps: 10,
+                live_iters: 40,
+                snapshot_every: 20,
+                prefer_taesd: true,
+                trace_size: 64,
+            },
+            Preset::Balanced => PresetSettings {
+                size: 256,
+                steps: 500,
+                paths: 64,
+                samples: 8,
+                sample_steps: 25,
+                live_iters: 100,
+                snapshot_every: 50,
+                prefer_taesd: true,
+                trace_size: 256,
+            },
+            Preset::Paper => PresetSettings {
+                size: 512,
+                steps: 1000,
+                paths: 128,
+                samples: 64,
+                sample_steps: 50,
+                live_iters: 200,
+                snapshot_every: 100,
+                prefer_taesd: false,
+                trace_size: 512,
+            },
+        }
+    }
+
+    /// The settings of this preset for a model of the given kind: Stable Diffusion
+    /// ([`Preset::settings`]) or a small prior (`small_prior`: the embedded `models/vf-icon`,
+    /// 64 px through a 16x16x4 latent, or a 32 px pixel-space prior): SDS renders at the
+    /// prior's 64 px image side (a pixel-space encoder area-resizes it to its size), samples are
+    /// traced at 64–256 px, and step counts are sized so that the default (`balanced`) run of
+    /// `generate` stays within about 30 s on 2 CPU cores.
+    pub fn settings_for(self, small_prior: bool) -> PresetSettings {
+        if !small_prior {
+            return self.settings();
+        }
+        match self {
+            // One SDS step or one sampler step is one classifier-free-guided UNet call (batch
+            // 2); for a ~3.4M-parameter UNet at 32 px that costs 1.2-1.7 CPU-seconds here
+            // (docs/BENCHMARKS.md), so the balanced preset budgets ~75 calls in all.
+            Preset::Draft => PresetSettings {
+                size: 64,
+                steps: 10,
+                paths: 8,
+                samples: 1,
+                sample_steps: 5,
+                live_iters: 10,
+                snapshot_every: 5,
+                prefer_taesd: false,
+                trace_size: 64,
+            },
+            Preset::Fast => PresetSettings {
+                size: 64,
+                steps: 25,
+                paths: 16,
+                samples: 2,
+                sample_steps: 8,
+                live_iters: 20,
+                snapshot_every: 5,
+                prefer_taesd: false,
+                trace_size: 128,
+            },
+            Preset::Balanced => PresetSettings {
+                size: 64,
+                steps: 50,
+                paths: 24,
+                samples: 2,
+                sample_steps: 12,
+                live_iters: 30,
+                snapshot_every: 10,
+                prefer_taesd: false,
+                trace_size: 128,
+            },
+            Preset::Paper => PresetSettings {
+                size: 64,
+                steps: 300,
+                paths: 64,
+                samples: 8,
+                sample_steps: 25,
+                live_iters: 100,
+                snapshot_every: 50,
+                prefer_taesd: false,
+                trace_size: 256,
+            },
+        }
+    }
+
+    /// The path budget of a vectorize job when the request names none: the total of this
+    /// preset's LIVE budget.
+    pub fn vectorize_paths(self) -> usize {
+        LiveConfig::preset(self.live()).budget.max_paths()
+    }
+
+    /// The LIVE configuration of a vectorize run of this preset (its budget and seed are the
+    /// request's): [`Preset::live`]'s, with `draft` cut to 64 px and 20/10 iterations.
+    pub fn live_config(self) -> LiveConfig {
+        let mut cfg = LiveConfig::preset(self.live());
+        if self == Preset::Draft {
+            cfg.iters_per_stage = 20;
+            cfg.final_iters = 10;
+            cfg.size = 64;
+        }
+        cfg
+    }
+
+    /// The LIVE preset used for vectorize jobs.
+    pub fn live(self) -> live::Preset {
+        match self {
+            Preset::Draft | Preset::Fast => live::Preset::Fast,
+            Preset::Balanced => live::Preset::Balanced,
+            Preset::Paper => live::Preset::Quality,
+        }
+    }
+}

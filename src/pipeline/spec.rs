@@ -1,0 +1,296 @@
+//! The job contract: what a caller asks for ([`JobSpec`]: kind, inputs, style, method, preset,
+//! explicit numbers, the resolved [`RunPlan`]), its vocabularies ([`JobKind`], [`Method`],
+//! [`Preset`]) and the hard [`Limits`] every entry point checks it against.
+
+use super::plan::RunPlan;
+use crate::scene::MAX_PATHS;
+pub use crate::stages::styles::Style;
+use serde::{Deserialize, Serialize};
+
+/// What a job produces: caption → SVG, or image → SVG.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum JobKind {
+    Text,
+    Vectorize,
+}
+
+impl JobKind {
+    pub const ALL: &[JobKind] = &[JobKind::Text, JobKind::Vectorize];
+}
+
+/// How a text job is produced (VectorFusion §4): sample+trace, sample+trace+SDS, or SDS alone.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Method {
+    Scratch,
+    SdLive,
+    #[default]
+    SdLiveSds,
+}
+
+impl Method {
+    pub const ALL: &[Method] = &[Method::Scratch, Method::SdLive, Method::SdLiveSds];
+
+    /// The method's name as in the API and on the command line (`sd_live_sds`).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Method::Scratch => "scratch",
+            Method::SdLive => "sd_live",
+            Method::SdLiveSds => "sd_live_sds",
+        }
+    }
+}
+
+/// Named speed/quality trade-offs (resolution, steps, paths, samples, encoder; see
+/// [`Preset::settings`]). `default` and `quality` are accepted as older names of `balanced` and
+/// `paper`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Preset {
+    Draft,
+    Fast,
+    #[default]
+    #[serde(alias = "default")]
+    Balanced,
+    #[serde(alias = "quality")]
+    Paper,
+}
+
+impl Preset {
+    pub const ALL: &[Preset] = &[Preset::Draft, Preset::Fast, Preset::Balanced, Preset::Paper];
+}
+
+/// Hard limits on a job's parameters: the `[limits]` section of `config.toml` (every field
+/// optional there), checked by [`Limits::validate`] when the configuration loads.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Limits {
+    /// At most [`MAX_PATHS`].
+    pub max_paths: u32,
+    pub max_steps: u32,
+    pub max_samples: u32,
+    pub max_caption_chars: usize,
+    pub max_svg_bytes: usize,
+    pub max_image_side: u32,
+}
+
+impl Default for Limits {
+    fn default() -> Self {
+        Limits {
+            max_paths: MAX_PATHS as u32,
+            max_steps: 20_000,
+            max_samples: 64,
+            max_caption_chars: 1000,
+            max_svg_bytes: 2 * 1024 * 1024,
+            max_image_side: 4096,
+        }
+    }
+}
+
+impl Limits {
+    /// Each limit is positive, and `max_paths` is at most [`MAX_PATHS`] (what the stages can
+    /// run): a server never accepts a job its workers would refuse. `Err` names the key.
+    pub fn validate(&self) -> Result<(), (&'static str, String)> {
+        if self.max_paths == 0 || self.max_paths as usize > MAX_PATHS {
+            return Err((
+                "limits.max_paths",
+                format!("must be between 1 and {MAX_PATHS}"),
+            ));
+        }
+        for (key, v) in [
+            ("limits.max_steps", self.max_steps as usize),
+            ("limits.max_samples", self.max_samples as usize),
+            ("limits.max_caption_chars", self.max_caption_chars),
+            ("limits.max_svg_bytes", self.max_svg_bytes),
+            ("limits.max_image_side", self.max_image_side as usize),
+        ] {
+            if v == 0 {
+                return Err((key, "must be at least 1".into()));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// A validated job. Construct through the service's request validation (or fill it in directly
+/// in code and call [`JobSpec::validate`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct JobSpec {
+    pub kind: JobKind,
+    pub caption: Option<String>,
+    /// PNG or JPEG bytes (base64 in JSON).
+    #[serde(default, with = "base64_bytes")]
+    pub image: Option<Vec<u8>>,
+    /// An SVG to start from.
+    pub svg: Option<String>,
+    pub style: Style,
+    pub method: Method,
+    pub paths: u32,
+    pub steps: u32,
+    pub seed: u64,
+    pub samples: u32,
+    pub preset: Preset,
+    pub priority: i32,
+    /// Text jobs: start some samples from the training icons nearest to the caption
+    /// (retrieval, when the model has an installed index); false samples from noise only.
+    #[serde(default = "default_retrieval")]
+    pub retrieval: bool,
+    /// The run, resolved once when the job was accepted ([`RunPlan`]): workers run this and
+    /// nothing else, so a queued job runs the same whatever the preset table says later. Jobs
+    /// stored before plans existed have none and are resolved when they run.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub plan: Option<RunPlan>,
+}
+
+fn default_retrieval() -> bool {
+    true
+}
+
+/// Why a [`JobSpec`] is invalid: which field, and why.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("{field}: {reason}")]
+pub struct SpecError {
+    pub field: &'static str,
+    pub reason: String,
+}
+
+impl SpecError {
+    pub fn new(field: &'static str, reason: impl Into<String>) -> Self {
+        SpecError {
+            field,
+            reason: reason.into(),
+        }
+    }
+}
+
+/// Allowed priority range (higher runs first).
+pub const PRIORITY_RANGE: std::ops::RangeInclusive<i32> = -100..=100;
+
+impl JobSpec {
+    /// Checks every field against `limits` and the kind's requirements.
+    pub fn validate(&self, limits: &Limits) -> Result<(), SpecError> {
+        fn range(field: &'static str, v: u32, max: u32) -> Result<(), SpecError> {
+            if v == 0 || v > max {
+                return Err(SpecError::new(
+                    field,
+                    format!("must be between 1 and {max}, got {v}"),
+                ));
+            }
+            Ok(())
+        }
+        range("paths", self.paths, limits.max_paths)?;
+        range("steps", self.steps, limits.max_steps)?;
+        range("samples", self.samples, limits.max_samples)?;
+        if !PRIORITY_RANGE.contains(&self.priority) {
+            return Err(SpecError::new(
+                "priority",
+                format!(
+                    "must be between {} and {}, got {}",
+                    PRIORITY_RANGE.start(),
+                    PRIORITY_RANGE.end(),
+                    self.priority
+                ),
+            ));
+        }
+        if let Some(c) = &self.caption {
+            let n = c.chars().count();
+            if c.trim().is_empty() {
+                return Err(SpecError::new("caption", "must not be empty"));
+            }
+            if n > limits.max_caption_chars {
+                return Err(SpecError::new(
+                    "caption",
+                    format!(
+                        "is {n} characters, at most {} allowed",
+                        limits.max_caption_chars
+                    ),
+                ));
+            }
+            if c.chars()
+                .any(|ch| ch.is_control() && ch != '\n' && ch != '\t')
+            {
+                return Err(SpecError::new("caption", "contains control characters"));
+            }
+        }
+        if let Some(svg) = &self.svg
+            && svg.len() > limits.max_svg_bytes
+        {
+            return Err(SpecError::new(
+                "svg",
+                format!(
+                    "is {} bytes, at most {} allowed",
+                    svg.len(),
+                    limits.max_svg_bytes
+                ),
+            ));
+        }
+        match self.kind {
+            JobKind::Text => {
+                if self.caption.is_none() {
+                    return Err(SpecError::new("caption", "is required for kind \"text\""));
+                }
+                if self.image.is_some() {
+                    return Err(SpecError::new(
+                        "image",
+                        "only applies to kind \"vectorize\" (use \"svg\" to start a text job from a drawing)",
+                    ));
+                }
+            }
+            JobKind::Vectorize => {
+                if self.image.is_none() {
+                    return Err(SpecError::new(
+                        "image",
+                        "is required for kind \"vectorize\" (base64 PNG or JPEG)",
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// A vocabulary word as serde spells it (snake_case, or one of the type's aliases), in any
+/// case and with `-` or spaces for `_`.
+fn parse_word<T: serde::de::DeserializeOwned>(
+    s: &str,
+    what: &str,
+    expected: &str,
+) -> Result<T, String> {
+    let word = s.trim().to_ascii_lowercase().replace(['-', ' '], "_");
+    T::deserialize(serde_json::Value::String(word))
+        .map_err(|_| format!("unknown {what} {s:?} (expected {expected})"))
+}
+
+impl std::str::FromStr for Preset {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        parse_word(s, "preset", "draft, fast, balanced or paper")
+    }
+}
+
+impl std::str::FromStr for Method {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        parse_word(s, "method", "scratch, sd_live or sd_live_sds")
+    }
+}
+
+mod base64_bytes {
+    use base64::Engine;
+    use base64::engine::general_purpose::STANDARD;
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(v: &Option<Vec<u8>>, s: S) -> Result<S::Ok, S::Error> {
+        match v {
+            Some(bytes) => s.serialize_some(&STANDARD.encode(bytes)),
+            None => s.serialize_none(),
+        }
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Option<Vec<u8>>, D::Error> {
+        let v: Option<String> = Option::deserialize(d)?;
+        v.map(|s| STANDARD.decode(s).map_err(serde::de::Error::custom))
+            .transpose()
+    }
+}
