@@ -275,9 +275,12 @@ pub fn run(args: BenchStabilityArgs) -> Result<(), CliError> {
             builtin_dir = TempDir::new("vf-stability-targets")?;
             let mut targets = Vec::new();
             for (name, t) in builtin_targets(a.size)? {
-                t.save_png(&builtin_dir.0.join(format!("{name}.png")))
+                // Scored against what the teacher reads back (8-bit PNG), not the f32 original.
+                let path = builtin_dir.0.join(format!("{name}.png"));
+                t.save_png(&path)
+                    .and_then(|()| Image::open(&path))
+                    .map(|t| targets.push(t))
                     .map_err(|e| CliError::Other(anyhow::anyhow!("built-in targets: {e}")))?;
-                targets.push(t);
             }
             (Some(builtin_dir.0.clone()), targets)
         }
