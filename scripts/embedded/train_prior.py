@@ -217,6 +217,9 @@ def main():
         step = args.init_step
         print(f"initialised from {args.init}/unet at step {step}", flush=True)
 
+    # The warm-up counts this run's steps: a run continued with a fresh optimiser (--init, or a
+    # resume) ramps its learning rate again instead of jumping to --lr.
+    run_start = step
     deadline = None
     if args.until:
         hh, mm = map(int, args.until.split(":"))
@@ -282,7 +285,7 @@ def main():
         cond[drop] = tok[0, 0].float()
         t = torch.randint(0, 1000, (args.batch,), generator=gen)
         noise = torch.randn(z0.shape, generator=gen)
-        lr = args.lr * min(1.0, (step + 1) / args.warmup)
+        lr = args.lr * min(1.0, (step - run_start + 1) / args.warmup)
         if deadline and args.cooldown_min > 0:
             left = (deadline - dt.datetime.now(dt.timezone.utc)).total_seconds() / 60
             f = min(1.0, max(0.0, left / args.cooldown_min))

@@ -68,6 +68,9 @@ def main():
     ap.add_argument("--minutes", type=float, default=20.0, help="stop after this much wall time in this run")
     ap.add_argument("--max-steps", type=int, default=10**9)
     ap.add_argument("--export-every-min", type=float, default=10.0)
+    ap.add_argument("--init", default=None, help="start from this exported AutoencoderKL (a fine-tune)")
+    ap.add_argument("--decoder-only", action="store_true",
+                    help="train the decoder only: the encoder, and so the latent space a prior was trained on, stays fixed")
     args = ap.parse_args()
 
     from diffusers import AutoencoderKL
@@ -79,10 +82,15 @@ def main():
     xv = x[val_i[:256]]
 
     torch.manual_seed(args.seed)
-    vae = AutoencoderKL(**VAE_CONFIG)
+    vae = AutoencoderKL.from_pretrained(args.init) if args.init else AutoencoderKL(**VAE_CONFIG)
     ema = copy.deepcopy(vae).eval().requires_grad_(False)
-    print(f"vae params: {sum(p.numel() for p in vae.parameters()) / 1e6:.2f}M", flush=True)
-    opt = torch.optim.AdamW(vae.parameters(), lr=args.lr, weight_decay=0.0, betas=(0.9, 0.99))
+    if args.decoder_only:
+        vae.encoder.requires_grad_(False)
+        vae.quant_conv.requires_grad_(False)
+    params = [p for p in vae.parameters() if p.requires_grad]
+    print(f"vae params: {sum(p.numel() for p in vae.parameters()) / 1e6:.2f}M, "
+          f"trained {sum(p.numel() for p in params) / 1e6:.2f}M", flush=True)
+    opt = torch.optim.AdamW(params, lr=args.lr, weight_decay=0.0, betas=(0.9, 0.99))
     gen = torch.Generator().manual_seed(args.seed)
     step, elapsed0 = 0, 0.0
     ckpt_path = os.path.join(args.out, "ckpt.pt")
@@ -127,7 +135,8 @@ def main():
         for g in opt.param_groups:
             g["lr"] = lr
         with amp:
-            post = vae.encode(x0).latent_dist
+            with torch.set_grad_enabled(not args.decoder_only):
+                post = vae.encode(x0).latent_dist
             z = post.mean + post.std * torch.randn(post.mean.shape, generator=gen)
             rec = vae.decode(z).sample
         rec = rec.float()
@@ -137,7 +146,7 @@ def main():
         loss = l1 + args.edge * edge + args.kl * kl
         opt.zero_grad(set_to_none=True)
         loss.backward()
-        torch.nn.utils.clip_grad_norm_(vae.parameters(), 1.0)
+        torch.nn.utils.clip_grad_norm_(params, 1.0)
         opt.step()
         step += 1
         d = min(args.ema, (1 + step) / (10 + step))
