@@ -9,11 +9,12 @@
 //! behaviour (another seed, size, step count, path count or init) fails. `VF_GOLDEN_WRITE=1`
 //! rewrites the file (only when a change of output is intended, and say so in the commit).
 
+mod common;
+
 use serde_json::{Value, json};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::process::Command;
-use vectorfusion::image::Image;
 use vectorfusion::pipeline::{DefaultExecutor, Executor, JobContext, Limits, ModelDirs};
 use vectorfusion::progress::CancelToken;
 
@@ -198,15 +199,7 @@ fn produce() -> BTreeMap<String, String> {
 
     // The command line: the analytic test teacher (plain scratch) and the tiny SD model.
     let dir = tmpdir("cli");
-    let targets = dir.join("targets");
-    std::fs::create_dir_all(&targets).unwrap();
-    let mut im = Image::filled(32, 32, [1.0; 4]);
-    for y in 8..24 {
-        for x in 8..24 {
-            im.data[4 * (y * 32 + x)..4 * (y * 32 + x) + 4].copy_from_slice(&[0.8, 0.1, 0.1, 1.0]);
-        }
-    }
-    im.save_png(&targets.join("red.png")).unwrap();
+    let targets = common::red_square_targets(&dir);
     let analytic = format!("analytic:{}", targets.display());
     for style in ["iconography", "pixel-art", "sketch"] {
         out.insert(

@@ -1,8 +1,9 @@
 //! `vectorfusion generate` with the analytic TEST teacher and with the tiny Stable Diffusion
 //! fixture (`--model`): writes a valid, NaN-free SVG and snapshots; bad input is a clear error.
 
+mod common;
+
 use std::process::Command;
-use vectorfusion::image::Image;
 
 fn bin() -> Command {
     Command::new(env!("CARGO_BIN_EXE_vectorfusion"))
@@ -18,15 +19,7 @@ fn tmpdir(name: &str) -> std::path::PathBuf {
 #[test]
 fn generate_with_analytic_teacher_writes_svg_and_snapshots() {
     let dir = tmpdir("ok");
-    let targets = dir.join("targets");
-    std::fs::create_dir_all(&targets).unwrap();
-    let mut im = Image::filled(32, 32, [1.0; 4]);
-    for y in 8..24 {
-        for x in 8..24 {
-            im.data[4 * (y * 32 + x)..4 * (y * 32 + x) + 4].copy_from_slice(&[0.8, 0.1, 0.1, 1.0]);
-        }
-    }
-    im.save_png(&targets.join("red.png")).unwrap();
+    let targets = common::red_square_targets(&dir);
     let out = dir.join("out.svg");
     let snaps = dir.join("snaps");
     for style in ["iconography", "pixel-art", "sketch", "low-poly", "painting"] {

@@ -54,3 +54,18 @@ pub async fn wait_status(
         tokio::time::sleep(Duration::from_millis(20)).await;
     }
 }
+
+/// `dir/targets/red.png`, a red 16 px square on a white 32 px image: the analytic test
+/// teacher's one target (`--teacher analytic:DIR`). Returns the targets directory.
+pub fn red_square_targets(dir: &std::path::Path) -> std::path::PathBuf {
+    let targets = dir.join("targets");
+    std::fs::create_dir_all(&targets).unwrap();
+    let mut im = vectorfusion::image::Image::filled(32, 32, [1.0; 4]);
+    for y in 8..24 {
+        for x in 8..24 {
+            im.data[4 * (y * 32 + x)..4 * (y * 32 + x) + 4].copy_from_slice(&[0.8, 0.1, 0.1, 1.0]);
+        }
+    }
+    im.save_png(&targets.join("red.png")).unwrap();
+    targets
+}
