@@ -4,7 +4,7 @@
 //! loaded on first use and kept per teacher size and encoder.
 
 use super::context::{Executor, JobContext, JobOutput};
-use super::models::{Models, find_taesd};
+use super::models::Models;
 use super::plan::{self, PlanRequest, RunPlan, StartKind, Tuning};
 use super::text::{MethodOutput, Start, run_text};
 use super::vectorize::run_vectorize;
@@ -73,15 +73,8 @@ impl DefaultExecutor {
                 .text_ready()
                 .map_err(PipelineError::ModelsNotConfigured)?;
         }
+        // A plan that chose TAESD when none is configured any more fails in `Models::load`.
         let encoder = plan.model.encoder;
-        if encoder == EncoderChoice::Taesd
-            && let Some(sd) = &self.models.sd_dir
-            && find_taesd(sd, self.models.taesd_dir.as_deref()).is_none()
-        {
-            return Err(PipelineError::ModelsNotConfigured(
-                "the plan uses the TAESD encoder, and none is configured any more".into(),
-            ));
-        }
         let mut cache = self
             .cache
             .lock()
