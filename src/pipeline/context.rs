@@ -115,12 +115,10 @@ pub trait Executor: Send + Sync {
     /// The default resolves text requests with the paper's model hints (Stable Diffusion's
     /// presets), as an executor that is not backed by a model directory would.
     fn plan(&self, request: &PlanRequest, limits: &Limits) -> Result<RunPlan, SpecError> {
-        let facts = self.text_ready().is_ok().then(|| super::ModelFacts {
-            name: "executor".into(),
-            hints: crate::models::pipeline::ModelHints::default(),
-            encoder_choice: super::EncoderChoice::Vae,
-            taesd_found: false,
-        });
+        let facts = self
+            .text_ready()
+            .is_ok()
+            .then(|| super::ModelFacts::paper("executor"));
         super::plan::resolve(request, facts.as_ref(), limits)
     }
 }

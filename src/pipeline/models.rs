@@ -190,30 +190,29 @@ impl ModelDirs {
     /// What is known of the configured text model without loading it (`None`: no model; see
     /// [`ModelDirs::text_ready`] for why).
     pub fn facts(&self) -> Option<ModelFacts> {
-        if let Some(sd) = &self.sd_dir {
-            // A malformed model_index.json is reported by the loader when the run starts.
-            let mut hints = ModelHints::read(sd).unwrap_or_default();
-            hints.small_prior |= is_pixel_model(sd);
-            let name = sd
-                .file_name()
-                .map(|n| n.to_string_lossy().into_owned())
-                .unwrap_or_else(|| "model".into());
-            return Some(ModelFacts {
-                name,
-                hints,
-                encoder_choice: if is_pixel_model(sd) {
-                    EncoderChoice::Vae
-                } else {
-                    self.encoder
-                },
-                taesd_found: find_taesd(sd, self.taesd_dir.as_deref()).is_some(),
-            });
-        }
-        self.analytic_dir.as_ref().map(|_| ModelFacts {
-            name: "analytic test teacher".into(),
-            hints: ModelHints::default(),
-            encoder_choice: EncoderChoice::Vae,
-            taesd_found: false,
+        let Some(sd) = &self.sd_dir else {
+            return self
+                .analytic_dir
+                .as_ref()
+                .map(|_| ModelFacts::paper("analytic test teacher"));
+        };
+        // A malformed model_index.json is reported by the loader when the run starts.
+        let mut hints = ModelHints::read(sd).unwrap_or_default();
+        let pixel = is_pixel_model(sd);
+        hints.small_prior |= pixel;
+        let name = sd
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "model".into());
+        Some(ModelFacts {
+            name,
+            hints,
+            encoder_choice: if pixel {
+                EncoderChoice::Vae
+            } else {
+                self.encoder
+            },
+            taesd_found: find_taesd(sd, self.taesd_dir.as_deref()).is_some(),
         })
     }
 

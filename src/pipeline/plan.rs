@@ -112,6 +112,17 @@ pub struct ModelFacts {
 }
 
 impl ModelFacts {
+    /// A model without a directory of its own (the test teacher, a custom executor): the
+    /// paper's hints, the VAE, no TAESD.
+    pub fn paper(name: impl Into<String>) -> Self {
+        ModelFacts {
+            name: name.into(),
+            hints: ModelHints::default(),
+            encoder_choice: EncoderChoice::Vae,
+            taesd_found: false,
+        }
+    }
+
     /// The SDS encoder a run uses, `prefer_taesd` being its preset's wish.
     pub fn encoder(&self, prefer_taesd: bool) -> EncoderChoice {
         match self.encoder_choice {
