@@ -45,6 +45,16 @@ pub struct ServerConfig {
     /// Tenants: each key sees only its own jobs (`server::tenant`).
     pub tenants: Vec<TenantConfig>,
     pub max_body_bytes: usize,
+    /// Bytes of uploads (images, starting SVGs) the active jobs may hold in the store together;
+    /// a submit past it gets 429 `upload_quota_exceeded`.
+    pub max_stored_upload_bytes: u64,
+    /// Open connections at most; further connections are closed at once.
+    pub max_connections: usize,
+    /// Seconds a connection may take to send a request's headers (also the keep-alive idle
+    /// limit: the clock starts when the connection waits for its next request).
+    pub header_read_timeout_secs: u64,
+    /// Seconds a submit may take to send its body; slower gets 408 `body_timeout`.
+    pub body_read_timeout_secs: u64,
     pub max_queue_depth: i64,
     /// Uploads (PNG/JPEG, SVG) validated at once; more wait up to 10 s, then get 429 `busy`.
     pub max_concurrent_decodes: usize,
@@ -67,6 +77,9 @@ pub struct TenantConfig {
     /// Queued + running jobs at most; 0: no cap.
     #[serde(default)]
     pub max_active_jobs: u32,
+    /// Bytes of its active jobs' uploads at most; 0: only the server's cap.
+    #[serde(default)]
+    pub max_upload_bytes: u64,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -92,6 +105,15 @@ pub struct QueueConfig {
     pub max_snapshots_per_job: u32,
     pub retention_hours: u64,
     pub prune_interval_secs: u64,
+    /// `process`: each job runs in a child process of the server (`worker::isolate`) under
+    /// `job_memory_mb` and `job_wall_secs`; `thread`: on the worker thread, in the server.
+    pub isolation: String,
+    /// Resident memory of one job process, in MiB; past it the job fails `resource_limit`.
+    /// 0: no limit.
+    pub job_memory_mb: u64,
+    /// Running time of one job process, in seconds; past it the job fails `resource_limit`.
+    /// 0: no limit.
+    pub job_wall_secs: u64,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -137,6 +159,10 @@ impl Default for ServerConfig {
             metrics_key: String::new(),
             tenants: Vec::new(),
             max_body_bytes: 16 * 1024 * 1024,
+            max_stored_upload_bytes: 1 << 30,
+            max_connections: 1024,
+            header_read_timeout_secs: 10,
+            body_read_timeout_secs: 30,
             max_queue_depth: 1000,
             max_concurrent_decodes: 2,
             max_sse_streams: 256,
@@ -170,6 +196,9 @@ impl Default for QueueConfig {
             retry_backoff_max_ms: 60_000,
             checkpoint_every_steps: 25,
             max_snapshots_per_job: 200,
+            isolation: "process".into(),
+            job_memory_mb: 12 * 1024,
+            job_wall_secs: 2 * 3600,
             retention_hours: 168,
             prune_interval_secs: 3600,
         }
@@ -284,6 +313,24 @@ impl Config {
         }
         if self.server.max_queue_depth < 1 {
             return bad("server.max_queue_depth", "must be at least 1");
+        }
+        if !matches!(self.queue.isolation.as_str(), "process" | "thread") {
+            return bad("queue.isolation", "must be \"process\" or \"thread\"");
+        }
+        if self.server.max_connections < 1 {
+            return bad("server.max_connections", "must be at least 1");
+        }
+        if self.server.header_read_timeout_secs < 1 {
+            return bad("server.header_read_timeout_secs", "must be at least 1");
+        }
+        if self.server.body_read_timeout_secs < 1 {
+            return bad("server.body_read_timeout_secs", "must be at least 1");
+        }
+        if self.server.max_stored_upload_bytes < self.server.max_body_bytes as u64 {
+            return bad(
+                "server.max_stored_upload_bytes",
+                "must be at least server.max_body_bytes (one upload must fit)",
+            );
         }
         if let Err(e) = self.models.encoder.parse::<EncoderChoice>() {
             return Err(ConfigError::Invalid {

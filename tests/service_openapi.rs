@@ -154,66 +154,95 @@ fn every_route_is_documented_and_every_documented_route_exists() {
 #[test]
 fn submit_request_fields_and_enums_match_the_code() {
     let spec = spec();
-    let props = spec.path(&["components", "schemas", "SubmitRequest", "properties"]);
-    let documented: BTreeSet<String> = props.keys().into_iter().collect();
+    let schemas = spec.path(&["components", "schemas"]);
+    // SubmitRequest is one of the two kinds' requests, told apart by `kind`.
+    let mapping = schemas.path(&["SubmitRequest", "discriminator", "mapping"]);
+    assert_eq!(
+        mapping.keys().into_iter().collect::<BTreeSet<_>>(),
+        serde_names(JobKind::ALL)
+    );
+    let text = schemas.path(&["TextJobRequest", "properties"]);
+    let vectorize = schemas.path(&["VectorizeJobRequest", "properties"]);
+    let documented: BTreeSet<String> = text.keys().into_iter().chain(vectorize.keys()).collect();
     let accepted: BTreeSet<String> = SUBMIT_FIELDS.iter().map(|s| s.to_string()).collect();
     assert_eq!(documented, accepted);
-    let enum_of = |field: &str| -> BTreeSet<String> {
+    // What each kind requires, and the fields only the other kind takes (null or absent).
+    let required = |name: &str| schemas.path(&[name, "required"]).flow_list();
+    assert_eq!(required("TextJobRequest"), ["kind", "caption"]);
+    assert_eq!(required("VectorizeJobRequest"), ["kind", "image"]);
+    assert_eq!(
+        text.path(&["image", "type"]).value.as_deref(),
+        Some("'null'")
+    );
+    assert_eq!(
+        vectorize.path(&["method", "type"]).value.as_deref(),
+        Some("'null'")
+    );
+    let enum_of = |props: &Node, field: &str| -> BTreeSet<String> {
         props
             .path(&[field, "enum"])
             .flow_list()
             .into_iter()
+            .filter(|v| v != "null")
             .collect()
     };
-    assert_eq!(enum_of("kind"), serde_names(JobKind::ALL));
-    assert_eq!(enum_of("style"), serde_names(&Style::ALL));
-    assert_eq!(enum_of("method"), serde_names(Method::ALL));
-    assert_eq!(enum_of("preset"), serde_names(Preset::ALL));
+    let kinds: BTreeSet<String> = enum_of(text, "kind")
+        .into_iter()
+        .chain(enum_of(vectorize, "kind"))
+        .collect();
+    assert_eq!(kinds, serde_names(JobKind::ALL));
+    assert_eq!(enum_of(text, "method"), serde_names(Method::ALL));
+    for props in [text, vectorize] {
+        assert_eq!(enum_of(props, "style"), serde_names(&Style::ALL));
+        assert_eq!(enum_of(props, "preset"), serde_names(Preset::ALL));
+    }
     let statuses: BTreeSet<String> = spec
         .path(&["components", "schemas", "JobStatus", "enum"])
         .flow_list()
         .into_iter()
         .collect();
     assert_eq!(statuses, serde_names(&JobStatus::ALL));
-    // documented defaults and bounds are the code's
-    let num = |field: &str, key: &str| -> i64 {
-        props
-            .path(&[field, key])
-            .value
-            .as_deref()
-            .unwrap()
-            .parse()
-            .unwrap()
-    };
-    // Omitted paths/steps/samples are the preset's: no fixed default may be documented.
-    for f in vectorfusion::server::types::PRESET_FIELDS {
-        assert!(
-            props.path(&[f]).get("default").is_none(),
-            "{f} has a documented default, but the preset decides"
-        );
-        let d = props.path(&[f, "description"]).value.clone().unwrap();
-        assert!(d.contains("preset"), "{f}: {d}");
-    }
-    assert_eq!(
-        props.path(&["preset", "default"]).value.as_deref(),
-        Some(
-            serde_names(&[Preset::default()])
-                .pop_first()
-                .unwrap()
-                .as_str()
-        )
-    );
     let limits = vectorfusion::pipeline::Limits::default();
-    assert_eq!(num("paths", "maximum"), limits.max_paths as i64);
-    assert_eq!(num("steps", "maximum"), limits.max_steps as i64);
-    assert_eq!(num("samples", "maximum"), limits.max_samples as i64);
-    assert_eq!(num("caption", "maxLength"), limits.max_caption_chars as i64);
-    assert_eq!(
-        num("priority", "minimum"),
-        *vectorfusion::pipeline::PRIORITY_RANGE.start() as i64
-    );
-    assert_eq!(
-        num("priority", "maximum"),
-        *vectorfusion::pipeline::PRIORITY_RANGE.end() as i64
-    );
+    for props in [text, vectorize] {
+        // documented defaults and bounds are the code's
+        let num = |field: &str, key: &str| -> i64 {
+            props
+                .path(&[field, key])
+                .value
+                .as_deref()
+                .unwrap()
+                .parse()
+                .unwrap()
+        };
+        // Omitted paths/steps/samples are the preset's: no fixed default may be documented.
+        for f in vectorfusion::server::types::PRESET_FIELDS {
+            assert!(
+                props.path(&[f]).get("default").is_none(),
+                "{f} has a documented default, but the preset decides"
+            );
+            let d = props.path(&[f, "description"]).value.clone().unwrap();
+            assert!(d.contains("preset"), "{f}: {d}");
+        }
+        assert_eq!(
+            props.path(&["preset", "default"]).value.as_deref(),
+            Some(
+                serde_names(&[Preset::default()])
+                    .pop_first()
+                    .unwrap()
+                    .as_str()
+            )
+        );
+        assert_eq!(num("paths", "maximum"), limits.max_paths as i64);
+        assert_eq!(num("steps", "maximum"), limits.max_steps as i64);
+        assert_eq!(num("samples", "maximum"), limits.max_samples as i64);
+        assert_eq!(num("caption", "maxLength"), limits.max_caption_chars as i64);
+        assert_eq!(
+            num("priority", "minimum"),
+            *vectorfusion::pipeline::PRIORITY_RANGE.start() as i64
+        );
+        assert_eq!(
+            num("priority", "maximum"),
+            *vectorfusion::pipeline::PRIORITY_RANGE.end() as i64
+        );
+    }
 }

@@ -20,6 +20,7 @@ fn tenant(name: &str, key: &str, max_active_jobs: u32) -> TenantConfig {
         name: name.into(),
         key: key.into(),
         max_active_jobs,
+        max_upload_bytes: 0,
     }
 }
 

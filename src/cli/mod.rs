@@ -40,6 +40,9 @@ pub enum Command {
     /// Benchmarks.
     #[command(subcommand)]
     Bench(bench::BenchCommand),
+    /// Internal: run one job of `serve` in this process (JSON lines on stdin/stdout).
+    #[command(hide = true)]
+    JobChild,
 }
 
 /// Placeholder arguments for commands that are not implemented yet.
@@ -95,6 +98,12 @@ pub fn run(cli: Cli) -> Result<(), CliError> {
         Command::Eval(a) => eval::run(a),
         Command::Setup(a) => setup::run(a),
         Command::Bench(b) => bench::run(b),
+        Command::JobChild => match crate::worker::isolate::run_stdio() {
+            0 => Ok(()),
+            code => Err(CliError::Usage(format!(
+                "job-child ended with status {code} (it is started by `serve`, not by hand)"
+            ))),
+        },
     }
 }
 

@@ -3,6 +3,7 @@
 use super::CliError;
 use crate::config::Config;
 use crate::pipeline::{DefaultExecutor, Executor};
+use crate::worker::isolate::{ChildExecutor, JobLimits, ProcessExecutor};
 use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -42,12 +43,15 @@ pub fn run(args: ServeArgs) -> Result<(), CliError> {
     }
     cfg.validate().map_err(|e| CliError::Usage(e.to_string()))?;
     init_logging(&cfg);
-    let executor: Arc<dyn Executor> = match args.test_executor {
+    let (inner, child): (Arc<dyn Executor>, ChildExecutor) = match args.test_executor {
         Some(ms) => {
             tracing::warn!(
                 "running with the TEST executor (service test double), not the pipeline"
             );
-            Arc::new(crate::worker::test_executor::TestExecutor::new(ms))
+            (
+                Arc::new(crate::worker::test_executor::TestExecutor::new(ms)),
+                ChildExecutor::Test { step_ms: ms },
+            )
         }
         None => {
             let mut dirs = cfg.model_dirs();
@@ -55,8 +59,25 @@ pub fn run(args: ServeArgs) -> Result<(), CliError> {
                 let default = crate::pipeline::default_model_dir().map_err(CliError::Usage)?;
                 dirs = dirs.or_default_model(default);
             }
-            Arc::new(DefaultExecutor::new(dirs))
+            (
+                Arc::new(DefaultExecutor::new(dirs.clone())),
+                ChildExecutor::Pipeline { models: dirs },
+            )
         }
+    };
+    let executor: Arc<dyn Executor> = if cfg.queue.isolation == "process" {
+        let exe = std::env::current_exe().map_err(|e| {
+            CliError::Usage(format!(
+                "cannot find this program to start job processes ({e}); set queue.isolation = \"thread\""
+            ))
+        })?;
+        let limits = JobLimits {
+            max_rss_bytes: cfg.queue.job_memory_mb.saturating_mul(1 << 20),
+            max_wall: std::time::Duration::from_secs(cfg.queue.job_wall_secs),
+        };
+        Arc::new(ProcessExecutor::new(exe, child, inner, limits))
+    } else {
+        inner
     };
     let rt = tokio::runtime::Builder::new_multi_thread()
         .enable_all()

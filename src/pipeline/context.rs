@@ -83,6 +83,11 @@ impl JobContext {
         }
     }
 
+    /// Steps between advised checkpoints.
+    pub fn checkpoint_every(&self) -> u32 {
+        self.checkpoint_every
+    }
+
     /// Whether `step` (1-based) is one at which a checkpoint is due.
     pub fn checkpoint_due(&self, step: u32) -> bool {
         step > 0 && step % self.checkpoint_every == 0

@@ -195,7 +195,9 @@ impl JobSpec {
         }
         if let Some(c) = &self.caption {
             let n = c.chars().count();
-            if c.trim().is_empty() {
+            if c.trim_matches(|ch: char| ch.is_whitespace() || ch == '\u{feff}')
+                .is_empty()
+            {
                 return Err(SpecError::new("caption", "must not be empty"));
             }
             if n > limits.max_caption_chars {

@@ -37,6 +37,12 @@ pub enum ApiError {
         "this key already has {limit} queued or running jobs (its max_active_jobs); retry later"
     )]
     QuotaExceeded { limit: u32, retry_after_secs: u64 },
+    #[error(
+        "stored uploads would pass {limit} bytes (max_stored_upload_bytes or the key's max_upload_bytes); retry when running jobs finish"
+    )]
+    UploadQuota { limit: i64, retry_after_secs: u64 },
+    #[error("the request body did not arrive within {secs} s")]
+    BodyTimeout { secs: u64 },
     #[error("the server is busy ({what}); retry later")]
     Busy {
         what: &'static str,
@@ -81,9 +87,11 @@ impl ApiError {
             ApiError::NotFound { .. } | ApiError::NoRoute { .. } => StatusCode::NOT_FOUND,
             ApiError::MethodNotAllowed(_) => StatusCode::METHOD_NOT_ALLOWED,
             ApiError::Conflict(_) | ApiError::IdempotencyConflict => StatusCode::CONFLICT,
-            ApiError::QueueFull { .. } | ApiError::Busy { .. } | ApiError::QuotaExceeded { .. } => {
-                StatusCode::TOO_MANY_REQUESTS
-            }
+            ApiError::QueueFull { .. }
+            | ApiError::Busy { .. }
+            | ApiError::QuotaExceeded { .. }
+            | ApiError::UploadQuota { .. } => StatusCode::TOO_MANY_REQUESTS,
+            ApiError::BodyTimeout { .. } => StatusCode::REQUEST_TIMEOUT,
             ApiError::ModelsNotConfigured(_) | ApiError::ShuttingDown => {
                 StatusCode::SERVICE_UNAVAILABLE
             }
@@ -107,6 +115,8 @@ impl ApiError {
             ApiError::QueueFull { .. } => "queue_full",
             ApiError::Busy { .. } => "busy",
             ApiError::QuotaExceeded { .. } => "quota_exceeded",
+            ApiError::UploadQuota { .. } => "upload_quota_exceeded",
+            ApiError::BodyTimeout { .. } => "body_timeout",
             ApiError::ModelsNotConfigured(_) => "models_not_configured",
             ApiError::ShuttingDown => "shutting_down",
             ApiError::Internal(_) => "internal",
@@ -156,7 +166,13 @@ pub fn without_paths(text: &str) -> String {
 
 impl From<crate::store::StoreError> for ApiError {
     fn from(e: crate::store::StoreError) -> Self {
-        ApiError::Internal(e.to_string())
+        match e {
+            crate::store::StoreError::UploadQuota { limit } => ApiError::UploadQuota {
+                limit,
+                retry_after_secs: 30,
+            },
+            other => ApiError::Internal(other.to_string()),
+        }
     }
 }
 
@@ -181,6 +197,9 @@ impl IntoResponse for ApiError {
             retry_after_secs, ..
         }
         | ApiError::QuotaExceeded {
+            retry_after_secs, ..
+        }
+        | ApiError::UploadQuota {
             retry_after_secs, ..
         } = &self
             && let Ok(v) = HeaderValue::from_str(&retry_after_secs.to_string())

@@ -7,6 +7,7 @@
 //! (they checkpoint and return to the queue) and waits for the workers.
 
 pub mod error;
+mod listen;
 mod page;
 mod routes;
 mod sse;
@@ -23,7 +24,7 @@ use axum::Router;
 use axum::extract::DefaultBodyLimit;
 use axum::http::Method;
 use axum::routing::{MethodRouter, delete, get, post};
-use std::future::{Future, IntoFuture};
+use std::future::Future;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicI64, Ordering};
 use std::time::Duration;
@@ -188,19 +189,20 @@ pub async fn run(
         let _ = stop_tx.send(true);
         st.pool.begin_shutdown();
     };
-    let serve = axum::serve(listener, app)
-        .with_graceful_shutdown(graceful)
-        .into_future();
+    let conn_limits = listen::ConnLimits {
+        max_connections: state.cfg.server.max_connections,
+        header_read_timeout: Duration::from_secs(state.cfg.server.header_read_timeout_secs),
+    };
+    let serve = listen::serve(listener, app, conn_limits, graceful);
     tokio::pin!(serve);
     let mut stop_seen = state.shutdown.clone();
-    let served = tokio::select! {
-        r = &mut serve => r,
+    tokio::select! {
+        () = &mut serve => {}
         _ = async {
             let _ = stop_seen.wait_for(|s| *s).await;
             tokio::time::sleep(grace).await;
         } => {
             warn!("connections still open {}s after the shutdown request; closing them", grace.as_secs());
-            Ok(())
         }
     };
     pruner.abort();
@@ -220,7 +222,7 @@ pub async fn run(
     }
     store.close().await;
     info!("stopped");
-    served.map_err(ServerError::Io)
+    Ok(())
 }
 
 async fn prune_loop(state: AppState) {

@@ -4,8 +4,8 @@ use super::AppState;
 use super::error::ApiError;
 use super::tenant::Caller;
 use super::types::{JobList, JobView, check_image, check_svg, parse_submit};
-use crate::pipeline::JobKind;
-use crate::store::{JobRow, JobStatus, NewJob, now_ms};
+use crate::pipeline::{JobKind, JobSpec};
+use crate::store::{JobRow, JobStatus, NewJob, NewUpload, now_ms};
 use crate::worker::events::JobEvent;
 use crate::worker::metrics::Metrics;
 use axum::Json;
@@ -88,14 +88,20 @@ pub(super) async fn submit(
     if declared.is_some_and(|n| n > limit as u64) {
         return Err(ApiError::PayloadTooLarge { limit });
     }
-    let body = axum::body::to_bytes(body, limit).await.map_err(|e| {
-        let msg = format!("{e:#}");
-        if msg.contains("length limit") {
-            ApiError::PayloadTooLarge { limit }
-        } else {
-            ApiError::MalformedJson(format!("could not read the request body: {msg}"))
-        }
-    })?;
+    let read_for = std::time::Duration::from_secs(state.cfg.server.body_read_timeout_secs);
+    let body = tokio::time::timeout(read_for, axum::body::to_bytes(body, limit))
+        .await
+        .map_err(|_| ApiError::BodyTimeout {
+            secs: read_for.as_secs(),
+        })?
+        .map_err(|e| {
+            let msg = format!("{e:#}");
+            if msg.contains("length limit") {
+                ApiError::PayloadTooLarge { limit }
+            } else {
+                ApiError::MalformedJson(format!("could not read the request body: {msg}"))
+            }
+        })?;
     let key = match headers.get(IDEMPOTENCY_HEADER) {
         None => None,
         Some(v) => {
@@ -171,6 +177,7 @@ pub(super) async fn submit(
     if let Caller::Tenant {
         name,
         max_active_jobs,
+        ..
     } = &caller
         && *max_active_jobs > 0
     {
@@ -200,6 +207,16 @@ pub(super) async fn submit(
             });
         }
     }
+    // The upload goes to its own table; the row's spec keeps "" markers (`store::uploads`).
+    let upload = upload_of(&state, &caller, &spec);
+    let mut row_spec = spec;
+    if row_spec.image.is_some() {
+        row_spec.image = Some(Vec::new());
+    }
+    if row_spec.svg.is_some() {
+        row_spec.svg = Some(String::new());
+    }
+    let spec = row_spec;
     let spec_json = serde_json::to_string(&spec).map_err(|e| ApiError::Internal(e.to_string()))?;
     let new = NewJob {
         id: id.hyphenated().to_string(),
@@ -214,6 +231,7 @@ pub(super) async fn submit(
         max_attempts: state.cfg.queue.max_attempts as i64,
         max_lost_attempts: state.cfg.queue.max_lost_attempts as i64,
         tenant: caller.tenant().map(str::to_string),
+        upload,
     };
     let (row, created) = state.store.insert_job(&new, now_ms()).await?;
     if !created {
@@ -224,6 +242,29 @@ pub(super) async fn submit(
     state.pool.notify();
     tracing::info!(job = %row.id, kind = %row.kind, "job submitted");
     Ok(accepted(&row))
+}
+
+/// The upload of a submit (base64 image, SVG) with the caller's quotas, if it has one.
+fn upload_of(state: &AppState, caller: &Caller, spec: &JobSpec) -> Option<NewUpload> {
+    if spec.image.is_none() && spec.svg.is_none() {
+        return None;
+    }
+    use base64::Engine as _;
+    let cap = |b: u64| i64::try_from(b).unwrap_or(i64::MAX);
+    Some(NewUpload {
+        image: spec
+            .image
+            .as_ref()
+            .map(|b| base64::engine::general_purpose::STANDARD.encode(b)),
+        svg: spec.svg.clone(),
+        max_total_bytes: cap(state.cfg.server.max_stored_upload_bytes),
+        max_tenant_bytes: match caller {
+            Caller::Tenant {
+                max_upload_bytes, ..
+            } => cap(*max_upload_bytes),
+            Caller::Operator => 0,
+        },
+    })
 }
 
 /// 202 with the job and its `Location`.

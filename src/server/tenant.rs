@@ -18,6 +18,8 @@ pub enum Caller {
         name: String,
         /// Queued + running jobs at most (0: no cap).
         max_active_jobs: u32,
+        /// Bytes of its active jobs' uploads at most (0: only the server's cap).
+        max_upload_bytes: u64,
     },
 }
 
@@ -26,6 +28,7 @@ impl Caller {
         Caller::Tenant {
             name: t.name.clone(),
             max_active_jobs: t.max_active_jobs,
+            max_upload_bytes: t.max_upload_bytes,
         }
     }
 
@@ -107,11 +110,13 @@ mod tests {
                     name: "a".into(),
                     key: "tenant-a-key-0123456789".into(),
                     max_active_jobs: 0,
+                    max_upload_bytes: 0,
                 },
                 TenantConfig {
                     name: "b".into(),
                     key: "tenant-b-key-0123456789".into(),
                     max_active_jobs: 3,
+                    max_upload_bytes: 0,
                 },
             ],
             ..ServerConfig::default()

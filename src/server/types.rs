@@ -40,6 +40,22 @@ fn field<T: DeserializeOwned>(obj: &Map<String, Value>, name: &str) -> Result<Op
     }
 }
 
+/// JSON Schema (and so `openapi.yaml`) counts `7374.0` as an integer; serde does not. Top-level
+/// whole-number floats within `i64::MIN..2^64` become integers (the range checks then apply).
+fn whole_numbers_as_integers(obj: &mut Map<String, Value>) {
+    for v in obj.values_mut() {
+        let Value::Number(n) = v else { continue };
+        let Some(f) = n.as_f64().filter(|f| n.is_f64() && f.fract() == 0.0) else {
+            continue;
+        };
+        if (0.0..u64::MAX as f64).contains(&f) {
+            *v = Value::from(f as u64);
+        } else if (i64::MIN as f64..0.0).contains(&f) {
+            *v = Value::from(f as i64);
+        }
+    }
+}
+
 /// Parses and validates a `POST /jobs` body into a [`JobSpec`]. `job_id_seed` seeds jobs that
 /// give no seed (so every job is reproducible from its stored spec). Image decoding is checked
 /// separately ([`check_image`]) because it is CPU work.
@@ -51,11 +67,12 @@ pub fn parse_submit(
 ) -> Result<JobSpec, ApiError> {
     let value: Value =
         serde_json::from_slice(body).map_err(|e| ApiError::MalformedJson(e.to_string()))?;
-    let Value::Object(obj) = value else {
+    let Value::Object(mut obj) = value else {
         return Err(ApiError::MalformedJson(
             "expected a JSON object at the top level".into(),
         ));
     };
+    whole_numbers_as_integers(&mut obj);
     for key in obj.keys() {
         if !SUBMIT_FIELDS.contains(&key.as_str()) {
             return Err(ApiError::invalid(

@@ -8,6 +8,11 @@
 //! stalled, the job was reclaimed) can no longer touch the job: a job completes exactly once.
 //! Each claim opens a row in `attempts`, closed with its outcome.
 
+mod lease;
+mod uploads;
+
+pub use uploads::{NewUpload, UploadRow};
+
 use serde::Serialize;
 use sqlx::sqlite::{
     SqliteConnectOptions, SqliteJournalMode, SqlitePool, SqlitePoolOptions, SqliteSynchronous,
@@ -25,6 +30,9 @@ pub enum StoreError {
     Migrate(#[from] sqlx::migrate::MigrateError),
     #[error("corrupt row in database: {0}")]
     Corrupt(String),
+    /// A submit whose upload would take the stored uploads past a quota (nothing was inserted).
+    #[error("stored uploads would exceed {limit} bytes")]
+    UploadQuota { limit: i64 },
 }
 
 /// Job lifecycle states (mirrors the CHECK constraint in `migrations/0001_jobs.sql`).
@@ -163,6 +171,8 @@ pub struct NewJob {
     /// Lost attempts (worker died) after which the job fails as `poison`; at least 1.
     pub max_lost_attempts: i64,
     pub tenant: Option<String>,
+    /// Its image and starting SVG, stored apart from the row (the spec holds "" markers).
+    pub upload: Option<NewUpload>,
 }
 
 /// Identifies one attempt of one job held by one worker; every worker write carries it.
@@ -285,9 +295,11 @@ impl Store {
         Ok(())
     }
 
-    /// Inserts a job. With an idempotency key already in use, returns the existing job and
-    /// `false`.
+    /// Inserts a job (and its upload, in one transaction). With an idempotency key already in
+    /// use, returns the existing job and `false`. An upload past its quotas inserts nothing and
+    /// fails with [`StoreError::UploadQuota`].
     pub async fn insert_job(&self, job: &NewJob, now: i64) -> Result<(JobRow, bool), StoreError> {
+        let mut tx = self.writer.begin_with("BEGIN IMMEDIATE").await?;
         let inserted: Option<JobRow> = sqlx::query_as(include_str!("sql/insert_job.sql"))
             .bind(&job.id)
             .bind(&job.kind)
@@ -299,18 +311,46 @@ impl Store {
             .bind(now)
             .bind(job.max_lost_attempts)
             .bind(&job.tenant)
-            .fetch_optional(&self.writer)
+            .fetch_optional(&mut *tx)
             .await?;
-        if let Some(row) = inserted {
-            return Ok((row, true));
+        let Some(row) = inserted else {
+            tx.rollback().await?;
+            let existing: Option<JobRow> = sqlx::query_as(include_str!("sql/get_job_by_key.sql"))
+                .bind(&job.idempotency_key)
+                .fetch_optional(&self.writer)
+                .await?;
+            return existing.map(|r| (r, false)).ok_or_else(|| {
+                StoreError::Corrupt("idempotency key conflict without a row".into())
+            });
+        };
+        if let Some(up) = &job.upload {
+            let stored = sqlx::query(include_str!("sql/insert_upload.sql"))
+                .bind(&job.id)
+                .bind(&job.tenant)
+                .bind(&up.image)
+                .bind(&up.svg)
+                .bind(up.bytes())
+                .bind(now)
+                .bind(up.max_total_bytes)
+                .bind(up.max_tenant_bytes)
+                .execute(&mut *tx)
+                .await?;
+            if stored.rows_affected() == 0 {
+                tx.rollback().await?;
+                let over_tenant = up.max_tenant_bytes > 0
+                    && self.upload_bytes(Some(job.tenant.as_deref())).await? + up.bytes()
+                        > up.max_tenant_bytes;
+                return Err(StoreError::UploadQuota {
+                    limit: if over_tenant {
+                        up.max_tenant_bytes
+                    } else {
+                        up.max_total_bytes
+                    },
+                });
+            }
         }
-        let existing: Option<JobRow> = sqlx::query_as(include_str!("sql/get_job_by_key.sql"))
-            .bind(&job.idempotency_key)
-            .fetch_optional(&self.writer)
-            .await?;
-        existing
-            .map(|r| (r, false))
-            .ok_or_else(|| StoreError::Corrupt("idempotency key conflict without a row".into()))
+        tx.commit().await?;
+        Ok((row, true))
     }
 
     /// The job submitted with this idempotency key, if any.
@@ -375,259 +415,6 @@ impl Store {
             .await?)
     }
 
-    /// Finishes running jobs whose lease expired and that cannot be retried; returns them.
-    pub async fn reap_expired(&self, now: i64) -> Result<Vec<JobRow>, StoreError> {
-        let rows: Vec<JobRow> = sqlx::query_as(include_str!("sql/reap_expired.sql"))
-            .bind(now)
-            .fetch_all(&self.writer)
-            .await?;
-        for row in &rows {
-            sqlx::query(include_str!("sql/mark_lost_attempts.sql"))
-                .bind(&row.id)
-                .bind(i64::MAX)
-                .bind(now)
-                .execute(&self.writer)
-                .await?;
-        }
-        Ok(rows)
-    }
-
-    /// Atomically claims the next job for `worker`, with a lease of `lease_ms`. One statement:
-    /// the trigger of `migrations/0002_claim_opens_attempt.sql` opens the attempt row (and marks
-    /// earlier running attempts lost) inside it.
-    pub async fn claim(
-        &self,
-        worker: &str,
-        now: i64,
-        lease_ms: i64,
-    ) -> Result<Option<(JobRow, Lease)>, StoreError> {
-        let row: Option<JobRow> = sqlx::query_as(include_str!("sql/claim.sql"))
-            .bind(worker)
-            .bind(now)
-            .bind(lease_ms)
-            .fetch_optional(&self.writer)
-            .await?;
-        Ok(row.map(|row| {
-            let lease = Lease {
-                job_id: row.id.clone(),
-                worker: worker.to_string(),
-                attempt: row.attempts,
-            };
-            (row, lease)
-        }))
-    }
-
-    pub async fn heartbeat(
-        &self,
-        lease: &Lease,
-        now: i64,
-        lease_ms: i64,
-    ) -> Result<Heartbeat, StoreError> {
-        let flag: Option<i64> = sqlx::query_scalar(include_str!("sql/heartbeat.sql"))
-            .bind(&lease.job_id)
-            .bind(&lease.worker)
-            .bind(lease.attempt)
-            .bind(now)
-            .bind(lease_ms)
-            .fetch_optional(&self.writer)
-            .await?;
-        Ok(match flag {
-            Some(c) => Heartbeat::Held { cancel: c != 0 },
-            None => Heartbeat::Lost,
-        })
-    }
-
-    /// Records the latest progress; `false` if the lease is gone.
-    #[allow(clippy::too_many_arguments)]
-    pub async fn update_progress(
-        &self,
-        lease: &Lease,
-        stage: &str,
-        step: u32,
-        total: u32,
-        loss: Option<f64>,
-        now: i64,
-    ) -> Result<bool, StoreError> {
-        let r = sqlx::query(include_str!("sql/update_progress.sql"))
-            .bind(&lease.job_id)
-            .bind(&lease.worker)
-            .bind(lease.attempt)
-            .bind(stage)
-            .bind(step as i64)
-            .bind(total as i64)
-            .bind(loss.filter(|l| l.is_finite()))
-            .bind(now)
-            .execute(&self.writer)
-            .await?;
-        Ok(r.rows_affected() == 1)
-    }
-
-    /// Stores the executor's resumable state; `false` if the lease is gone.
-    pub async fn save_checkpoint(
-        &self,
-        lease: &Lease,
-        state: &str,
-        now: i64,
-    ) -> Result<bool, StoreError> {
-        let r = sqlx::query(include_str!("sql/save_checkpoint.sql"))
-            .bind(&lease.job_id)
-            .bind(&lease.worker)
-            .bind(lease.attempt)
-            .bind(state)
-            .bind(now)
-            .execute(&self.writer)
-            .await?;
-        Ok(r.rows_affected() == 1)
-    }
-
-    /// Stores a snapshot and keeps at most `keep` per job; returns its number, or `None` if
-    /// the lease is gone.
-    pub async fn add_snapshot(
-        &self,
-        lease: &Lease,
-        stage: &str,
-        step: u32,
-        svg: &str,
-        now: i64,
-        keep: i64,
-    ) -> Result<Option<i64>, StoreError> {
-        let n: Option<i64> = sqlx::query_scalar(include_str!("sql/insert_snapshot.sql"))
-            .bind(&lease.job_id)
-            .bind(&lease.worker)
-            .bind(lease.attempt)
-            .bind(stage)
-            .bind(step as i64)
-            .bind(svg)
-            .bind(now)
-            .fetch_optional(&self.writer)
-            .await?;
-        if let Some(n) = n
-            && n > keep
-        {
-            sqlx::query(include_str!("sql/trim_snapshots.sql"))
-                .bind(&lease.job_id)
-                .bind(n - keep.max(1))
-                .execute(&self.writer)
-                .await?;
-        }
-        Ok(n)
-    }
-
-    /// Marks the job succeeded and stores its result in one transaction. `false` (and nothing
-    /// written) if this lease no longer holds the job.
-    pub async fn complete(
-        &self,
-        lease: &Lease,
-        svg: &str,
-        paths: i64,
-        detail: &str,
-        now: i64,
-    ) -> Result<bool, StoreError> {
-        let mut tx = self.writer.begin_with("BEGIN IMMEDIATE").await?;
-        let r = sqlx::query(include_str!("sql/complete_job.sql"))
-            .bind(&lease.job_id)
-            .bind(&lease.worker)
-            .bind(lease.attempt)
-            .bind(now)
-            .execute(&mut *tx)
-            .await?;
-        if r.rows_affected() != 1 {
-            tx.rollback().await?;
-            return Ok(false);
-        }
-        sqlx::query(include_str!("sql/insert_result.sql"))
-            .bind(&lease.job_id)
-            .bind(svg)
-            .bind(paths)
-            .bind(detail)
-            .bind(now)
-            .execute(&mut *tx)
-            .await?;
-        finish_attempt(&mut tx, lease, AttemptOutcome::Succeeded, None, now).await?;
-        tx.commit().await?;
-        Ok(true)
-    }
-
-    /// Records a failed attempt: re-queued at `retry_at` if given, else failed for good.
-    pub async fn fail(
-        &self,
-        lease: &Lease,
-        code: &str,
-        message: &str,
-        retry_at: Option<i64>,
-        now: i64,
-    ) -> Result<Option<JobRow>, StoreError> {
-        let mut tx = self.writer.begin_with("BEGIN IMMEDIATE").await?;
-        let row: Option<JobRow> = sqlx::query_as(include_str!("sql/fail_job.sql"))
-            .bind(&lease.job_id)
-            .bind(&lease.worker)
-            .bind(lease.attempt)
-            .bind(retry_at)
-            .bind(code)
-            .bind(message)
-            .bind(now)
-            .fetch_optional(&mut *tx)
-            .await?;
-        if row.is_some() {
-            let outcome = if retry_at.is_some() {
-                AttemptOutcome::Retry
-            } else {
-                AttemptOutcome::Failed
-            };
-            finish_attempt(&mut tx, lease, outcome, Some(message), now).await?;
-        }
-        tx.commit().await?;
-        Ok(row)
-    }
-
-    /// Marks a running job cancelled (its executor stopped on request).
-    pub async fn finish_cancelled(
-        &self,
-        lease: &Lease,
-        now: i64,
-    ) -> Result<Option<JobRow>, StoreError> {
-        self.end_attempt(
-            lease,
-            include_str!("sql/finish_cancelled.sql"),
-            AttemptOutcome::Cancelled,
-            now,
-        )
-        .await
-    }
-
-    /// Hands a running job back to the queue (graceful shutdown); its checkpoint is kept.
-    pub async fn release(&self, lease: &Lease, now: i64) -> Result<Option<JobRow>, StoreError> {
-        self.end_attempt(
-            lease,
-            include_str!("sql/release_job.sql"),
-            AttemptOutcome::Interrupted,
-            now,
-        )
-        .await
-    }
-
-    async fn end_attempt(
-        &self,
-        lease: &Lease,
-        sql: &'static str,
-        outcome: AttemptOutcome,
-        now: i64,
-    ) -> Result<Option<JobRow>, StoreError> {
-        let mut tx = self.writer.begin_with("BEGIN IMMEDIATE").await?;
-        let row: Option<JobRow> = sqlx::query_as(sql)
-            .bind(&lease.job_id)
-            .bind(&lease.worker)
-            .bind(lease.attempt)
-            .bind(now)
-            .fetch_optional(&mut *tx)
-            .await?;
-        if row.is_some() {
-            finish_attempt(&mut tx, lease, outcome, None, now).await?;
-        }
-        tx.commit().await?;
-        Ok(row)
-    }
-
     pub async fn attempts(&self, job_id: &str) -> Result<Vec<AttemptRow>, StoreError> {
         Ok(sqlx::query_as(include_str!("sql/list_attempts.sql"))
             .bind(job_id)
@@ -679,24 +466,6 @@ impl Store {
             .await?;
         Ok(r.rows_affected())
     }
-}
-
-async fn finish_attempt(
-    tx: &mut sqlx::Transaction<'static, sqlx::Sqlite>,
-    lease: &Lease,
-    outcome: AttemptOutcome,
-    error: Option<&str>,
-    now: i64,
-) -> Result<(), StoreError> {
-    sqlx::query(include_str!("sql/finish_attempt.sql"))
-        .bind(&lease.job_id)
-        .bind(lease.attempt)
-        .bind(outcome.as_str())
-        .bind(error)
-        .bind(now)
-        .execute(&mut **tx)
-        .await?;
-    Ok(())
 }
 
 #[cfg(test)]

@@ -20,6 +20,7 @@ fn new_job(i: usize) -> NewJob {
         max_attempts: 3,
         max_lost_attempts: 2,
         tenant: None,
+        upload: None,
     }
 }
 
@@ -329,4 +330,61 @@ async fn prune_removes_old_finished_jobs() {
     assert!(store.result(&job.id).await.unwrap().is_none());
     assert!(store.latest_snapshot(&job.id).await.unwrap().is_none());
     assert!(store.get_job(&queued.id).await.unwrap().is_some());
+}
+
+#[tokio::test]
+async fn uploads_live_apart_within_their_quotas_and_go_when_the_job_ends() {
+    let (_d, store) = temp_store(2).await;
+    let up = |n: usize, tenant_cap: i64| NewUpload {
+        image: Some("A".repeat(n)),
+        svg: None,
+        max_total_bytes: 1000,
+        max_tenant_bytes: tenant_cap,
+    };
+    let mut a = new_job(0);
+    a.upload = Some(up(600, 0));
+    let (ra, _) = store.insert_job(&a, 1).await.unwrap();
+    let row_bytes: i64 =
+        sqlx::query_scalar("SELECT length(CAST(spec AS BLOB)) FROM jobs WHERE id = ?1")
+            .bind(&ra.id)
+            .fetch_one(store.pool())
+            .await
+            .unwrap();
+    assert!(row_bytes < 100, "the job row holds {row_bytes} bytes");
+    let stored = store.upload(&ra.id).await.unwrap().unwrap();
+    assert_eq!(stored.image.map(|i| i.len()), Some(600));
+    assert_eq!(store.upload_bytes(None).await.unwrap(), 600);
+
+    // 600 + 500 > 1000: refused, and the job is not inserted either.
+    let mut b = new_job(1);
+    b.upload = Some(up(500, 0));
+    match store.insert_job(&b, 2).await {
+        Err(StoreError::UploadQuota { limit }) => assert_eq!(limit, 1000),
+        other => panic!("expected the upload quota, got {other:?}"),
+    }
+    assert!(store.get_job(&b.id).await.unwrap().is_none());
+    assert_eq!(store.queue_depth().await.unwrap(), 1);
+    // A tenant's own cap is checked against that tenant's uploads only.
+    let mut c = new_job(2);
+    c.tenant = Some("t".into());
+    c.upload = Some(up(300, 200));
+    match store.insert_job(&c, 3).await {
+        Err(StoreError::UploadQuota { limit }) => assert_eq!(limit, 200),
+        other => panic!("expected the tenant's upload quota, got {other:?}"),
+    }
+    c.upload = Some(up(150, 200));
+    store.insert_job(&c, 4).await.unwrap();
+    assert_eq!(store.upload_bytes(Some(Some("t"))).await.unwrap(), 150);
+    assert_eq!(store.upload_bytes(Some(None)).await.unwrap(), 600);
+
+    // Finishing the job deletes its upload, which frees the quota.
+    let (row, lease) = store.claim("w", 10, 1000).await.unwrap().unwrap();
+    assert_eq!(row.id, ra.id);
+    assert!(store.complete(&lease, "<svg/>", 0, "{}", 11).await.unwrap());
+    assert!(store.upload(&ra.id).await.unwrap().is_none());
+    assert_eq!(store.upload_bytes(None).await.unwrap(), 150);
+    store.insert_job(&b, 12).await.unwrap();
+    // So does cancelling a queued one.
+    store.request_cancel(&c.id, 13).await.unwrap().unwrap();
+    assert!(store.upload(&c.id).await.unwrap().is_none());
 }

@@ -10,11 +10,14 @@
 //! back to the queue with their last checkpoint.
 
 pub mod events;
+pub mod isolate;
 pub mod metrics;
+mod sink;
 pub mod test_executor;
+mod upload;
 
 use crate::pipeline::{Executor, JobContext, JobSpec, PipelineError};
-use crate::progress::{CancelToken, Progress, ProgressSink};
+use crate::progress::CancelToken;
 use crate::store::{Heartbeat, JobRow, JobStatus, Lease, Store, now_ms};
 use events::{Hub, JobEvent};
 use metrics::Metrics;
@@ -277,7 +280,7 @@ fn worker_loop(s: &Shared, worker_id: &str) {
 
 fn run_job(s: &Shared, row: JobRow, lease: Lease) {
     let job_id = row.id.clone();
-    let spec: JobSpec = match serde_json::from_str(&row.spec) {
+    let mut spec: JobSpec = match serde_json::from_str(&row.spec) {
         Ok(spec) => spec,
         Err(e) => {
             let msg = format!("stored job spec is unreadable: {e}");
@@ -286,6 +289,11 @@ fn run_job(s: &Shared, row: JobRow, lease: Lease) {
             return;
         }
     };
+    if let Err(msg) = upload::attach(&s.store, &s.runtime, &job_id, &mut spec) {
+        error!("{msg}");
+        finish_failed(s, &lease, "invalid_spec", &msg, None);
+        return;
+    }
     let resume = row
         .checkpoint
         .as_deref()
@@ -319,7 +327,7 @@ fn run_job(s: &Shared, row: JobRow, lease: Lease) {
         .instrument(tracing::Span::current()),
     );
 
-    let sink = Arc::new(WorkerSink::new(s, &lease));
+    let sink = Arc::new(sink::WorkerSink::new(s, &lease));
     let ckpt_store = s.store.clone();
     let ckpt_lease = lease.clone();
     let rt = s.runtime.clone();
@@ -465,163 +473,6 @@ async fn heartbeat_loop(
                 return;
             }
             Err(e) => warn!(error = %e, "heartbeat failed; will retry"),
-        }
-    }
-}
-
-#[derive(Default)]
-struct SinkState {
-    last_progress: Option<Instant>,
-    last_snapshot: Option<Instant>,
-    pending_snapshot: Option<(String, u32, String)>,
-    pending_progress: Option<Progress>,
-    stage: Option<(String, Instant)>,
-}
-
-/// The progress sink handed to executors: rate-limits progress and snapshots, stores them and
-/// publishes them to SSE subscribers. Runs on the worker thread; database writes are short.
-struct WorkerSink {
-    store: Store,
-    hub: Hub,
-    metrics: Arc<Metrics>,
-    runtime: Handle,
-    lease: Lease,
-    progress_interval: Duration,
-    snapshot_interval: Duration,
-    keep_snapshots: i64,
-    state: Mutex<SinkState>,
-}
-
-impl WorkerSink {
-    fn new(s: &Shared, lease: &Lease) -> Self {
-        WorkerSink {
-            store: s.store.clone(),
-            hub: s.hub.clone(),
-            metrics: s.metrics.clone(),
-            runtime: s.runtime.clone(),
-            lease: lease.clone(),
-            progress_interval: s.settings.progress_interval,
-            snapshot_interval: s.settings.snapshot_interval,
-            keep_snapshots: s.settings.max_snapshots_per_job.max(1) as i64,
-            state: Mutex::new(SinkState::default()),
-        }
-    }
-
-    fn lock(&self) -> std::sync::MutexGuard<'_, SinkState> {
-        match self.state.lock() {
-            Ok(g) => g,
-            Err(p) => p.into_inner(),
-        }
-    }
-
-    fn emit_progress(&self, p: &Progress) {
-        let r = self.runtime.block_on(self.store.update_progress(
-            &self.lease,
-            &p.stage,
-            p.step,
-            p.total,
-            p.loss,
-            now_ms(),
-        ));
-        if let Err(e) = r {
-            warn!(error = %e, "storing progress failed");
-        }
-        self.hub.publish(
-            &self.lease.job_id,
-            JobEvent::Progress {
-                stage: p.stage.clone(),
-                step: p.step,
-                total: p.total,
-                loss: p.loss.filter(|l| l.is_finite()),
-                detail: p.detail.clone(),
-            },
-        );
-    }
-
-    fn emit_snapshot(&self, stage: &str, step: u32, svg: String) {
-        match self.runtime.block_on(self.store.add_snapshot(
-            &self.lease,
-            stage,
-            step,
-            &svg,
-            now_ms(),
-            self.keep_snapshots,
-        )) {
-            Ok(Some(n)) => self.hub.publish(
-                &self.lease.job_id,
-                JobEvent::Snapshot {
-                    n,
-                    stage: stage.to_string(),
-                    step,
-                    svg: svg.into(),
-                },
-            ),
-            Ok(None) => {}
-            Err(e) => warn!(error = %e, "storing a snapshot failed"),
-        }
-    }
-
-    /// Writes whatever the rate limits held back, and closes the stage timer.
-    fn flush(&self) {
-        let (progress, snap) = {
-            let mut st = self.lock();
-            if let Some((stage, t0)) = st.stage.take() {
-                self.metrics
-                    .observe_stage(&stage, t0.elapsed().as_secs_f64());
-            }
-            (st.pending_progress.take(), st.pending_snapshot.take())
-        };
-        if let Some(p) = progress {
-            self.emit_progress(&p);
-        }
-        if let Some((stage, step, svg)) = snap {
-            self.emit_snapshot(&stage, step, svg);
-        }
-    }
-}
-
-impl ProgressSink for WorkerSink {
-    fn report(&self, mut event: Progress) {
-        let now = Instant::now();
-        let svg = event.svg.take();
-        let (do_progress, do_snapshot) = {
-            let mut st = self.lock();
-            let stage_changed = st.stage.as_ref().is_none_or(|(s, _)| *s != event.stage);
-            if stage_changed {
-                if let Some((old, t0)) = st.stage.take() {
-                    self.metrics.observe_stage(&old, t0.elapsed().as_secs_f64());
-                }
-                st.stage = Some((event.stage.clone(), now));
-            }
-            let last = event.total > 0 && event.step >= event.total;
-            let due = |t: Option<Instant>, every: Duration| {
-                t.is_none_or(|t| now.duration_since(t) >= every)
-            };
-            let do_progress =
-                stage_changed || last || due(st.last_progress, self.progress_interval);
-            if do_progress {
-                st.last_progress = Some(now);
-                st.pending_progress = None;
-            } else {
-                st.pending_progress = Some(event.clone());
-            }
-            let mut do_snapshot = None;
-            if let Some(svg) = svg {
-                if last || due(st.last_snapshot, self.snapshot_interval) {
-                    st.last_snapshot = Some(now);
-                    st.pending_snapshot = None;
-                    do_snapshot = Some(svg);
-                } else {
-                    st.pending_snapshot = Some((event.stage.clone(), event.step, svg));
-                }
-            }
-            (do_progress, do_snapshot)
-        };
-        if do_progress {
-            self.emit_progress(&event);
-        }
-        if let Some(svg) = do_snapshot {
-            self.emit_snapshot(&event.stage, event.step, svg);
         }
     }
 }

@@ -1,0 +1,277 @@
+//! The worker's side of the store: claiming jobs and every write fenced by the lease
+//! (`(lease_owner, attempts)`): heartbeats, progress, checkpoints, snapshots, and the outcome.
+
+use super::{AttemptOutcome, Heartbeat, JobRow, Lease, Store, StoreError};
+
+impl Store {
+    /// Finishes running jobs whose lease expired and that cannot be retried; returns them.
+    pub async fn reap_expired(&self, now: i64) -> Result<Vec<JobRow>, StoreError> {
+        let rows: Vec<JobRow> = sqlx::query_as(include_str!("sql/reap_expired.sql"))
+            .bind(now)
+            .fetch_all(&self.writer)
+            .await?;
+        for row in &rows {
+            sqlx::query(include_str!("sql/mark_lost_attempts.sql"))
+                .bind(&row.id)
+                .bind(i64::MAX)
+                .bind(now)
+                .execute(&self.writer)
+                .await?;
+        }
+        Ok(rows)
+    }
+
+    /// Atomically claims the next job for `worker`, with a lease of `lease_ms`. One statement:
+    /// the trigger of `migrations/0002_claim_opens_attempt.sql` opens the attempt row (and marks
+    /// earlier running attempts lost) inside it.
+    pub async fn claim(
+        &self,
+        worker: &str,
+        now: i64,
+        lease_ms: i64,
+    ) -> Result<Option<(JobRow, Lease)>, StoreError> {
+        let row: Option<JobRow> = sqlx::query_as(include_str!("sql/claim.sql"))
+            .bind(worker)
+            .bind(now)
+            .bind(lease_ms)
+            .fetch_optional(&self.writer)
+            .await?;
+        Ok(row.map(|row| {
+            let lease = Lease {
+                job_id: row.id.clone(),
+                worker: worker.to_string(),
+                attempt: row.attempts,
+            };
+            (row, lease)
+        }))
+    }
+
+    pub async fn heartbeat(
+        &self,
+        lease: &Lease,
+        now: i64,
+        lease_ms: i64,
+    ) -> Result<Heartbeat, StoreError> {
+        let flag: Option<i64> = sqlx::query_scalar(include_str!("sql/heartbeat.sql"))
+            .bind(&lease.job_id)
+            .bind(&lease.worker)
+            .bind(lease.attempt)
+            .bind(now)
+            .bind(lease_ms)
+            .fetch_optional(&self.writer)
+            .await?;
+        Ok(match flag {
+            Some(c) => Heartbeat::Held { cancel: c != 0 },
+            None => Heartbeat::Lost,
+        })
+    }
+
+    /// Records the latest progress; `false` if the lease is gone.
+    #[allow(clippy::too_many_arguments)]
+    pub async fn update_progress(
+        &self,
+        lease: &Lease,
+        stage: &str,
+        step: u32,
+        total: u32,
+        loss: Option<f64>,
+        now: i64,
+    ) -> Result<bool, StoreError> {
+        let r = sqlx::query(include_str!("sql/update_progress.sql"))
+            .bind(&lease.job_id)
+            .bind(&lease.worker)
+            .bind(lease.attempt)
+            .bind(stage)
+            .bind(step as i64)
+            .bind(total as i64)
+            .bind(loss.filter(|l| l.is_finite()))
+            .bind(now)
+            .execute(&self.writer)
+            .await?;
+        Ok(r.rows_affected() == 1)
+    }
+
+    /// Stores the executor's resumable state; `false` if the lease is gone.
+    pub async fn save_checkpoint(
+        &self,
+        lease: &Lease,
+        state: &str,
+        now: i64,
+    ) -> Result<bool, StoreError> {
+        let r = sqlx::query(include_str!("sql/save_checkpoint.sql"))
+            .bind(&lease.job_id)
+            .bind(&lease.worker)
+            .bind(lease.attempt)
+            .bind(state)
+            .bind(now)
+            .execute(&self.writer)
+            .await?;
+        Ok(r.rows_affected() == 1)
+    }
+
+    /// Stores a snapshot and keeps at most `keep` per job; returns its number, or `None` if
+    /// the lease is gone.
+    pub async fn add_snapshot(
+        &self,
+        lease: &Lease,
+        stage: &str,
+        step: u32,
+        svg: &str,
+        now: i64,
+        keep: i64,
+    ) -> Result<Option<i64>, StoreError> {
+        let n: Option<i64> = sqlx::query_scalar(include_str!("sql/insert_snapshot.sql"))
+            .bind(&lease.job_id)
+            .bind(&lease.worker)
+            .bind(lease.attempt)
+            .bind(stage)
+            .bind(step as i64)
+            .bind(svg)
+            .bind(now)
+            .fetch_optional(&self.writer)
+            .await?;
+        if let Some(n) = n
+            && n > keep
+        {
+            sqlx::query(include_str!("sql/trim_snapshots.sql"))
+                .bind(&lease.job_id)
+                .bind(n - keep.max(1))
+                .execute(&self.writer)
+                .await?;
+        }
+        Ok(n)
+    }
+
+    /// Marks the job succeeded and stores its result in one transaction. `false` (and nothing
+    /// written) if this lease no longer holds the job.
+    pub async fn complete(
+        &self,
+        lease: &Lease,
+        svg: &str,
+        paths: i64,
+        detail: &str,
+        now: i64,
+    ) -> Result<bool, StoreError> {
+        let mut tx = self.writer.begin_with("BEGIN IMMEDIATE").await?;
+        let r = sqlx::query(include_str!("sql/complete_job.sql"))
+            .bind(&lease.job_id)
+            .bind(&lease.worker)
+            .bind(lease.attempt)
+            .bind(now)
+            .execute(&mut *tx)
+            .await?;
+        if r.rows_affected() != 1 {
+            tx.rollback().await?;
+            return Ok(false);
+        }
+        sqlx::query(include_str!("sql/insert_result.sql"))
+            .bind(&lease.job_id)
+            .bind(svg)
+            .bind(paths)
+            .bind(detail)
+            .bind(now)
+            .execute(&mut *tx)
+            .await?;
+        finish_attempt(&mut tx, lease, AttemptOutcome::Succeeded, None, now).await?;
+        tx.commit().await?;
+        Ok(true)
+    }
+
+    /// Records a failed attempt: re-queued at `retry_at` if given, else failed for good.
+    pub async fn fail(
+        &self,
+        lease: &Lease,
+        code: &str,
+        message: &str,
+        retry_at: Option<i64>,
+        now: i64,
+    ) -> Result<Option<JobRow>, StoreError> {
+        let mut tx = self.writer.begin_with("BEGIN IMMEDIATE").await?;
+        let row: Option<JobRow> = sqlx::query_as(include_str!("sql/fail_job.sql"))
+            .bind(&lease.job_id)
+            .bind(&lease.worker)
+            .bind(lease.attempt)
+            .bind(retry_at)
+            .bind(code)
+            .bind(message)
+            .bind(now)
+            .fetch_optional(&mut *tx)
+            .await?;
+        if row.is_some() {
+            let outcome = if retry_at.is_some() {
+                AttemptOutcome::Retry
+            } else {
+                AttemptOutcome::Failed
+            };
+            finish_attempt(&mut tx, lease, outcome, Some(message), now).await?;
+        }
+        tx.commit().await?;
+        Ok(row)
+    }
+
+    /// Marks a running job cancelled (its executor stopped on request).
+    pub async fn finish_cancelled(
+        &self,
+        lease: &Lease,
+        now: i64,
+    ) -> Result<Option<JobRow>, StoreError> {
+        self.end_attempt(
+            lease,
+            include_str!("sql/finish_cancelled.sql"),
+            AttemptOutcome::Cancelled,
+            now,
+        )
+        .await
+    }
+
+    /// Hands a running job back to the queue (graceful shutdown); its checkpoint is kept.
+    pub async fn release(&self, lease: &Lease, now: i64) -> Result<Option<JobRow>, StoreError> {
+        self.end_attempt(
+            lease,
+            include_str!("sql/release_job.sql"),
+            AttemptOutcome::Interrupted,
+            now,
+        )
+        .await
+    }
+
+    async fn end_attempt(
+        &self,
+        lease: &Lease,
+        sql: &'static str,
+        outcome: AttemptOutcome,
+        now: i64,
+    ) -> Result<Option<JobRow>, StoreError> {
+        let mut tx = self.writer.begin_with("BEGIN IMMEDIATE").await?;
+        let row: Option<JobRow> = sqlx::query_as(sql)
+            .bind(&lease.job_id)
+            .bind(&lease.worker)
+            .bind(lease.attempt)
+            .bind(now)
+            .fetch_optional(&mut *tx)
+            .await?;
+        if row.is_some() {
+            finish_attempt(&mut tx, lease, outcome, None, now).await?;
+        }
+        tx.commit().await?;
+        Ok(row)
+    }
+}
+
+async fn finish_attempt(
+    tx: &mut sqlx::Transaction<'static, sqlx::Sqlite>,
+    lease: &Lease,
+    outcome: AttemptOutcome,
+    error: Option<&str>,
+    now: i64,
+) -> Result<(), StoreError> {
+    sqlx::query(include_str!("sql/finish_attempt.sql"))
+        .bind(&lease.job_id)
+        .bind(lease.attempt)
+        .bind(outcome.as_str())
+        .bind(error)
+        .bind(now)
+        .execute(&mut **tx)
+        .await?;
+    Ok(())
+}

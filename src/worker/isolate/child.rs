@@ -1,0 +1,103 @@
+//! The job process (`vectorfusion job-child`, started by [`super::ProcessExecutor`]): reads a
+//! [`Start`] from stdin, runs the job with the executor it names, and writes progress,
+//! checkpoints and the outcome to stdout. Logs go to stderr. When stdin closes (the server is
+//! gone) it exits at once.
+
+use super::protocol::{CANCEL, ChildExecutor, FromChild, Start};
+use crate::pipeline::{DefaultExecutor, Executor, JobContext, PipelineError};
+use crate::progress::CancelToken;
+use crate::worker::test_executor::TestExecutor;
+use std::io::{BufRead, Write};
+use std::panic::AssertUnwindSafe;
+use std::sync::{Arc, Mutex};
+
+/// Exit status when the server went away before the job ended.
+const ORPHANED: i32 = 70;
+
+/// Runs one job over stdin/stdout; returns the process exit status (0 once an outcome was
+/// written, 2 for an unreadable start).
+pub fn run_stdio() -> i32 {
+    let stdin = std::io::stdin();
+    let mut first = String::new();
+    if let Err(e) = stdin.lock().read_line(&mut first) {
+        eprintln!("job-child: cannot read the job: {e}");
+        return 2;
+    }
+    let start: Start = match serde_json::from_str(&first) {
+        Ok(s) => s,
+        Err(e) => {
+            eprintln!("job-child: the job is not a valid start message: {e}");
+            return 2;
+        }
+    };
+    let out = Arc::new(Mutex::new(std::io::stdout()));
+    let send = {
+        let out = out.clone();
+        move |msg: &FromChild| -> Result<(), String> {
+            let mut line = serde_json::to_vec(msg).map_err(|e| e.to_string())?;
+            line.push(b'\n');
+            let mut o = out.lock().map_err(|_| "stdout lock poisoned".to_string())?;
+            o.write_all(&line)
+                .and_then(|()| o.flush())
+                .map_err(|e| format!("the server stopped reading: {e}"))
+        }
+    };
+    let cancel = CancelToken::new();
+    let watch = cancel.clone();
+    std::thread::spawn(move || {
+        for line in std::io::stdin().lock().lines() {
+            match line {
+                Ok(l) if l.trim() == CANCEL => watch.cancel(),
+                Ok(_) => {}
+                Err(_) => break,
+            }
+        }
+        std::process::exit(ORPHANED);
+    });
+    let executor: Box<dyn Executor> = match start.executor {
+        ChildExecutor::Pipeline { models } => Box::new(DefaultExecutor::new(models)),
+        ChildExecutor::Test { step_ms } => Box::new(TestExecutor::new(step_ms)),
+    };
+    let progress = {
+        let send = send.clone();
+        move |p| {
+            let _ = send(&FromChild::Progress(p));
+        }
+    };
+    let checkpoint = {
+        let send = send.clone();
+        move |v| send(&FromChild::Checkpoint(v))
+    };
+    let ctx = JobContext::new(
+        Arc::new(progress),
+        cancel,
+        start.checkpoint_every,
+        Box::new(checkpoint),
+        start.resume,
+    );
+    let outcome = std::panic::catch_unwind(AssertUnwindSafe(|| executor.run(&start.spec, &ctx)))
+        .unwrap_or_else(|panic| {
+            let msg = panic
+                .downcast_ref::<&str>()
+                .map(|s| s.to_string())
+                .or_else(|| panic.downcast_ref::<String>().cloned())
+                .unwrap_or_else(|| "unknown panic".into());
+            Err(PipelineError::Crashed(format!(
+                "the executor panicked: {msg}"
+            )))
+        });
+    let msg = match outcome {
+        Ok(out) => FromChild::Done(out),
+        Err(e) => FromChild::Error {
+            code: e.code().to_string(),
+            detail: e.detail(),
+        },
+    };
+    match send(&msg) {
+        Ok(()) => 0,
+        Err(e) => {
+            eprintln!("job-child: {e}");
+            ORPHANED
+        }
+    }
+}
