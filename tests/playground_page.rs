@@ -1,6 +1,7 @@
 //! The playground page in a real browser (headless Chromium through chromedriver): a vectorize
 //! job of a committed image draws live and ends with a download of exactly `result.svg`; a bad
-//! upload shows the API's message. Screenshots go to `target/tmp/playground/` (and to
+//! upload shows the API's message; on a server with an API key the page asks for it, and with
+//! the key typed in, runs the same job. Screenshots go to `target/tmp/playground/` (and to
 //! `$VF_PAGE_SCREENSHOTS` when set, e.g. `docs/img`). `.ci/run` installs chromium and
 //! chromium-driver when it can; without them the test prints SKIP.
 
@@ -31,8 +32,9 @@ fn save(b: &Browser, name: &str) {
     }
 }
 
-#[test]
-fn playground_page_runs_a_job_in_a_real_browser() {
+/// The page on a server with `api_key` (when given) drives a vectorize job of [`IMAGE`] to its
+/// end; `checks` runs after that, with the browser and the base URL.
+fn with_page(api_key: Option<&str>, checks: impl FnOnce(&Browser, &str) -> Result<(), String>) {
     let Some((driver, chromium)) = installed() else {
         eprintln!(
             "SKIP: chromium / chromedriver not installed (apt-get install chromium chromium-driver)"
@@ -44,14 +46,26 @@ fn playground_page_runs_a_job_in_a_real_browser() {
         .enable_all()
         .build()
         .unwrap();
+    let key = api_key.map(str::to_string);
     let srv = rt.block_on(TestServer::start(Arc::new(TestExecutor::new(20)), |c| {
         c.queue.workers = 1;
+        if let Some(k) = key {
+            c.server.api_key = k;
+        }
     }));
     let base = format!("http://{}", srv.addr);
     let b = Browser::start(&driver, &chromium);
     let wait = Duration::from_secs(30);
     let run = || -> Result<(), String> {
         b.goto(&format!("{base}/"));
+        if let Some(k) = api_key {
+            // The page's first call (the job list) gets 401: it asks for the key.
+            b.wait_for(
+                "const f = document.getElementById('key-form'); return f && !f.hidden;",
+                wait,
+            )?;
+            b.type_into(&b.find("#api-key", wait)?, k)?;
+        }
         let file = b.find("#file", wait)?;
         b.type_into(&file, IMAGE)?;
         // Few steps, so the job takes about a second.
@@ -66,7 +80,9 @@ fn playground_page_runs_a_job_in_a_real_browser() {
             "const i = document.getElementById('snapshot'); return i && i.src.startsWith('blob:');",
             wait,
         )?;
-        save(&b, "playground-running.png");
+        if api_key.is_none() {
+            save(&b, "playground-running.png");
+        }
         b.wait_for(
             "const i = document.getElementById('result'); return i && i.src.startsWith('blob:') && i.offsetParent !== null;",
             wait,
@@ -75,24 +91,54 @@ fn playground_page_runs_a_job_in_a_real_browser() {
             "const a = document.getElementById('download-svg'); return a && a.href.startsWith('blob:');",
             wait,
         )?;
-        save(&b, "playground-done.png");
+        checks(&b, &base)
+    };
+    let result = run();
+    if let Err(e) = &result {
+        save(&b, "playground-failure.png");
+        panic!("{e} (screenshot: target/tmp/playground/playground-failure.png)");
+    }
+    drop(b);
+    rt.block_on(srv.stop());
+}
+
+/// The `GET` body of `url`, with `key` as a bearer token when given.
+fn fetch(url: &str, key: Option<&str>) -> Result<String, String> {
+    let mut req = ureq::get(url);
+    if let Some(k) = key {
+        req = req.set("Authorization", &format!("Bearer {k}"));
+    }
+    req.call()
+        .map_err(|e| e.to_string())?
+        .into_string()
+        .map_err(|e| e.to_string())
+}
+
+/// The text of the page's SVG download link.
+fn downloaded_svg(b: &Browser) -> Result<serde_json::Value, String> {
+    b.eval_async(
+        "const done = arguments[arguments.length - 1]; \
+         fetch(document.getElementById('download-svg').href).then(r => r.text()).then(done, e => done('ERR ' + e));",
+        json!([]),
+    )
+}
+
+/// The newest job's `result.svg`, as the API serves it.
+fn served_svg(base: &str, key: Option<&str>) -> Result<String, String> {
+    let list: serde_json::Value =
+        serde_json::from_str(&fetch(&format!("{base}/jobs"), key)?).map_err(|e| e.to_string())?;
+    let id = list["jobs"][0]["id"].as_str().ok_or("no job listed")?;
+    fetch(&format!("{base}/jobs/{id}/result.svg"), key)
+}
+
+#[test]
+fn playground_page_runs_a_job_in_a_real_browser() {
+    with_page(None, |b, base| {
+        let wait = Duration::from_secs(30);
+        save(b, "playground-done.png");
         // The download link holds exactly the bytes of GET /jobs/{id}/result.svg.
-        let downloaded = b.eval_async(
-            "const done = arguments[arguments.length - 1]; \
-             fetch(document.getElementById('download-svg').href).then(r => r.text()).then(done, e => done('ERR ' + e));",
-            json!([]),
-        )?;
-        let list: serde_json::Value = ureq::get(&format!("{base}/jobs"))
-            .call()
-            .map_err(|e| e.to_string())?
-            .into_json()
-            .map_err(|e| e.to_string())?;
-        let id = list["jobs"][0]["id"].as_str().ok_or("no job listed")?;
-        let served = ureq::get(&format!("{base}/jobs/{id}/result.svg"))
-            .call()
-            .map_err(|e| e.to_string())?
-            .into_string()
-            .map_err(|e| e.to_string())?;
+        let downloaded = downloaded_svg(b)?;
+        let served = served_svg(base, None)?;
         if downloaded.as_str() != Some(served.as_str()) {
             return Err(format!(
                 "download differs from result.svg: {downloaded:.200} vs {served:.200}"
@@ -115,14 +161,26 @@ fn playground_page_runs_a_job_in_a_real_browser() {
             "document.getElementById('error').scrollIntoView({block: 'center'});",
             json!([]),
         )?;
-        save(&b, "playground-error.png");
+        save(b, "playground-error.png");
         Ok(())
-    };
-    let result = run();
-    if let Err(e) = &result {
-        save(&b, "playground-failure.png");
-        panic!("{e} (screenshot: target/tmp/playground/playground-failure.png)");
-    }
-    drop(b);
-    rt.block_on(srv.stop());
+    });
+}
+
+#[test]
+fn playground_page_asks_for_the_api_key_and_sends_it() {
+    const KEY: &str = "operator-key-for-the-page-test";
+    with_page(Some(KEY), |b, base| {
+        // Without the key the API refuses; the page's download matches what the key reads.
+        if fetch(&format!("{base}/jobs"), None).is_ok() {
+            return Err("GET /jobs answered without the key".into());
+        }
+        let downloaded = downloaded_svg(b)?;
+        let served = served_svg(base, Some(KEY))?;
+        if downloaded.as_str() != Some(served.as_str()) {
+            return Err(format!(
+                "download differs from result.svg: {downloaded:.200} vs {served:.200}"
+            ));
+        }
+        Ok(())
+    });
 }

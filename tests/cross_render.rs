@@ -1,0 +1,113 @@
+//! Our SVGs look the same in resvg and in Chromium (issue #23, the fast subset of
+//! `scripts/cross_render.py`, which adds Inkscape): real outputs of every kind (the run-plan
+//! golden SVGs: three styles, vectorize, from-SVG, the small prior) drawn at 256 px by both, over
+//! white, differ by at most 1.5/255 on average. Without chromium the test prints SKIP.
+
+use resvg::{tiny_skia, usvg};
+use std::path::PathBuf;
+use std::process::Command;
+
+const SIDE: u32 = 256;
+const MAX_MEAN_ABS: f64 = 1.5;
+
+fn chromium() -> Option<&'static str> {
+    ["/usr/bin/chromium", "/usr/bin/chromium-browser"]
+        .into_iter()
+        .find(|p| std::path::Path::new(p).exists())
+}
+
+/// `svg` with its width and height set to [`SIDE`] (the viewBox scales the drawing).
+fn at_side(svg: &str) -> String {
+    let head_end = svg.find('>').expect("an <svg> tag");
+    let head = &svg[..head_end];
+    let re = regex::Regex::new(r#"\s(width|height)="[^"]*""#).unwrap();
+    let head = re.replace_all(head, |c: &regex::Captures| {
+        format!(r#" {}="{SIDE}""#, &c[1])
+    });
+    format!("{head}{}", &svg[head_end..])
+}
+
+/// RGB over white, as f64 per channel.
+fn resvg_rgb(svg: &str) -> Vec<f64> {
+    let tree = usvg::Tree::from_str(svg, &usvg::Options::default()).expect("resvg parses it");
+    let mut pm = tiny_skia::Pixmap::new(SIDE, SIDE).unwrap();
+    pm.fill(tiny_skia::Color::WHITE);
+    resvg::render(&tree, tiny_skia::Transform::default(), &mut pm.as_mut());
+    pm.data()
+        .chunks(4)
+        .flat_map(|p| [p[0] as f64, p[1] as f64, p[2] as f64])
+        .collect()
+}
+
+fn chromium_rgb(exe: &str, file: &std::path::Path, png: &std::path::Path) -> Vec<f64> {
+    let profile = tempfile::tempdir().unwrap();
+    let out = Command::new(exe)
+        .args([
+            "--headless",
+            "--disable-gpu",
+            "--no-sandbox",
+            "--hide-scrollbars",
+            "--force-device-scale-factor=1",
+            "--default-background-color=ffffffff",
+        ])
+        .arg(format!("--user-data-dir={}", profile.path().display()))
+        .arg(format!("--window-size={SIDE},{SIDE}"))
+        .arg(format!("--screenshot={}", png.display()))
+        .arg(format!("file://{}", file.display()))
+        .output()
+        .expect("chromium runs");
+    assert!(
+        png.exists(),
+        "no screenshot: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let img = image::open(png).expect("a PNG").to_rgba8();
+    assert_eq!(img.dimensions(), (SIDE, SIDE));
+    img.pixels()
+        .flat_map(|p| {
+            let a = p[3] as f64 / 255.0;
+            [0, 1, 2].map(|c| p[c] as f64 * a + 255.0 * (1.0 - a))
+        })
+        .collect()
+}
+
+#[test]
+fn outputs_render_the_same_in_resvg_and_chromium() {
+    let Some(exe) = chromium() else {
+        eprintln!("SKIP outputs_render_the_same_in_resvg_and_chromium: chromium is not installed");
+        return;
+    };
+    let golden: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(
+            PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/golden/run_plan.json"),
+        )
+        .unwrap(),
+    )
+    .unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let mut report = Vec::new();
+    let mut worst = 0.0f64;
+    for name in [
+        "service/sd_live_sds/iconography",
+        "service/sd_live_sds/pixel_art",
+        "service/sd_live_sds/sketch",
+        "service/vectorize",
+        "service/from-svg",
+        "service/small-prior",
+    ] {
+        let svg = at_side(golden[name].as_str().unwrap_or_else(|| panic!("{name}")));
+        let file = dir.path().join(format!("{}.svg", name.replace('/', "_")));
+        std::fs::write(&file, &svg).unwrap();
+        let a = resvg_rgb(&svg);
+        let b = chromium_rgb(exe, &file, &file.with_extension("png"));
+        let mean = a.iter().zip(&b).map(|(x, y)| (x - y).abs()).sum::<f64>() / a.len() as f64;
+        worst = worst.max(mean);
+        report.push(format!("{name}: {mean:.3}/255"));
+    }
+    eprintln!("resvg vs chromium at {SIDE} px: {}", report.join(", "));
+    assert!(
+        worst <= MAX_MEAN_ABS,
+        "renderers disagree: {}",
+        report.join(", ")
+    );
+}
