@@ -42,19 +42,31 @@ def to01(u8):
     return u8.permute(0, 3, 1, 2).float() / 255.0
 
 
-def augment(x, gen):
+def augment(x, gen, strong=False):
     b = x.shape[0]
     flip = torch.rand(b, generator=gen) < 0.5
     x = torch.where(flip[:, None, None, None], x.flip(-1), x)
-    # random scale in [0.8, 1.05] and shift up to 4 px, white fill
-    s = 0.8 + 0.25 * torch.rand(b, generator=gen)
+    # random scale and shift (up to 4 px), white fill; `strong` widens the scale range and adds a
+    # small rotation and, for a third of the batch, a blur (renders of traced SVGs are softer)
+    lo, span = (0.7, 0.4) if strong else (0.8, 0.25)
+    s = lo + span * torch.rand(b, generator=gen)
     sh = (torch.rand(b, 2, generator=gen) * 2 - 1) * (4 / 32)
+    a = (torch.rand(b, generator=gen) * 2 - 1) * (0.17 if strong else 0.0)
     theta = torch.zeros(b, 2, 3)
-    theta[:, 0, 0] = 1 / s
-    theta[:, 1, 1] = 1 / s
+    theta[:, 0, 0] = torch.cos(a) / s
+    theta[:, 0, 1] = -torch.sin(a) / s
+    theta[:, 1, 0] = torch.sin(a) / s
+    theta[:, 1, 1] = torch.cos(a) / s
     theta[:, :, 2] = sh
     grid = F.affine_grid(theta, x.shape, align_corners=False)
-    return 1 - F.grid_sample(1 - x, grid, mode="bilinear", padding_mode="zeros", align_corners=False)
+    x = 1 - F.grid_sample(1 - x, grid, mode="bilinear", padding_mode="zeros", align_corners=False)
+    if strong:
+        blur = torch.rand(b, generator=gen) < 0.33
+        k = torch.tensor([1.0, 2.0, 1.0])
+        k = (k[:, None] * k[None, :] / 16).expand(3, 1, 3, 3)
+        soft = F.conv2d(F.pad(x, (1, 1, 1, 1), mode="replicate"), k, groups=3)
+        x = torch.where(blur[:, None, None, None], soft, x)
+    return x
 
 
 @torch.no_grad()
@@ -120,6 +132,8 @@ def main():
     ap.add_argument("--bf16", action="store_true")
     ap.add_argument("--minutes", type=float, default=1e9)
     ap.add_argument("--distractors", type=int, default=63, help="R-Precision: the true caption among this many + 1")
+    ap.add_argument("--strong-aug", action="store_true", help="wider scale, rotation, blur")
+    ap.add_argument("--eval-every", type=int, default=0, help="log held-out R-Precision every N steps (OUT/eval.csv)")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
     os.makedirs(args.out, exist_ok=True)
@@ -169,7 +183,7 @@ def main():
             extra = [by_cap[int(c)][int(torch.randint(0, len(by_cap[int(c)]), (1,), generator=gen))]
                      if by_cap[int(c)] else int(b[0]) for c in pick]
             b = torch.cat([b, torch.tensor(extra)])
-        x = augment(to01(raw[b]), gen)
+        x = augment(to01(raw[b]), gen, args.strong_aug)
         ci = idx[b]
         with amp:
             img = model.encode_image(x).float()
@@ -191,6 +205,16 @@ def main():
             log.writerow([step, f"{loss.item():.4f}", f"{lr:.2e}", f"{elapsed0 + time.time() - t0:.1f}"])
             logf.flush()
             print(f"step {step}/{total} loss {loss.item():.3f}", flush=True)
+        if args.eval_every and step % args.eval_every == 0:
+            m = evaluate(model, *ev, distractors=args.distractors)
+            new_file = not os.path.exists(os.path.join(args.out, "eval.csv"))
+            with open(os.path.join(args.out, "eval.csv"), "a", newline="") as f:
+                w = csv.writer(f)
+                if new_file:
+                    w.writerow(["step", "r1", "r5", f"r_precision_1_of_{args.distractors + 1}", "elapsed_s"])
+                w.writerow([step, f"{m['r1']:.4f}", f"{m['r5']:.4f}", f"{m[f'r_precision_1_of_{args.distractors + 1}']:.4f}",
+                            f"{elapsed0 + time.time() - t0:.1f}"])
+            print(f"eval step {step}: R-Precision {m[f'r_precision_1_of_{args.distractors + 1}']:.3f}", flush=True)
         if time.time() - last > 600 or step == total:
             torch.save({"model": model.state_dict(), "opt": opt.state_dict(), "gen": gen.get_state(), "step": step,
                         "elapsed": elapsed0 + time.time() - t0}, ckpt)
