@@ -3,7 +3,7 @@ headless Chromium and Inkscape (and our own rasteriser, `vectorfusion render`, f
 the SVG's own size over white, and reports the mean absolute difference (in /255 of RGB) of each
 pair of renderers, per file and in all (issue #23's target: at most 1.5/255 between each pair).
 
-    python scripts/cross_render.py --svgs DIR [--vf target/debug/vectorfusion] \
+    python scripts/cross_render.py --svgs DIR [--side 256] [--vf target/debug/vectorfusion] \
         [--json docs/cross_render.json] [--keep OUTDIR]
 
 Needs: resvg-py and pillow/numpy in the Python environment, `chromium` and `inkscape` on PATH
@@ -76,6 +76,7 @@ def main():
     ap.add_argument("--vf", default="target/debug/vectorfusion")
     ap.add_argument("--json")
     ap.add_argument("--keep", help="keep the PNGs here")
+    ap.add_argument("--side", type=int, help="draw at this width (the SVG's width/height rewritten, the viewBox scales)")
     args = ap.parse_args()
     files = sorted(glob.glob(os.path.join(args.svgs, "**", "*.svg"), recursive=True))
     if not files:
@@ -98,11 +99,23 @@ def main():
     pairs = list(itertools.combinations(renderers, 2))
     per_file = []
     for i, svg in enumerate(files):
-        size = svg_size(open(svg, encoding="utf-8").read())
+        text = open(svg, encoding="utf-8").read()
+        size = svg_size(text)
+        if args.side:
+            size = (args.side, round(args.side * size[1] / size[0]))
+            head, rest = text.split(">", 1)
+            head = re.sub(r'\swidth="[^"]*"', f' width="{size[0]}"', head, count=1)
+            head = re.sub(r'\sheight="[^"]*"', f' height="{size[1]}"', head, count=1)
+            scaled = os.path.join(out_dir, f"{i:03d}.svg")
+            with open(scaled, "w", encoding="utf-8") as f:
+                f.write(head + ">" + rest)
+            svg_in = scaled
+        else:
+            svg_in = svg
         imgs = {}
         for name, fn in renderers.items():
             png = os.path.join(out_dir, f"{i:03d}_{name}.png")
-            fn(svg, png, size)
+            fn(svg_in, png, size)
             imgs[name] = over_white(png, size)
         row = {"file": os.path.relpath(svg, args.svgs), "size": size}
         for a, b in pairs:

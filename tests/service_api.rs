@@ -67,6 +67,12 @@ async fn vectorize_job_end_to_end_with_events_and_results() {
             .unwrap()
             .starts_with("image/svg+xml")
     );
+    // opened directly, it can run and load nothing, and is not sniffed as another type
+    assert_eq!(
+        r.header("content-security-policy"),
+        Some("default-src 'none'; style-src 'unsafe-inline'")
+    );
+    assert_eq!(r.header("x-content-type-options"), Some("nosniff"));
     let expected = scene_svg(&scene_at(42, 6, 12, 12).unwrap());
     assert_eq!(r.text(), expected);
     resvg::usvg::Tree::from_str(&r.text(), &resvg::usvg::Options::default()).unwrap();

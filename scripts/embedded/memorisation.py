@@ -20,9 +20,17 @@ from pixel_rprecision import load_split, over_white, read_picture, small  # noqa
 
 
 def nearest(q, train):
-    d = ((q[:, None, :] - train[None, :, :]) ** 2).mean(-1)
-    j = d.argmin(1)
-    return j, np.sqrt(d[np.arange(len(q)), j])
+    """Index and RMS distance of each row of q's nearest row of train (|a-b|^2 = |a|^2 + |b|^2 - 2ab,
+    a block of queries at a time, so memory stays at block x len(train))."""
+    t2 = (train.astype(np.float64) ** 2).sum(1)
+    js, ds = [], []
+    for i in range(0, len(q), 64):
+        b = q[i : i + 64].astype(np.float64)
+        d = (b**2).sum(1)[:, None] + t2[None, :] - 2 * b @ train.T.astype(np.float64)
+        j = d.argmin(1)
+        js.append(j)
+        ds.append(np.sqrt(np.maximum(d[np.arange(len(b)), j], 0) / q.shape[1]))
+    return np.concatenate(js), np.concatenate(ds)
 
 
 def main():

@@ -452,9 +452,19 @@ async fn finished_result(
         })
 }
 
+/// An SVG body. Opened directly in a browser it can run nothing and load nothing (the
+/// safe-output profile already keeps scripts out; the policy is the second wall), and it is
+/// never sniffed as another type.
 fn svg_response(svg: String) -> Response {
     (
-        [(header::CONTENT_TYPE, "image/svg+xml; charset=utf-8")],
+        [
+            (header::CONTENT_TYPE, "image/svg+xml; charset=utf-8"),
+            (
+                header::CONTENT_SECURITY_POLICY,
+                "default-src 'none'; style-src 'unsafe-inline'",
+            ),
+            (header::X_CONTENT_TYPE_OPTIONS, "nosniff"),
+        ],
         svg,
     )
         .into_response()
