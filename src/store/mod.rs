@@ -299,58 +299,59 @@ impl Store {
     /// use, returns the existing job and `false`. An upload past its quotas inserts nothing and
     /// fails with [`StoreError::UploadQuota`].
     pub async fn insert_job(&self, job: &NewJob, now: i64) -> Result<(JobRow, bool), StoreError> {
-        let mut tx = self.writer.begin_with("BEGIN IMMEDIATE").await?;
-        let inserted: Option<JobRow> = sqlx::query_as(include_str!("sql/insert_job.sql"))
-            .bind(&job.id)
-            .bind(&job.kind)
-            .bind(&job.spec)
-            .bind(job.priority)
-            .bind(&job.idempotency_key)
-            .bind(&job.request_hash)
-            .bind(job.max_attempts)
-            .bind(now)
-            .bind(job.max_lost_attempts)
-            .bind(&job.tenant)
-            .fetch_optional(&mut *tx)
-            .await?;
-        let Some(row) = inserted else {
-            tx.rollback().await?;
-            let existing: Option<JobRow> = sqlx::query_as(include_str!("sql/get_job_by_key.sql"))
-                .bind(&job.idempotency_key)
+        let Some(up) = &job.upload else {
+            // No upload: one autocommit statement, one round trip on the writer.
+            let inserted = insert_job_query(job, now)
                 .fetch_optional(&self.writer)
                 .await?;
-            return existing.map(|r| (r, false)).ok_or_else(|| {
-                StoreError::Corrupt("idempotency key conflict without a row".into())
-            });
+            return match inserted {
+                Some(row) => Ok((row, true)),
+                None => self.existing_by_key(job).await,
+            };
         };
-        if let Some(up) = &job.upload {
-            let stored = sqlx::query(include_str!("sql/insert_upload.sql"))
-                .bind(&job.id)
-                .bind(&job.tenant)
-                .bind(&up.image)
-                .bind(&up.svg)
-                .bind(up.bytes())
-                .bind(now)
-                .bind(up.max_total_bytes)
-                .bind(up.max_tenant_bytes)
-                .execute(&mut *tx)
-                .await?;
-            if stored.rows_affected() == 0 {
-                tx.rollback().await?;
-                let over_tenant = up.max_tenant_bytes > 0
-                    && self.upload_bytes(Some(job.tenant.as_deref())).await? + up.bytes()
-                        > up.max_tenant_bytes;
-                return Err(StoreError::UploadQuota {
-                    limit: if over_tenant {
-                        up.max_tenant_bytes
-                    } else {
-                        up.max_total_bytes
-                    },
-                });
-            }
+        let mut tx = self.writer.begin_with("BEGIN IMMEDIATE").await?;
+        let inserted = insert_job_query(job, now).fetch_optional(&mut *tx).await?;
+        let Some(row) = inserted else {
+            tx.rollback().await?;
+            return self.existing_by_key(job).await;
+        };
+        let stored = sqlx::query(include_str!("sql/insert_upload.sql"))
+            .bind(&job.id)
+            .bind(&job.tenant)
+            .bind(&up.image)
+            .bind(&up.svg)
+            .bind(up.bytes())
+            .bind(now)
+            .bind(up.max_total_bytes)
+            .bind(up.max_tenant_bytes)
+            .execute(&mut *tx)
+            .await?;
+        if stored.rows_affected() == 0 {
+            tx.rollback().await?;
+            let over_tenant = up.max_tenant_bytes > 0
+                && self.upload_bytes(Some(job.tenant.as_deref())).await? + up.bytes()
+                    > up.max_tenant_bytes;
+            return Err(StoreError::UploadQuota {
+                limit: if over_tenant {
+                    up.max_tenant_bytes
+                } else {
+                    up.max_total_bytes
+                },
+            });
         }
         tx.commit().await?;
         Ok((row, true))
+    }
+
+    /// The job already holding `job`'s idempotency key (its insert did nothing), and `false`.
+    async fn existing_by_key(&self, job: &NewJob) -> Result<(JobRow, bool), StoreError> {
+        let existing: Option<JobRow> = sqlx::query_as(include_str!("sql/get_job_by_key.sql"))
+            .bind(&job.idempotency_key)
+            .fetch_optional(&self.writer)
+            .await?;
+        existing
+            .map(|r| (r, false))
+            .ok_or_else(|| StoreError::Corrupt("idempotency key conflict without a row".into()))
     }
 
     /// The job submitted with this idempotency key, if any.
@@ -466,6 +467,24 @@ impl Store {
             .await?;
         Ok(r.rows_affected())
     }
+}
+
+/// The insert of `job`'s row (`RETURNING *`; nothing when its idempotency key is taken).
+fn insert_job_query(
+    job: &NewJob,
+    now: i64,
+) -> sqlx::query::QueryAs<'_, sqlx::Sqlite, JobRow, sqlx::sqlite::SqliteArguments> {
+    sqlx::query_as(include_str!("sql/insert_job.sql"))
+        .bind(&job.id)
+        .bind(&job.kind)
+        .bind(&job.spec)
+        .bind(job.priority)
+        .bind(&job.idempotency_key)
+        .bind(&job.request_hash)
+        .bind(job.max_attempts)
+        .bind(now)
+        .bind(job.max_lost_attempts)
+        .bind(&job.tenant)
 }
 
 #[cfg(test)]
