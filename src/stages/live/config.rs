@@ -1,0 +1,235 @@
+//! What a LIVE run is asked to do ([`LiveConfig`] and its parts) and how it can fail.
+
+use super::schedule;
+use crate::losses::LossError;
+use crate::scene::{MAX_PATHS, SceneError};
+use serde::{Deserialize, Serialize};
+
+/// Why vectorisation failed.
+#[derive(Debug, thiserror::Error)]
+pub enum LiveError {
+    #[error("invalid configuration: {0}")]
+    Config(String),
+    #[error("invalid target image: {0}")]
+    Target(String),
+    #[error("cancelled")]
+    Cancelled,
+    #[error(transparent)]
+    Scene(#[from] SceneError),
+    #[error(transparent)]
+    Loss(#[from] LossError),
+    #[error("vtracer failed: {0}")]
+    Tracer(String),
+    #[error("saving a checkpoint failed: {0}")]
+    Checkpoint(String),
+}
+
+/// How many paths to use.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum PathBudget {
+    /// Add paths in these stages (e.g. `[8, 8, 16, 16, 16]`).
+    Schedule { stages: Vec<usize> },
+    /// Add `stage` paths at a time while the PSNR gain per added path exceeds
+    /// `min_gain_db_per_path`, up to `max_paths`; then prune paths whose removal changes the
+    /// render by less than `prune_tolerance` (MSE over white).
+    Auto {
+        stage: usize,
+        max_paths: usize,
+        min_gain_db_per_path: f64,
+        prune_tolerance: f64,
+    },
+}
+
+impl PathBudget {
+    /// The most paths this budget can create.
+    pub fn max_paths(&self) -> usize {
+        match self {
+            PathBudget::Schedule { stages } => stages.iter().sum(),
+            PathBudget::Auto { max_paths, .. } => *max_paths,
+        }
+    }
+
+    /// `n` paths in LIVE's proportions ([`schedule::schedule_for`]).
+    pub fn fixed(n: usize) -> Self {
+        PathBudget::Schedule {
+            stages: schedule::schedule_for(n),
+        }
+    }
+
+    /// The default `auto` budget: stages of 8 up to 64 paths, continue while each added path
+    /// gains more than 0.05 dB, prune paths worth less than 2e-5 MSE.
+    pub fn auto() -> Self {
+        PathBudget::Auto {
+            stage: 8,
+            max_paths: 64,
+            min_gain_db_per_path: 0.05,
+            prune_tolerance: 2e-5,
+        }
+    }
+}
+
+/// Where the paths come from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum InitMode {
+    /// LIVE: circles at high-error regions, stage by stage.
+    Circles,
+    /// Start from vtracer's trace (simple closed paths), refine, then add what it misses.
+    Vtracer,
+}
+
+/// Named speed/quality trade-offs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "snake_case")]
+pub enum Preset {
+    Fast,
+    Balanced,
+    Quality,
+}
+
+/// User-facing LIVE settings.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LiveConfig {
+    /// Longest side (pixels) of the canvas the optimisation runs at (never more than the
+    /// target's); the result is scaled back to the target's size.
+    pub size: u32,
+    pub budget: PathBudget,
+    pub init: InitMode,
+    /// Adam iterations per stage.
+    pub iters_per_stage: u32,
+    /// Extra iterations over all paths after the last stage.
+    pub final_iters: u32,
+    /// Peak learning rates (pixels per step for points).
+    pub lr_points: f32,
+    pub lr_fill: f32,
+    pub lr_background: f32,
+    /// Weight of the UDF-weighted L2 term relative to the plain mean L2.
+    pub udf_weight: f32,
+    /// UDF threshold `tau` in pixels (at the working size).
+    pub udf_tau: f32,
+    /// Weight of the Xing loss (LIVE uses 0.01).
+    pub xing_weight: f32,
+    /// New-path circle radius (pixels at the working size) and its segment count.
+    pub init_radius: f32,
+    pub init_segments: usize,
+    /// Grow each new circle to fill its region (its inscribed radius, at least `init_radius`)
+    /// instead of LIVE's fixed small circle: far fewer steps are needed to cover large regions.
+    pub init_fit_region: bool,
+    /// Keep every fill fully opaque (smaller SVGs, no faint layers); otherwise opacity is
+    /// optimised too.
+    pub opaque: bool,
+    /// Re-initialise paths with opacity below this...
+    pub reinit_min_opacity: f32,
+    /// ... or area below this (square pixels at the working size); 0 disables.
+    pub reinit_min_area: f32,
+    pub seed: u64,
+    /// Attach the current SVG to a progress event every this many steps (0 = never).
+    pub snapshot_every: u32,
+}
+
+impl LiveConfig {
+    /// A preset with a path budget of `paths` (LIVE proportions).
+    pub fn preset(preset: Preset) -> Self {
+        let base = LiveConfig {
+            size: 128,
+            budget: PathBudget::fixed(64),
+            init: InitMode::Circles,
+            iters_per_stage: 100,
+            final_iters: 50,
+            lr_points: 1.0,
+            lr_fill: 0.02,
+            lr_background: 0.01,
+            udf_weight: 0.5,
+            udf_tau: 4.0,
+            xing_weight: 0.01,
+            init_radius: 3.0,
+            init_segments: 4,
+            init_fit_region: true,
+            opaque: true,
+            reinit_min_opacity: 0.05,
+            reinit_min_area: 16.0,
+            seed: 0,
+            snapshot_every: 50,
+        };
+        match preset {
+            Preset::Fast => base,
+            Preset::Balanced => LiveConfig {
+                size: 160,
+                iters_per_stage: 200,
+                final_iters: 100,
+                init_radius: 4.0,
+                udf_tau: 6.0,
+                reinit_min_area: 36.0,
+                ..base
+            },
+            Preset::Quality => LiveConfig {
+                size: 256,
+                iters_per_stage: 300,
+                final_iters: 150,
+                init_radius: 5.0,
+                udf_tau: 8.0,
+                reinit_min_area: 64.0,
+                ..base
+            },
+        }
+    }
+
+    /// Checks ranges; called by [`vectorize`].
+    pub fn validate(&self) -> Result<(), LiveError> {
+        /// Per-stage iteration limit: keeps step counters far from `u32` overflow.
+        const MAX_ITERS: u32 = 100_000;
+        let bad = |m: &str| Err(LiveError::Config(m.to_string()));
+        if !(8..=2048).contains(&self.size) {
+            return bad("size must be in 8..=2048");
+        }
+        match &self.budget {
+            PathBudget::Schedule { stages } => {
+                if stages.contains(&0) {
+                    return bad("schedule stages must add at least one path");
+                }
+                if stages.iter().fold(0usize, |a, &n| a.saturating_add(n)) > MAX_PATHS {
+                    return Err(LiveError::Config(format!(
+                        "schedule adds more than {MAX_PATHS} paths"
+                    )));
+                }
+            }
+            PathBudget::Auto {
+                stage, max_paths, ..
+            } => {
+                if *stage == 0 || *max_paths == 0 || *max_paths > MAX_PATHS {
+                    return Err(LiveError::Config(format!(
+                        "auto budget needs stage >= 1 and 1 <= max_paths <= {MAX_PATHS}"
+                    )));
+                }
+            }
+        }
+        let finite = [
+            self.lr_points,
+            self.lr_fill,
+            self.lr_background,
+            self.udf_weight,
+            self.udf_tau,
+            self.xing_weight,
+            self.init_radius,
+            self.reinit_min_opacity,
+            self.reinit_min_area,
+        ];
+        if finite.iter().any(|v| !v.is_finite() || *v < 0.0) {
+            return bad("rates, weights, radii and thresholds must be finite and >= 0");
+        }
+        if self.init_segments == 0 || self.init_segments > 64 {
+            return bad("init_segments must be in 1..=64");
+        }
+        if self.iters_per_stage > MAX_ITERS || self.final_iters > MAX_ITERS {
+            return bad("iterations per stage must be at most 100000");
+        }
+        Ok(())
+    }
+}
+
+impl Default for LiveConfig {
+    fn default() -> Self {
+        LiveConfig::preset(Preset::Balanced)
+    }
+}

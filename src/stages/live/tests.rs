@@ -1,0 +1,69 @@
+use super::*;
+
+#[test]
+fn presets_are_valid_and_ordered_by_effort() {
+    let f = LiveConfig::preset(Preset::Fast);
+    let b = LiveConfig::preset(Preset::Balanced);
+    let q = LiveConfig::preset(Preset::Quality);
+    for c in [&f, &b, &q] {
+        c.validate().unwrap();
+        assert_eq!(c.budget, PathBudget::fixed(64));
+        assert_eq!(c.reinit_min_opacity, 0.05);
+    }
+    assert!(f.size < b.size && b.size < q.size);
+    assert!(f.iters_per_stage < b.iters_per_stage && b.iters_per_stage < q.iters_per_stage);
+    assert_eq!(q.reinit_min_area, 64.0);
+    assert_eq!(LiveConfig::default(), b);
+}
+
+#[test]
+fn validate_rejects_bad_settings() {
+    let ok = LiveConfig::default();
+    let cases = [
+        LiveConfig {
+            lr_points: f32::NAN,
+            ..ok.clone()
+        },
+        LiveConfig {
+            xing_weight: -1.0,
+            ..ok.clone()
+        },
+        LiveConfig {
+            init_segments: 0,
+            ..ok.clone()
+        },
+        LiveConfig {
+            budget: PathBudget::Auto {
+                stage: 0,
+                max_paths: 8,
+                min_gain_db_per_path: 0.1,
+                prune_tolerance: 0.0,
+            },
+            ..ok.clone()
+        },
+        LiveConfig {
+            budget: PathBudget::Schedule {
+                stages: vec![MAX_PATHS, 1],
+            },
+            ..ok.clone()
+        },
+    ];
+    for c in cases {
+        assert!(matches!(c.validate(), Err(LiveError::Config(_))), "{c:?}");
+    }
+}
+
+#[test]
+fn border_colour_is_the_frame_mean() {
+    let mut im = Image::filled(8, 8, [0.0, 0.0, 1.0, 1.0]);
+    // Transparent frame counts as white.
+    for y in 0..8u32 {
+        for x in 0..8u32 {
+            if x == 0 || y == 0 || x == 7 || y == 7 {
+                let i = 4 * (y * 8 + x) as usize;
+                im.data[i..i + 4].copy_from_slice(&[0.0; 4]);
+            }
+        }
+    }
+    assert_eq!(border_colour(&im), Rgba::WHITE);
+}
