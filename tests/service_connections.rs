@@ -163,3 +163,35 @@ async fn uploads_are_stored_apart_under_a_quota_that_finished_jobs_free() {
     store.close().await;
     srv.stop().await;
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn concurrent_submits_never_overshoot_the_queue_depth() {
+    // One worker, held by a slow job; everything else waits in the queue.
+    let srv = TestServer::start(Arc::new(TestExecutor::new(5_000)), |c| {
+        c.queue.workers = 1;
+        c.server.max_queue_depth = 20;
+    })
+    .await;
+    let body = json!({"kind": "text", "caption": "a cat", "steps": 5, "paths": 2});
+    let tasks: Vec<_> = (0..48)
+        .map(|_| {
+            let (b, addr) = (body.clone(), srv.addr);
+            tokio::spawn(async move { post_json(addr, "/jobs", &b).await.status })
+        })
+        .collect();
+    let (mut accepted, mut full) = (0, 0);
+    for t in tasks {
+        match t.await.unwrap() {
+            202 => accepted += 1,
+            429 => full += 1,
+            s => panic!("unexpected status {s}"),
+        }
+    }
+    let list = get(srv.addr, "/jobs?status=queued&limit=500").await.json();
+    let queued = list["jobs"].as_array().unwrap().len();
+    assert!(queued <= 20, "{queued} jobs queued, max_queue_depth is 20");
+    // 20 queued, plus at most the one the worker took.
+    assert!((20..=21).contains(&accepted), "{accepted} accepted");
+    assert_eq!(accepted + full, 48);
+    srv.stop().await;
+}

@@ -5,7 +5,7 @@ use super::error::ApiError;
 use super::tenant::Caller;
 use super::types::{JobList, JobView, check_image, check_svg, parse_submit};
 use crate::pipeline::{JobKind, JobSpec};
-use crate::store::{JobRow, JobStatus, NewJob, NewUpload, now_ms};
+use crate::store::{JobRow, JobStatus, NewJob, NewUpload, StoreError, now_ms};
 use crate::worker::events::JobEvent;
 use crate::worker::metrics::Metrics;
 use axum::Json;
@@ -49,6 +49,10 @@ pub(super) async fn load_job(
 const IDEMPOTENCY_HEADER: &str = "idempotency-key";
 /// Request bodies up to this size are parsed on the async thread.
 const INLINE_PARSE_BYTES: usize = 16 * 1024;
+
+/// Within this many jobs of `max_queue_depth` (by the estimate), a submit's insert counts the
+/// queued jobs itself.
+const QUEUE_MARGIN: i64 = 64;
 
 /// How long a submit waits for an upload-validation permit before answering 429 `busy`.
 const DECODE_WAIT: std::time::Duration = std::time::Duration::from_secs(10);
@@ -232,8 +236,23 @@ pub(super) async fn submit(
         max_lost_attempts: state.cfg.queue.max_lost_attempts as i64,
         tenant: caller.tenant().map(str::to_string),
         upload,
+        // Near a full queue the insert counts the queue itself, so concurrent submits cannot
+        // overshoot `max_queue_depth` together.
+        max_queued: (state.queued_estimate.load(Ordering::Relaxed)
+            >= max_depth.saturating_sub(QUEUE_MARGIN))
+        .then_some(max_depth),
     };
-    let (row, created) = state.store.insert_job(&new, now_ms()).await?;
+    let (row, created) = match state.store.insert_job(&new, now_ms()).await {
+        Err(StoreError::QueueFull { limit }) => {
+            Metrics::inc(&state.metrics.jobs_rejected_queue_full);
+            state.queued_estimate.store(limit, Ordering::Relaxed);
+            return Err(ApiError::QueueFull {
+                depth: limit,
+                retry_after_secs: 5,
+            });
+        }
+        inserted => inserted?,
+    };
     if !created {
         return replay(row, &hash);
     }

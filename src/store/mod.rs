@@ -33,6 +33,9 @@ pub enum StoreError {
     /// A submit whose upload would take the stored uploads past a quota (nothing was inserted).
     #[error("stored uploads would exceed {limit} bytes")]
     UploadQuota { limit: i64 },
+    /// A submit with [`NewJob::max_queued`] found that many jobs queued (nothing was inserted).
+    #[error("the queue already holds {limit} jobs")]
+    QueueFull { limit: i64 },
 }
 
 /// Job lifecycle states (mirrors the CHECK constraint in `migrations/0001_jobs.sql`).
@@ -173,6 +176,9 @@ pub struct NewJob {
     pub tenant: Option<String>,
     /// Its image and starting SVG, stored apart from the row (the spec holds "" markers).
     pub upload: Option<NewUpload>,
+    /// Insert only while fewer jobs than this are queued, checked in the insert itself (the
+    /// server sets it when its estimate says the queue is nearly full); `None`: no check.
+    pub max_queued: Option<i64>,
 }
 
 /// Identifies one attempt of one job held by one worker; every worker write carries it.
@@ -343,15 +349,25 @@ impl Store {
         Ok((row, true))
     }
 
-    /// The job already holding `job`'s idempotency key (its insert did nothing), and `false`.
+    /// Why `job`'s insert did nothing: its idempotency key is taken (that job, and `false`), or
+    /// the queue was full ([`NewJob::max_queued`]).
     async fn existing_by_key(&self, job: &NewJob) -> Result<(JobRow, bool), StoreError> {
-        let existing: Option<JobRow> = sqlx::query_as(include_str!("sql/get_job_by_key.sql"))
-            .bind(&job.idempotency_key)
-            .fetch_optional(&self.writer)
-            .await?;
-        existing
-            .map(|r| (r, false))
-            .ok_or_else(|| StoreError::Corrupt("idempotency key conflict without a row".into()))
+        let existing: Option<JobRow> = match &job.idempotency_key {
+            Some(key) => {
+                sqlx::query_as(include_str!("sql/get_job_by_key.sql"))
+                    .bind(key)
+                    .fetch_optional(&self.writer)
+                    .await?
+            }
+            None => None,
+        };
+        match (existing, job.max_queued) {
+            (Some(r), _) => Ok((r, false)),
+            (None, Some(limit)) => Err(StoreError::QueueFull { limit }),
+            (None, None) => Err(StoreError::Corrupt(
+                "idempotency key conflict without a row".into(),
+            )),
+        }
     }
 
     /// The job submitted with this idempotency key, if any.
@@ -485,6 +501,7 @@ fn insert_job_query(
         .bind(now)
         .bind(job.max_lost_attempts)
         .bind(&job.tenant)
+        .bind(job.max_queued)
 }
 
 #[cfg(test)]

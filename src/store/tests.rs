@@ -21,6 +21,7 @@ fn new_job(i: usize) -> NewJob {
         max_lost_attempts: 2,
         tenant: None,
         upload: None,
+        max_queued: None,
     }
 }
 
@@ -387,4 +388,32 @@ async fn uploads_live_apart_within_their_quotas_and_go_when_the_job_ends() {
     // So does cancelling a queued one.
     store.request_cancel(&c.id, 13).await.unwrap().unwrap();
     assert!(store.upload(&c.id).await.unwrap().is_none());
+}
+
+#[tokio::test]
+async fn a_full_queue_refuses_the_insert_itself() {
+    let (_d, store) = temp_store(2).await;
+    let mut keyed = new_job(0);
+    keyed.idempotency_key = Some("k".into());
+    keyed.max_queued = Some(3);
+    store.insert_job(&keyed, 1).await.unwrap();
+    for i in 1..3 {
+        let mut j = new_job(i);
+        j.max_queued = Some(3);
+        store.insert_job(&j, 1).await.unwrap();
+    }
+    let mut j = new_job(3);
+    j.max_queued = Some(3);
+    match store.insert_job(&j, 2).await {
+        Err(StoreError::QueueFull { limit }) => assert_eq!(limit, 3),
+        other => panic!("expected a full queue, got {other:?}"),
+    }
+    assert_eq!(store.queue_depth().await.unwrap(), 3);
+    // A retry with a known idempotency key still gets its job back at a full queue.
+    let mut again = new_job(4);
+    again.idempotency_key = Some("k".into());
+    again.max_queued = Some(3);
+    let (row, created) = store.insert_job(&again, 3).await.unwrap();
+    assert!(!created);
+    assert_eq!(row.id, keyed.id);
 }
