@@ -171,10 +171,6 @@ impl From<crate::store::StoreError> for ApiError {
                 limit,
                 retry_after_secs: 30,
             },
-            crate::store::StoreError::QueueFull { limit } => ApiError::QueueFull {
-                depth: limit,
-                retry_after_secs: 5,
-            },
             other => ApiError::Internal(other.to_string()),
         }
     }

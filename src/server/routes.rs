@@ -141,7 +141,7 @@ pub(super) async fn submit(
             .await
             .map_err(|e| ApiError::Internal(format!("validation task failed: {e}")))??
     };
-    let spec = if spec.image.is_some() || spec.svg.is_some() {
+    let (spec, upload) = if spec.image.is_some() || spec.svg.is_some() {
         let permit =
             tokio::time::timeout(DECODE_WAIT, state.decode_permits.clone().acquire_owned())
                 .await
@@ -152,21 +152,24 @@ pub(super) async fn submit(
                     retry_after_secs: 2,
                 })?;
         // The permit moves into the task: it is held until decoding ends, even if the client
-        // goes away meanwhile.
+        // goes away meanwhile. The upload leaves the spec there too (base64 of a large image
+        // is CPU work as well).
         tokio::task::spawn_blocking(move || {
             let _permit = permit;
+            let mut spec = spec;
             if let Some(img) = &spec.image {
                 check_image(img, &limits)?;
             }
             if let Some(svg) = &spec.svg {
                 check_svg(svg)?;
             }
-            Ok::<_, ApiError>(spec)
+            let upload = take_upload(&mut spec);
+            Ok::<_, ApiError>((spec, Some(upload)))
         })
         .await
         .map_err(|e| ApiError::Internal(format!("validation task failed: {e}")))??
     } else {
-        spec
+        (spec, None)
     };
 
     if spec.kind == JobKind::Text
@@ -204,23 +207,9 @@ pub(super) async fn submit(
         let depth = state.store.queue_depth().await?;
         state.queued_estimate.store(depth, Ordering::Relaxed);
         if depth >= max_depth {
-            Metrics::inc(&state.metrics.jobs_rejected_queue_full);
-            return Err(ApiError::QueueFull {
-                depth,
-                retry_after_secs: 5,
-            });
+            return Err(queue_full(&state, depth));
         }
     }
-    // The upload goes to its own table; the row's spec keeps "" markers (`store::uploads`).
-    let upload = upload_of(&state, &caller, &spec);
-    let mut row_spec = spec;
-    if row_spec.image.is_some() {
-        row_spec.image = Some(Vec::new());
-    }
-    if row_spec.svg.is_some() {
-        row_spec.svg = Some(String::new());
-    }
-    let spec = row_spec;
     let spec_json = serde_json::to_string(&spec).map_err(|e| ApiError::Internal(e.to_string()))?;
     let new = NewJob {
         id: id.hyphenated().to_string(),
@@ -235,7 +224,7 @@ pub(super) async fn submit(
         max_attempts: state.cfg.queue.max_attempts as i64,
         max_lost_attempts: state.cfg.queue.max_lost_attempts as i64,
         tenant: caller.tenant().map(str::to_string),
-        upload,
+        upload: upload.map(|u| with_quotas(u, &state, &caller)),
         // Near a full queue the insert counts the queue itself, so concurrent submits cannot
         // overshoot `max_queue_depth` together.
         max_queued: (state.queued_estimate.load(Ordering::Relaxed)
@@ -243,14 +232,7 @@ pub(super) async fn submit(
         .then_some(max_depth),
     };
     let (row, created) = match state.store.insert_job(&new, now_ms()).await {
-        Err(StoreError::QueueFull { limit }) => {
-            Metrics::inc(&state.metrics.jobs_rejected_queue_full);
-            state.queued_estimate.store(limit, Ordering::Relaxed);
-            return Err(ApiError::QueueFull {
-                depth: limit,
-                retry_after_secs: 5,
-            });
-        }
+        Err(StoreError::QueueFull { limit }) => return Err(queue_full(&state, limit)),
         inserted => inserted?,
     };
     if !created {
@@ -263,19 +245,24 @@ pub(super) async fn submit(
     Ok(accepted(&row))
 }
 
-/// The upload of a submit (base64 image, SVG) with the caller's quotas, if it has one.
-fn upload_of(state: &AppState, caller: &Caller, spec: &JobSpec) -> Option<NewUpload> {
-    if spec.image.is_none() && spec.svg.is_none() {
-        return None;
-    }
+/// Moves a validated spec's upload out of it (the image as base64, the SVG), leaving the ""
+/// markers the stored job keeps in their place (`store::uploads`; the worker puts it back).
+fn take_upload(spec: &mut JobSpec) -> NewUpload {
     use base64::Engine as _;
-    let cap = |b: u64| i64::try_from(b).unwrap_or(i64::MAX);
-    Some(NewUpload {
+    NewUpload {
         image: spec
             .image
-            .as_ref()
-            .map(|b| base64::engine::general_purpose::STANDARD.encode(b)),
-        svg: spec.svg.clone(),
+            .as_mut()
+            .map(|b| base64::engine::general_purpose::STANDARD.encode(std::mem::take(b))),
+        svg: spec.svg.as_mut().map(std::mem::take),
+        ..NewUpload::default()
+    }
+}
+
+/// `upload` under the server's quota and the caller's own.
+fn with_quotas(upload: NewUpload, state: &AppState, caller: &Caller) -> NewUpload {
+    let cap = |b: u64| i64::try_from(b).unwrap_or(i64::MAX);
+    NewUpload {
         max_total_bytes: cap(state.cfg.server.max_stored_upload_bytes),
         max_tenant_bytes: match caller {
             Caller::Tenant {
@@ -283,7 +270,18 @@ fn upload_of(state: &AppState, caller: &Caller, spec: &JobSpec) -> Option<NewUpl
             } => cap(*max_upload_bytes),
             Caller::Operator => 0,
         },
-    })
+        ..upload
+    }
+}
+
+/// The 429 of a full queue (`depth` jobs waiting), counted, with the estimate corrected.
+fn queue_full(state: &AppState, depth: i64) -> ApiError {
+    Metrics::inc(&state.metrics.jobs_rejected_queue_full);
+    state.queued_estimate.store(depth, Ordering::Relaxed);
+    ApiError::QueueFull {
+        depth,
+        retry_after_secs: 5,
+    }
 }
 
 /// 202 with the job and its `Location`.

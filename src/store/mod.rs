@@ -312,14 +312,14 @@ impl Store {
                 .await?;
             return match inserted {
                 Some(row) => Ok((row, true)),
-                None => self.existing_by_key(job).await,
+                None => self.not_inserted(job).await,
             };
         };
         let mut tx = self.writer.begin_with("BEGIN IMMEDIATE").await?;
         let inserted = insert_job_query(job, now).fetch_optional(&mut *tx).await?;
         let Some(row) = inserted else {
             tx.rollback().await?;
-            return self.existing_by_key(job).await;
+            return self.not_inserted(job).await;
         };
         let stored = sqlx::query(include_str!("sql/insert_upload.sql"))
             .bind(&job.id)
@@ -351,7 +351,7 @@ impl Store {
 
     /// Why `job`'s insert did nothing: its idempotency key is taken (that job, and `false`), or
     /// the queue was full ([`NewJob::max_queued`]).
-    async fn existing_by_key(&self, job: &NewJob) -> Result<(JobRow, bool), StoreError> {
+    async fn not_inserted(&self, job: &NewJob) -> Result<(JobRow, bool), StoreError> {
         let existing: Option<JobRow> = match &job.idempotency_key {
             Some(key) => {
                 sqlx::query_as(include_str!("sql/get_job_by_key.sql"))
