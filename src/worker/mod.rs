@@ -412,11 +412,7 @@ fn run_job(s: &Shared, row: JobRow, lease: Lease) {
             finish_failed(s, &lease, e.code(), &e.to_string(), retry_at);
         }
         Err(panic) => {
-            let msg = panic
-                .downcast_ref::<&str>()
-                .map(|s| s.to_string())
-                .or_else(|| panic.downcast_ref::<String>().cloned())
-                .unwrap_or_else(|| "unknown panic".into());
+            let msg = panic_message(panic.as_ref());
             error!(panic = %msg, "executor panicked");
             finish_failed(
                 s,
@@ -427,6 +423,15 @@ fn run_job(s: &Shared, row: JobRow, lease: Lease) {
             );
         }
     }
+}
+
+/// The text a panic carried (`panic!` with a literal or a formatted message).
+pub(crate) fn panic_message(panic: &(dyn std::any::Any + Send)) -> String {
+    panic
+        .downcast_ref::<&str>()
+        .map(|s| s.to_string())
+        .or_else(|| panic.downcast_ref::<String>().cloned())
+        .unwrap_or_else(|| "unknown panic".into())
 }
 
 fn finish_failed(s: &Shared, lease: &Lease, code: &str, message: &str, retry_at: Option<i64>) {

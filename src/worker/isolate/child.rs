@@ -77,11 +77,7 @@ pub fn run_stdio() -> i32 {
     );
     let outcome = std::panic::catch_unwind(AssertUnwindSafe(|| executor.run(&start.spec, &ctx)))
         .unwrap_or_else(|panic| {
-            let msg = panic
-                .downcast_ref::<&str>()
-                .map(|s| s.to_string())
-                .or_else(|| panic.downcast_ref::<String>().cloned())
-                .unwrap_or_else(|| "unknown panic".into());
+            let msg = crate::worker::panic_message(panic.as_ref());
             Err(PipelineError::Crashed(format!(
                 "the executor panicked: {msg}"
             )))
