@@ -85,8 +85,24 @@ pub struct TenantConfig {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct DatabaseConfig {
+    /// The SQLite file, when `url` is empty.
     pub path: PathBuf,
+    /// `postgres://…` for a PostgreSQL queue shared by many nodes (or `sqlite://PATH`); empty:
+    /// the SQLite file at `path`. Env: `VECTORFUSION_DATABASE_URL`.
+    pub url: String,
+    /// Connections per node (the reader pool with SQLite; the one pool with PostgreSQL).
     pub max_connections: u32,
+}
+
+impl DatabaseConfig {
+    /// The database this configuration names: `url` if set, else the file at `path`.
+    pub fn location(&self) -> Result<crate::store::DbLocation, String> {
+        if self.url.trim().is_empty() {
+            Ok(crate::store::DbLocation::Sqlite(self.path.clone()))
+        } else {
+            crate::store::DbLocation::parse(&self.url)
+        }
+    }
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -178,6 +194,7 @@ impl Default for DatabaseConfig {
     fn default() -> Self {
         DatabaseConfig {
             path: PathBuf::from("vectorfusion.db"),
+            url: String::new(),
             max_connections: 8,
         }
     }
@@ -290,8 +307,14 @@ impl Config {
         if self.server.bind.parse::<std::net::SocketAddr>().is_err() {
             return bad("server.bind", "must be ADDR:PORT, e.g. 127.0.0.1:8080");
         }
-        if self.queue.workers == 0 {
-            return bad("queue.workers", "must be at least 1");
+        if let Err(e) = self.database.location() {
+            return Err(ConfigError::Invalid {
+                key: "database.url",
+                reason: e,
+            });
+        }
+        if self.database.max_connections < 1 {
+            return bad("database.max_connections", "must be at least 1");
         }
         if self.queue.lease_secs == 0 || self.queue.heartbeat_secs == 0 {
             return bad("queue.lease_secs", "lease and heartbeat must be positive");
@@ -468,7 +491,23 @@ mod tests {
             "{err}"
         );
         assert!(Config::from_toml_and_env("[queue]\nwrokers = 1\n", Vec::new()).is_err());
-        assert!(Config::from_toml_and_env("[queue]\nworkers = 0\n", Vec::new()).is_err());
+        // 0 workers: an API-only node.
+        assert!(Config::from_toml_and_env("[queue]\nworkers = 0\n", Vec::new()).is_ok());
+        let pg = Config::from_toml_and_env(
+            "",
+            vec![(
+                "VECTORFUSION_DATABASE_URL".to_string(),
+                "postgres://vf@db/vf".to_string(),
+            )],
+        )
+        .unwrap();
+        assert_eq!(
+            pg.database.location().unwrap().backend(),
+            crate::store::Backend::Postgres
+        );
+        let err = Config::from_toml_and_env("[database]\nurl = \"mysql://x/y\"\n", Vec::new())
+            .unwrap_err();
+        assert!(err.to_string().contains("database.url"), "{err}");
     }
 
     #[test]

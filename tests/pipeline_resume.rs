@@ -343,7 +343,7 @@ async fn service_shutdown_mid_sds_and_restart_resumes_from_the_stored_checkpoint
         .unwrap();
     let store = vectorfusion::store::Store::open(&db, 1).await.unwrap();
     let row = store.get_job(&id).await.unwrap().unwrap();
-    assert_eq!(row.status, "queued");
+    assert_eq!(row.status, vectorfusion::store::JobStatus::Queued);
     let ck: Value = serde_json::from_str(row.checkpoint.as_deref().unwrap()).unwrap();
     let saved = step_of(&ck);
     assert!((12..120).contains(&saved), "{saved}");

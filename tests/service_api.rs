@@ -993,7 +993,11 @@ async fn graceful_shutdown_requeues_running_job_and_restart_resumes_it() {
     srv.stop().await;
     let store = vectorfusion::store::Store::open(&db, 1).await.unwrap();
     let row = store.get_job(&id).await.unwrap().unwrap();
-    assert_eq!(row.status, "queued", "handed back to the queue");
+    assert_eq!(
+        row.status,
+        vectorfusion::store::JobStatus::Queued,
+        "handed back to the queue"
+    );
     assert!(row.checkpoint.is_some(), "checkpoint kept");
     assert_eq!(store.attempts(&id).await.unwrap()[0].outcome, "interrupted");
     store.close().await;

@@ -224,7 +224,7 @@ async fn sigterm_checkpoints_and_requeues_then_restart_resumes() {
     {
         let store = vectorfusion::store::Store::open(&db, 1).await.unwrap();
         let row = store.get_job(&id).await.unwrap().unwrap();
-        assert_eq!(row.status, "queued");
+        assert_eq!(row.status, vectorfusion::store::JobStatus::Queued);
         assert!(row.checkpoint.is_some());
         assert_eq!(store.attempts(&id).await.unwrap()[0].outcome, "interrupted");
         store.close().await;

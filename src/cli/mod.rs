@@ -12,6 +12,7 @@ pub mod serve;
 pub mod setup;
 pub mod vectorize;
 
+use crate::server::Role;
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
@@ -31,8 +32,10 @@ pub enum Command {
     Vectorize(vectorize::VectorizeArgs),
     /// Render an SVG through our rasteriser to PNG.
     Render(render::RenderArgs),
-    /// Run the HTTP service.
+    /// Run the HTTP service (API and workers; `--workers 0`: API only).
     Serve(serve::ServeArgs),
+    /// Run a worker-only node on a shared (PostgreSQL) queue: health, readiness and metrics.
+    Worker(serve::WorkerArgs),
     /// Evaluate generated SVGs with CLIP scorers.
     Eval(eval::EvalArgs),
     /// Install the embedded model's MiniLM weights into the cache (once; fast when cached).
@@ -94,7 +97,8 @@ pub fn run(cli: Cli) -> Result<(), CliError> {
         Command::Generate(a) => generate::run(*a),
         Command::Vectorize(a) => vectorize::run(a),
         Command::Render(a) => render::run(a),
-        Command::Serve(args) => serve::run(args),
+        Command::Serve(args) => serve::run(args.node, args.bind, Role::Server),
+        Command::Worker(args) => serve::run(args.node, Some(args.bind), Role::Worker),
         Command::Eval(a) => eval::run(a),
         Command::Setup(a) => setup::run(a),
         Command::Bench(b) => bench::run(b),

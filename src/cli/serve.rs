@@ -3,6 +3,7 @@
 use super::CliError;
 use crate::config::Config;
 use crate::pipeline::{DefaultExecutor, Executor};
+use crate::server::Role;
 use crate::worker::isolate::{ChildExecutor, JobLimits, ProcessExecutor};
 use std::net::SocketAddr;
 use std::path::PathBuf;
@@ -11,17 +12,36 @@ use std::sync::Arc;
 /// Run the HTTP job service (see docs/SERVICE.md). Without flags: 127.0.0.1:8080, ./vectorfusion.db.
 #[derive(clap::Args, Debug)]
 pub struct ServeArgs {
-    /// Configuration file (TOML; see config.toml for every setting).
-    #[arg(long, value_name = "FILE")]
-    pub config: Option<PathBuf>,
     /// Listen address, overrides server.bind.
     #[arg(long, value_name = "ADDR:PORT")]
     pub bind: Option<SocketAddr>,
-    /// SQLite database file, overrides database.path.
-    #[arg(long, value_name = "PATH")]
-    pub db: Option<PathBuf>,
-    /// Worker threads, overrides queue.workers.
-    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u16).range(1..=256))]
+    #[command(flatten)]
+    pub node: NodeArgs,
+}
+
+/// Run a worker-only node (see docs/SERVICE.md): it claims jobs from the shared queue and serves
+/// only /healthz, /readyz and /metrics.
+#[derive(clap::Args, Debug)]
+pub struct WorkerArgs {
+    /// Listen address of the health and metrics endpoints.
+    #[arg(long, value_name = "ADDR:PORT", default_value = "127.0.0.1:8081")]
+    pub bind: SocketAddr,
+    #[command(flatten)]
+    pub node: NodeArgs,
+}
+
+/// What every node takes.
+#[derive(clap::Args, Debug)]
+pub struct NodeArgs {
+    /// Configuration file (TOML; see config.toml for every setting).
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// The queue: a SQLite file (overrides database.path) or postgres://user@host/db (overrides
+    /// database.url; env VECTORFUSION_DATABASE_URL).
+    #[arg(long, value_name = "PATH|URL")]
+    pub db: Option<String>,
+    /// Worker threads, overrides queue.workers (0: an API-only node).
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u16).range(0..=256))]
     pub workers: Option<u16>,
     /// Testing only: replace the pipeline with the service test double, sleeping STEP_MS per
     /// step. Not a product feature.
@@ -29,17 +49,28 @@ pub struct ServeArgs {
     pub test_executor: Option<u64>,
 }
 
-pub fn run(args: ServeArgs) -> Result<(), CliError> {
+pub fn run(args: NodeArgs, bind: Option<SocketAddr>, role: Role) -> Result<(), CliError> {
     let mut cfg =
         Config::load(args.config.as_deref()).map_err(|e| CliError::Usage(e.to_string()))?;
-    if let Some(b) = args.bind {
+    if let Some(b) = bind {
         cfg.server.bind = b.to_string();
     }
     if let Some(db) = args.db {
-        cfg.database.path = db;
+        match crate::store::DbLocation::parse(&db).map_err(CliError::Usage)? {
+            crate::store::DbLocation::Sqlite(path) => {
+                cfg.database.path = path;
+                cfg.database.url.clear();
+            }
+            crate::store::DbLocation::Postgres(url) => cfg.database.url = url,
+        }
     }
     if let Some(n) = args.workers {
         cfg.queue.workers = n as usize;
+    }
+    if role == Role::Worker && cfg.queue.workers == 0 {
+        return Err(CliError::Usage(
+            "a worker node needs at least one worker (--workers N, N ≥ 1)".into(),
+        ));
     }
     cfg.validate().map_err(|e| CliError::Usage(e.to_string()))?;
     init_logging(&cfg);
@@ -88,7 +119,7 @@ pub fn run(args: ServeArgs) -> Result<(), CliError> {
         let listener = tokio::net::TcpListener::bind(&cfg.server.bind)
             .await
             .map_err(|e| CliError::Usage(format!("cannot listen on {}: {e}", cfg.server.bind)))?;
-        crate::server::run(cfg, executor, listener, shutdown_signal())
+        crate::server::run_node(cfg, executor, listener, shutdown_signal(), role)
             .await
             .map_err(|e| CliError::Other(e.into()))
     });

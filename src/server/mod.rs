@@ -13,10 +13,11 @@ mod routes;
 mod sse;
 pub mod tenant;
 pub mod types;
+mod wakeups;
 
 use crate::config::Config;
 use crate::pipeline::{Executor, Limits};
-use crate::store::{Store, StoreError};
+use crate::store::{Backend, Store, StoreError};
 use crate::worker::events::Hub;
 use crate::worker::metrics::Metrics;
 use crate::worker::{WorkerPool, WorkerSettings};
@@ -39,6 +40,27 @@ pub enum ServerError {
     Store(#[from] StoreError),
     #[error("I/O error: {0}")]
     Io(#[from] std::io::Error),
+    #[error("invalid configuration: {0}")]
+    Config(String),
+}
+
+/// What a node does. Every node shares the queue in the database; any API node serves any job.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Role {
+    /// The API and `queue.workers` workers (`vectorfusion serve`; `--workers 0`: API only).
+    Server,
+    /// Workers only (`vectorfusion worker`): health, readiness and metrics, no job API.
+    Worker,
+}
+
+impl Role {
+    /// Routes a node of this role serves.
+    fn serves(self, path: &str) -> bool {
+        match self {
+            Role::Server => true,
+            Role::Worker => matches!(path, "/healthz" | "/readyz" | "/metrics"),
+        }
+    }
 }
 
 #[doc(hidden)]
@@ -118,10 +140,12 @@ pub fn routes() -> Vec<(String, String)> {
         .collect()
 }
 
-fn router(state: AppState) -> Router {
+fn router(state: AppState, role: Role) -> Router {
     let mut r = Router::new();
     for (_, path, handler) in route_table() {
-        r = r.route(path, handler);
+        if role.serves(path) {
+            r = r.route(path, handler);
+        }
     }
     r.method_not_allowed_fallback(routes::method_not_allowed)
         .fallback(routes::no_route)
@@ -140,7 +164,19 @@ pub async fn run(
     listener: TcpListener,
     shutdown: impl Future<Output = ()> + Send + 'static,
 ) -> Result<(), ServerError> {
-    let store = Store::open(&cfg.database.path, cfg.database.max_connections).await?;
+    run_node(cfg, executor, listener, shutdown, Role::Server).await
+}
+
+/// Runs one node of `role` on `listener` until `shutdown` resolves, then shuts down gracefully.
+pub async fn run_node(
+    cfg: Config,
+    executor: Arc<dyn Executor>,
+    listener: TcpListener,
+    shutdown: impl Future<Output = ()> + Send + 'static,
+    role: Role,
+) -> Result<(), ServerError> {
+    let location = cfg.database.location().map_err(ServerError::Config)?;
+    let store = Store::connect(&location, cfg.database.max_connections).await?;
     let hub = Hub::new();
     let metrics = Arc::new(Metrics::default());
     let pool = WorkerPool::start(
@@ -171,9 +207,15 @@ pub async fn run(
     }));
     let pruner = tokio::spawn(prune_loop(state.clone()));
     let counter = tokio::spawn(depth_loop(state.clone()));
-    let app = router(state.clone());
+    let wakeups = match (&location, store.backend()) {
+        (crate::store::DbLocation::Postgres(url), Backend::Postgres) => {
+            Some(tokio::spawn(wakeups::listen(state.clone(), url.clone())))
+        }
+        _ => None,
+    };
+    let app = router(state.clone(), role);
     let addr = listener.local_addr()?;
-    info!(%addr, workers = state.pool.workers(), db = %state.cfg.database.path.display(), "listening");
+    info!(%addr, ?role, workers = state.pool.workers(), db = %location, "listening");
 
     // Shutdown is bounded: open connections (SSE streams end on the stop signal; a half-sent
     // request may not) and then the workers share one `shutdown_grace_secs` deadline, counted
@@ -207,6 +249,9 @@ pub async fn run(
     };
     pruner.abort();
     counter.abort();
+    if let Some(w) = wakeups {
+        w.abort();
+    }
     // Workers finish their current step, record the interruption and exit.
     let left = stop_at.get().map_or(grace, |t: &std::time::Instant| {
         grace.saturating_sub(t.elapsed())

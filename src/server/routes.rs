@@ -328,7 +328,7 @@ pub(super) async fn get_job(
     let id = job_id(&raw)?;
     let row = load_job(&state, &id, &caller).await?;
     let mut view = JobView::from_row(&row);
-    if row.status == JobStatus::Succeeded.as_str()
+    if row.status == JobStatus::Succeeded
         && let Some(result) = state.store.result(&id).await?
     {
         view = view.with_result(&result);
@@ -415,7 +415,7 @@ pub(super) async fn cancel(
 ) -> Result<Json<JobView>, ApiError> {
     let id = job_id(&raw)?;
     let before = load_job(&state, &id, &caller).await?;
-    match before.status().map_err(ApiError::from)? {
+    match before.status {
         JobStatus::Succeeded | JobStatus::Failed => {
             return Err(ApiError::Conflict(format!(
                 "job {id} already finished with status {}",
@@ -433,7 +433,7 @@ pub(super) async fn cancel(
             what: "job",
             id: id.clone(),
         })?;
-    match row.status().map_err(ApiError::from)? {
+    match row.status {
         JobStatus::Cancelled => state
             .hub
             .publish(&id, JobEvent::Finished(JobStatus::Cancelled)),
@@ -453,7 +453,7 @@ async fn finished_result(
     caller: &Caller,
 ) -> Result<crate::store::ResultRow, ApiError> {
     let row = load_job(state, id, caller).await?;
-    if row.status != JobStatus::Succeeded.as_str() {
+    if row.status != JobStatus::Succeeded {
         return Err(ApiError::Conflict(format!(
             "job {id} has no result: its status is {}",
             row.status

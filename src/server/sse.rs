@@ -10,13 +10,17 @@
 //! Each stream is fed by its own task from a per-job broadcast channel. The worker's publish
 //! never waits; when a client reads too slowly its channel lags and the task resynchronises from
 //! the database, so slow clients cost themselves events, never the workers time.
+//!
+//! On a shared database (PostgreSQL) the job may run on another node: its changes arrive as
+//! `Changed` hints (`wakeups.rs`), and the task also re-reads the job every second, so the stream
+//! shows every stored snapshot, each status change and the latest progress wherever the job runs.
 
 use super::AppState;
 use super::error::ApiError;
 use super::routes::{job_id, load_job};
 use super::tenant::Caller;
 use super::types::JobView;
-use crate::store::{JobRow, JobStatus, SnapshotRow};
+use crate::store::{Backend, JobRow, JobStatus, SnapshotRow};
 use crate::worker::events::JobEvent;
 use axum::extract::{Extension, Path, State};
 use axum::http::HeaderMap;
@@ -83,7 +87,7 @@ fn snapshot_event(n: i64, stage: &str, step: i64, svg: &str) -> Event {
 }
 
 fn terminal_event(row: &JobRow) -> Option<Event> {
-    let name = match row.status().ok()? {
+    let name = match row.status {
         JobStatus::Succeeded => "done",
         JobStatus::Failed => "failed",
         JobStatus::Cancelled => "cancelled",
@@ -97,6 +101,9 @@ struct Feed {
     id: String,
     tx: mpsc::Sender<Event>,
     sent_snapshot: i64,
+    /// The status and (stage, step) last sent, so a re-read sends only what changed.
+    sent_status: JobStatus,
+    sent_progress: (Option<String>, i64),
 }
 
 impl Feed {
@@ -121,7 +128,42 @@ impl Feed {
         let Ok(Some(row)) = self.state.store.get_job(&self.id).await else {
             return Err(());
         };
+        self.sent_status = row.status;
+        self.sent_progress = (row.stage.clone(), row.step);
         self.send(state_event(&row)).await?;
+        self.snapshots_and_end(&row).await
+    }
+
+    /// Re-reads the job after a change that may have happened on another node: a `state` event
+    /// if its status changed, else a `progress` event if it moved, then new snapshots.
+    async fn refresh(&mut self) -> Result<bool, ()> {
+        let row = match self.state.store.get_job(&self.id).await {
+            Ok(Some(row)) => row,
+            Ok(None) => return Err(()),
+            // The database is briefly unreachable: try again at the next tick.
+            Err(_) => return Ok(false),
+        };
+        if row.status != self.sent_status {
+            self.sent_status = row.status;
+            self.send(state_event(&row)).await?;
+        } else if (row.stage.as_ref(), row.step)
+            != (self.sent_progress.0.as_ref(), self.sent_progress.1)
+            && row.status == JobStatus::Running
+        {
+            self.send(json_event(
+                "progress",
+                &serde_json::json!({
+                    "stage": row.stage, "step": row.step, "total": row.total, "loss": row.loss,
+                    "detail": null
+                }),
+            ))
+            .await?;
+        }
+        self.sent_progress = (row.stage.clone(), row.step);
+        self.snapshots_and_end(&row).await
+    }
+
+    async fn snapshots_and_end(&mut self, row: &JobRow) -> Result<bool, ()> {
         let snaps = self
             .state
             .store
@@ -129,7 +171,7 @@ impl Feed {
             .await
             .map_err(|_| ())?;
         self.send_snapshots(snaps).await?;
-        if let Some(t) = terminal_event(&row) {
+        if let Some(t) = terminal_event(row) {
             self.send(t).await?;
             return Ok(true);
         }
@@ -145,11 +187,14 @@ async fn feed(
     tx: mpsc::Sender<Event>,
 ) -> Result<(), ()> {
     let mut shutdown = state.shutdown.clone();
+    let shared_db = state.store.backend() == Backend::Postgres;
     let mut f = Feed {
         id: row.id.clone(),
         state,
         tx,
         sent_snapshot: last_seen.unwrap_or(0),
+        sent_status: row.status,
+        sent_progress: (row.stage.clone(), row.step),
     };
     f.send(state_event(&row)).await?;
     let replay = match last_seen {
@@ -166,9 +211,12 @@ async fn feed(
     if let Some(t) = terminal_event(&row) {
         return f.send(t).await;
     }
+    let mut poll = tokio::time::interval(Duration::from_secs(1));
+    poll.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     loop {
         let ev = tokio::select! {
             ev = rx.recv() => ev,
+            _ = poll.tick(), if shared_db => Ok(JobEvent::Changed),
             _ = shutdown.changed() => return Ok(()),
             _ = f.tx.closed() => return Ok(()),
         };
@@ -180,6 +228,7 @@ async fn feed(
                 loss,
                 detail,
             }) => {
+                f.sent_progress = (Some(stage.clone()), i64::from(step));
                 f.send(json_event(
                     "progress",
                     &serde_json::json!({
@@ -201,6 +250,11 @@ async fn feed(
             }
             Ok(JobEvent::Status(_)) => {
                 if f.resync().await? {
+                    return Ok(());
+                }
+            }
+            Ok(JobEvent::Changed) => {
+                if f.refresh().await? {
                     return Ok(());
                 }
             }

@@ -367,7 +367,7 @@ impl JobView {
         let spec: Option<JobSpec> = serde_json::from_str(&row.spec).ok();
         let fraction = if row.total > 0 {
             (row.step as f64 / row.total as f64).clamp(0.0, 1.0)
-        } else if row.status == JobStatus::Succeeded.as_str() {
+        } else if row.status == JobStatus::Succeeded {
             1.0
         } else {
             0.0
@@ -376,7 +376,7 @@ impl JobView {
         JobView {
             id: row.id.clone(),
             kind: row.kind.clone(),
-            status: row.status.clone(),
+            status: row.status.as_str().to_string(),
             stage: row.stage.clone(),
             progress: ProgressView {
                 stage: row.stage.clone(),

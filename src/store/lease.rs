@@ -1,17 +1,17 @@
 //! The worker's side of the store: claiming jobs and every write fenced by the lease
 //! (`(lease_owner, attempts)`): heartbeats, progress, checkpoints, snapshots, and the outcome.
 
-use super::{AttemptOutcome, Heartbeat, JobRow, Lease, Store, StoreError};
+use super::{AttemptOutcome, Heartbeat, JobRow, Lease, Store, StoreError, sql};
 
 impl Store {
     /// Finishes running jobs whose lease expired and that cannot be retried; returns them.
     pub async fn reap_expired(&self, now: i64) -> Result<Vec<JobRow>, StoreError> {
-        let rows: Vec<JobRow> = sqlx::query_as(include_str!("sql/reap_expired.sql"))
+        let rows: Vec<JobRow> = sqlx::query_as(sql!(self, "reap_expired.sql"))
             .bind(now)
             .fetch_all(&self.writer)
             .await?;
         for row in &rows {
-            sqlx::query(include_str!("sql/mark_lost_attempts.sql"))
+            sqlx::query(sql!(self, "mark_lost_attempts.sql"))
                 .bind(&row.id)
                 .bind(i64::MAX)
                 .bind(now)
@@ -22,7 +22,7 @@ impl Store {
     }
 
     /// Atomically claims the next job for `worker`, with a lease of `lease_ms`. One statement:
-    /// the trigger of `migrations/0002_claim_opens_attempt.sql` opens the attempt row (and marks
+    /// the trigger of `migrations/sqlite/0002_claim_opens_attempt.sql` (`jobs_claim_opens_attempt` in PostgreSQL) opens the attempt row (and marks
     /// earlier running attempts lost) inside it.
     pub async fn claim(
         &self,
@@ -30,7 +30,7 @@ impl Store {
         now: i64,
         lease_ms: i64,
     ) -> Result<Option<(JobRow, Lease)>, StoreError> {
-        let row: Option<JobRow> = sqlx::query_as(include_str!("sql/claim.sql"))
+        let row: Option<JobRow> = sqlx::query_as(sql!(self, "claim.sql"))
             .bind(worker)
             .bind(now)
             .bind(lease_ms)
@@ -52,7 +52,7 @@ impl Store {
         now: i64,
         lease_ms: i64,
     ) -> Result<Heartbeat, StoreError> {
-        let flag: Option<i64> = sqlx::query_scalar(include_str!("sql/heartbeat.sql"))
+        let flag: Option<i64> = sqlx::query_scalar(sql!(self, "heartbeat.sql"))
             .bind(&lease.job_id)
             .bind(&lease.worker)
             .bind(lease.attempt)
@@ -77,7 +77,7 @@ impl Store {
         loss: Option<f64>,
         now: i64,
     ) -> Result<bool, StoreError> {
-        let r = sqlx::query(include_str!("sql/update_progress.sql"))
+        let r = sqlx::query(sql!(self, "update_progress.sql"))
             .bind(&lease.job_id)
             .bind(&lease.worker)
             .bind(lease.attempt)
@@ -98,7 +98,7 @@ impl Store {
         state: &str,
         now: i64,
     ) -> Result<bool, StoreError> {
-        let r = sqlx::query(include_str!("sql/save_checkpoint.sql"))
+        let r = sqlx::query(sql!(self, "save_checkpoint.sql"))
             .bind(&lease.job_id)
             .bind(&lease.worker)
             .bind(lease.attempt)
@@ -120,7 +120,7 @@ impl Store {
         now: i64,
         keep: i64,
     ) -> Result<Option<i64>, StoreError> {
-        let n: Option<i64> = sqlx::query_scalar(include_str!("sql/insert_snapshot.sql"))
+        let n: Option<i64> = sqlx::query_scalar(sql!(self, "insert_snapshot.sql"))
             .bind(&lease.job_id)
             .bind(&lease.worker)
             .bind(lease.attempt)
@@ -133,7 +133,7 @@ impl Store {
         if let Some(n) = n
             && n > keep
         {
-            sqlx::query(include_str!("sql/trim_snapshots.sql"))
+            sqlx::query(sql!(self, "trim_snapshots.sql"))
                 .bind(&lease.job_id)
                 .bind(n - keep.max(1))
                 .execute(&self.writer)
@@ -152,8 +152,8 @@ impl Store {
         detail: &str,
         now: i64,
     ) -> Result<bool, StoreError> {
-        let mut tx = self.writer.begin_with("BEGIN IMMEDIATE").await?;
-        let r = sqlx::query(include_str!("sql/complete_job.sql"))
+        let mut tx = self.begin().await?;
+        let r = sqlx::query(sql!(self, "complete_job.sql"))
             .bind(&lease.job_id)
             .bind(&lease.worker)
             .bind(lease.attempt)
@@ -164,7 +164,7 @@ impl Store {
             tx.rollback().await?;
             return Ok(false);
         }
-        sqlx::query(include_str!("sql/insert_result.sql"))
+        sqlx::query(sql!(self, "insert_result.sql"))
             .bind(&lease.job_id)
             .bind(svg)
             .bind(paths)
@@ -172,7 +172,8 @@ impl Store {
             .bind(now)
             .execute(&mut *tx)
             .await?;
-        finish_attempt(&mut tx, lease, AttemptOutcome::Succeeded, None, now).await?;
+        self.finish_attempt(&mut tx, lease, AttemptOutcome::Succeeded, None, now)
+            .await?;
         tx.commit().await?;
         Ok(true)
     }
@@ -186,8 +187,8 @@ impl Store {
         retry_at: Option<i64>,
         now: i64,
     ) -> Result<Option<JobRow>, StoreError> {
-        let mut tx = self.writer.begin_with("BEGIN IMMEDIATE").await?;
-        let row: Option<JobRow> = sqlx::query_as(include_str!("sql/fail_job.sql"))
+        let mut tx = self.begin().await?;
+        let row: Option<JobRow> = sqlx::query_as(sql!(self, "fail_job.sql"))
             .bind(&lease.job_id)
             .bind(&lease.worker)
             .bind(lease.attempt)
@@ -203,7 +204,8 @@ impl Store {
             } else {
                 AttemptOutcome::Failed
             };
-            finish_attempt(&mut tx, lease, outcome, Some(message), now).await?;
+            self.finish_attempt(&mut tx, lease, outcome, Some(message), now)
+                .await?;
         }
         tx.commit().await?;
         Ok(row)
@@ -217,7 +219,7 @@ impl Store {
     ) -> Result<Option<JobRow>, StoreError> {
         self.end_attempt(
             lease,
-            include_str!("sql/finish_cancelled.sql"),
+            sql!(self, "finish_cancelled.sql"),
             AttemptOutcome::Cancelled,
             now,
         )
@@ -228,7 +230,7 @@ impl Store {
     pub async fn release(&self, lease: &Lease, now: i64) -> Result<Option<JobRow>, StoreError> {
         self.end_attempt(
             lease,
-            include_str!("sql/release_job.sql"),
+            sql!(self, "release_job.sql"),
             AttemptOutcome::Interrupted,
             now,
         )
@@ -242,7 +244,7 @@ impl Store {
         outcome: AttemptOutcome,
         now: i64,
     ) -> Result<Option<JobRow>, StoreError> {
-        let mut tx = self.writer.begin_with("BEGIN IMMEDIATE").await?;
+        let mut tx = self.begin().await?;
         let row: Option<JobRow> = sqlx::query_as(sql)
             .bind(&lease.job_id)
             .bind(&lease.worker)
@@ -251,27 +253,29 @@ impl Store {
             .fetch_optional(&mut *tx)
             .await?;
         if row.is_some() {
-            finish_attempt(&mut tx, lease, outcome, None, now).await?;
+            self.finish_attempt(&mut tx, lease, outcome, None, now)
+                .await?;
         }
         tx.commit().await?;
         Ok(row)
     }
-}
 
-async fn finish_attempt(
-    tx: &mut sqlx::Transaction<'static, sqlx::Sqlite>,
-    lease: &Lease,
-    outcome: AttemptOutcome,
-    error: Option<&str>,
-    now: i64,
-) -> Result<(), StoreError> {
-    sqlx::query(include_str!("sql/finish_attempt.sql"))
-        .bind(&lease.job_id)
-        .bind(lease.attempt)
-        .bind(outcome.as_str())
-        .bind(error)
-        .bind(now)
-        .execute(&mut **tx)
-        .await?;
-    Ok(())
+    async fn finish_attempt(
+        &self,
+        tx: &mut sqlx::Transaction<'static, sqlx::Any>,
+        lease: &Lease,
+        outcome: AttemptOutcome,
+        error: Option<&str>,
+        now: i64,
+    ) -> Result<(), StoreError> {
+        sqlx::query(sql!(self, "finish_attempt.sql"))
+            .bind(&lease.job_id)
+            .bind(lease.attempt)
+            .bind(outcome.as_str())
+            .bind(error)
+            .bind(now)
+            .execute(&mut **tx)
+            .await?;
+        Ok(())
+    }
 }

@@ -1,5 +1,6 @@
-//! The job store: SQLite through sqlx (WAL), schema in `migrations/`, every statement in a file
-//! under `src/store/sql/`.
+//! The job store: SQLite (embedded, WAL) or PostgreSQL (shared by many nodes) through sqlx,
+//! schema in `migrations/<backend>/`, every statement in a file under `src/store/sql/<backend>/`
+//! (`backend.rs` picks them).
 //!
 //! Jobs move `queued → running → succeeded | failed | cancelled` (a CHECK constraint keeps the
 //! status honest). A worker *claims* a job with one atomic `UPDATE … RETURNING`, which gives it a
@@ -8,18 +9,19 @@
 //! stalled, the job was reclaimed) can no longer touch the job: a job completes exactly once.
 //! Each claim opens a row in `attempts`, closed with its outcome.
 
+mod backend;
 mod lease;
+mod status;
 mod uploads;
 
+pub use backend::{Backend, DbLocation, create_test_database};
 pub use uploads::{NewUpload, UploadRow};
 
+use backend::sql;
 use serde::Serialize;
-use sqlx::sqlite::{
-    SqliteConnectOptions, SqliteJournalMode, SqlitePool, SqlitePoolOptions, SqliteSynchronous,
-};
+use sqlx::AnyPool;
 use std::path::Path;
 use std::str::FromStr;
-use std::time::Duration;
 
 /// Errors from the store.
 #[derive(Debug, thiserror::Error)]
@@ -38,7 +40,7 @@ pub enum StoreError {
     QueueFull { limit: i64 },
 }
 
-/// Job lifecycle states (mirrors the CHECK constraint in `migrations/0001_jobs.sql`).
+/// Job lifecycle states (mirrors the CHECK constraint in `migrations/*/0001_jobs.sql`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum JobStatus {
@@ -76,6 +78,12 @@ impl JobStatus {
     }
 }
 
+impl std::fmt::Display for JobStatus {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
 impl FromStr for JobStatus {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
@@ -94,7 +102,7 @@ pub struct JobRow {
     pub kind: String,
     pub spec: String,
     pub priority: i64,
-    pub status: String,
+    pub status: JobStatus,
     pub idempotency_key: Option<String>,
     pub request_hash: Option<String>,
     pub stage: Option<String>,
@@ -120,12 +128,6 @@ pub struct JobRow {
     pub updated_at: i64,
     /// The tenant that submitted it (`server::tenant`); `None`: the operator.
     pub tenant: Option<String>,
-}
-
-impl JobRow {
-    pub fn status(&self) -> Result<JobStatus, StoreError> {
-        self.status.parse().map_err(StoreError::Corrupt)
-    }
 }
 
 /// One row of `attempts`.
@@ -225,73 +227,69 @@ pub fn now_ms() -> i64 {
     chrono::Utc::now().timestamp_millis()
 }
 
-/// Handle to the database; cheap to clone.
-///
-/// Writes go through a single connection (`writer`) so that in-process writers queue fairly in
-/// the pool instead of contending for SQLite's lock (whose busy handler sleeps for
-/// milliseconds); reads use a pool of connections (WAL readers never block the writer). The SQL
-/// stays safe with several processes on one file: every claim and fenced write is atomic in
-/// SQLite itself.
+/// Handle to the database; cheap to clone. SQLite: one writer connection and a pool of
+/// readers (`backend.rs` says why); PostgreSQL: one pool for both.
 #[derive(Clone, Debug)]
 pub struct Store {
-    pool: SqlitePool,
-    writer: SqlitePool,
+    pool: AnyPool,
+    writer: AnyPool,
+    backend: Backend,
 }
 
 impl Store {
     /// Opens (creating if needed) the SQLite file at `path` in WAL mode and runs the migrations.
     pub async fn open(path: &Path, max_connections: u32) -> Result<Self, StoreError> {
-        if let Some(parent) = path.parent()
-            && !parent.as_os_str().is_empty()
-        {
-            std::fs::create_dir_all(parent).map_err(|e| {
-                StoreError::Db(sqlx::Error::Configuration(
-                    format!("cannot create database directory {}: {e}", parent.display()).into(),
-                ))
-            })?;
-        }
-        let options = SqliteConnectOptions::new()
-            .filename(path)
-            .create_if_missing(true)
-            .journal_mode(SqliteJournalMode::Wal)
-            .synchronous(SqliteSynchronous::Normal)
-            .foreign_keys(true)
-            .busy_timeout(Duration::from_secs(10))
-            // No checkpoint inside a commit (it fsyncs and would stall every queued write);
-            // the owner calls `checkpoint` from a background task instead.
-            .pragma("wal_autocheckpoint", "0");
-        let writer = SqlitePoolOptions::new()
-            .max_connections(1)
-            .connect_with(options.clone())
-            .await?;
-        sqlx::migrate!("./migrations").run(&writer).await?;
-        let pool = SqlitePoolOptions::new()
-            .max_connections(max_connections.max(1))
-            .connect_with(options)
-            .await?;
-        Ok(Store { pool, writer })
+        Self::connect(&DbLocation::Sqlite(path.to_path_buf()), max_connections).await
     }
 
-    pub fn pool(&self) -> &SqlitePool {
+    /// Opens the database at `loc` (SQLite or PostgreSQL) and runs its migrations.
+    pub async fn connect(loc: &DbLocation, max_connections: u32) -> Result<Self, StoreError> {
+        let pools = backend::connect(loc, max_connections).await?;
+        Ok(Store {
+            pool: pools.pool,
+            writer: pools.writer,
+            backend: loc.backend(),
+        })
+    }
+
+    pub fn backend(&self) -> Backend {
+        self.backend
+    }
+
+    /// For tests and tools that read the tables directly.
+    pub fn pool(&self) -> &AnyPool {
         &self.pool
     }
 
-    /// Closes every connection (checkpoints the WAL).
+    /// A write transaction. SQLite takes its write lock at `BEGIN IMMEDIATE`, so the statements
+    /// inside never fail half-way on a busy lock.
+    async fn begin(&self) -> Result<sqlx::Transaction<'static, sqlx::Any>, StoreError> {
+        Ok(match self.backend {
+            Backend::Sqlite => self.writer.begin_with("BEGIN IMMEDIATE").await?,
+            Backend::Postgres => self.writer.begin().await?,
+        })
+    }
+
+    /// Closes every connection (SQLite: checkpoints the WAL).
     pub async fn close(&self) {
-        let _ = sqlx::query("PRAGMA wal_checkpoint(TRUNCATE)")
-            .execute(&self.writer)
-            .await;
+        if self.backend == Backend::Sqlite {
+            let _ = sqlx::query("PRAGMA wal_checkpoint(TRUNCATE)")
+                .execute(&self.writer)
+                .await;
+        }
         self.pool.close().await;
         self.writer.close().await;
     }
 
-    /// Copies the WAL back into the database file without blocking readers or the writer
+    /// SQLite: copies the WAL back into the database file without blocking readers or the writer
     /// (`PRAGMA wal_checkpoint(PASSIVE)`). Automatic checkpoints are off: long-lived owners
-    /// (the server) call this periodically; [`Store::close`] truncates the WAL.
+    /// (the server) call this periodically; [`Store::close`] truncates the WAL. PostgreSQL: nothing.
     pub async fn checkpoint(&self) -> Result<(), StoreError> {
-        sqlx::query("PRAGMA wal_checkpoint(PASSIVE)")
-            .execute(&self.pool)
-            .await?;
+        if self.backend == Backend::Sqlite {
+            sqlx::query("PRAGMA wal_checkpoint(PASSIVE)")
+                .execute(&self.pool)
+                .await?;
+        }
         Ok(())
     }
 
@@ -307,7 +305,25 @@ impl Store {
     pub async fn insert_job(&self, job: &NewJob, now: i64) -> Result<(JobRow, bool), StoreError> {
         let Some(up) = &job.upload else {
             // No upload: one autocommit statement, one round trip on the writer.
-            let inserted = insert_job_query(job, now)
+            if self.backend == Backend::Postgres && job.max_queued.is_some() {
+                // The count in the insert must see every earlier insert: take the admission
+                // lock in a transaction first (SQLite's single writer does this for free).
+                let mut tx = self.begin().await?;
+                sqlx::query(include_str!("sql/postgres/admission_lock.sql"))
+                    .execute(&mut *tx)
+                    .await?;
+                let inserted = self
+                    .insert_job_query(job, now)
+                    .fetch_optional(&mut *tx)
+                    .await?;
+                tx.commit().await?;
+                return match inserted {
+                    Some(row) => Ok((row, true)),
+                    None => self.not_inserted(job).await,
+                };
+            }
+            let inserted = self
+                .insert_job_query(job, now)
                 .fetch_optional(&self.writer)
                 .await?;
             return match inserted {
@@ -315,13 +331,21 @@ impl Store {
                 None => self.not_inserted(job).await,
             };
         };
-        let mut tx = self.writer.begin_with("BEGIN IMMEDIATE").await?;
-        let inserted = insert_job_query(job, now).fetch_optional(&mut *tx).await?;
+        let mut tx = self.begin().await?;
+        if self.backend == Backend::Postgres {
+            sqlx::query(include_str!("sql/postgres/admission_lock.sql"))
+                .execute(&mut *tx)
+                .await?;
+        }
+        let inserted = self
+            .insert_job_query(job, now)
+            .fetch_optional(&mut *tx)
+            .await?;
         let Some(row) = inserted else {
             tx.rollback().await?;
             return self.not_inserted(job).await;
         };
-        let stored = sqlx::query(include_str!("sql/insert_upload.sql"))
+        let stored = sqlx::query(sql!(self, "insert_upload.sql"))
             .bind(&job.id)
             .bind(&job.tenant)
             .bind(&up.image)
@@ -354,7 +378,7 @@ impl Store {
     async fn not_inserted(&self, job: &NewJob) -> Result<(JobRow, bool), StoreError> {
         let existing: Option<JobRow> = match &job.idempotency_key {
             Some(key) => {
-                sqlx::query_as(include_str!("sql/get_job_by_key.sql"))
+                sqlx::query_as(sql!(self, "get_job_by_key.sql"))
                     .bind(key)
                     .fetch_optional(&self.writer)
                     .await?
@@ -372,14 +396,14 @@ impl Store {
 
     /// The job submitted with this idempotency key, if any.
     pub async fn get_job_by_key(&self, key: &str) -> Result<Option<JobRow>, StoreError> {
-        Ok(sqlx::query_as(include_str!("sql/get_job_by_key.sql"))
+        Ok(sqlx::query_as(sql!(self, "get_job_by_key.sql"))
             .bind(key)
             .fetch_optional(&self.pool)
             .await?)
     }
 
     pub async fn get_job(&self, id: &str) -> Result<Option<JobRow>, StoreError> {
-        Ok(sqlx::query_as(include_str!("sql/get_job.sql"))
+        Ok(sqlx::query_as(sql!(self, "get_job.sql"))
             .bind(id)
             .fetch_optional(&self.pool)
             .await?)
@@ -394,7 +418,7 @@ impl Store {
         limit: i64,
         tenant: Option<&str>,
     ) -> Result<Vec<JobRow>, StoreError> {
-        Ok(sqlx::query_as(include_str!("sql/list_jobs.sql"))
+        Ok(sqlx::query_as(sql!(self, "list_jobs.sql"))
             .bind(status.map(JobStatus::as_str))
             .bind(before_seq)
             .bind(limit)
@@ -405,27 +429,27 @@ impl Store {
 
     /// Queued and running jobs of `tenant`.
     pub async fn active_jobs(&self, tenant: &str) -> Result<i64, StoreError> {
-        Ok(sqlx::query_scalar(include_str!("sql/active_jobs.sql"))
+        Ok(sqlx::query_scalar(sql!(self, "active_jobs.sql"))
             .bind(tenant)
             .fetch_one(&self.pool)
             .await?)
     }
 
     pub async fn queue_depth(&self) -> Result<i64, StoreError> {
-        Ok(sqlx::query_scalar(include_str!("sql/queue_depth.sql"))
+        Ok(sqlx::query_scalar(sql!(self, "queue_depth.sql"))
             .fetch_one(&self.pool)
             .await?)
     }
 
     pub async fn count_by_status(&self) -> Result<Vec<(String, i64)>, StoreError> {
-        Ok(sqlx::query_as(include_str!("sql/count_by_status.sql"))
+        Ok(sqlx::query_as(sql!(self, "count_by_status.sql"))
             .fetch_all(&self.pool)
             .await?)
     }
 
     /// Cancels a queued job at once or flags a running one. `None` if the id is unknown.
     pub async fn request_cancel(&self, id: &str, now: i64) -> Result<Option<JobRow>, StoreError> {
-        Ok(sqlx::query_as(include_str!("sql/request_cancel.sql"))
+        Ok(sqlx::query_as(sql!(self, "request_cancel.sql"))
             .bind(id)
             .bind(now)
             .fetch_optional(&self.writer)
@@ -433,7 +457,7 @@ impl Store {
     }
 
     pub async fn attempts(&self, job_id: &str) -> Result<Vec<AttemptRow>, StoreError> {
-        Ok(sqlx::query_as(include_str!("sql/list_attempts.sql"))
+        Ok(sqlx::query_as(sql!(self, "list_attempts.sql"))
             .bind(job_id)
             .fetch_all(&self.pool)
             .await?)
@@ -445,7 +469,7 @@ impl Store {
         after: i64,
         limit: i64,
     ) -> Result<Vec<SnapshotRow>, StoreError> {
-        Ok(sqlx::query_as(include_str!("sql/snapshots_after.sql"))
+        Ok(sqlx::query_as(sql!(self, "snapshots_after.sql"))
             .bind(job_id)
             .bind(after)
             .bind(limit)
@@ -454,14 +478,14 @@ impl Store {
     }
 
     pub async fn latest_snapshot(&self, job_id: &str) -> Result<Option<SnapshotRow>, StoreError> {
-        Ok(sqlx::query_as(include_str!("sql/latest_snapshot.sql"))
+        Ok(sqlx::query_as(sql!(self, "latest_snapshot.sql"))
             .bind(job_id)
             .fetch_optional(&self.pool)
             .await?)
     }
 
     pub async fn snapshot(&self, job_id: &str, n: i64) -> Result<Option<SnapshotRow>, StoreError> {
-        Ok(sqlx::query_as(include_str!("sql/get_snapshot.sql"))
+        Ok(sqlx::query_as(sql!(self, "get_snapshot.sql"))
             .bind(job_id)
             .bind(n)
             .fetch_optional(&self.pool)
@@ -469,39 +493,40 @@ impl Store {
     }
 
     pub async fn result(&self, job_id: &str) -> Result<Option<ResultRow>, StoreError> {
-        Ok(sqlx::query_as(include_str!("sql/get_result.sql"))
+        Ok(sqlx::query_as(sql!(self, "get_result.sql"))
             .bind(job_id)
             .fetch_optional(&self.pool)
             .await?)
     }
 
+    /// The insert of `job`'s row (`RETURNING *`; nothing when its idempotency key is taken).
+    fn insert_job_query<'q>(
+        &self,
+        job: &'q NewJob,
+        now: i64,
+    ) -> sqlx::query::QueryAs<'q, sqlx::Any, JobRow, sqlx::any::AnyArguments> {
+        sqlx::query_as(sql!(self, "insert_job.sql"))
+            .bind(&job.id)
+            .bind(&job.kind)
+            .bind(&job.spec)
+            .bind(job.priority)
+            .bind(&job.idempotency_key)
+            .bind(&job.request_hash)
+            .bind(job.max_attempts)
+            .bind(now)
+            .bind(job.max_lost_attempts)
+            .bind(&job.tenant)
+            .bind(job.max_queued)
+    }
+
     /// Deletes finished jobs (and their snapshots, results, attempts) finished before `before`.
     pub async fn prune(&self, before: i64) -> Result<u64, StoreError> {
-        let r = sqlx::query(include_str!("sql/prune.sql"))
+        let r = sqlx::query(sql!(self, "prune.sql"))
             .bind(before)
             .execute(&self.writer)
             .await?;
         Ok(r.rows_affected())
     }
-}
-
-/// The insert of `job`'s row (`RETURNING *`; nothing when its idempotency key is taken).
-fn insert_job_query(
-    job: &NewJob,
-    now: i64,
-) -> sqlx::query::QueryAs<'_, sqlx::Sqlite, JobRow, sqlx::sqlite::SqliteArguments> {
-    sqlx::query_as(include_str!("sql/insert_job.sql"))
-        .bind(&job.id)
-        .bind(&job.kind)
-        .bind(&job.spec)
-        .bind(job.priority)
-        .bind(&job.idempotency_key)
-        .bind(&job.request_hash)
-        .bind(job.max_attempts)
-        .bind(now)
-        .bind(job.max_lost_attempts)
-        .bind(&job.tenant)
-        .bind(job.max_queued)
 }
 
 #[cfg(test)]

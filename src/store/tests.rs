@@ -1,12 +1,53 @@
+//! The store's conformance suite (River's pattern): every test runs against SQLite and against
+//! PostgreSQL. The PostgreSQL half needs a server whose user may create databases, named by
+//! `VF_TEST_POSTGRES_URL` (`.ci/run` starts one with `scripts/pg_cluster.sh`); without it those
+//! tests print SKIP and pass.
+
 use super::*;
 use std::collections::HashSet;
 
-async fn temp_store(conns: u32) -> (tempfile::TempDir, Store) {
-    let dir = tempfile::tempdir().unwrap();
-    let store = Store::open(&dir.path().join("jobs.db"), conns)
-        .await
-        .unwrap();
-    (dir, store)
+/// A fresh, empty database of `backend` (its temporary directory with SQLite), or `None` (SKIP)
+/// for PostgreSQL without `VF_TEST_POSTGRES_URL`.
+async fn temp_store(
+    backend: Backend,
+    conns: u32,
+) -> Option<(Option<tempfile::TempDir>, DbLocation, Store)> {
+    let (dir, loc) = match backend {
+        Backend::Sqlite => {
+            let dir = tempfile::tempdir().unwrap();
+            let loc = DbLocation::Sqlite(dir.path().join("jobs.db"));
+            (Some(dir), loc)
+        }
+        Backend::Postgres => {
+            let Ok(admin) = std::env::var("VF_TEST_POSTGRES_URL") else {
+                eprintln!("SKIP: VF_TEST_POSTGRES_URL is not set (no PostgreSQL server to test)");
+                return None;
+            };
+            let url = create_test_database(&admin).await.unwrap();
+            (None, DbLocation::Postgres(url))
+        }
+    };
+    let store = Store::connect(&loc, conns).await.unwrap();
+    Some((dir, loc, store))
+}
+
+/// Each named `async fn(Backend)` becomes a test per backend: `on_sqlite::NAME`,
+/// `on_postgres::NAME`.
+macro_rules! conformance {
+    ($($name:ident),* $(,)?) => {
+        mod on_sqlite {
+            $(#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+            async fn $name() {
+                super::$name(super::Backend::Sqlite).await
+            })*
+        }
+        mod on_postgres {
+            $(#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+            async fn $name() {
+                super::$name(super::Backend::Postgres).await
+            })*
+        }
+    };
 }
 
 fn new_job(i: usize) -> NewJob {
@@ -25,31 +66,35 @@ fn new_job(i: usize) -> NewJob {
     }
 }
 
-#[tokio::test]
-async fn wal_mode_and_status_check_constraint() {
-    let (_d, store) = temp_store(2).await;
-    let mode: String = sqlx::query_scalar("PRAGMA journal_mode")
-        .fetch_one(store.pool())
-        .await
-        .unwrap();
-    assert_eq!(mode, "wal");
+async fn status_check_constraint_and_sqlite_wal(b: Backend) {
+    let Some((_d, _loc, store)) = temp_store(b, 2).await else {
+        return;
+    };
+    if b == Backend::Sqlite {
+        let mode: String = sqlx::query_scalar("PRAGMA journal_mode")
+            .fetch_one(store.pool())
+            .await
+            .unwrap();
+        assert_eq!(mode, "wal");
+    }
     let (row, _) = store.insert_job(&new_job(0), 1).await.unwrap();
-    let bad = sqlx::query("UPDATE jobs SET status = 'exploded' WHERE id = ?1")
+    let bad = sqlx::query("UPDATE jobs SET status = 'exploded' WHERE id = $1")
         .bind(&row.id)
         .execute(store.pool())
         .await;
     assert!(bad.is_err(), "CHECK constraint must reject unknown status");
     // running without a lease owner is rejected too
-    let bad = sqlx::query("UPDATE jobs SET status = 'running' WHERE id = ?1")
+    let bad = sqlx::query("UPDATE jobs SET status = 'running' WHERE id = $1")
         .bind(&row.id)
         .execute(store.pool())
         .await;
     assert!(bad.is_err());
 }
 
-#[tokio::test]
-async fn idempotency_key_returns_same_job() {
-    let (_d, store) = temp_store(2).await;
+async fn idempotency_key_returns_same_job(b: Backend) {
+    let Some((_d, _loc, store)) = temp_store(b, 2).await else {
+        return;
+    };
     let mut a = new_job(0);
     a.idempotency_key = Some("k1".into());
     let mut b = new_job(1);
@@ -62,9 +107,10 @@ async fn idempotency_key_returns_same_job() {
     assert_eq!(store.queue_depth().await.unwrap(), 1);
 }
 
-#[tokio::test]
-async fn claim_order_priority_then_fifo() {
-    let (_d, store) = temp_store(2).await;
+async fn claim_order_priority_then_fifo(b: Backend) {
+    let Some((_d, _loc, store)) = temp_store(b, 2).await else {
+        return;
+    };
     let low = store.insert_job(&new_job(0), 1).await.unwrap().0;
     let mut hi = new_job(1);
     hi.priority = 5;
@@ -77,14 +123,15 @@ async fn claim_order_priority_then_fifo() {
     assert_eq!(got, vec![hi.id, low.id, low2.id]);
 }
 
-#[tokio::test]
-async fn concurrent_claims_never_share_a_job() {
-    // Several Store handles on one file = several writer connections racing in SQLite itself
-    // (as with several server processes), plus several tasks per handle.
-    let (d, store) = temp_store(8).await;
+async fn concurrent_claims_never_share_a_job(b: Backend) {
+    // Several Store handles on one database = several writer connections racing in the
+    // database itself (as with several server processes or nodes), plus several tasks per handle.
+    let Some((_d, loc, store)) = temp_store(b, 8).await else {
+        return;
+    };
     let mut handles_db = vec![store.clone()];
     for _ in 0..3 {
-        handles_db.push(Store::open(&d.path().join("jobs.db"), 2).await.unwrap());
+        handles_db.push(Store::connect(&loc, 2).await.unwrap());
     }
     let n = 60;
     for i in 0..n {
@@ -119,9 +166,10 @@ async fn concurrent_claims_never_share_a_job() {
     assert_eq!(attempts, n as i64);
 }
 
-#[tokio::test]
-async fn expired_lease_is_reclaimed_and_old_worker_is_fenced() {
-    let (_d, store) = temp_store(2).await;
+async fn expired_lease_is_reclaimed_and_old_worker_is_fenced(b: Backend) {
+    let Some((_d, _loc, store)) = temp_store(b, 2).await else {
+        return;
+    };
     let job = store.insert_job(&new_job(0), 0).await.unwrap().0;
     let (_, lease_a) = store.claim("a", 100, 1000).await.unwrap().unwrap();
     // lease still valid: nobody else can take it
@@ -165,12 +213,13 @@ async fn expired_lease_is_reclaimed_and_old_worker_is_fenced() {
     let outcomes: Vec<&str> = attempts.iter().map(|a| a.outcome.as_str()).collect();
     assert_eq!(outcomes, vec!["lost", "succeeded"]);
     let row = store.get_job(&job.id).await.unwrap().unwrap();
-    assert_eq!(row.status().unwrap(), JobStatus::Succeeded);
+    assert_eq!(row.status, JobStatus::Succeeded);
 }
 
-#[tokio::test]
-async fn lease_expiry_after_last_attempt_fails_job() {
-    let (_d, store) = temp_store(2).await;
+async fn lease_expiry_after_last_attempt_fails_job(b: Backend) {
+    let Some((_d, _loc, store)) = temp_store(b, 2).await else {
+        return;
+    };
     let mut j = new_job(0);
     j.max_attempts = 1;
     let job = store.insert_job(&j, 0).await.unwrap().0;
@@ -179,14 +228,15 @@ async fn lease_expiry_after_last_attempt_fails_job() {
     let reaped = store.reap_expired(200).await.unwrap();
     assert_eq!(reaped.len(), 1);
     let row = store.get_job(&job.id).await.unwrap().unwrap();
-    assert_eq!(row.status().unwrap(), JobStatus::Failed);
+    assert_eq!(row.status, JobStatus::Failed);
     assert_eq!(row.error_code.as_deref(), Some("lease_expired"));
     assert_eq!(store.attempts(&job.id).await.unwrap()[0].outcome, "lost");
 }
 
-#[tokio::test]
-async fn job_lost_max_lost_attempts_times_fails_as_poison() {
-    let (_d, store) = temp_store(2).await;
+async fn job_lost_max_lost_attempts_times_fails_as_poison(b: Backend) {
+    let Some((_d, _loc, store)) = temp_store(b, 2).await else {
+        return;
+    };
     let mut j = new_job(0);
     j.max_attempts = 5;
     j.max_lost_attempts = 2;
@@ -201,7 +251,7 @@ async fn job_lost_max_lost_attempts_times_fails_as_poison() {
     let reaped = store.reap_expired(400).await.unwrap();
     assert_eq!(reaped.len(), 1);
     let row = store.get_job(&job.id).await.unwrap().unwrap();
-    assert_eq!(row.status().unwrap(), JobStatus::Failed);
+    assert_eq!(row.status, JobStatus::Failed);
     assert_eq!(row.error_code.as_deref(), Some("poison"));
     assert_eq!(row.lost_attempts, 2);
     let outcomes: Vec<String> = store
@@ -223,9 +273,10 @@ async fn job_lost_max_lost_attempts_times_fails_as_poison() {
     assert_eq!(row.error_code.as_deref(), Some("poison"));
 }
 
-#[tokio::test]
-async fn retry_with_backoff_then_fail() {
-    let (_d, store) = temp_store(2).await;
+async fn retry_with_backoff_then_fail(b: Backend) {
+    let Some((_d, _loc, store)) = temp_store(b, 2).await else {
+        return;
+    };
     let mut j = new_job(0);
     j.max_attempts = 2;
     let job = store.insert_job(&j, 0).await.unwrap().0;
@@ -235,7 +286,7 @@ async fn retry_with_backoff_then_fail() {
         .await
         .unwrap()
         .unwrap();
-    assert_eq!(row.status().unwrap(), JobStatus::Queued);
+    assert_eq!(row.status, JobStatus::Queued);
     assert!(
         store.claim("a", 499, 1000).await.unwrap().is_none(),
         "backoff"
@@ -246,7 +297,7 @@ async fn retry_with_backoff_then_fail() {
         .await
         .unwrap()
         .unwrap();
-    assert_eq!(row.status().unwrap(), JobStatus::Failed);
+    assert_eq!(row.status, JobStatus::Failed);
     let outcomes: Vec<String> = store
         .attempts(&job.id)
         .await
@@ -257,29 +308,31 @@ async fn retry_with_backoff_then_fail() {
     assert_eq!(outcomes, vec!["retry", "failed"]);
 }
 
-#[tokio::test]
-async fn cancel_queued_and_running() {
-    let (_d, store) = temp_store(2).await;
+async fn cancel_queued_and_running(b: Backend) {
+    let Some((_d, _loc, store)) = temp_store(b, 2).await else {
+        return;
+    };
     let a = store.insert_job(&new_job(0), 0).await.unwrap().0;
     let (_, lease) = store.claim("w", 1, 1000).await.unwrap().unwrap();
     let b = store.insert_job(&new_job(1), 2).await.unwrap().0;
     let rb = store.request_cancel(&b.id, 3).await.unwrap().unwrap();
-    assert_eq!(rb.status().unwrap(), JobStatus::Cancelled);
+    assert_eq!(rb.status, JobStatus::Cancelled);
     let ra = store.request_cancel(&a.id, 3).await.unwrap().unwrap();
-    assert_eq!(ra.status().unwrap(), JobStatus::Running);
+    assert_eq!(ra.status, JobStatus::Running);
     assert_eq!(
         store.heartbeat(&lease, 4, 1000).await.unwrap(),
         Heartbeat::Held { cancel: true }
     );
     let done = store.finish_cancelled(&lease, 5).await.unwrap().unwrap();
-    assert_eq!(done.status().unwrap(), JobStatus::Cancelled);
+    assert_eq!(done.status, JobStatus::Cancelled);
     assert!(store.request_cancel("nope", 6).await.unwrap().is_none());
     assert!(store.claim("w", 10, 1000).await.unwrap().is_none());
 }
 
-#[tokio::test]
-async fn snapshots_numbered_trimmed_and_fenced() {
-    let (_d, store) = temp_store(2).await;
+async fn snapshots_numbered_trimmed_and_fenced(b: Backend) {
+    let Some((_d, _loc, store)) = temp_store(b, 2).await else {
+        return;
+    };
     let job = store.insert_job(&new_job(0), 0).await.unwrap().0;
     let (_, lease) = store.claim("w", 1, 1000).await.unwrap().unwrap();
     for i in 0..5u32 {
@@ -310,13 +363,14 @@ async fn snapshots_numbered_trimmed_and_fenced() {
             .unwrap()
     );
     let row = store.release(&lease, 5).await.unwrap().unwrap();
-    assert_eq!(row.status().unwrap(), JobStatus::Queued);
+    assert_eq!(row.status, JobStatus::Queued);
     assert_eq!(row.checkpoint.as_deref(), Some("{\"step\":4}"));
 }
 
-#[tokio::test]
-async fn prune_removes_old_finished_jobs() {
-    let (_d, store) = temp_store(2).await;
+async fn prune_removes_old_finished_jobs(b: Backend) {
+    let Some((_d, _loc, store)) = temp_store(b, 2).await else {
+        return;
+    };
     let job = store.insert_job(&new_job(0), 0).await.unwrap().0;
     let (_, lease) = store.claim("w", 1, 1000).await.unwrap().unwrap();
     store
@@ -333,9 +387,10 @@ async fn prune_removes_old_finished_jobs() {
     assert!(store.get_job(&queued.id).await.unwrap().is_some());
 }
 
-#[tokio::test]
-async fn uploads_live_apart_within_their_quotas_and_go_when_the_job_ends() {
-    let (_d, store) = temp_store(2).await;
+async fn uploads_live_apart_within_their_quotas_and_go_when_the_job_ends(b: Backend) {
+    let Some((_d, _loc, store)) = temp_store(b, 2).await else {
+        return;
+    };
     let up = |n: usize, tenant_cap: i64| NewUpload {
         image: Some("A".repeat(n)),
         svg: None,
@@ -346,7 +401,7 @@ async fn uploads_live_apart_within_their_quotas_and_go_when_the_job_ends() {
     a.upload = Some(up(600, 0));
     let (ra, _) = store.insert_job(&a, 1).await.unwrap();
     let row_bytes: i64 =
-        sqlx::query_scalar("SELECT length(CAST(spec AS BLOB)) FROM jobs WHERE id = ?1")
+        sqlx::query_scalar("SELECT CAST(length(spec) AS BIGINT) FROM jobs WHERE id = $1")
             .bind(&ra.id)
             .fetch_one(store.pool())
             .await
@@ -390,9 +445,10 @@ async fn uploads_live_apart_within_their_quotas_and_go_when_the_job_ends() {
     assert!(store.upload(&c.id).await.unwrap().is_none());
 }
 
-#[tokio::test]
-async fn a_full_queue_refuses_the_insert_itself() {
-    let (_d, store) = temp_store(2).await;
+async fn a_full_queue_refuses_the_insert_itself(b: Backend) {
+    let Some((_d, _loc, store)) = temp_store(b, 2).await else {
+        return;
+    };
     let mut keyed = new_job(0);
     keyed.idempotency_key = Some("k".into());
     keyed.max_queued = Some(3);
@@ -417,3 +473,121 @@ async fn a_full_queue_refuses_the_insert_itself() {
     assert!(!created);
     assert_eq!(row.id, keyed.id);
 }
+
+async fn concurrent_submits_never_overshoot_a_full_queue(b: Backend) {
+    let Some((_d, loc, store)) = temp_store(b, 8).await else {
+        return;
+    };
+    // 48 submits at once from four handles (16 connections) against a limit of 20; 16 of them
+    // retry one idempotency key.
+    let mut stores = Vec::new();
+    for _ in 0..4 {
+        stores.push(Store::connect(&loc, 4).await.unwrap());
+    }
+    let start = std::sync::Arc::new(tokio::sync::Barrier::new(48));
+    let mut handles = Vec::new();
+    for i in 0..48 {
+        let s = stores[i % 4].clone();
+        let start = start.clone();
+        handles.push(tokio::spawn(async move {
+            let mut j = new_job(i);
+            j.max_queued = Some(20);
+            if i % 3 == 0 {
+                j.idempotency_key = Some("same".into());
+            }
+            start.wait().await;
+            vec![s.insert_job(&j, 1).await]
+        }));
+    }
+    let (mut created, mut full, mut same) = (0, 0, HashSet::new());
+    for h in handles {
+        for r in h.await.unwrap() {
+            match r {
+                Ok((row, true)) => {
+                    created += 1;
+                    if row.idempotency_key.is_some() {
+                        same.insert(row.id);
+                    }
+                }
+                Ok((row, false)) => {
+                    same.insert(row.id);
+                }
+                Err(StoreError::QueueFull { .. }) => full += 1,
+                Err(e) => panic!("unexpected error {e}"),
+            }
+        }
+    }
+    assert_eq!(store.queue_depth().await.unwrap(), 20, "the limit holds");
+    assert_eq!(created, 20);
+    assert!(same.len() <= 1, "one job for one key, got {same:?}");
+    assert!(full >= 48 - 20 - 16, "{full} refused");
+}
+
+async fn cancel_and_complete_race_ends_each_job_once(b: Backend) {
+    let Some((_d, loc, store)) = temp_store(b, 8).await else {
+        return;
+    };
+    let other = Store::connect(&loc, 4).await.unwrap();
+    let n = 30;
+    for i in 0..n {
+        store.insert_job(&new_job(i), 1).await.unwrap();
+    }
+    let mut leases = Vec::new();
+    while let Some((_, lease)) = store.claim("w", 10, 60_000).await.unwrap() {
+        leases.push(lease);
+    }
+    assert_eq!(leases.len(), n);
+    // For each job at once: the worker completes, a client cancels, and a second worker whose
+    // lease is stale tries to complete as well.
+    let mut tasks = Vec::new();
+    for lease in leases {
+        let (a, c) = (store.clone(), other.clone());
+        let stale = Lease {
+            attempt: lease.attempt + 1,
+            ..lease.clone()
+        };
+        tasks.push(tokio::spawn(async move {
+            let (done, _, late) = tokio::join!(
+                a.complete(&lease, "<svg/>", 1, "{}", 20),
+                c.request_cancel(&lease.job_id, 20),
+                c.complete(&stale, "<svg/>", 1, "{}", 20),
+            );
+            assert!(!late.unwrap(), "a stale lease completed a job");
+            (lease.job_id, done.unwrap())
+        }));
+    }
+    for t in tasks {
+        let (id, completed) = t.await.unwrap();
+        let row = store.get_job(&id).await.unwrap().unwrap();
+        let results: i64 = sqlx::query_scalar("SELECT COUNT(*) FROM results WHERE job_id = $1")
+            .bind(&id)
+            .fetch_one(store.pool())
+            .await
+            .unwrap();
+        // A cancel request on a running job only flags it: the worker's completion wins.
+        assert!(completed);
+        assert_eq!(row.status, JobStatus::Succeeded);
+        assert_eq!(results, 1);
+        let attempts = store.attempts(&id).await.unwrap();
+        assert_eq!(attempts.len(), 1);
+        assert_eq!(attempts[0].outcome, "succeeded");
+    }
+}
+
+conformance!(
+    status_check_constraint_and_sqlite_wal,
+    idempotency_key_returns_same_job,
+    claim_order_priority_then_fifo,
+    concurrent_claims_never_share_a_job,
+    expired_lease_is_reclaimed_and_old_worker_is_fenced,
+    lease_expiry_after_last_attempt_fails_job,
+    job_lost_max_lost_attempts_times_fails_as_poison,
+    retry_with_backoff_then_fail,
+    cancel_queued_and_running,
+    snapshots_numbered_trimmed_and_fenced,
+    prune_removes_old_finished_jobs,
+    uploads_live_apart_within_their_quotas_and_go_when_the_job_ends,
+    a_full_queue_refuses_the_insert_itself,
+    concurrent_submits_never_overshoot_a_full_queue,
+    cancel_and_complete_race_ends_each_job_once,
+);

@@ -1,7 +1,7 @@
-//! Uploads, stored apart from the job row (`migrations/0005_uploads.sql`): written once at
+//! Uploads, stored apart from the job row (`migrations/*/0005_uploads.sql`, `0001` on PostgreSQL): written once at
 //! submit, read once per claim, deleted when the job finishes.
 
-use super::{Store, StoreError};
+use super::{Store, StoreError, sql};
 
 /// A new job's upload and the quotas its insert must respect.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -35,7 +35,7 @@ pub struct UploadRow {
 impl Store {
     /// The upload of a job not yet finished (`None` once it finished, or when it had none).
     pub async fn upload(&self, job_id: &str) -> Result<Option<UploadRow>, StoreError> {
-        Ok(sqlx::query_as(include_str!("sql/get_upload.sql"))
+        Ok(sqlx::query_as(sql!(self, "get_upload.sql"))
             .bind(job_id)
             .fetch_optional(&self.pool)
             .await?)
@@ -44,7 +44,7 @@ impl Store {
     /// Bytes of stored uploads: all of them (`tenant` `None`), or one tenant's
     /// (`Some(None)`: the operator's).
     pub async fn upload_bytes(&self, tenant: Option<Option<&str>>) -> Result<i64, StoreError> {
-        Ok(sqlx::query_scalar(include_str!("sql/upload_bytes.sql"))
+        Ok(sqlx::query_scalar(sql!(self, "upload_bytes.sql"))
             .bind(i64::from(tenant.is_some()))
             .bind(tenant.flatten())
             .fetch_one(&self.pool)

@@ -32,6 +32,9 @@ pub enum JobEvent {
     Status(JobStatus),
     /// The job reached a terminal status; no further events follow.
     Finished(JobStatus),
+    /// Its row or snapshots changed in the database, maybe on another node (a PostgreSQL
+    /// notification): subscribers re-read it.
+    Changed,
 }
 
 /// Per-job broadcast channels.

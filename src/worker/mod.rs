@@ -248,10 +248,8 @@ fn worker_loop(s: &Shared, worker_id: &str) {
             Ok(rows) => {
                 for row in rows {
                     warn!(job = %row.id, status = %row.status, "job's lease expired for good");
-                    if let Ok(st) = row.status() {
-                        s.hub.publish(&row.id, JobEvent::Finished(st));
-                    }
-                    if row.status == "failed" {
+                    s.hub.publish(&row.id, JobEvent::Finished(row.status));
+                    if row.status == JobStatus::Failed {
                         s.metrics
                             .job_failed(row.error_code.as_deref().unwrap_or("lease_expired"));
                     }

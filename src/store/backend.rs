@@ -1,0 +1,244 @@
+//! Where the store lives and how to talk to it: SQLite (a file; the embedded default) or
+//! PostgreSQL (a URL; many nodes on one queue). Both are reached through sqlx's `Any` driver, so
+//! one `Store` API runs on either; what differs is the SQL (`sql/sqlite/`, `sql/postgres/`,
+//! picked by [`sql!`]), the migrations (`migrations/sqlite/`, `migrations/postgres/`) and the
+//! connection set-up here.
+
+use super::StoreError;
+use sqlx::any::{AnyConnectOptions, AnyPoolOptions};
+use sqlx::{AnyPool, Executor};
+use std::fmt;
+use std::path::{Path, PathBuf};
+use std::str::FromStr;
+use std::time::Duration;
+
+/// The database engine behind a [`super::Store`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Backend {
+    Sqlite,
+    Postgres,
+}
+
+/// A database to open: a SQLite file, or a PostgreSQL server by URL.
+#[derive(Clone, PartialEq, Eq)]
+pub enum DbLocation {
+    Sqlite(PathBuf),
+    /// `postgres://user:password@host:port/db?options` (libpq URL syntax, as sqlx reads it).
+    Postgres(String),
+}
+
+impl DbLocation {
+    /// `postgres://…` or `postgresql://…` is PostgreSQL; `sqlite://PATH`, `sqlite:PATH` or a plain
+    /// path is a SQLite file.
+    pub fn parse(s: &str) -> Result<Self, String> {
+        let s = s.trim();
+        if s.is_empty() {
+            return Err("the database location is empty".into());
+        }
+        if s.starts_with("postgres://") || s.starts_with("postgresql://") {
+            url::Url::parse(s).map_err(|e| format!("invalid PostgreSQL URL: {e}"))?;
+            return Ok(DbLocation::Postgres(s.to_string()));
+        }
+        if let Some(rest) = s
+            .strip_prefix("sqlite://")
+            .or_else(|| s.strip_prefix("sqlite:"))
+        {
+            if rest.is_empty() || rest.contains('?') {
+                return Err("a sqlite:// location takes a file path and no options".into());
+            }
+            return Ok(DbLocation::Sqlite(PathBuf::from(rest)));
+        }
+        if s.contains("://") {
+            return Err(format!(
+                "unsupported database URL scheme in {:?}: use postgres://… or a SQLite file path",
+                s.split("://").next().unwrap_or_default()
+            ));
+        }
+        Ok(DbLocation::Sqlite(PathBuf::from(s)))
+    }
+
+    pub fn backend(&self) -> Backend {
+        match self {
+            DbLocation::Sqlite(_) => Backend::Sqlite,
+            DbLocation::Postgres(_) => Backend::Postgres,
+        }
+    }
+}
+
+/// Shown in logs and errors: a PostgreSQL password is masked.
+impl fmt::Display for DbLocation {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            DbLocation::Sqlite(p) => write!(f, "{}", p.display()),
+            DbLocation::Postgres(u) => match url::Url::parse(u) {
+                Ok(mut url) => {
+                    if url.password().is_some() {
+                        let _ = url.set_password(Some("***"));
+                    }
+                    write!(f, "{url}")
+                }
+                Err(_) => f.write_str("postgres://(unparsable)"),
+            },
+        }
+    }
+}
+
+impl fmt::Debug for DbLocation {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "DbLocation({self})")
+    }
+}
+
+/// Connection pools of one store: `writer` takes the writes, `pool` the reads.
+pub(super) struct Pools {
+    pub pool: AnyPool,
+    pub writer: AnyPool,
+}
+
+/// Opens `loc` and runs its backend's migrations.
+pub(super) async fn connect(loc: &DbLocation, max_connections: u32) -> Result<Pools, StoreError> {
+    sqlx::any::install_default_drivers();
+    match loc {
+        DbLocation::Sqlite(path) => connect_sqlite(path, max_connections).await,
+        DbLocation::Postgres(url) => {
+            let options = AnyConnectOptions::from_str(url)?;
+            let pool = AnyPoolOptions::new()
+                .max_connections(max_connections.max(2))
+                .acquire_timeout(Duration::from_secs(10))
+                .connect_with(options)
+                .await?;
+            sqlx::migrate!("./migrations/postgres").run(&pool).await?;
+            // PostgreSQL takes concurrent writers itself: one pool serves both roles.
+            Ok(Pools {
+                writer: pool.clone(),
+                pool,
+            })
+        }
+    }
+}
+
+/// Writes go through a single connection (`writer`) so that in-process writers queue fairly in
+/// the pool instead of contending for SQLite's lock (whose busy handler sleeps for
+/// milliseconds); reads use a pool of connections (WAL readers never block the writer). The SQL
+/// stays safe with several processes on one file: every claim and fenced write is atomic in
+/// SQLite itself.
+async fn connect_sqlite(path: &Path, max_connections: u32) -> Result<Pools, StoreError> {
+    if let Some(parent) = path.parent()
+        && !parent.as_os_str().is_empty()
+    {
+        std::fs::create_dir_all(parent).map_err(|e| {
+            StoreError::Db(sqlx::Error::Configuration(
+                format!("cannot create database directory {}: {e}", parent.display()).into(),
+            ))
+        })?;
+    }
+    let options = AnyConnectOptions::from_str(&sqlite_url(path)?)?;
+    let open = |max: u32| {
+        AnyPoolOptions::new()
+            .max_connections(max)
+            .after_connect(|conn, _meta| {
+                Box::pin(async move {
+                    for pragma in [
+                        "PRAGMA journal_mode = WAL",
+                        "PRAGMA synchronous = NORMAL",
+                        "PRAGMA foreign_keys = ON",
+                        "PRAGMA busy_timeout = 10000",
+                        // No checkpoint inside a commit (it fsyncs and would stall every queued
+                        // write); the owner calls `checkpoint` from a background task instead.
+                        "PRAGMA wal_autocheckpoint = 0",
+                    ] {
+                        conn.execute(pragma).await?;
+                    }
+                    Ok(())
+                })
+            })
+            .connect_with(options.clone())
+    };
+    let writer = open(1).await?;
+    sqlx::migrate!("./migrations/sqlite").run(&writer).await?;
+    let pool = open(max_connections.max(1)).await?;
+    Ok(Pools { pool, writer })
+}
+
+/// `sqlite:///absolute/path?mode=rwc`, the path percent-encoded (the driver decodes it).
+fn sqlite_url(path: &Path) -> Result<String, StoreError> {
+    let abs = std::path::absolute(path).map_err(|e| {
+        StoreError::Db(sqlx::Error::Configuration(
+            format!("cannot resolve database path {}: {e}", path.display()).into(),
+        ))
+    })?;
+    let Some(text) = abs.to_str() else {
+        return Err(StoreError::Db(sqlx::Error::Configuration(
+            format!("database path {} is not UTF-8", abs.display()).into(),
+        )));
+    };
+    let mut url = String::from("sqlite://");
+    for b in text.bytes() {
+        if b.is_ascii_alphanumeric() || b"/-_.~".contains(&b) {
+            url.push(b as char);
+        } else {
+            url.push_str(&format!("%{b:02X}"));
+        }
+    }
+    url.push_str("?mode=rwc");
+    Ok(url)
+}
+
+/// Tests: creates an empty database on the PostgreSQL server of `admin_url` (a URL whose user
+/// may `CREATE DATABASE`) and returns the URL of the new database.
+#[doc(hidden)]
+pub async fn create_test_database(admin_url: &str) -> Result<String, StoreError> {
+    use sqlx::Connection;
+    let mut url = url::Url::parse(admin_url)
+        .map_err(|e| StoreError::Db(sqlx::Error::Configuration(e.to_string().into())))?;
+    let name = format!("vf_test_{}", uuid::Uuid::new_v4().simple());
+    let mut conn = sqlx::postgres::PgConnection::connect(admin_url).await?;
+    // The name is ours (a UUID), not input: safe to put in the statement.
+    sqlx::raw_sql(sqlx::AssertSqlSafe(format!("CREATE DATABASE {name}")))
+        .execute(&mut conn)
+        .await?;
+    let _ = conn.close().await;
+    url.set_path(&name);
+    Ok(url.to_string())
+}
+
+/// The text of one statement for the store's backend: `sql!(self, "claim.sql")` is
+/// `sql/sqlite/claim.sql` or `sql/postgres/claim.sql`.
+macro_rules! sql {
+    ($store:expr, $file:literal) => {
+        match $store.backend {
+            $crate::store::Backend::Sqlite => include_str!(concat!("sql/sqlite/", $file)),
+            $crate::store::Backend::Postgres => include_str!(concat!("sql/postgres/", $file)),
+        }
+    };
+}
+pub(super) use sql;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn locations_parse_by_scheme() {
+        assert_eq!(
+            DbLocation::parse("jobs.db").unwrap(),
+            DbLocation::Sqlite("jobs.db".into())
+        );
+        assert_eq!(
+            DbLocation::parse("sqlite:///var/vf/jobs.db").unwrap(),
+            DbLocation::Sqlite("/var/vf/jobs.db".into())
+        );
+        let pg = DbLocation::parse("postgres://vf:secret@db:5432/vf").unwrap();
+        assert_eq!(pg.backend(), Backend::Postgres);
+        assert!(!pg.to_string().contains("secret"), "{pg}");
+        assert!(DbLocation::parse("mysql://x/y").is_err());
+        assert!(DbLocation::parse("  ").is_err());
+        assert!(DbLocation::parse("postgres://[bad").is_err());
+    }
+
+    #[test]
+    fn sqlite_urls_survive_odd_paths() {
+        let url = sqlite_url(Path::new("/tmp/a b?c#d.db")).unwrap();
+        assert_eq!(url, "sqlite:///tmp/a%20b%3Fc%23d.db?mode=rwc");
+    }
+}

@@ -1,0 +1,1 @@
+SELECT * FROM results WHERE job_id = $1

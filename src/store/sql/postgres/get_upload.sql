@@ -1,0 +1,1 @@
+SELECT image, svg FROM uploads WHERE job_id = $1

@@ -1,0 +1,1 @@
+SELECT * FROM attempts WHERE job_id = $1 ORDER BY attempt

@@ -1,0 +1,1 @@
+DELETE FROM snapshots WHERE job_id = $1 AND n <= $2
