@@ -12,7 +12,10 @@
 
 #[path = "../tests/common/http.rs"]
 mod http;
+#[path = "common/load.rs"]
+mod load;
 
+use load::{Stats, run_rate};
 use serde_json::json;
 use std::net::SocketAddr;
 use std::sync::Arc;
@@ -38,65 +41,14 @@ fn captions() -> Vec<String> {
         .collect()
 }
 
-struct Stats {
-    sent: usize,
-    ok: usize,
-    lat_ms: Vec<f64>,
-    wall: f64,
-}
-
-fn pct(sorted: &[f64], p: f64) -> f64 {
-    if sorted.is_empty() {
-        return f64::NAN;
-    }
-    let i = ((sorted.len() as f64 - 1.0) * p).round() as usize;
-    sorted[i]
-}
-
-/// Fires `n` requests at `rate` per second (open loop: sends do not wait for answers).
-async fn run_rate<F, Fut>(rate: u32, n: usize, make: F) -> Stats
-where
-    F: Fn(usize) -> Fut,
-    Fut: std::future::Future<Output = bool> + Send + 'static,
-{
-    let interval = Duration::from_secs_f64(1.0 / rate as f64);
-    let t0 = Instant::now();
-    let mut tasks = Vec::with_capacity(n);
-    for i in 0..n {
-        let due = t0 + interval * i as u32;
-        tokio::time::sleep_until(due.into()).await;
-        let fut = make(i);
-        tasks.push(tokio::spawn(async move {
-            let s = Instant::now();
-            let ok = fut.await;
-            (ok, s.elapsed().as_secs_f64() * 1000.0)
-        }));
-    }
-    let mut lat = Vec::with_capacity(n);
-    let mut ok = 0;
-    for t in tasks {
-        if let Ok((good, ms)) = t.await {
-            ok += good as usize;
-            lat.push(ms);
-        }
-    }
-    lat.sort_by(|a, b| a.total_cmp(b));
-    Stats {
-        sent: n,
-        ok,
-        lat_ms: lat,
-        wall: t0.elapsed().as_secs_f64(),
-    }
-}
-
 fn report(what: &str, rate: u32, s: &Stats) {
     println!(
         "| {what} | {rate} | {} | {} | {:.0} | {:.2} | {:.2} | {:.2} |",
         s.sent,
         s.ok,
         s.sent as f64 / s.wall,
-        pct(&s.lat_ms, 0.5),
-        pct(&s.lat_ms, 0.99),
+        s.pct(0.5),
+        s.pct(0.99),
         s.lat_ms.last().copied().unwrap_or(f64::NAN),
     );
 }

@@ -111,23 +111,22 @@ CREATE TRIGGER jobs_finish_drops_upload AFTER UPDATE OF status ON jobs
 FOR EACH ROW WHEN (NEW.status IN ('succeeded', 'failed', 'cancelled'))
 EXECUTE FUNCTION jobs_finish_drops_upload();
 
--- Wake-up hints (LISTEN/NOTIFY; polling stays the truth): `vf_queue` when a job becomes
--- claimable, `vf_job` (payload: the job id) when what a job's event stream shows changes.
+-- Wake-up hints (LISTEN/NOTIFY; polling stays the truth): `vf_job` (payload: the job id) when
+-- what a job's event stream shows changes. (`vf_queue`, "a job became claimable", is sent by the
+-- store itself, coalesced, outside the submit's transaction: a NOTIFY holds a database-wide lock
+-- through its transaction's commit flush, which would put every submit in single file.)
 CREATE FUNCTION jobs_notify() RETURNS trigger LANGUAGE plpgsql AS $$
 BEGIN
-    IF NEW.status = 'queued' AND (TG_OP = 'INSERT' OR OLD.status IS DISTINCT FROM 'queued') THEN
-        PERFORM pg_notify('vf_queue', '');
-    END IF;
-    IF TG_OP = 'UPDATE' AND (OLD.status IS DISTINCT FROM NEW.status
-                             OR OLD.step IS DISTINCT FROM NEW.step
-                             OR OLD.stage IS DISTINCT FROM NEW.stage
-                             OR OLD.cancel_requested IS DISTINCT FROM NEW.cancel_requested) THEN
+    IF OLD.status IS DISTINCT FROM NEW.status
+       OR OLD.step IS DISTINCT FROM NEW.step
+       OR OLD.stage IS DISTINCT FROM NEW.stage
+       OR OLD.cancel_requested IS DISTINCT FROM NEW.cancel_requested THEN
         PERFORM pg_notify('vf_job', NEW.id);
     END IF;
     RETURN NULL;
 END $$;
 
-CREATE TRIGGER jobs_notify AFTER INSERT OR UPDATE ON jobs
+CREATE TRIGGER jobs_notify AFTER UPDATE ON jobs
 FOR EACH ROW EXECUTE FUNCTION jobs_notify();
 
 CREATE FUNCTION snapshots_notify() RETURNS trigger LANGUAGE plpgsql AS $$

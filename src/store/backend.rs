@@ -10,7 +10,9 @@ use sqlx::{AnyPool, Executor};
 use std::fmt;
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
+use std::sync::Arc;
 use std::time::Duration;
+use tokio::sync::Notify;
 
 /// The database engine behind a [`super::Store`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -89,10 +91,14 @@ impl fmt::Debug for DbLocation {
     }
 }
 
-/// Connection pools of one store: `writer` takes the writes, `pool` the reads.
+/// Connection pools of one store: `writer` takes the writes, `pool` the reads, `lease_writer`
+/// the worker's frequent fenced writes (claim, heartbeat, progress, checkpoint, snapshot).
 pub(super) struct Pools {
     pub pool: AnyPool,
     pub writer: AnyPool,
+    pub lease_writer: AnyPool,
+    /// PostgreSQL: wakes the task that sends `vf_queue` (see [`queue_hints`]).
+    pub queue_hint: Option<Arc<Notify>>,
 }
 
 /// Opens `loc` and runs its backend's migrations.
@@ -102,16 +108,38 @@ pub(super) async fn connect(loc: &DbLocation, max_connections: u32) -> Result<Po
         DbLocation::Sqlite(path) => connect_sqlite(path, max_connections).await,
         DbLocation::Postgres(url) => {
             let options = AnyConnectOptions::from_str(url)?;
-            let pool = AnyPoolOptions::new()
-                .max_connections(max_connections.max(2))
-                .acquire_timeout(Duration::from_secs(10))
-                .connect_with(options)
-                .await?;
+            let max = max_connections.max(2);
+            let open = |asynchronous: bool| {
+                AnyPoolOptions::new()
+                    .max_connections(max)
+                    // Opened up front: a connection opened under load costs a round trip of
+                    // authentication and statement preparation on the request that waits.
+                    .min_connections(max)
+                    .acquire_timeout(Duration::from_secs(10))
+                    .after_connect(move |conn, _meta| {
+                        Box::pin(async move {
+                            if asynchronous {
+                                conn.execute("SET synchronous_commit = off").await?;
+                            }
+                            Ok(())
+                        })
+                    })
+                    .connect_with(options.clone())
+            };
+            let pool = open(false).await?;
             sqlx::migrate!("./migrations/postgres").run(&pool).await?;
-            // PostgreSQL takes concurrent writers itself: one pool serves both roles.
+            // PostgreSQL takes concurrent writers itself: one pool reads and writes what must
+            // be durable when the call returns (submits, cancels, outcomes). The worker's
+            // progress writes commit asynchronously (no WAL flush wait): a database crash may
+            // lose the last fraction of a second of them, which the lease fencing makes safe
+            // (a lost claim or heartbeat only ends that attempt early; see docs/SERVICE.md).
+            let lease_writer = open(true).await?;
+            let queue_hint = queue_hints(lease_writer.clone());
             Ok(Pools {
                 writer: pool.clone(),
                 pool,
+                lease_writer,
+                queue_hint: Some(queue_hint),
             })
         }
     }
@@ -157,7 +185,39 @@ async fn connect_sqlite(path: &Path, max_connections: u32) -> Result<Pools, Stor
     let writer = open(1).await?;
     sqlx::migrate!("./migrations/sqlite").run(&writer).await?;
     let pool = open(max_connections.max(1)).await?;
-    Ok(Pools { pool, writer })
+    Ok(Pools {
+        pool,
+        lease_writer: writer.clone(),
+        writer,
+        queue_hint: None,
+    })
+}
+
+/// PostgreSQL: a task that sends `NOTIFY vf_queue` (idle workers on every node try a claim)
+/// after the store queued a job, at most one per 20 ms however many jobs were queued. It runs
+/// on the asynchronous-commit pool, outside the submit's transaction, and ends with the pool.
+fn queue_hints(pool: AnyPool) -> Arc<Notify> {
+    let hint = Arc::new(Notify::new());
+    let wait = hint.clone();
+    tokio::spawn(async move {
+        loop {
+            wait.notified().await;
+            if pool.is_closed() {
+                return;
+            }
+            if let Err(e) = sqlx::query("SELECT pg_notify('vf_queue', '')")
+                .execute(&pool)
+                .await
+            {
+                if pool.is_closed() {
+                    return;
+                }
+                tracing::debug!(error = %e, "vf_queue notification failed (workers still poll)");
+            }
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+    });
+    hint
 }
 
 /// `sqlite:///absolute/path?mode=rwc`, the path percent-encoded (the driver decodes it).

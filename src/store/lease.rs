@@ -34,7 +34,7 @@ impl Store {
             .bind(worker)
             .bind(now)
             .bind(lease_ms)
-            .fetch_optional(&self.writer)
+            .fetch_optional(&self.lease_writer)
             .await?;
         Ok(row.map(|row| {
             let lease = Lease {
@@ -58,7 +58,7 @@ impl Store {
             .bind(lease.attempt)
             .bind(now)
             .bind(lease_ms)
-            .fetch_optional(&self.writer)
+            .fetch_optional(&self.lease_writer)
             .await?;
         Ok(match flag {
             Some(c) => Heartbeat::Held { cancel: c != 0 },
@@ -86,7 +86,7 @@ impl Store {
             .bind(total as i64)
             .bind(loss.filter(|l| l.is_finite()))
             .bind(now)
-            .execute(&self.writer)
+            .execute(&self.lease_writer)
             .await?;
         Ok(r.rows_affected() == 1)
     }
@@ -104,7 +104,7 @@ impl Store {
             .bind(lease.attempt)
             .bind(state)
             .bind(now)
-            .execute(&self.writer)
+            .execute(&self.lease_writer)
             .await?;
         Ok(r.rows_affected() == 1)
     }
@@ -128,7 +128,7 @@ impl Store {
             .bind(step as i64)
             .bind(svg)
             .bind(now)
-            .fetch_optional(&self.writer)
+            .fetch_optional(&self.lease_writer)
             .await?;
         if let Some(n) = n
             && n > keep
@@ -136,7 +136,7 @@ impl Store {
             sqlx::query(sql!(self, "trim_snapshots.sql"))
                 .bind(&lease.job_id)
                 .bind(n - keep.max(1))
-                .execute(&self.writer)
+                .execute(&self.lease_writer)
                 .await?;
         }
         Ok(n)
@@ -208,6 +208,9 @@ impl Store {
                 .await?;
         }
         tx.commit().await?;
+        if row.is_some() && retry_at.is_some() {
+            self.hint_queued();
+        }
         Ok(row)
     }
 
@@ -257,6 +260,9 @@ impl Store {
                 .await?;
         }
         tx.commit().await?;
+        if row.is_some() && outcome == AttemptOutcome::Interrupted {
+            self.hint_queued();
+        }
         Ok(row)
     }
 

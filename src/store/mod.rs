@@ -233,6 +233,8 @@ pub fn now_ms() -> i64 {
 pub struct Store {
     pool: AnyPool,
     writer: AnyPool,
+    lease_writer: AnyPool,
+    queue_hint: Option<std::sync::Arc<tokio::sync::Notify>>,
     backend: Backend,
 }
 
@@ -248,8 +250,17 @@ impl Store {
         Ok(Store {
             pool: pools.pool,
             writer: pools.writer,
+            lease_writer: pools.lease_writer,
+            queue_hint: pools.queue_hint,
             backend: loc.backend(),
         })
+    }
+
+    /// A job became claimable: tell idle workers on other nodes (PostgreSQL; coalesced).
+    fn hint_queued(&self) {
+        if let Some(h) = &self.queue_hint {
+            h.notify_one();
+        }
     }
 
     pub fn backend(&self) -> Backend {
@@ -279,6 +290,10 @@ impl Store {
         }
         self.pool.close().await;
         self.writer.close().await;
+        self.lease_writer.close().await;
+        if let Some(h) = &self.queue_hint {
+            h.notify_one(); // lets the hint task see the closed pool and end
+        }
     }
 
     /// SQLite: copies the WAL back into the database file without blocking readers or the writer
@@ -318,7 +333,10 @@ impl Store {
                     .await?;
                 tx.commit().await?;
                 return match inserted {
-                    Some(row) => Ok((row, true)),
+                    Some(row) => {
+                        self.hint_queued();
+                        Ok((row, true))
+                    }
                     None => self.not_inserted(job).await,
                 };
             }
@@ -327,7 +345,10 @@ impl Store {
                 .fetch_optional(&self.writer)
                 .await?;
             return match inserted {
-                Some(row) => Ok((row, true)),
+                Some(row) => {
+                    self.hint_queued();
+                    Ok((row, true))
+                }
                 None => self.not_inserted(job).await,
             };
         };
@@ -370,6 +391,7 @@ impl Store {
             });
         }
         tx.commit().await?;
+        self.hint_queued();
         Ok((row, true))
     }
 
