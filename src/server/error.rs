@@ -52,6 +52,8 @@ pub enum ApiError {
     ModelsNotConfigured(String),
     #[error("the server is shutting down")]
     ShuttingDown,
+    #[error("the database is unreachable ({0}); retry shortly")]
+    DatabaseUnavailable(String),
     #[error("internal error: {0}")]
     Internal(String),
 }
@@ -92,9 +94,9 @@ impl ApiError {
             | ApiError::QuotaExceeded { .. }
             | ApiError::UploadQuota { .. } => StatusCode::TOO_MANY_REQUESTS,
             ApiError::BodyTimeout { .. } => StatusCode::REQUEST_TIMEOUT,
-            ApiError::ModelsNotConfigured(_) | ApiError::ShuttingDown => {
-                StatusCode::SERVICE_UNAVAILABLE
-            }
+            ApiError::ModelsNotConfigured(_)
+            | ApiError::ShuttingDown
+            | ApiError::DatabaseUnavailable(_) => StatusCode::SERVICE_UNAVAILABLE,
             ApiError::Internal(_) => StatusCode::INTERNAL_SERVER_ERROR,
         }
     }
@@ -119,6 +121,7 @@ impl ApiError {
             ApiError::BodyTimeout { .. } => "body_timeout",
             ApiError::ModelsNotConfigured(_) => "models_not_configured",
             ApiError::ShuttingDown => "shutting_down",
+            ApiError::DatabaseUnavailable(_) => "database_unavailable",
             ApiError::Internal(_) => "internal",
         }
     }
@@ -171,6 +174,7 @@ impl From<crate::store::StoreError> for ApiError {
                 limit,
                 retry_after_secs: 30,
             },
+            other if other.is_unavailable() => ApiError::DatabaseUnavailable(other.to_string()),
             other => ApiError::Internal(other.to_string()),
         }
     }
@@ -205,6 +209,10 @@ impl IntoResponse for ApiError {
             && let Ok(v) = HeaderValue::from_str(&retry_after_secs.to_string())
         {
             resp.headers_mut().insert(header::RETRY_AFTER, v);
+        }
+        if let ApiError::DatabaseUnavailable(_) = &self {
+            resp.headers_mut()
+                .insert(header::RETRY_AFTER, HeaderValue::from_static("2"));
         }
         if let ApiError::Unauthorized = &self {
             resp.headers_mut().insert(

@@ -296,6 +296,16 @@ mod tests {
         assert!(DbLocation::parse("postgres://[bad").is_err());
     }
 
+    #[tokio::test]
+    async fn an_unreachable_database_is_unavailable_not_corrupt() {
+        // Port 1 on loopback: nothing listens, the connection is refused.
+        let loc = DbLocation::parse("postgres://vf@127.0.0.1:1/vf?connect_timeout=2").unwrap();
+        let err = super::super::Store::connect(&loc, 1).await.unwrap_err();
+        assert!(err.is_unavailable(), "{err:?}");
+        let bad = super::super::StoreError::Corrupt("x".into());
+        assert!(!bad.is_unavailable());
+    }
+
     #[test]
     fn sqlite_urls_survive_odd_paths() {
         let url = sqlite_url(Path::new("/tmp/a b?c#d.db")).unwrap();

@@ -40,6 +40,26 @@ pub enum StoreError {
     QueueFull { limit: i64 },
 }
 
+impl StoreError {
+    /// The database cannot be reached right now (connection refused or lost, pool exhausted,
+    /// server shutting down or starting): worth retrying, unlike a bad statement or row.
+    pub fn is_unavailable(&self) -> bool {
+        match self {
+            StoreError::Db(
+                sqlx::Error::Io(_)
+                | sqlx::Error::PoolTimedOut
+                | sqlx::Error::PoolClosed
+                | sqlx::Error::Tls(_),
+            ) => true,
+            StoreError::Db(sqlx::Error::Database(e)) => e.code().is_some_and(|c| {
+                // PostgreSQL: connection exceptions (08…), shutdown / cannot connect now (57P…).
+                c.starts_with("08") || c.starts_with("57P")
+            }),
+            _ => false,
+        }
+    }
+}
+
 /// Job lifecycle states (mirrors the CHECK constraint in `migrations/*/0001_jobs.sql`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
