@@ -20,7 +20,7 @@ use std::net::SocketAddr;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 use vectorfusion::config::Config;
-use vectorfusion::store::{DbLocation, NewJob, Store, create_test_database, now_ms};
+use vectorfusion::store::{DbLocation, JobKind, NewJob, Store, create_test_database, now_ms};
 use vectorfusion::worker::test_executor::TestExecutor;
 
 const RATE: u32 = 500;
@@ -68,7 +68,7 @@ async fn submit_latency(loc: &DbLocation) -> load::Stats {
 fn job(i: usize) -> NewJob {
     NewJob {
         id: uuid::Uuid::new_v4().to_string(),
-        kind: "vectorize".into(),
+        kind: JobKind::Vectorize,
         spec: format!("{{\"i\":{i}}}"),
         priority: 0,
         idempotency_key: None,

@@ -7,17 +7,8 @@ use crate::scene::MAX_PATHS;
 pub use crate::stages::styles::Style;
 use serde::{Deserialize, Serialize};
 
-/// What a job produces: caption → SVG, or image → SVG.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum JobKind {
-    Text,
-    Vectorize,
-}
-
-impl JobKind {
-    pub const ALL: &[JobKind] = &[JobKind::Text, JobKind::Vectorize];
-}
+/// What a job produces (the queue's typed `kind` column).
+pub use crate::store::JobKind;
 
 /// How a text job is produced (VectorFusion §4): sample+trace, sample+trace+SDS, or SDS alone.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]

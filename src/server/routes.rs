@@ -213,10 +213,7 @@ pub(super) async fn submit(
     let spec_json = serde_json::to_string(&spec).map_err(|e| ApiError::Internal(e.to_string()))?;
     let new = NewJob {
         id: id.hyphenated().to_string(),
-        kind: match spec.kind {
-            JobKind::Text => "text".into(),
-            JobKind::Vectorize => "vectorize".into(),
-        },
+        kind: spec.kind,
         spec: spec_json,
         priority: spec.priority as i64,
         idempotency_key: key,

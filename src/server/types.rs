@@ -375,7 +375,7 @@ impl JobView {
         let base = format!("/jobs/{}", row.id);
         JobView {
             id: row.id.clone(),
-            kind: row.kind.clone(),
+            kind: row.kind.as_str().to_string(),
             status: row.status.as_str().to_string(),
             stage: row.stage.clone(),
             progress: ProgressView {

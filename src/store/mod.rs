@@ -10,8 +10,8 @@
 //! Each claim opens a row in `attempts`, closed with its outcome.
 
 mod backend;
+mod columns;
 mod lease;
-mod status;
 mod uploads;
 
 pub use backend::{Backend, DbLocation, create_test_database};
@@ -57,6 +57,43 @@ impl StoreError {
             }),
             _ => false,
         }
+    }
+}
+
+/// What a job produces: caption → SVG, or image → SVG (mirrors the CHECK constraint on
+/// `jobs.kind`; the job contract in `pipeline::spec` uses this type).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum JobKind {
+    Text,
+    Vectorize,
+}
+
+impl JobKind {
+    pub const ALL: &[JobKind] = &[JobKind::Text, JobKind::Vectorize];
+
+    pub fn as_str(self) -> &'static str {
+        match self {
+            JobKind::Text => "text",
+            JobKind::Vectorize => "vectorize",
+        }
+    }
+}
+
+impl std::fmt::Display for JobKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+impl FromStr for JobKind {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        JobKind::ALL
+            .iter()
+            .copied()
+            .find(|k| k.as_str() == s)
+            .ok_or_else(|| format!("unknown job kind {s:?}"))
     }
 }
 
@@ -119,7 +156,7 @@ impl FromStr for JobStatus {
 pub struct JobRow {
     pub seq: i64,
     pub id: String,
-    pub kind: String,
+    pub kind: JobKind,
     pub spec: String,
     pub priority: i64,
     pub status: JobStatus,
@@ -187,7 +224,7 @@ pub struct ResultRow {
 #[derive(Clone, Debug)]
 pub struct NewJob {
     pub id: String,
-    pub kind: String,
+    pub kind: JobKind,
     pub spec: String,
     pub priority: i64,
     pub idempotency_key: Option<String>,
@@ -549,7 +586,7 @@ impl Store {
     ) -> sqlx::query::QueryAs<'q, sqlx::Any, JobRow, sqlx::any::AnyArguments> {
         sqlx::query_as(sql!(self, "insert_job.sql"))
             .bind(&job.id)
-            .bind(&job.kind)
+            .bind(job.kind)
             .bind(&job.spec)
             .bind(job.priority)
             .bind(&job.idempotency_key)

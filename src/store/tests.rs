@@ -53,7 +53,7 @@ macro_rules! conformance {
 fn new_job(i: usize) -> NewJob {
     NewJob {
         id: uuid::Uuid::new_v4().to_string(),
-        kind: "vectorize".into(),
+        kind: JobKind::Vectorize,
         spec: format!("{{\"i\":{i}}}"),
         priority: 0,
         idempotency_key: None,
