@@ -108,6 +108,13 @@ pub(super) async fn connect(loc: &DbLocation, max_connections: u32) -> Result<Po
         DbLocation::Sqlite(path) => connect_sqlite(path, max_connections).await,
         DbLocation::Postgres(url) => {
             let options = AnyConnectOptions::from_str(url)?;
+            // One plain connection first: a pool that cannot connect reports only "timed out",
+            // this says why (refused, unknown host, authentication, no such database).
+            use sqlx::Connection;
+            sqlx::AnyConnection::connect_with(&options)
+                .await?
+                .close()
+                .await?;
             let max = max_connections.max(2);
             let open = |asynchronous: bool| {
                 AnyPoolOptions::new()
