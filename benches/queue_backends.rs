@@ -16,12 +16,9 @@ mod http;
 mod load;
 
 use serde_json::json;
-use std::net::SocketAddr;
-use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 use vectorfusion::config::Config;
 use vectorfusion::store::{DbLocation, JobKind, NewJob, Store, create_test_database, now_ms};
-use vectorfusion::worker::test_executor::TestExecutor;
 
 const RATE: u32 = 500;
 const SECONDS: f64 = 4.0;
@@ -34,25 +31,8 @@ async fn submit_latency(loc: &DbLocation) -> load::Stats {
         DbLocation::Sqlite(p) => cfg.database.path = p.clone(),
         DbLocation::Postgres(u) => cfg.database.url = u.clone(),
     }
-    cfg.server.max_queue_depth = 1_000_000;
-    cfg.queue.workers = 2;
-    cfg.queue.poll_interval_ms = 20;
-    let listener = tokio::net::TcpListener::bind("127.0.0.1:0")
-        .await
-        .expect("bind");
-    let addr: SocketAddr = listener.local_addr().expect("addr");
-    let (tx, rx) = tokio::sync::oneshot::channel::<()>();
-    let server = tokio::spawn(vectorfusion::server::run(
-        cfg,
-        Arc::new(TestExecutor::new(0)),
-        listener,
-        async move {
-            let _ = rx.await;
-        },
-    ));
-    while tokio::net::TcpStream::connect(addr).await.is_err() {
-        tokio::time::sleep(Duration::from_millis(20)).await;
-    }
+    let server = load::BenchServer::start(cfg).await;
+    let addr = server.addr;
     let n = (RATE as f64 * SECONDS) as usize;
     let s = load::run_rate(RATE, n, move |i| {
         let body = json!({"kind": "text", "caption": format!("a red bicycle {i}"),
@@ -60,8 +40,7 @@ async fn submit_latency(loc: &DbLocation) -> load::Stats {
         async move { http::post_json(addr, "/jobs", &body).await.status == 202 }
     })
     .await;
-    let _ = tx.send(());
-    let _ = server.await;
+    server.stop().await;
     s
 }
 

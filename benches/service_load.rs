@@ -17,11 +17,9 @@ mod load;
 
 use load::{Stats, run_rate};
 use serde_json::json;
-use std::net::SocketAddr;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 use vectorfusion::config::Config;
-use vectorfusion::worker::test_executor::TestExecutor;
 
 const RATES: [u32; 4] = [100, 250, 500, 1000];
 const SECONDS: f64 = 4.0;
@@ -63,23 +61,8 @@ fn main() {
         let dir = tempfile::tempdir().expect("tempdir");
         let mut cfg = Config::default();
         cfg.database.path = dir.path().join("load.db");
-        cfg.server.max_queue_depth = 1_000_000;
-        cfg.queue.workers = 2;
-        cfg.queue.poll_interval_ms = 20;
-        let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.expect("bind");
-        let addr: SocketAddr = listener.local_addr().expect("addr");
-        let (tx, rx) = tokio::sync::oneshot::channel::<()>();
-        let server = tokio::spawn(vectorfusion::server::run(
-            cfg,
-            Arc::new(TestExecutor::new(0)),
-            listener,
-            async move {
-                let _ = rx.await;
-            },
-        ));
-        while tokio::net::TcpStream::connect(addr).await.is_err() {
-            tokio::time::sleep(Duration::from_millis(20)).await;
-        }
+        let server = load::BenchServer::start(cfg).await;
+        let addr = server.addr;
         let caps = Arc::new(captions());
         let ids = Arc::new(std::sync::Mutex::new(Vec::<String>::new()));
         println!("| request | target rate (req/s) | sent | 2xx | achieved (req/s) | p50 ms | p99 ms | max ms |");
@@ -157,7 +140,6 @@ fn main() {
                 .collect();
             println!("{route}: {}", shares.join(", "));
         }
-        let _ = tx.send(());
-        let _ = server.await;
+        server.stop().await;
     });
 }

@@ -1,6 +1,48 @@
 //! Open-loop load helpers shared by the service benches.
 
+use std::net::SocketAddr;
+use std::sync::Arc;
 use std::time::{Duration, Instant};
+use vectorfusion::config::Config;
+use vectorfusion::worker::test_executor::TestExecutor;
+
+/// An in-process server on 127.0.0.1 over `cfg`'s database with 2 workers running the service
+/// test double (no sleeping): the benches measure the service, not the pipeline.
+pub struct BenchServer {
+    pub addr: SocketAddr,
+    stop: tokio::sync::oneshot::Sender<()>,
+    task: tokio::task::JoinHandle<Result<(), vectorfusion::server::ServerError>>,
+}
+
+impl BenchServer {
+    pub async fn start(mut cfg: Config) -> BenchServer {
+        cfg.server.max_queue_depth = 1_000_000;
+        cfg.queue.workers = 2;
+        cfg.queue.poll_interval_ms = 20;
+        let listener = tokio::net::TcpListener::bind("127.0.0.1:0")
+            .await
+            .expect("bind");
+        let addr: SocketAddr = listener.local_addr().expect("addr");
+        let (stop, rx) = tokio::sync::oneshot::channel::<()>();
+        let task = tokio::spawn(vectorfusion::server::run(
+            cfg,
+            Arc::new(TestExecutor::new(0)),
+            listener,
+            async move {
+                let _ = rx.await;
+            },
+        ));
+        while tokio::net::TcpStream::connect(addr).await.is_err() {
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+        BenchServer { addr, stop, task }
+    }
+
+    pub async fn stop(self) {
+        let _ = self.stop.send(());
+        let _ = self.task.await;
+    }
+}
 
 pub struct Stats {
     pub sent: usize,

@@ -7,9 +7,27 @@ use sqlx::encode::IsNull;
 use sqlx::error::BoxDynError;
 use sqlx::{Database, Decode, Encode, Type};
 
-/// The column impls of an enum with `as_str` and `FromStr`, for every backend whose `str` is TEXT.
+/// Display and FromStr by the names of an enum with `ALL` and `as_str`, and its column impls for
+/// every backend whose `str` is TEXT.
 macro_rules! text_column {
-    ($ty:ty) => {
+    ($ty:ty, $what:literal) => {
+        impl std::fmt::Display for $ty {
+            fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                f.write_str(self.as_str())
+            }
+        }
+
+        impl std::str::FromStr for $ty {
+            type Err = String;
+            fn from_str(s: &str) -> Result<Self, String> {
+                <$ty>::ALL
+                    .iter()
+                    .copied()
+                    .find(|v| v.as_str() == s)
+                    .ok_or_else(|| format!(concat!("unknown ", $what, " {:?}"), s))
+            }
+        }
+
         impl<DB: Database> Type<DB> for $ty
         where
             str: Type<DB>,
@@ -49,5 +67,5 @@ macro_rules! text_column {
     };
 }
 
-text_column!(JobStatus);
-text_column!(JobKind);
+text_column!(JobStatus, "status");
+text_column!(JobKind, "job kind");

@@ -21,7 +21,6 @@ use backend::sql;
 use serde::Serialize;
 use sqlx::AnyPool;
 use std::path::Path;
-use std::str::FromStr;
 
 /// Errors from the store.
 #[derive(Debug, thiserror::Error)]
@@ -80,23 +79,6 @@ impl JobKind {
     }
 }
 
-impl std::fmt::Display for JobKind {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.as_str())
-    }
-}
-
-impl FromStr for JobKind {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        JobKind::ALL
-            .iter()
-            .copied()
-            .find(|k| k.as_str() == s)
-            .ok_or_else(|| format!("unknown job kind {s:?}"))
-    }
-}
-
 /// Job lifecycle states (mirrors the CHECK constraint in `migrations/*/0001_jobs.sql`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -132,22 +114,6 @@ impl JobStatus {
             self,
             JobStatus::Succeeded | JobStatus::Failed | JobStatus::Cancelled
         )
-    }
-}
-
-impl std::fmt::Display for JobStatus {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.as_str())
-    }
-}
-
-impl FromStr for JobStatus {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        JobStatus::ALL
-            .into_iter()
-            .find(|st| st.as_str() == s)
-            .ok_or_else(|| format!("unknown status {s:?}"))
     }
 }
 
