@@ -342,31 +342,23 @@ impl Store {
     /// fails with [`StoreError::UploadQuota`].
     pub async fn insert_job(&self, job: &NewJob, now: i64) -> Result<(JobRow, bool), StoreError> {
         let Some(up) = &job.upload else {
-            // No upload: one autocommit statement, one round trip on the writer.
-            if self.backend == Backend::Postgres && job.max_queued.is_some() {
+            let inserted = if self.backend == Backend::Postgres && job.max_queued.is_some() {
                 // The count in the insert must see every earlier insert: take the admission
                 // lock in a transaction first (SQLite's single writer does this for free).
                 let mut tx = self.begin().await?;
-                sqlx::query(include_str!("sql/postgres/admission_lock.sql"))
-                    .execute(&mut *tx)
-                    .await?;
+                self.admission_lock(&mut tx).await?;
                 let inserted = self
                     .insert_job_query(job, now)
                     .fetch_optional(&mut *tx)
                     .await?;
                 tx.commit().await?;
-                return match inserted {
-                    Some(row) => {
-                        self.hint_queued();
-                        Ok((row, true))
-                    }
-                    None => self.not_inserted(job).await,
-                };
-            }
-            let inserted = self
-                .insert_job_query(job, now)
-                .fetch_optional(&self.writer)
-                .await?;
+                inserted
+            } else {
+                // One autocommit statement, one round trip on the writer.
+                self.insert_job_query(job, now)
+                    .fetch_optional(&self.writer)
+                    .await?
+            };
             return match inserted {
                 Some(row) => {
                     self.hint_queued();
@@ -376,11 +368,7 @@ impl Store {
             };
         };
         let mut tx = self.begin().await?;
-        if self.backend == Backend::Postgres {
-            sqlx::query(include_str!("sql/postgres/admission_lock.sql"))
-                .execute(&mut *tx)
-                .await?;
-        }
+        self.admission_lock(&mut tx).await?;
         let inserted = self
             .insert_job_query(job, now)
             .fetch_optional(&mut *tx)
@@ -416,6 +404,20 @@ impl Store {
         tx.commit().await?;
         self.hint_queued();
         Ok((row, true))
+    }
+
+    /// PostgreSQL: serialises the inserts that count (queue depth, upload quotas) until `tx`
+    /// ends. SQLite: nothing (its single writer already does).
+    async fn admission_lock(
+        &self,
+        tx: &mut sqlx::Transaction<'static, sqlx::Any>,
+    ) -> Result<(), StoreError> {
+        if self.backend == Backend::Postgres {
+            sqlx::query(include_str!("sql/postgres/admission_lock.sql"))
+                .execute(&mut **tx)
+                .await?;
+        }
+        Ok(())
     }
 
     /// Why `job`'s insert did nothing: its idempotency key is taken (that job, and `false`), or
