@@ -90,3 +90,18 @@ pub enum ModelError {
 }
 
 pub type Result<T> = std::result::Result<T, ModelError>;
+
+/// The check every encoder VJP makes first: the latents' gradient has the latents' shape.
+pub(crate) fn check_latent_grad(
+    d_latents: &candle_core::Tensor,
+    latent_dims: &[usize],
+) -> Result<()> {
+    if d_latents.dims() != latent_dims {
+        return Err(ModelError::InvalidInput(format!(
+            "d_latents shape {:?} != latents shape {:?}",
+            d_latents.dims(),
+            latent_dims
+        )));
+    }
+    Ok(())
+}

@@ -309,13 +309,7 @@ impl Taesd {
     /// `J^T · d_latents` at the image `tape` was recorded for, with respect to the `[0, 1]`
     /// image (no weight gradients). Consumes the tape, releasing it layer by layer.
     pub fn encode_pullback(&self, tape: EncodeTape, d_latents: &Tensor) -> Result<Tensor> {
-        if d_latents.dims() != tape.latent_dims.as_slice() {
-            return Err(ModelError::InvalidInput(format!(
-                "d_latents shape {:?} != latents shape {:?}",
-                d_latents.dims(),
-                tape.latent_dims
-            )));
-        }
+        super::check_latent_grad(d_latents, &tape.latent_dims)?;
         let mut d = d_latents.to_dtype(tape.dtype)?;
         for (l, t) in self.encoder.iter().zip(tape.layers).rev() {
             d = match (l, t) {

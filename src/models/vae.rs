@@ -516,13 +516,7 @@ impl AutoencoderKl {
     /// `J^T · d_latents` at the image `tape` was recorded for, with respect to the `[0, 1]`
     /// image, without any weight gradient. Consumes the tape, releasing it layer by layer.
     pub fn encode_pullback(&self, tape: EncodeTape, d_latents: &Tensor) -> Result<Tensor> {
-        if d_latents.dims() != tape.latent_dims.as_slice() {
-            return Err(ModelError::InvalidInput(format!(
-                "d_latents shape {:?} != latents shape {:?}",
-                d_latents.dims(),
-                tape.latent_dims
-            )));
-        }
+        super::check_latent_grad(d_latents, &tape.latent_dims)?;
         let lc = self.config.latent_channels;
         let d_mean = (d_latents.to_dtype(tape.dtype)? * self.config.scaling_factor)?;
         // moments gradient: mean half gets d_mean, logvar half zero
