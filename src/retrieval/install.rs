@@ -337,6 +337,17 @@ mod tests {
             .collect())
     }
 
+    /// The index and icon directories under `root` (where [`model_with`] puts the tarball),
+    /// with downloads off.
+    fn offline_locations(root: &Path) -> RetrievalLocations {
+        RetrievalLocations {
+            index_dir: Some(root.join("index")),
+            cache: None,
+            icons_dir: Some(root.join("icons")),
+            offline: true,
+        }
+    }
+
     fn model_with(set_tgz: &[u8], root: &Path) -> PathBuf {
         let model = root.join("model");
         std::fs::create_dir_all(model.join("retrieval")).unwrap();
@@ -356,12 +367,7 @@ mod tests {
         let bytes = tgz(SET);
         assert_eq!(icons_json_from_tgz(&bytes).unwrap(), SET);
         let model = model_with(&bytes, &root);
-        let loc = RetrievalLocations {
-            index_dir: Some(root.join("index")),
-            cache: None,
-            icons_dir: Some(root.join("icons")),
-            offline: true,
-        };
+        let loc = offline_locations(&root);
         let idx = install(&model, &loc, false, "", &mut toy_embed).unwrap();
         // red-heart-2 is a variant of red-heart: one caption, two icons
         assert_eq!(idx.captions(), ["red heart", "sun"]);
@@ -390,12 +396,7 @@ mod tests {
         let model = model_with(&tgz(SET), &root);
         // replace the local tarball with other bytes: the checksum fails
         std::fs::write(root.join("icons/iconify-json-toy-1.0.0.tgz"), tgz("{}")).unwrap();
-        let loc = RetrievalLocations {
-            index_dir: Some(root.join("index")),
-            cache: None,
-            icons_dir: Some(root.join("icons")),
-            offline: true,
-        };
+        let loc = offline_locations(&root);
         let e = install(&model, &loc, false, "", &mut toy_embed).unwrap_err();
         assert!(e.to_string().contains("sha256"), "{e}");
         // no tarball and downloads off: unavailable, not a panic or a hang
