@@ -3,7 +3,7 @@
 
 use super::index::{IconIndex, set_path};
 use super::{RetrievalError, iconify, is_held_out, names};
-use crate::models::bert::weights::sha256_hex;
+use crate::models::bert::weights::{env_path, sha256_hex};
 use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, HashSet};
 use std::io::Read;
@@ -89,15 +89,14 @@ pub struct RetrievalLocations {
 
 impl RetrievalLocations {
     pub fn from_env() -> Self {
-        let nonempty = |k: &str| std::env::var_os(k).filter(|v| !v.is_empty());
         let minilm = crate::models::bert::MiniLmLocations::from_env();
         Self {
-            index_dir: nonempty(ENV_INDEX_DIR).map(PathBuf::from),
+            index_dir: env_path(ENV_INDEX_DIR),
             cache: minilm
                 .cache
                 .as_ref()
                 .and_then(|c| c.parent().map(Path::to_path_buf)),
-            icons_dir: nonempty(ENV_ICONS_DIR).map(PathBuf::from),
+            icons_dir: env_path(ENV_ICONS_DIR),
             offline: minilm.offline,
         }
     }
