@@ -6,6 +6,7 @@ use vectorfusion::eval::clip::{
     EvalError, evaluate, evaluate_svg_dir, read_prompts, render_svg, render_svg_dir,
 };
 use vectorfusion::models::clip::ClipScorer;
+use vectorfusion::models::scorer::ImageTextScorer;
 
 fn fixture(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))

@@ -7,6 +7,7 @@ use candle_core::{Device, Tensor};
 use std::path::PathBuf;
 use vectorfusion::image::Image;
 use vectorfusion::models::clip::ClipScorer;
+use vectorfusion::models::scorer::ImageTextScorer;
 
 fn fixture(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))

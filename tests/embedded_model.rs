@@ -14,7 +14,7 @@ use vectorfusion::models::bert::weights::MiniLmLocations;
 use vectorfusion::models::codec::Codec;
 use vectorfusion::models::pipeline::{load_unet, load_vae};
 use vectorfusion::models::scheduler::{Sampler, SamplerKind, SchedulerConfig};
-use vectorfusion::models::scorer::{IconClip, IconClipConfig, IconClipScorer};
+use vectorfusion::models::scorer::{IconClip, IconClipConfig, IconClipScorer, ImageTextScorer};
 use vectorfusion::models::{LoadOptions, Precision, StableDiffusion};
 
 fn root() -> PathBuf {

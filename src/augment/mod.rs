@@ -401,11 +401,7 @@ mod tests {
                 o.data.iter().zip(&g).map(|(a, b)| (a * b) as f64).sum()
             };
             for i in (0..im.data.len()).step_by(7) {
-                let h = 1e-2;
-                let (mut p, mut m) = (im.clone(), im.clone());
-                p.data[i] += h;
-                m.data[i] -= h;
-                let fd = (loss(&p) - loss(&m)) / (2.0 * h as f64);
+                let fd = crate::image::central_difference(&im, i, 1e-2, loss);
                 assert!(
                     (fd - d_in[i] as f64).abs() < 2e-3,
                     "i={i} fd={fd} {}",

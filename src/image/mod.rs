@@ -178,6 +178,16 @@ impl Image {
     }
 }
 
+/// The central difference `(f(im + h·eᵢ) − f(im − h·eᵢ)) / 2h` along value `i` of `im`: what
+/// the gradient tests compare hand-written VJPs with.
+#[cfg(test)]
+pub(crate) fn central_difference(im: &Image, i: usize, h: f32, f: impl Fn(&Image) -> f64) -> f64 {
+    let (mut p, mut m) = (im.clone(), im.clone());
+    p.data[i] += h;
+    m.data[i] -= h;
+    (f(&p) - f(&m)) / (2.0 * h as f64)
+}
+
 /// Mean squared error over RGB channels of two images of the same size, both composited over
 /// white first. Panics never: mismatched sizes return `f64::INFINITY`.
 pub fn mse_rgb_over_white(a: &Image, b: &Image) -> f64 {

@@ -89,13 +89,7 @@ impl PixelSpace {
     pub fn encode_vjp(&self, image: &Tensor, d_latents: &Tensor) -> Result<Tensor> {
         let (h, w) = self.dims(image)?;
         let (b, _, _, _) = image.dims4()?;
-        if d_latents.dims() != [b, 3, self.size, self.size] {
-            return Err(ModelError::InvalidInput(format!(
-                "d_latents shape {:?} != latents shape {:?}",
-                d_latents.dims(),
-                [b, 3, self.size, self.size]
-            )));
-        }
+        super::check_latent_grad(d_latents, &[b, 3, self.size, self.size])?;
         let dev = image.device();
         let rht = pool_matrix(self.size, h, dev)?.t()?.contiguous()?;
         let rw = pool_matrix(self.size, w, dev)?;
@@ -306,6 +300,16 @@ mod tests {
         Tensor::from_vec(v, s, &Device::Cpu).unwrap()
     }
 
+    /// `Σ a·b` over all elements.
+    fn dot(a: &Tensor, b: &Tensor) -> f32 {
+        (a * b)
+            .unwrap()
+            .sum_all()
+            .unwrap()
+            .to_scalar::<f32>()
+            .unwrap()
+    }
+
     #[test]
     fn integer_ratio_is_a_box_average_and_non_integer_matches_adaptive_pooling() {
         let p = PixelSpace { size: 2 };
@@ -348,20 +352,10 @@ mod tests {
         let d = t(d, (1, 3, 4, 4));
         let zero = Tensor::zeros((1, 3, 7, 6), DType::F32, &Device::Cpu).unwrap();
         let jv = (p.encode(&v).unwrap() - p.encode(&zero).unwrap()).unwrap();
-        let lhs = (jv * &d)
-            .unwrap()
-            .sum_all()
-            .unwrap()
-            .to_scalar::<f32>()
-            .unwrap();
+        let lhs = dot(&jv, &d);
         let g = p.encode_vjp(&v, &d).unwrap();
         assert_eq!(g.dims(), &[1, 3, 7, 6]);
-        let rhs = (g * &v)
-            .unwrap()
-            .sum_all()
-            .unwrap()
-            .to_scalar::<f32>()
-            .unwrap();
+        let rhs = dot(&g, &v);
         assert!(
             (lhs - rhs).abs() < 1e-4 * lhs.abs().max(1.0),
             "{lhs} vs {rhs}"

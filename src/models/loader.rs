@@ -305,6 +305,27 @@ fn check_safetensors(path: &Path) -> Result<()> {
     Ok(())
 }
 
+/// Loads the autoencoder in `dir` (`config.json` + `diffusion_pytorch_model.safetensors`): its
+/// config, checked by `validate`, then `build` on the weights. Errors name `component`.
+pub fn load_autoencoder<C: DeserializeOwned, M>(
+    dir: &Path,
+    component: &'static str,
+    validate: impl FnOnce(&C) -> std::result::Result<(), String>,
+    (precision, device): (Precision, &Device),
+    build: impl FnOnce(VarBuilder<'static>, C) -> candle_core::Result<M>,
+) -> Result<M> {
+    let cfg_path = dir.join("config.json");
+    let cfg: C = read_config(&cfg_path)?;
+    validate(&cfg).map_err(|reason| ModelError::Unsupported {
+        component,
+        path: cfg_path.display().to_string(),
+        reason,
+    })?;
+    let w = find_weights(dir, UNET_WEIGHTS)?;
+    let vb = var_builder(&w, precision.dtype(), device)?;
+    build(vb, cfg).map_err(mismatch(component, &w))
+}
+
 /// Maps a candle error raised while building a component into a weight-mismatch error.
 pub fn mismatch(component: &'static str, path: &Path) -> impl Fn(candle_core::Error) -> ModelError {
     let path = path.display().to_string();

@@ -28,6 +28,7 @@ pub mod nn;
 pub mod pipeline;
 pub mod scheduler;
 pub mod scorer;
+mod serde_defaults;
 pub mod taesd;
 pub mod unet;
 pub mod vae;
@@ -90,3 +91,39 @@ pub enum ModelError {
 }
 
 pub type Result<T> = std::result::Result<T, ModelError>;
+
+/// The dims of `latents`, or an error unless it is `[b, channels, h, w]` (`model` names the
+/// model that expects it).
+pub(crate) fn latent_dims(
+    latents: &candle_core::Tensor,
+    channels: usize,
+    model: &str,
+) -> Result<(usize, usize, usize, usize)> {
+    let (b, c, h, w) = latents.dims4().map_err(|_| {
+        ModelError::InvalidInput(format!(
+            "latents must be [b, c, h, w], got {:?}",
+            latents.dims()
+        ))
+    })?;
+    if c != channels {
+        return Err(ModelError::InvalidInput(format!(
+            "latents have {c} channels, the {model} expects {channels}"
+        )));
+    }
+    Ok((b, c, h, w))
+}
+
+/// The check every encoder VJP makes first: the latents' gradient has the latents' shape.
+pub(crate) fn check_latent_grad(
+    d_latents: &candle_core::Tensor,
+    latent_dims: &[usize],
+) -> Result<()> {
+    if d_latents.dims() != latent_dims {
+        return Err(ModelError::InvalidInput(format!(
+            "d_latents shape {:?} != latents shape {:?}",
+            d_latents.dims(),
+            latent_dims
+        )));
+    }
+    Ok(())
+}

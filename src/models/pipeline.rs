@@ -9,6 +9,7 @@ use super::taesd::Taesd;
 use super::unet::{Unet, UnetConfig};
 use super::vae::{AutoencoderKl, VaeConfig};
 use super::{ModelError, Result};
+use crate::models::serde_defaults::yes;
 use candle_core::{DType, Device, Tensor};
 use std::path::Path;
 
@@ -40,16 +41,13 @@ pub fn load_unet(dir: &Path, precision: Precision, device: &Device) -> Result<Un
 /// Loads `dir/config.json` + weights as an `AutoencoderKL`.
 pub fn load_vae(dir: &Path, precision: Precision, device: &Device) -> Result<AutoencoderKl> {
     check_precision("vae", precision, device)?;
-    let cfg_path = dir.join("config.json");
-    let cfg: VaeConfig = loader::read_config(&cfg_path)?;
-    cfg.validate().map_err(|reason| ModelError::Unsupported {
-        component: "vae",
-        path: cfg_path.display().to_string(),
-        reason,
-    })?;
-    let w = loader::find_weights(dir, UNET_WEIGHTS)?;
-    let vb = loader::var_builder(&w, precision.dtype(), device)?;
-    AutoencoderKl::new(vb, cfg).map_err(loader::mismatch("vae", &w))
+    loader::load_autoencoder(
+        dir,
+        "vae",
+        VaeConfig::validate,
+        (precision, device),
+        AutoencoderKl::new,
+    )
 }
 
 /// Loads `dir/scheduler_config.json`.
@@ -168,9 +166,6 @@ pub struct ModelHints {
     pub small_prior: bool,
 }
 
-fn yes() -> bool {
-    true
-}
 fn sample_guidance() -> f32 {
     7.5
 }

@@ -1,6 +1,7 @@
 //! Noise schedules from `scheduler/scheduler_config.json` and the DDIM / Euler samplers.
 
 use super::{ModelError, Result};
+use crate::models::serde_defaults::num;
 use candle_core::Tensor;
 use serde::Deserialize;
 
@@ -19,7 +20,7 @@ pub enum PredictionType {
 pub struct SchedulerConfig {
     #[serde(rename = "_class_name", default)]
     pub class_name: String,
-    #[serde(default = "thousand")]
+    #[serde(default = "num::<1000>")]
     pub num_train_timesteps: usize,
     #[serde(default = "beta_start")]
     pub beta_start: f64,
@@ -53,9 +54,6 @@ fn one() -> f64 {
     1.0
 }
 
-fn thousand() -> usize {
-    1000
-}
 fn beta_start() -> f64 {
     0.00085
 }

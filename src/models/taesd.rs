@@ -2,9 +2,10 @@
 //! `diffusion_pytorch_model.safetensors`): a fast approximate SD VAE with encode (+ input-only
 //! VJP) and decode. Latents are in the SD latent space (already scaled).
 
-use super::loader::{self, Precision, UNET_WEIGHTS};
+use super::loader::{self, Precision};
 use super::nn::{Conv2d, add_relu, relu_backward};
 use super::{ModelError, Result};
+use crate::models::serde_defaults::num;
 use candle_core::{Device, Tensor};
 use candle_nn::VarBuilder;
 use serde::Deserialize;
@@ -13,9 +14,9 @@ use std::path::Path;
 /// `config.json` of an `AutoencoderTiny`.
 #[derive(Debug, Clone, Deserialize)]
 pub struct TaesdConfig {
-    #[serde(default = "three")]
+    #[serde(default = "num::<3>")]
     pub in_channels: usize,
-    #[serde(default = "three")]
+    #[serde(default = "num::<3>")]
     pub out_channels: usize,
     #[serde(default = "chans")]
     pub encoder_block_out_channels: Vec<usize>,
@@ -25,25 +26,16 @@ pub struct TaesdConfig {
     pub num_encoder_blocks: Vec<usize>,
     #[serde(default = "dec_blocks")]
     pub num_decoder_blocks: Vec<usize>,
-    #[serde(default = "four")]
+    #[serde(default = "num::<4>")]
     pub latent_channels: usize,
     #[serde(default = "relu")]
     pub act_fn: String,
     #[serde(default = "nearest")]
     pub upsample_fn: String,
-    #[serde(default = "two")]
+    #[serde(default = "num::<2>")]
     pub upsampling_scaling_factor: usize,
 }
 
-fn three() -> usize {
-    3
-}
-fn four() -> usize {
-    4
-}
-fn two() -> usize {
-    2
-}
 fn chans() -> Vec<usize> {
     vec![64; 4]
 }
@@ -242,16 +234,13 @@ impl Taesd {
 
     /// Loads `dir/config.json` + `dir/diffusion_pytorch_model.safetensors`.
     pub fn load(dir: &Path, precision: Precision, device: &Device) -> Result<Self> {
-        let cfg_path = dir.join("config.json");
-        let cfg: TaesdConfig = loader::read_config(&cfg_path)?;
-        cfg.validate().map_err(|reason| ModelError::Unsupported {
-            component: "taesd",
-            path: cfg_path.display().to_string(),
-            reason,
-        })?;
-        let w = loader::find_weights(dir, UNET_WEIGHTS)?;
-        let vb = loader::var_builder(&w, precision.dtype(), device)?;
-        Self::new(vb, cfg).map_err(loader::mismatch("taesd", &w))
+        loader::load_autoencoder(
+            dir,
+            "taesd",
+            TaesdConfig::validate,
+            (precision, device),
+            Self::new,
+        )
     }
 
     fn check_image(&self, image: &Tensor) -> Result<()> {
@@ -309,13 +298,7 @@ impl Taesd {
     /// `J^T · d_latents` at the image `tape` was recorded for, with respect to the `[0, 1]`
     /// image (no weight gradients). Consumes the tape, releasing it layer by layer.
     pub fn encode_pullback(&self, tape: EncodeTape, d_latents: &Tensor) -> Result<Tensor> {
-        if d_latents.dims() != tape.latent_dims.as_slice() {
-            return Err(ModelError::InvalidInput(format!(
-                "d_latents shape {:?} != latents shape {:?}",
-                d_latents.dims(),
-                tape.latent_dims
-            )));
-        }
+        super::check_latent_grad(d_latents, &tape.latent_dims)?;
         let mut d = d_latents.to_dtype(tape.dtype)?;
         for (l, t) in self.encoder.iter().zip(tape.layers).rev() {
             d = match (l, t) {

@@ -6,6 +6,7 @@
 
 use super::nn::{Conv2d, Downsample, GroupNorm, ResnetBlock, SpatialSelfAttention};
 use super::{ModelError, Result};
+use crate::models::serde_defaults::{num, silu, yes};
 use candle_core::Tensor;
 use candle_nn::VarBuilder;
 use serde::Deserialize;
@@ -13,20 +14,20 @@ use serde::Deserialize;
 /// The fields of `vae/config.json` that decide the architecture.
 #[derive(Debug, Clone, Deserialize)]
 pub struct VaeConfig {
-    #[serde(default = "three")]
+    #[serde(default = "num::<3>")]
     pub in_channels: usize,
-    #[serde(default = "three")]
+    #[serde(default = "num::<3>")]
     pub out_channels: usize,
     pub block_out_channels: Vec<usize>,
     #[serde(default)]
     pub down_block_types: Vec<String>,
     #[serde(default)]
     pub up_block_types: Vec<String>,
-    #[serde(default = "one")]
+    #[serde(default = "num::<1>")]
     pub layers_per_block: usize,
-    #[serde(default = "four")]
+    #[serde(default = "num::<4>")]
     pub latent_channels: usize,
-    #[serde(default = "thirty_two")]
+    #[serde(default = "num::<32>")]
     pub norm_num_groups: usize,
     #[serde(default = "default_scaling")]
     pub scaling_factor: f64,
@@ -42,26 +43,8 @@ pub struct VaeConfig {
     pub act_fn: String,
 }
 
-fn three() -> usize {
-    3
-}
-fn one() -> usize {
-    1
-}
-fn four() -> usize {
-    4
-}
-fn thirty_two() -> usize {
-    32
-}
 fn default_scaling() -> f64 {
     0.18215
-}
-fn yes() -> bool {
-    true
-}
-fn silu() -> String {
-    "silu".into()
 }
 
 impl VaeConfig {
@@ -516,13 +499,7 @@ impl AutoencoderKl {
     /// `J^T · d_latents` at the image `tape` was recorded for, with respect to the `[0, 1]`
     /// image, without any weight gradient. Consumes the tape, releasing it layer by layer.
     pub fn encode_pullback(&self, tape: EncodeTape, d_latents: &Tensor) -> Result<Tensor> {
-        if d_latents.dims() != tape.latent_dims.as_slice() {
-            return Err(ModelError::InvalidInput(format!(
-                "d_latents shape {:?} != latents shape {:?}",
-                d_latents.dims(),
-                tape.latent_dims
-            )));
-        }
+        super::check_latent_grad(d_latents, &tape.latent_dims)?;
         let lc = self.config.latent_channels;
         let d_mean = (d_latents.to_dtype(tape.dtype)? * self.config.scaling_factor)?;
         // moments gradient: mean half gets d_mean, logvar half zero
@@ -547,18 +524,7 @@ impl AutoencoderKl {
 
     /// Decodes scaled latents to raw decoder output (≈ `[-1, 1]`).
     pub fn decode_raw(&self, latents: &Tensor) -> Result<Tensor> {
-        let (_, c, _, _) = latents.dims4().map_err(|_| {
-            ModelError::InvalidInput(format!(
-                "latents must be [b, c, h, w], got {:?}",
-                latents.dims()
-            ))
-        })?;
-        if c != self.config.latent_channels {
-            return Err(ModelError::InvalidInput(format!(
-                "latents have {c} channels, the VAE expects {}",
-                self.config.latent_channels
-            )));
-        }
+        super::latent_dims(latents, self.config.latent_channels, "VAE")?;
         let shift = self.config.shift_factor.unwrap_or(0.0);
         let z = ((latents / self.config.scaling_factor)? + shift)?;
         let z = match &self.post_quant_conv {

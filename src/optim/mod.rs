@@ -48,24 +48,21 @@ impl LrSchedule {
         }
     }
 
-    /// The same schedule with every rate multiplied by `k` (e.g. colours 20x lower than points).
+    /// The same schedule with every rate multiplied by `k` (e.g. colours 20x lower than points);
+    /// the step counts stay.
     pub fn scaled(&self, k: f32) -> LrSchedule {
-        match *self {
-            LrSchedule::Constant { lr } => LrSchedule::Constant { lr: lr * k },
+        let mut s = self.clone();
+        match &mut s {
+            LrSchedule::Constant { lr } => *lr *= k,
             LrSchedule::WarmupCosine {
-                start,
-                peak,
-                warmup,
-                end,
-                total,
-            } => LrSchedule::WarmupCosine {
-                start: start * k,
-                peak: peak * k,
-                warmup,
-                end: end * k,
-                total,
-            },
+                start, peak, end, ..
+            } => {
+                for rate in [start, peak, end] {
+                    *rate *= k;
+                }
+            }
         }
+        s
     }
 }
 

@@ -108,10 +108,7 @@ pub(crate) fn walk<T: Real>(
             return;
         }
     } else {
-        let inv = d[1].recip();
-        let a = (y0 - p0[1]) * inv;
-        let b = (y1 - p0[1]) * inv;
-        let (a, b) = if a < b { (a, b) } else { (b, a) };
+        let (a, b) = slab(p0[1], d[1], y0, y1);
         s_lo = s_lo.max(a);
         s_hi = s_hi.min(b);
     }
@@ -129,10 +126,7 @@ pub(crate) fn walk<T: Real>(
             return;
         }
     } else {
-        let inv = d[0].recip();
-        let a = (x0 - p0[0]) * inv;
-        let b = (x1 - p0[0]) * inv;
-        let (a, b) = if a < b { (a, b) } else { (b, a) };
+        let (a, b) = slab(p0[0], d[0], x0, x1);
         m_lo = m_lo.max(a);
         m_hi = m_hi.min(b);
         // Left part: where x < x0.
@@ -148,6 +142,16 @@ pub(crate) fn walk<T: Real>(
     if m_lo < m_hi {
         pieces(p0, d, m_lo, m_hi, clip, true, 0, &mut f);
     }
+}
+
+/// The parameters `a ≤ b` at which `p + s·d` (`d ≠ 0`) crosses `lo` and `hi`: the segment is
+/// inside the slab `[lo, hi)` for `s` in between.
+#[inline]
+fn slab<T: Real>(p: T, d: T, lo: T, hi: T) -> (T, T) {
+    let inv = d.recip();
+    let a = (lo - p) * inv;
+    let b = (hi - p) * inv;
+    if a < b { (a, b) } else { (b, a) }
 }
 
 #[allow(clippy::too_many_arguments)]

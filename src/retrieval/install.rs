@@ -3,7 +3,7 @@
 
 use super::index::{IconIndex, set_path};
 use super::{RetrievalError, iconify, is_held_out, names};
-use crate::models::bert::weights::sha256_hex;
+use crate::models::bert::weights::{env_path, sha256_hex};
 use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, HashSet};
 use std::io::Read;
@@ -89,15 +89,14 @@ pub struct RetrievalLocations {
 
 impl RetrievalLocations {
     pub fn from_env() -> Self {
-        let nonempty = |k: &str| std::env::var_os(k).filter(|v| !v.is_empty());
         let minilm = crate::models::bert::MiniLmLocations::from_env();
         Self {
-            index_dir: nonempty(ENV_INDEX_DIR).map(PathBuf::from),
+            index_dir: env_path(ENV_INDEX_DIR),
             cache: minilm
                 .cache
                 .as_ref()
                 .and_then(|c| c.parent().map(Path::to_path_buf)),
-            icons_dir: nonempty(ENV_ICONS_DIR).map(PathBuf::from),
+            icons_dir: env_path(ENV_ICONS_DIR),
             offline: minilm.offline,
         }
     }
@@ -337,6 +336,17 @@ mod tests {
             .collect())
     }
 
+    /// The index and icon directories under `root` (where [`model_with`] puts the tarball),
+    /// with downloads off.
+    fn offline_locations(root: &Path) -> RetrievalLocations {
+        RetrievalLocations {
+            index_dir: Some(root.join("index")),
+            cache: None,
+            icons_dir: Some(root.join("icons")),
+            offline: true,
+        }
+    }
+
     fn model_with(set_tgz: &[u8], root: &Path) -> PathBuf {
         let model = root.join("model");
         std::fs::create_dir_all(model.join("retrieval")).unwrap();
@@ -356,12 +366,7 @@ mod tests {
         let bytes = tgz(SET);
         assert_eq!(icons_json_from_tgz(&bytes).unwrap(), SET);
         let model = model_with(&bytes, &root);
-        let loc = RetrievalLocations {
-            index_dir: Some(root.join("index")),
-            cache: None,
-            icons_dir: Some(root.join("icons")),
-            offline: true,
-        };
+        let loc = offline_locations(&root);
         let idx = install(&model, &loc, false, "", &mut toy_embed).unwrap();
         // red-heart-2 is a variant of red-heart: one caption, two icons
         assert_eq!(idx.captions(), ["red heart", "sun"]);
@@ -390,12 +395,7 @@ mod tests {
         let model = model_with(&tgz(SET), &root);
         // replace the local tarball with other bytes: the checksum fails
         std::fs::write(root.join("icons/iconify-json-toy-1.0.0.tgz"), tgz("{}")).unwrap();
-        let loc = RetrievalLocations {
-            index_dir: Some(root.join("index")),
-            cache: None,
-            icons_dir: Some(root.join("icons")),
-            offline: true,
-        };
+        let loc = offline_locations(&root);
         let e = install(&model, &loc, false, "", &mut toy_embed).unwrap_err();
         assert!(e.to_string().contains("sha256"), "{e}");
         // no tarball and downloads off: unavailable, not a panic or a hang

@@ -126,40 +126,36 @@ pub enum SceneError {
 }
 
 impl Shape {
-    /// A closed, filled cubic path. `points.len()` must be a positive multiple of 3.
-    pub fn closed_cubic(points: Vec<Point>, fill: Rgba) -> Result<Self, SceneError> {
+    /// The shape with these parts, if it is valid.
+    fn checked(
+        kind: ShapeKind,
+        points: Vec<Point>,
+        fill: Option<Rgba>,
+        stroke: Option<Stroke>,
+    ) -> Result<Self, SceneError> {
         let s = Shape {
-            kind: ShapeKind::ClosedCubic,
+            kind,
             points,
-            fill: Some(fill),
-            stroke: None,
+            fill,
+            stroke,
         };
         s.validate(0)?;
         Ok(s)
+    }
+
+    /// A closed, filled cubic path. `points.len()` must be a positive multiple of 3.
+    pub fn closed_cubic(points: Vec<Point>, fill: Rgba) -> Result<Self, SceneError> {
+        Self::checked(ShapeKind::ClosedCubic, points, Some(fill), None)
     }
 
     /// An open, stroked cubic path. `points.len()` must be `3n + 1` with `n >= 1`.
     pub fn open_cubic(points: Vec<Point>, stroke: Stroke) -> Result<Self, SceneError> {
-        let s = Shape {
-            kind: ShapeKind::OpenCubic,
-            points,
-            fill: None,
-            stroke: Some(stroke),
-        };
-        s.validate(0)?;
-        Ok(s)
+        Self::checked(ShapeKind::OpenCubic, points, None, Some(stroke))
     }
 
     /// A closed, filled polygon with at least 3 vertices.
     pub fn polygon(points: Vec<Point>, fill: Rgba) -> Result<Self, SceneError> {
-        let s = Shape {
-            kind: ShapeKind::Polygon,
-            points,
-            fill: Some(fill),
-            stroke: None,
-        };
-        s.validate(0)?;
-        Ok(s)
+        Self::checked(ShapeKind::Polygon, points, Some(fill), None)
     }
 
     /// An axis-aligned square (pixel-art cell) as a 4-gon.

@@ -473,11 +473,7 @@ mod tests {
             z.iter().zip(&dz.data).map(|(a, b)| a * *b as f64).sum()
         };
         for i in (0..im.data.len()).step_by(5) {
-            let h = 1e-3;
-            let (mut p, mut m) = (im.clone(), im.clone());
-            p.data[i] += h;
-            m.data[i] -= h;
-            let fd = (f(&p) - f(&m)) / (2.0 * h as f64);
+            let fd = crate::image::central_difference(&im, i, 1e-3, f);
             assert!((fd - g[i] as f64).abs() < 1e-3, "i={i} fd={fd} an={}", g[i]);
         }
     }

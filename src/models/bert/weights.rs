@@ -47,15 +47,20 @@ pub struct MiniLmLocations {
     pub offline: bool,
 }
 
+/// The environment variable `key` as a path, if it is set and not empty.
+pub(crate) fn env_path(key: &str) -> Option<PathBuf> {
+    std::env::var_os(key)
+        .filter(|v| !v.is_empty())
+        .map(PathBuf::from)
+}
+
 impl MiniLmLocations {
     /// From `VF_MINILM_DIR`, `XDG_CACHE_HOME` / `HOME` and `VF_OFFLINE`.
     pub fn from_env() -> Self {
-        let nonempty = |k: &str| std::env::var_os(k).filter(|v| !v.is_empty());
-        let base = nonempty("XDG_CACHE_HOME")
-            .map(PathBuf::from)
-            .or_else(|| nonempty("HOME").map(|h| PathBuf::from(h).join(".cache")));
+        let base =
+            env_path("XDG_CACHE_HOME").or_else(|| env_path("HOME").map(|h| h.join(".cache")));
         Self {
-            env: nonempty(ENV_DIR).map(PathBuf::from),
+            env: env_path(ENV_DIR),
             cache: base.map(|b| b.join("vectorfusion").join(CACHE_NAME)),
             offline: std::env::var(ENV_OFFLINE)
                 .is_ok_and(|v| matches!(v.to_ascii_lowercase().as_str(), "1" | "true" | "yes")),

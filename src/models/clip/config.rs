@@ -6,6 +6,7 @@
 //! the same default as `transformers`.
 
 use super::ClipError;
+use crate::models::serde_defaults::{id, num};
 use serde::Deserialize;
 use std::path::Path;
 
@@ -24,50 +25,8 @@ pub enum Activation {
     GeluTanh,
 }
 
-fn d_text_vocab() -> usize {
-    49408
-}
-fn d_512() -> usize {
-    512
-}
-fn d_2048() -> usize {
-    2048
-}
-fn d_12() -> usize {
-    12
-}
-fn d_8() -> usize {
-    8
-}
-fn d_77() -> usize {
-    77
-}
 fn d_eps() -> f64 {
     1e-5
-}
-fn d_bos() -> u32 {
-    49406
-}
-fn d_eos() -> u32 {
-    49407
-}
-fn d_pad() -> u32 {
-    1
-}
-fn d_768() -> usize {
-    768
-}
-fn d_3072() -> usize {
-    3072
-}
-fn d_3() -> usize {
-    3
-}
-fn d_224() -> usize {
-    224
-}
-fn d_32() -> usize {
-    32
 }
 fn d_logit_scale() -> f64 {
     2.6592
@@ -76,29 +35,29 @@ fn d_logit_scale() -> f64 {
 /// `CLIPTextConfig`.
 #[derive(Debug, Clone, Deserialize, PartialEq)]
 pub struct ClipTextConfig {
-    #[serde(default = "d_text_vocab")]
+    #[serde(default = "num::<49408>")]
     pub vocab_size: usize,
-    #[serde(default = "d_512")]
+    #[serde(default = "num::<512>")]
     pub hidden_size: usize,
-    #[serde(default = "d_2048")]
+    #[serde(default = "num::<2048>")]
     pub intermediate_size: usize,
-    #[serde(default = "d_512")]
+    #[serde(default = "num::<512>")]
     pub projection_dim: usize,
-    #[serde(default = "d_12")]
+    #[serde(default = "num::<12>")]
     pub num_hidden_layers: usize,
-    #[serde(default = "d_8")]
+    #[serde(default = "num::<8>")]
     pub num_attention_heads: usize,
-    #[serde(default = "d_77")]
+    #[serde(default = "num::<77>")]
     pub max_position_embeddings: usize,
     #[serde(default)]
     pub hidden_act: Activation,
     #[serde(default = "d_eps")]
     pub layer_norm_eps: f64,
-    #[serde(default = "d_bos")]
+    #[serde(default = "id::<49406>")]
     pub bos_token_id: u32,
-    #[serde(default = "d_eos")]
+    #[serde(default = "id::<49407>")]
     pub eos_token_id: u32,
-    #[serde(default = "d_pad")]
+    #[serde(default = "id::<1>")]
     pub pad_token_id: u32,
 }
 
@@ -112,21 +71,21 @@ impl Default for ClipTextConfig {
 /// `CLIPVisionConfig`.
 #[derive(Debug, Clone, Deserialize, PartialEq)]
 pub struct ClipVisionConfig {
-    #[serde(default = "d_768")]
+    #[serde(default = "num::<768>")]
     pub hidden_size: usize,
-    #[serde(default = "d_3072")]
+    #[serde(default = "num::<3072>")]
     pub intermediate_size: usize,
-    #[serde(default = "d_512")]
+    #[serde(default = "num::<512>")]
     pub projection_dim: usize,
-    #[serde(default = "d_12")]
+    #[serde(default = "num::<12>")]
     pub num_hidden_layers: usize,
-    #[serde(default = "d_12")]
+    #[serde(default = "num::<12>")]
     pub num_attention_heads: usize,
-    #[serde(default = "d_3")]
+    #[serde(default = "num::<3>")]
     pub num_channels: usize,
-    #[serde(default = "d_224")]
+    #[serde(default = "num::<224>")]
     pub image_size: usize,
-    #[serde(default = "d_32")]
+    #[serde(default = "num::<32>")]
     pub patch_size: usize,
     #[serde(default)]
     pub hidden_act: Activation,
@@ -147,7 +106,7 @@ pub struct ClipConfig {
     pub text_config: ClipTextConfig,
     #[serde(default)]
     pub vision_config: ClipVisionConfig,
-    #[serde(default = "d_512")]
+    #[serde(default = "num::<512>")]
     pub projection_dim: usize,
     #[serde(default = "d_logit_scale")]
     pub logit_scale_init_value: f64,

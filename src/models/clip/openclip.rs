@@ -9,6 +9,7 @@ use super::model::ClipModel;
 use super::preprocess::{CropRounding, PreprocessConfig};
 use super::tokenizer::ClipTokenizer;
 use super::{ClipError, weight_files};
+use crate::models::serde_defaults::num;
 use candle_core::{DType, Device, Tensor};
 use candle_nn::VarBuilder;
 use serde::Deserialize;
@@ -17,48 +18,21 @@ use std::path::Path;
 
 pub const CONFIG_FILE: &str = "open_clip_config.json";
 
-fn d_77() -> usize {
-    77
-}
-fn d_vocab() -> usize {
-    49408
-}
-fn d_512() -> usize {
-    512
-}
-fn d_768() -> usize {
-    768
-}
-fn d_8() -> usize {
-    8
-}
-fn d_12() -> usize {
-    12
-}
-fn d_64() -> usize {
-    64
-}
-fn d_16() -> usize {
-    16
-}
-fn d_224() -> usize {
-    224
-}
 fn d_mlp() -> f64 {
     4.0
 }
 
 #[derive(Debug, Clone, Deserialize)]
 pub struct TextCfg {
-    #[serde(default = "d_77")]
+    #[serde(default = "num::<77>")]
     pub context_length: usize,
-    #[serde(default = "d_vocab")]
+    #[serde(default = "num::<49408>")]
     pub vocab_size: usize,
-    #[serde(default = "d_512")]
+    #[serde(default = "num::<512>")]
     pub width: usize,
-    #[serde(default = "d_8")]
+    #[serde(default = "num::<8>")]
     pub heads: usize,
-    #[serde(default = "d_12")]
+    #[serde(default = "num::<12>")]
     pub layers: usize,
     #[serde(default = "d_mlp")]
     pub mlp_ratio: f64,
@@ -70,17 +44,17 @@ pub struct TextCfg {
 
 #[derive(Debug, Clone, Deserialize)]
 pub struct VisionCfg {
-    #[serde(default = "d_12")]
+    #[serde(default = "num::<12>")]
     pub layers: usize,
-    #[serde(default = "d_768")]
+    #[serde(default = "num::<768>")]
     pub width: usize,
-    #[serde(default = "d_64")]
+    #[serde(default = "num::<64>")]
     pub head_width: usize,
     #[serde(default = "d_mlp")]
     pub mlp_ratio: f64,
-    #[serde(default = "d_16")]
+    #[serde(default = "num::<16>")]
     pub patch_size: usize,
-    #[serde(default = "d_224")]
+    #[serde(default = "num::<224>")]
     pub image_size: usize,
     #[serde(default)]
     pub ls_init_value: Option<f64>,

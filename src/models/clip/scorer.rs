@@ -114,17 +114,15 @@ impl ClipScorer {
 
     /// Unit-norm text embeddings, one per caption.
     pub fn text_embeddings(&self, texts: &[&str]) -> Result<Vec<Vec<f32>>, ClipError> {
-        let mut out = Vec::with_capacity(texts.len());
-        for chunk in texts.chunks(BATCH) {
+        embed_in_batches(texts, |chunk| {
             let len = self.tokenizer.max_length;
             let ids: Vec<u32> = chunk
                 .iter()
                 .flat_map(|t| self.tokenizer.encode_padded(t))
                 .collect();
             let ids = Tensor::from_vec(ids, (chunk.len(), len), &self.device)?;
-            out.extend(self.model.text_embeddings(&ids)?.to_vec2::<f32>()?);
-        }
-        Ok(out)
+            Ok(self.model.text_embeddings(&ids)?)
+        })
     }
 
     /// Preprocessed `(n, 3, s, s)` pixel tensor.
@@ -143,36 +141,9 @@ impl ClipScorer {
 
     /// Unit-norm image embeddings, one per image (RGBA composited over white).
     pub fn image_embeddings(&self, images: &[Image]) -> Result<Vec<Vec<f32>>, ClipError> {
-        let mut out = Vec::with_capacity(images.len());
-        for chunk in images.chunks(BATCH) {
-            let px = self.pixel_values(chunk)?;
-            out.extend(self.model.image_embeddings(&px)?.to_vec2::<f32>()?);
-        }
-        Ok(out)
-    }
-
-    /// Cosine similarity of every image with the caption (in [-1, 1]; the paper reports ×100).
-    pub fn score_images(&self, images: &[Image], caption: &str) -> Result<Vec<f32>, ClipError> {
-        if images.is_empty() {
-            return Ok(Vec::new());
-        }
-        let t = self.text_embeddings(&[caption])?;
-        let t = t
-            .first()
-            .ok_or_else(|| ClipError::Input("no text embedding".into()))?;
-        Ok(self
-            .image_embeddings(images)?
-            .iter()
-            .map(|i| dot(i, t))
-            .collect())
-    }
-
-    /// Index and score of the best image for the caption (rejection sampling), plus all scores.
-    pub fn best_of(&self, images: &[Image], caption: &str) -> Result<(usize, Vec<f32>), ClipError> {
-        let scores = self.score_images(images, caption)?;
-        let best =
-            argmax(&scores).ok_or_else(|| ClipError::Input("no images to choose from".into()))?;
-        Ok((best, scores))
+        embed_in_batches(images, |chunk| {
+            Ok(self.model.image_embeddings(&self.pixel_values(chunk)?)?)
+        })
     }
 }
 
@@ -272,6 +243,19 @@ fn resolve_hub(repo: &str, allow_download: bool) -> Result<PathBuf, ClipError> {
              or pass a local directory"
         ),
     })
+}
+
+/// `embed` over `items` in batches of [`BATCH`]: the rows of its `[batch, d]` outputs, in order
+/// (how both scorers embed captions and images).
+pub(crate) fn embed_in_batches<T, E: From<candle_core::Error>>(
+    items: &[T],
+    embed: impl Fn(&[T]) -> Result<Tensor, E>,
+) -> Result<Vec<Vec<f32>>, E> {
+    let mut out = Vec::with_capacity(items.len());
+    for chunk in items.chunks(BATCH) {
+        out.extend(embed(chunk)?.to_vec2::<f32>()?);
+    }
+    Ok(out)
 }
 
 /// Index of the largest score (the first one on ties), `None` when empty.

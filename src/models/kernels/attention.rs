@@ -6,9 +6,9 @@
 //! sums, `O = P V`, then each output row divided by its sum. The full `n × m` score matrix (1 GiB
 //! per layer for the UNet at 512 px with candle) never exists.
 
-use super::SyncPtr;
 use super::math;
-use gemm::{Parallelism, gemm};
+use super::{SyncPtr, gemm_strided};
+use gemm::Parallelism;
 use rayon::prelude::*;
 use std::cell::RefCell;
 
@@ -110,25 +110,13 @@ pub fn attention(
             // `s` holds rows × m values; this task alone writes output rows q0..q0+rows, columns
             // h·d..(h+1)·d of image bi.
             unsafe {
-                gemm(
-                    rows,
-                    m,
-                    d,
-                    s.as_mut_ptr(),
-                    1,
-                    m as isize,
+                gemm_strided(
+                    (rows, m, d),
+                    (s.as_mut_ptr(), m),
                     false,
-                    q.as_ptr().add(qoff),
-                    1,
-                    c as isize,
-                    k.as_ptr().add(kvoff),
-                    c as isize,
-                    1,
-                    0.0,
+                    (q.as_ptr().add(qoff), c, 1),
+                    (k.as_ptr().add(kvoff), 1, c),
                     scale,
-                    false,
-                    false,
-                    false,
                     Parallelism::None,
                 );
             }
@@ -143,25 +131,13 @@ pub fn attention(
             // SAFETY: as above: this task's output window, v read inside its checked length.
             unsafe {
                 let o = dst.get().add(qoff);
-                gemm(
-                    rows,
-                    d,
-                    m,
-                    o,
-                    1,
-                    c as isize,
+                gemm_strided(
+                    (rows, d, m),
+                    (o, c),
                     false,
-                    s.as_ptr(),
-                    1,
-                    m as isize,
-                    v.as_ptr().add(kvoff),
-                    1,
-                    c as isize,
-                    0.0,
+                    (s.as_ptr(), m, 1),
+                    (v.as_ptr().add(kvoff), c, 1),
                     1.0,
-                    false,
-                    false,
-                    false,
                     Parallelism::None,
                 );
                 for (r, &iv) in inv.iter().enumerate().take(rows) {
@@ -177,7 +153,7 @@ pub fn attention(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::models::kernels::test_values;
+    use crate::models::kernels::{max_abs_diff, test_values};
 
     fn naive(g: &AttentionGeom, q: &[f32], k: &[f32], v: &[f32], scale: f32) -> Vec<f32> {
         let AttentionGeom {
@@ -238,11 +214,7 @@ mod tests {
             let v = test_values(b * m * c, 3);
             let got = attention(&g, &q, &k, &v, 0.7).unwrap();
             let want = naive(&g, &q, &k, &v, 0.7);
-            let err = got
-                .iter()
-                .zip(&want)
-                .map(|(a, b)| (a - b).abs())
-                .fold(0f32, f32::max);
+            let err = max_abs_diff(&got, &want);
             assert!(err < 1e-5, "({b},{n},{m},{c},{heads}): {err}");
         }
         assert!(AttentionGeom::new(1, 1, 1, 6, 4).is_err());

@@ -5,7 +5,8 @@
 //!
 //! Weights are PyTorch's `[out, in]`.
 
-use gemm::{Parallelism, gemm};
+use super::gemm_strided;
+use gemm::Parallelism;
 use rayon::prelude::*;
 
 /// A strided read-only matrix: element `(r, c)` is `data[r·rs + c·cs]`. Invariant (checked by
@@ -59,25 +60,13 @@ pub(crate) fn gemm_acc(
     }
     // SAFETY: the views and the output window were bounds-checked; `dst` is borrowed mutably.
     unsafe {
-        gemm(
-            m,
-            n,
-            k,
-            dst.as_mut_ptr(),
-            1,
-            dst_rs as isize,
+        gemm_strided(
+            (m, n, k),
+            (dst.as_mut_ptr(), dst_rs),
             true,
-            a.data.as_ptr(),
-            a.cs as isize,
-            a.rs as isize,
-            b.data.as_ptr(),
-            b.cs as isize,
-            b.rs as isize,
+            (a.data.as_ptr(), a.rs, a.cs),
+            (b.data.as_ptr(), b.rs, b.cs),
             1.0,
-            1.0,
-            false,
-            false,
-            false,
             threads,
         );
     }

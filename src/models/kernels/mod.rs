@@ -77,6 +77,49 @@ impl SyncPtr {
     }
 }
 
+/// One GEMM `dst (+)= beta · lhs · rhs`, the way every kernel here calls the `gemm` crate: an
+/// `m × n` output with row pitch `dst.1` (column stride 1), `lhs` (`m × k`) and `rhs` (`k × n`)
+/// as `(pointer, row stride, column stride)`; `read_dst` adds to what `dst` holds instead of
+/// overwriting it. No conjugation.
+///
+/// # Safety
+/// Every element of the three windows lies inside its buffer, and nothing else reads or writes
+/// the output window during the call.
+pub(crate) unsafe fn gemm_strided(
+    (m, n, k): (usize, usize, usize),
+    (dst, dst_rs): (*mut f32, usize),
+    read_dst: bool,
+    (lhs, lhs_rs, lhs_cs): (*const f32, usize, usize),
+    (rhs, rhs_rs, rhs_cs): (*const f32, usize, usize),
+    beta: f32,
+    threads: gemm::Parallelism,
+) {
+    // SAFETY: the caller's contract covers every access the GEMM makes.
+    unsafe {
+        gemm::gemm(
+            m,
+            n,
+            k,
+            dst,
+            1,
+            dst_rs as isize,
+            read_dst,
+            lhs,
+            lhs_cs as isize,
+            lhs_rs as isize,
+            rhs,
+            rhs_cs as isize,
+            rhs_rs as isize,
+            1.0,
+            beta,
+            false,
+            false,
+            false,
+            threads,
+        )
+    }
+}
+
 /// Deterministic values in [-1, 1) for the kernel tests (an LCG; no RNG state to share).
 #[cfg(test)]
 pub(crate) fn test_values(n: usize, seed: u64) -> Vec<f32> {
@@ -89,4 +132,14 @@ pub(crate) fn test_values(n: usize, seed: u64) -> Vec<f32> {
             ((s >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
         })
         .collect()
+}
+
+/// The largest absolute difference between two equally long value lists (the kernel tests'
+/// error measure).
+#[cfg(test)]
+pub(crate) fn max_abs_diff(a: &[f32], b: &[f32]) -> f32 {
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0f32, f32::max)
 }

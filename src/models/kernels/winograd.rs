@@ -10,10 +10,9 @@
 //! input row into even and odd samples), runs the 16 GEMMs into `[16, co, T]`, and writes its
 //! output rows with the inverse transform.
 
-use super::SyncPtr;
-use super::conv::{ConvGeom, check_len};
-use gemm::{Parallelism, gemm};
-use rayon::prelude::*;
+use super::conv::{ConvGeom, check_len, for_each_row_block};
+use super::{SyncPtr, gemm_strided};
+use gemm::Parallelism;
 use std::cell::RefCell;
 
 /// `U[ξ, co, ci] = (G g Gᵀ)[ξ]` for every `[co, ci, 3, 3]` kernel `g`, `ξ = 4·i + j`.
@@ -90,13 +89,9 @@ pub fn conv2d(
     let target = (2usize << 20) / (16 * (ci + co));
     let target = target.clamp(128, 1024);
     let rows = (target / tw).clamp(1, th.div_ceil(2).max(1));
-    let blocks = th.div_ceil(rows);
     let mut out = vec![0f32; b * co * ho * wo];
     let out_ptr = SyncPtr(out.as_mut_ptr());
-    (0..b * blocks).into_par_iter().for_each(|job| {
-        let (bi, blk) = (job / blocks, job % blocks);
-        let ty0 = blk * rows;
-        let nr = rows.min(th - ty0);
+    for_each_row_block(b, th, rows, |bi, ty0, nr| {
         let t = nr * tw;
         let xb = &x[bi * ci * h * w..(bi + 1) * ci * h * w];
         SCRATCH.with_borrow_mut(|s| {
@@ -108,25 +103,13 @@ pub fn conv2d(
                 // SAFETY: u holds 16 · co · ci values (checked by the caller), v 16 · ci · t and
                 // m 16 · co · t; each call reads/writes the ξ-th slab only.
                 unsafe {
-                    gemm(
-                        co,
-                        t,
-                        ci,
-                        s.m.as_mut_ptr().add(xi * co * t),
-                        1,
-                        t as isize,
+                    gemm_strided(
+                        (co, t, ci),
+                        (s.m.as_mut_ptr().add(xi * co * t), t),
                         false,
-                        u.as_ptr().add(xi * n),
-                        1,
-                        ci as isize,
-                        s.v.as_ptr().add(xi * ci * t),
-                        1,
-                        t as isize,
+                        (u.as_ptr().add(xi * n), ci, 1),
+                        (s.v.as_ptr().add(xi * ci * t), t, 1),
                         1.0,
-                        1.0,
-                        false,
-                        false,
-                        false,
                         Parallelism::None,
                     );
                 }

@@ -3,19 +3,17 @@
 //! `proj`, L2 norm. Text tower: the frozen MiniLM sentence embedding (mean pooled over the
 //! attention mask, L2 norm) → `text_proj` → L2 norm. Field names are the checkpoint keys.
 
-use super::ScorerError;
+use super::{ImageTextScorer, ScorerError};
 use crate::image::Image;
 use crate::image::ops::resize;
 use crate::models::bert::{BertTextEncoder, l2_normalize};
+use crate::models::clip::scorer::embed_in_batches;
 use candle_core::{DType, Device, Tensor};
 use candle_nn::{Conv2d, Conv2dConfig, GroupNorm, Linear, Module, VarBuilder};
 use std::path::Path;
 
 /// `model_type` of `scorer/config.json`.
 pub const MODEL_TYPE: &str = "vf_iconclip";
-
-/// Images and texts are embedded in chunks of this many.
-const BATCH: usize = 16;
 
 /// `scorer/config.json`.
 #[derive(Debug, Clone, PartialEq, serde::Deserialize, serde::Serialize)]
@@ -227,14 +225,6 @@ impl IconClipScorer {
         })
     }
 
-    pub fn name(&self) -> &str {
-        &self.name
-    }
-
-    pub fn image_size(&self) -> u32 {
-        self.model.config.image_size as u32
-    }
-
     /// `(n, 3, s, s)` pixels: composited over white, area-resized to `image_size`.
     pub fn pixel_values(&self, images: &[Image]) -> Result<Tensor, ScorerError> {
         let s = self.image_size();
@@ -258,26 +248,31 @@ impl IconClipScorer {
             &self.device,
         )?)
     }
+}
+
+impl ImageTextScorer for IconClipScorer {
+    fn name(&self) -> &str {
+        &self.name
+    }
+
+    fn image_size(&self) -> u32 {
+        self.model.config.image_size as u32
+    }
 
     /// Unit image embeddings, one per image.
-    pub fn image_embeddings(&self, images: &[Image]) -> Result<Vec<Vec<f32>>, ScorerError> {
-        let mut out = Vec::with_capacity(images.len());
-        for chunk in images.chunks(BATCH) {
-            let px = self.pixel_values(chunk)?;
-            out.extend(self.model.encode_image(&px)?.to_vec2::<f32>()?);
-        }
-        Ok(out)
+    fn image_embeddings(&self, images: &[Image]) -> Result<Vec<Vec<f32>>, ScorerError> {
+        embed_in_batches(images, |chunk| {
+            Ok(self.model.encode_image(&self.pixel_values(chunk)?)?)
+        })
     }
 
     /// Unit text embeddings, one per caption.
-    pub fn text_embeddings(&self, texts: &[&str]) -> Result<Vec<Vec<f32>>, ScorerError> {
-        let mut out = Vec::with_capacity(texts.len());
-        for chunk in texts.chunks(BATCH) {
+    fn text_embeddings(&self, texts: &[&str]) -> Result<Vec<Vec<f32>>, ScorerError> {
+        embed_in_batches(texts, |chunk| {
             let s = self
                 .text
                 .sentence_embeddings(chunk, self.model.config.text_max_length)?;
-            out.extend(self.model.encode_text(&s)?.to_vec2::<f32>()?);
-        }
-        Ok(out)
+            Ok(self.model.encode_text(&s)?)
+        })
     }
 }

@@ -109,21 +109,6 @@ impl ImageTextScorer for ClipScorer {
     }
 }
 
-impl ImageTextScorer for IconClipScorer {
-    fn name(&self) -> &str {
-        IconClipScorer::name(self)
-    }
-    fn image_size(&self) -> u32 {
-        IconClipScorer::image_size(self)
-    }
-    fn text_embeddings(&self, texts: &[&str]) -> Result<Vec<Vec<f32>>, ScorerError> {
-        IconClipScorer::text_embeddings(self, texts)
-    }
-    fn image_embeddings(&self, images: &[Image]) -> Result<Vec<Vec<f32>>, ScorerError> {
-        IconClipScorer::image_embeddings(self, images)
-    }
-}
-
 /// A loaded scorer of either kind.
 #[derive(Debug)]
 pub enum Scorer {

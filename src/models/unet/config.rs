@@ -2,15 +2,16 @@
 //! change the computation and that the implementation does not cover is rejected with a clear
 //! error instead of being ignored.
 
+use crate::models::serde_defaults::{num, silu, yes};
 use serde::Deserialize;
 use serde_json::Value;
 
 /// `unet/config.json` (fields that decide the architecture).
 #[derive(Debug, Clone, Deserialize)]
 pub struct UnetConfig {
-    #[serde(default = "four")]
+    #[serde(default = "num::<4>")]
     pub in_channels: usize,
-    #[serde(default = "four")]
+    #[serde(default = "num::<4>")]
     pub out_channels: usize,
     #[serde(default)]
     pub center_input_sample: bool,
@@ -23,7 +24,7 @@ pub struct UnetConfig {
     #[serde(default)]
     pub mid_block_type: Option<String>,
     pub block_out_channels: Vec<usize>,
-    #[serde(default = "two")]
+    #[serde(default = "num::<2>")]
     pub layers_per_block: usize,
     #[serde(default = "one_f")]
     pub downsample_padding: f64,
@@ -31,7 +32,7 @@ pub struct UnetConfig {
     pub mid_block_scale_factor: f64,
     #[serde(default = "silu")]
     pub act_fn: String,
-    #[serde(default = "thirty_two")]
+    #[serde(default = "num::<32>")]
     pub norm_num_groups: usize,
     #[serde(default = "norm_eps")]
     pub norm_eps: f64,
@@ -93,26 +94,11 @@ pub struct UnetConfig {
     pub class_embeddings_concat: bool,
 }
 
-fn four() -> usize {
-    4
-}
-fn two() -> usize {
-    2
-}
-fn thirty_two() -> usize {
-    32
-}
 fn one_f() -> f64 {
     1.0
 }
-fn yes() -> bool {
-    true
-}
 fn norm_eps() -> f64 {
     1e-5
-}
-fn silu() -> String {
-    "silu".into()
 }
 fn transformer_layers() -> Value {
     Value::from(1)

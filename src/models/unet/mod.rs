@@ -90,18 +90,7 @@ impl Unet {
     /// Raw model output (ε or v, as the scheduler's `prediction_type` says) for latents
     /// `[b, c, h, w]` at timestep `t`, conditioned on `context [b, seq, cross_attention_dim]`.
     pub fn forward(&self, latents: &Tensor, t: f64, context: &Tensor) -> Result<Tensor> {
-        let (b, c, h, w) = latents.dims4().map_err(|_| {
-            ModelError::InvalidInput(format!(
-                "latents must be [b, c, h, w], got {:?}",
-                latents.dims()
-            ))
-        })?;
-        if c != self.arch.in_channels {
-            return Err(ModelError::InvalidInput(format!(
-                "latents have {c} channels, the UNet expects {}",
-                self.arch.in_channels
-            )));
-        }
+        let (b, _, h, w) = super::latent_dims(latents, self.arch.in_channels, "UNet")?;
         if h == 0 || w == 0 {
             return Err(ModelError::InvalidInput(format!("latents of size {h}x{w}")));
         }

@@ -59,22 +59,16 @@ fn omitted_numbers_are_the_presets_and_explicit_ones_win() {
     assert_eq!(t.sample.unwrap().samples, 3);
     assert_eq!(t.seeds, Seeds::from_seed(9));
     // Per style: pixel art is its grid, sketch at most 16 strokes.
-    let px = text(
-        PlanRequest {
-            style: Style::PixelArt,
-            ..PlanRequest::text("a crown")
-        },
-        false,
-    );
-    assert_eq!(px.paths, 1024);
-    let sk = text(
-        PlanRequest {
-            style: Style::Sketch,
-            ..PlanRequest::text("a crown")
-        },
-        false,
-    );
-    assert_eq!(sk.paths, 16);
+    for (style, paths) in [(Style::PixelArt, 1024), (Style::Sketch, 16)] {
+        let p = text(
+            PlanRequest {
+                style,
+                ..PlanRequest::text("a crown")
+            },
+            false,
+        );
+        assert_eq!(p.paths, paths, "{style:?}");
+    }
 }
 
 #[test]

@@ -139,18 +139,8 @@ mod tests {
 
     /// White 64x64 target with a big red square and a small blue one.
     fn target() -> Image {
-        let mut im = Image::filled(64, 64, [1.0, 1.0, 1.0, 1.0]);
-        for y in 0..64u32 {
-            for x in 0..64u32 {
-                let i = 4 * (y * 64 + x) as usize;
-                if (8..40).contains(&x) && (8..40).contains(&y) {
-                    im.data[i..i + 4].copy_from_slice(&[1.0, 0.0, 0.0, 1.0]);
-                } else if (48..56).contains(&x) && (48..56).contains(&y) {
-                    im.data[i..i + 4].copy_from_slice(&[0.0, 0.0, 1.0, 1.0]);
-                }
-            }
-        }
-        im
+        let (red, blue) = ([1.0, 0.0, 0.0, 1.0], [0.0, 0.0, 1.0, 1.0]);
+        super::super::tests::white_with_rects(64, &[(8..40, 8..40, red), (48..56, 48..56, blue)])
     }
 
     #[test]

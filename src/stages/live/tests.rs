@@ -1,4 +1,23 @@
 use super::*;
+use std::ops::Range;
+
+/// A white `side × side` image with rectangles `(xs, ys, colour)` painted on it (where two
+/// overlap, the first wins): the targets of the init and tracer tests.
+pub(super) fn white_with_rects(side: u32, rects: &[(Range<u32>, Range<u32>, [f32; 4])]) -> Image {
+    let mut im = Image::filled(side, side, [1.0, 1.0, 1.0, 1.0]);
+    for y in 0..side {
+        for x in 0..side {
+            let i = 4 * (y * side + x) as usize;
+            if let Some((_, _, c)) = rects
+                .iter()
+                .find(|(xs, ys, _)| xs.contains(&x) && ys.contains(&y))
+            {
+                im.data[i..i + 4].copy_from_slice(c);
+            }
+        }
+    }
+    im
+}
 
 #[test]
 fn presets_are_valid_and_ordered_by_effort() {

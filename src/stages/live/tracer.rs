@@ -252,18 +252,8 @@ mod tests {
     use super::*;
 
     fn two_squares() -> Image {
-        let mut im = Image::filled(48, 48, [1.0, 1.0, 1.0, 1.0]);
-        for y in 0..48u32 {
-            for x in 0..48u32 {
-                let i = 4 * (y * 48 + x) as usize;
-                if (6..26).contains(&x) && (6..26).contains(&y) {
-                    im.data[i..i + 4].copy_from_slice(&[1.0, 0.0, 0.0, 1.0]);
-                } else if (30..44).contains(&x) && (28..44).contains(&y) {
-                    im.data[i..i + 4].copy_from_slice(&[0.0, 0.0, 1.0, 1.0]);
-                }
-            }
-        }
-        im
+        let (red, blue) = ([1.0, 0.0, 0.0, 1.0], [0.0, 0.0, 1.0, 1.0]);
+        super::super::tests::white_with_rects(48, &[(6..26, 6..26, red), (30..44, 28..44, blue)])
     }
 
     #[test]

@@ -1,0 +1,122 @@
+//! A finished job's output: `result.svg`, the `result.png` preview and the snapshots.
+
+use super::jobs::{job_id, load_job};
+use crate::server::AppState;
+use crate::server::error::ApiError;
+use crate::server::tenant::Caller;
+use crate::store::JobStatus;
+use axum::extract::{Extension, Path, State};
+use axum::http::header;
+use axum::response::{IntoResponse, Response};
+
+async fn finished_result(
+    state: &AppState,
+    id: &str,
+    caller: &Caller,
+) -> Result<crate::store::ResultRow, ApiError> {
+    let row = load_job(state, id, caller).await?;
+    if row.status != JobStatus::Succeeded {
+        return Err(ApiError::Conflict(format!(
+            "job {id} has no result: its status is {}",
+            row.status
+        )));
+    }
+    state
+        .store
+        .result(id)
+        .await?
+        .ok_or_else(|| ApiError::NotFound {
+            what: "result for job",
+            id: id.to_string(),
+        })
+}
+
+/// An SVG body. Opened directly in a browser it can run nothing and load nothing (the
+/// safe-output profile already keeps scripts out; the policy is the second wall), and it is
+/// never sniffed as another type.
+fn svg_response(svg: String) -> Response {
+    (
+        [
+            (header::CONTENT_TYPE, "image/svg+xml; charset=utf-8"),
+            (
+                header::CONTENT_SECURITY_POLICY,
+                "default-src 'none'; style-src 'unsafe-inline'",
+            ),
+            (header::X_CONTENT_TYPE_OPTIONS, "nosniff"),
+        ],
+        svg,
+    )
+        .into_response()
+}
+
+pub(in crate::server) async fn result_svg(
+    State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
+    Path(raw): Path<String>,
+) -> Result<Response, ApiError> {
+    let id = job_id(&raw)?;
+    Ok(svg_response(
+        finished_result(&state, &id, &caller).await?.svg,
+    ))
+}
+
+/// Longest side of PNG previews.
+const PREVIEW_MAX_SIDE: f32 = 1024.0;
+
+/// Renders `svg` to PNG with resvg, scaled so the longest side is at most [`PREVIEW_MAX_SIDE`].
+pub fn render_png(svg: &str) -> Result<Vec<u8>, String> {
+    use resvg::tiny_skia;
+    let tree = crate::svg::parse_usvg(svg)?;
+    let size = tree.size();
+    let scale = (PREVIEW_MAX_SIDE / size.width().max(size.height())).min(1.0);
+    let w = (size.width() * scale).ceil().max(1.0) as u32;
+    let h = (size.height() * scale).ceil().max(1.0) as u32;
+    let mut pixmap =
+        tiny_skia::Pixmap::new(w, h).ok_or_else(|| format!("cannot allocate {w}x{h}"))?;
+    resvg::render(
+        &tree,
+        tiny_skia::Transform::from_scale(scale, scale),
+        &mut pixmap.as_mut(),
+    );
+    pixmap.encode_png().map_err(|e| e.to_string())
+}
+
+pub(in crate::server) async fn result_png(
+    State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
+    Path(raw): Path<String>,
+) -> Result<Response, ApiError> {
+    let id = job_id(&raw)?;
+    let result = finished_result(&state, &id, &caller).await?;
+    let png = tokio::task::spawn_blocking(move || render_png(&result.svg))
+        .await
+        .map_err(|e| ApiError::Internal(e.to_string()))?
+        .map_err(|e| ApiError::Internal(format!("rendering the preview failed: {e}")))?;
+    Ok(([(header::CONTENT_TYPE, "image/png")], png).into_response())
+}
+
+pub(in crate::server) async fn snapshot(
+    State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
+    Path((raw, file)): Path<(String, String)>,
+) -> Result<Response, ApiError> {
+    let id = job_id(&raw)?;
+    let n = file
+        .strip_suffix(".svg")
+        .and_then(|s| s.parse::<i64>().ok())
+        .filter(|n| *n >= 1)
+        .ok_or_else(|| ApiError::NotFound {
+            what: "snapshot",
+            id: format!("{id}/{file} (snapshots are named N.svg, N = 1, 2, ...)"),
+        })?;
+    load_job(&state, &id, &caller).await?;
+    let snap = state
+        .store
+        .snapshot(&id, n)
+        .await?
+        .ok_or_else(|| ApiError::NotFound {
+            what: "snapshot",
+            id: format!("{id}/{n} (it may have been pruned)"),
+        })?;
+    Ok(svg_response(snap.svg))
+}
