@@ -19,7 +19,7 @@ impl BenchServer {
         cfg.server.max_queue_depth = 1_000_000;
         cfg.queue.workers = 2;
         cfg.queue.poll_interval_ms = 20;
-        let listener = tokio::net::TcpListener::bind("127.0.0.1:0")
+        let listener = vectorfusion::server::listen::bind("127.0.0.1:0")
             .await
             .expect("bind");
         let addr: SocketAddr = listener.local_addr().expect("addr");

@@ -116,7 +116,7 @@ pub fn run(args: NodeArgs, bind: Option<SocketAddr>, role: Role) -> Result<(), C
         .build()
         .map_err(|e| CliError::Other(e.into()))?;
     let result = rt.block_on(async move {
-        let listener = tokio::net::TcpListener::bind(&cfg.server.bind)
+        let listener = crate::server::listen::bind(&cfg.server.bind)
             .await
             .map_err(|e| CliError::Usage(format!("cannot listen on {}: {e}", cfg.server.bind)))?;
         crate::server::run_node(cfg, executor, listener, shutdown_signal(), role)

@@ -15,6 +15,35 @@ use tokio::net::TcpListener;
 use tokio::sync::Semaphore;
 use tracing::{debug, warn};
 
+/// Pending connections the kernel queues for `accept` (the listen backlog). Tokio's
+/// `TcpListener::bind` asks for 128, as the standard library does: a burst of new connections
+/// while the accept loop is busy then overflows it, and each dropped SYN costs its client a
+/// one-second retransmit. (The kernel caps it at `net.core.somaxconn`.)
+pub const LISTEN_BACKLOG: u32 = 4096;
+
+/// Binds the service's listening socket on `addr` with [`LISTEN_BACKLOG`].
+pub async fn bind(addr: &str) -> std::io::Result<TcpListener> {
+    let mut last = None;
+    for a in tokio::net::lookup_host(addr).await? {
+        let socket = if a.is_ipv4() {
+            tokio::net::TcpSocket::new_v4()?
+        } else {
+            tokio::net::TcpSocket::new_v6()?
+        };
+        socket.set_reuseaddr(true)?;
+        match socket.bind(a).and_then(|()| socket.listen(LISTEN_BACKLOG)) {
+            Ok(l) => return Ok(l),
+            Err(e) => last = Some(e),
+        }
+    }
+    Err(last.unwrap_or_else(|| {
+        std::io::Error::new(
+            std::io::ErrorKind::InvalidInput,
+            "address resolved to nothing",
+        )
+    }))
+}
+
 /// Per-connection limits, from `[server]`.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct ConnLimits {

@@ -7,7 +7,7 @@
 //! (they checkpoint and return to the queue) and waits for the workers.
 
 pub mod error;
-mod listen;
+pub mod listen;
 mod page;
 mod routes;
 mod sse;
