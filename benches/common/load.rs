@@ -32,7 +32,9 @@ impl BenchServer {
                 let _ = rx.await;
             },
         ));
-        while tokio::net::TcpStream::connect(addr).await.is_err() {
+        // The socket accepts connections before the server has opened its database (migrations,
+        // pools): wait until it answers, so the measured requests do not queue behind start-up.
+        while crate::http::get(addr, "/readyz").await.status != 200 {
             tokio::time::sleep(Duration::from_millis(20)).await;
         }
         BenchServer { addr, stop, task }
