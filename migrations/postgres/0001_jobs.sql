@@ -111,29 +111,7 @@ CREATE TRIGGER jobs_finish_drops_upload AFTER UPDATE OF status ON jobs
 FOR EACH ROW WHEN (NEW.status IN ('succeeded', 'failed', 'cancelled'))
 EXECUTE FUNCTION jobs_finish_drops_upload();
 
--- Wake-up hints (LISTEN/NOTIFY; polling stays the truth): `vf_job` (payload: the job id) when
--- what a job's event stream shows changes. (`vf_queue`, "a job became claimable", is sent by the
--- store itself, coalesced, outside the submit's transaction: a NOTIFY holds a database-wide lock
--- through its transaction's commit flush, which would put every submit in single file.)
-CREATE FUNCTION jobs_notify() RETURNS trigger LANGUAGE plpgsql AS $$
-BEGIN
-    IF OLD.status IS DISTINCT FROM NEW.status
-       OR OLD.step IS DISTINCT FROM NEW.step
-       OR OLD.stage IS DISTINCT FROM NEW.stage
-       OR OLD.cancel_requested IS DISTINCT FROM NEW.cancel_requested THEN
-        PERFORM pg_notify('vf_job', NEW.id);
-    END IF;
-    RETURN NULL;
-END $$;
-
-CREATE TRIGGER jobs_notify AFTER UPDATE ON jobs
-FOR EACH ROW EXECUTE FUNCTION jobs_notify();
-
-CREATE FUNCTION snapshots_notify() RETURNS trigger LANGUAGE plpgsql AS $$
-BEGIN
-    PERFORM pg_notify('vf_job', NEW.job_id);
-    RETURN NULL;
-END $$;
-
-CREATE TRIGGER snapshots_notify AFTER INSERT ON snapshots
-FOR EACH ROW EXECUTE FUNCTION snapshots_notify();
+-- No NOTIFY in triggers: a NOTIFY holds a database-wide lock through its transaction's commit
+-- flush, which puts every committing transaction that sends one in single file. The store sends
+-- its wake-up hints (`vf_queue`, `vf_job`) itself, after the write has committed
+-- (`src/store/backend.rs`, `hints`).

@@ -1,4 +1,4 @@
-//! PostgreSQL wake-ups across nodes: the triggers of `migrations/postgres/0001_jobs.sql` NOTIFY
+//! PostgreSQL wake-ups across nodes: the store of every node NOTIFYs (`store::backend::Hints`)
 //! `vf_queue` when a job becomes claimable and `vf_job` (payload: the job id) when what its event
 //! stream shows changes. This task LISTENs and turns them into local wake-ups: idle workers try
 //! a claim, the job's event streams re-read it from the database.

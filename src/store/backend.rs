@@ -97,8 +97,8 @@ pub(super) struct Pools {
     pub pool: AnyPool,
     pub writer: AnyPool,
     pub lease_writer: AnyPool,
-    /// PostgreSQL: wakes the task that sends `vf_queue` (see [`queue_hints`]).
-    pub queue_hint: Option<Arc<Notify>>,
+    /// PostgreSQL: the wake-up hints sent after commits (see [`Hints`]).
+    pub hints: Option<Hints>,
 }
 
 /// Opens `loc` and runs its backend's migrations.
@@ -141,12 +141,12 @@ pub(super) async fn connect(loc: &DbLocation, max_connections: u32) -> Result<Po
             // lose the last fraction of a second of them, which the lease fencing makes safe
             // (a lost claim or heartbeat only ends that attempt early; see docs/SERVICE.md).
             let lease_writer = open(true).await?;
-            let queue_hint = queue_hints(lease_writer.clone());
+            let hints = Hints::start(lease_writer.clone());
             Ok(Pools {
                 writer: pool.clone(),
                 pool,
                 lease_writer,
-                queue_hint: Some(queue_hint),
+                hints: Some(hints),
             })
         }
     }
@@ -196,35 +196,88 @@ async fn connect_sqlite(path: &Path, max_connections: u32) -> Result<Pools, Stor
         pool,
         lease_writer: writer.clone(),
         writer,
-        queue_hint: None,
+        hints: None,
     })
 }
 
-/// PostgreSQL: a task that sends `NOTIFY vf_queue` (idle workers on every node try a claim)
-/// after the store queued a job, at most one per 20 ms however many jobs were queued. It runs
-/// on the asynchronous-commit pool, outside the submit's transaction, and ends with the pool.
-fn queue_hints(pool: AnyPool) -> Arc<Notify> {
-    let hint = Arc::new(Notify::new());
-    let wait = hint.clone();
-    tokio::spawn(async move {
-        loop {
-            wait.notified().await;
-            if pool.is_closed() {
-                return;
-            }
-            if let Err(e) = sqlx::query("SELECT pg_notify('vf_queue', '')")
-                .execute(&pool)
-                .await
-            {
-                if pool.is_closed() {
+/// PostgreSQL wake-up hints, sent after the write they announce has committed, on the
+/// asynchronous-commit pool (a NOTIFY inside a durable commit would hold a database-wide lock
+/// through its flush): `vf_queue` (a job became claimable; idle workers on every node try a
+/// claim), at most one per 20 ms however many jobs were queued, and `vf_job` with a job id (its
+/// event streams re-read it), at most one per job per 20 ms. Both are hints: workers poll and event
+/// streams re-read on a timer whatever happens. The task ends with the pool.
+#[derive(Clone, Debug)]
+pub(super) struct Hints {
+    queue: Arc<Notify>,
+    jobs: tokio::sync::mpsc::Sender<String>,
+}
+
+impl Hints {
+    fn start(pool: AnyPool) -> Hints {
+        let queue = Arc::new(Notify::new());
+        let wait = queue.clone();
+        let p = pool.clone();
+        tokio::spawn(async move {
+            loop {
+                wait.notified().await;
+                if p.is_closed() || !notify(&p, "vf_queue", "").await {
                     return;
                 }
-                tracing::debug!(error = %e, "vf_queue notification failed (workers still poll)");
+                tokio::time::sleep(Duration::from_millis(20)).await;
             }
-            tokio::time::sleep(Duration::from_millis(20)).await;
+        });
+        // Bounded: when the database is slower than the hints, the newest are dropped (the
+        // streams' timers cover them).
+        let (jobs, mut rx) = tokio::sync::mpsc::channel::<String>(1024);
+        tokio::spawn(async move {
+            let mut batch = std::collections::BTreeSet::new();
+            while let Some(id) = rx.recv().await {
+                batch.insert(id);
+                tokio::time::sleep(Duration::from_millis(20)).await;
+                while let Ok(id) = rx.try_recv() {
+                    batch.insert(id);
+                }
+                for id in std::mem::take(&mut batch) {
+                    if pool.is_closed() || !notify(&pool, "vf_job", &id).await {
+                        return;
+                    }
+                }
+            }
+        });
+        Hints { queue, jobs }
+    }
+
+    pub(super) fn queued(&self) {
+        self.queue.notify_one();
+    }
+
+    pub(super) fn job(&self, id: &str) {
+        let _ = self.jobs.try_send(id.to_string());
+    }
+
+    /// Lets the queue task see the closed pool and end.
+    pub(super) fn close(&self) {
+        self.queue.notify_one();
+    }
+}
+
+/// `pg_notify(channel, payload)`; `false` once the pool is closed.
+async fn notify(pool: &AnyPool, channel: &str, payload: &str) -> bool {
+    match sqlx::query("SELECT pg_notify($1, $2)")
+        .bind(channel)
+        .bind(payload)
+        .execute(pool)
+        .await
+    {
+        Ok(_) => true,
+        Err(e) => {
+            if pool.is_closed() {
+                return false;
+            }
+            tracing::debug!(error = %e, channel, "notification failed (a hint; polling covers it)");
+            true
         }
-    });
-    hint
+    }
 }
 
 /// `sqlite:///absolute/path?mode=rwc`, the path percent-encoded (the driver decodes it).

@@ -11,6 +11,7 @@ impl Store {
             .fetch_all(&self.writer)
             .await?;
         for row in &rows {
+            self.hint_job(&row.id);
             sqlx::query(sql!(self, "mark_lost_attempts.sql"))
                 .bind(&row.id)
                 .bind(i64::MAX)
@@ -36,6 +37,9 @@ impl Store {
             .bind(lease_ms)
             .fetch_optional(&self.lease_writer)
             .await?;
+        if let Some(row) = &row {
+            self.hint_job(&row.id);
+        }
         Ok(row.map(|row| {
             let lease = Lease {
                 job_id: row.id.clone(),
@@ -88,7 +92,11 @@ impl Store {
             .bind(now)
             .execute(&self.lease_writer)
             .await?;
-        Ok(r.rows_affected() == 1)
+        let held = r.rows_affected() == 1;
+        if held {
+            self.hint_job(&lease.job_id);
+        }
+        Ok(held)
     }
 
     /// Stores the executor's resumable state; `false` if the lease is gone.
@@ -139,6 +147,9 @@ impl Store {
                 .execute(&self.lease_writer)
                 .await?;
         }
+        if n.is_some() {
+            self.hint_job(&lease.job_id);
+        }
         Ok(n)
     }
 
@@ -175,6 +186,7 @@ impl Store {
         self.finish_attempt(&mut tx, lease, AttemptOutcome::Succeeded, None, now)
             .await?;
         tx.commit().await?;
+        self.hint_job(&lease.job_id);
         Ok(true)
     }
 
@@ -208,8 +220,11 @@ impl Store {
                 .await?;
         }
         tx.commit().await?;
-        if row.is_some() && retry_at.is_some() {
-            self.hint_queued();
+        if row.is_some() {
+            self.hint_job(&lease.job_id);
+            if retry_at.is_some() {
+                self.hint_queued();
+            }
         }
         Ok(row)
     }
@@ -260,8 +275,11 @@ impl Store {
                 .await?;
         }
         tx.commit().await?;
-        if row.is_some() && outcome == AttemptOutcome::Interrupted {
-            self.hint_queued();
+        if row.is_some() {
+            self.hint_job(&lease.job_id);
+            if outcome == AttemptOutcome::Interrupted {
+                self.hint_queued();
+            }
         }
         Ok(row)
     }

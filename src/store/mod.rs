@@ -257,7 +257,7 @@ pub struct Store {
     pool: AnyPool,
     writer: AnyPool,
     lease_writer: AnyPool,
-    queue_hint: Option<std::sync::Arc<tokio::sync::Notify>>,
+    hints: Option<backend::Hints>,
     backend: Backend,
 }
 
@@ -274,15 +274,23 @@ impl Store {
             pool: pools.pool,
             writer: pools.writer,
             lease_writer: pools.lease_writer,
-            queue_hint: pools.queue_hint,
+            hints: pools.hints,
             backend: loc.backend(),
         })
     }
 
     /// A job became claimable: tell idle workers on other nodes (PostgreSQL; coalesced).
     fn hint_queued(&self) {
-        if let Some(h) = &self.queue_hint {
-            h.notify_one();
+        if let Some(h) = &self.hints {
+            h.queued();
+        }
+    }
+
+    /// What job `id`'s event stream shows changed: tell its streams on other nodes
+    /// (PostgreSQL; coalesced).
+    fn hint_job(&self, id: &str) {
+        if let Some(h) = &self.hints {
+            h.job(id);
         }
     }
 
@@ -314,8 +322,8 @@ impl Store {
         self.pool.close().await;
         self.writer.close().await;
         self.lease_writer.close().await;
-        if let Some(h) = &self.queue_hint {
-            h.notify_one(); // lets the hint task see the closed pool and end
+        if let Some(h) = &self.hints {
+            h.close();
         }
     }
 
@@ -496,11 +504,15 @@ impl Store {
 
     /// Cancels a queued job at once or flags a running one. `None` if the id is unknown.
     pub async fn request_cancel(&self, id: &str, now: i64) -> Result<Option<JobRow>, StoreError> {
-        Ok(sqlx::query_as(sql!(self, "request_cancel.sql"))
+        let row: Option<JobRow> = sqlx::query_as(sql!(self, "request_cancel.sql"))
             .bind(id)
             .bind(now)
             .fetch_optional(&self.writer)
-            .await?)
+            .await?;
+        if row.is_some() {
+            self.hint_job(id);
+        }
+        Ok(row)
     }
 
     pub async fn attempts(&self, job_id: &str) -> Result<Vec<AttemptRow>, StoreError> {
