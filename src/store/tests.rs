@@ -574,6 +574,49 @@ async fn cancel_and_complete_race_ends_each_job_once(b: Backend) {
     }
 }
 
+async fn a_reclaimed_job_carries_its_checkpoint_to_the_next_worker(b: Backend) {
+    let Some((_d, _loc, store)) = temp_store(b, 2).await else {
+        return;
+    };
+    let job = store.insert_job(&new_job(0), 0).await.unwrap().0;
+    let (_, a) = store.claim("a", 10, 1000).await.unwrap().unwrap();
+    assert!(
+        store
+            .save_checkpoint(&a, r#"{"step":4}"#, 20)
+            .await
+            .unwrap()
+    );
+    // a dies; b reclaims the job after the lease and sees a's checkpoint
+    let (row, lease_b) = store.claim("b", 2000, 1000).await.unwrap().unwrap();
+    assert_eq!(row.id, job.id);
+    assert_eq!(row.checkpoint.as_deref(), Some(r#"{"step":4}"#));
+    // a's late checkpoint is refused and does not overwrite b's
+    assert!(
+        store
+            .save_checkpoint(&lease_b, r#"{"step":8}"#, 2100)
+            .await
+            .unwrap()
+    );
+    assert!(
+        !store
+            .save_checkpoint(&a, r#"{"step":5}"#, 2200)
+            .await
+            .unwrap()
+    );
+    // a graceful hand-back keeps the checkpoint for the next claim too
+    assert!(store.release(&lease_b, 2300).await.unwrap().is_some());
+    let (row, _) = store.claim("c", 2400, 1000).await.unwrap().unwrap();
+    assert_eq!(row.checkpoint.as_deref(), Some(r#"{"step":8}"#));
+    let outcomes: Vec<String> = store
+        .attempts(&job.id)
+        .await
+        .unwrap()
+        .into_iter()
+        .map(|a| a.outcome)
+        .collect();
+    assert_eq!(outcomes, vec!["lost", "interrupted", "running"]);
+}
+
 conformance!(
     status_check_constraint_and_sqlite_wal,
     idempotency_key_returns_same_job,
@@ -590,4 +633,5 @@ conformance!(
     a_full_queue_refuses_the_insert_itself,
     concurrent_submits_never_overshoot_a_full_queue,
     cancel_and_complete_race_ends_each_job_once,
+    a_reclaimed_job_carries_its_checkpoint_to_the_next_worker,
 );
