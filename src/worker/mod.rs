@@ -287,10 +287,22 @@ fn run_job(s: &Shared, row: JobRow, lease: Lease) {
             return;
         }
     };
-    if let Err(msg) = upload::attach(&s.store, &s.runtime, &job_id, &mut spec) {
-        error!("{msg}");
-        finish_failed(s, &lease, "invalid_spec", &msg, None);
-        return;
+    match upload::attach(&s.store, &s.runtime, &job_id, &mut spec) {
+        Ok(()) => {}
+        Err(upload::AttachError::Store(msg)) => {
+            // A database hiccup (more likely with a networked PostgreSQL): another attempt may
+            // read it, with the same backoff as a transient pipeline error.
+            let retry_at = (lease.attempt < s.settings.max_attempts as i64)
+                .then(|| now_ms() + s.settings.backoff(lease.attempt).as_millis() as i64);
+            warn!(retry = retry_at.is_some(), "{msg}");
+            finish_failed(s, &lease, "transient", &msg, retry_at);
+            return;
+        }
+        Err(upload::AttachError::Invalid(msg)) => {
+            error!("{msg}");
+            finish_failed(s, &lease, "invalid_spec", &msg, None);
+            return;
+        }
     }
     let resume = row
         .checkpoint

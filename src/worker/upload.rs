@@ -2,9 +2,18 @@
 //! "" markers where the image and the starting SVG were.
 
 use crate::pipeline::JobSpec;
-use crate::store::Store;
+use crate::store::{Store, StoreError};
 use base64::Engine as _;
 use tokio::runtime::Handle;
+
+/// Why a claimed job's upload could not be put back.
+#[derive(Debug, PartialEq)]
+pub(super) enum AttachError {
+    /// The database could not be read (a connection lost, a busy lock): worth another attempt.
+    Store(String),
+    /// The upload is gone or malformed: no attempt will do better.
+    Invalid(String),
+}
 
 /// Puts the stored upload back into `spec`. A spec without markers is left as it is (a job
 /// stored before uploads had their own table carries its upload inline). Errors name what is
@@ -14,7 +23,42 @@ pub(super) fn attach(
     runtime: &Handle,
     job_id: &str,
     spec: &mut JobSpec,
-) -> Result<(), String> {
+) -> Result<(), AttachError> {
+    attach_inner(store, runtime, job_id, spec).map_err(|e| e.into_attach())
+}
+
+/// The reasons inside [`attach`], before they are sorted into retryable or not.
+enum Failure {
+    Store(StoreError),
+    Invalid(String),
+}
+
+impl Failure {
+    fn into_attach(self) -> AttachError {
+        match self {
+            Failure::Store(e @ StoreError::Db(_)) => {
+                AttachError::Store(format!("reading the job's upload failed: {e}"))
+            }
+            Failure::Store(e) => {
+                AttachError::Invalid(format!("the job's upload is unreadable: {e}"))
+            }
+            Failure::Invalid(msg) => AttachError::Invalid(msg),
+        }
+    }
+}
+
+impl From<&str> for Failure {
+    fn from(msg: &str) -> Self {
+        Failure::Invalid(msg.to_string())
+    }
+}
+
+fn attach_inner(
+    store: &Store,
+    runtime: &Handle,
+    job_id: &str,
+    spec: &mut JobSpec,
+) -> Result<(), Failure> {
     let wants_image = spec.image.as_ref().is_some_and(Vec::is_empty);
     let wants_svg = spec.svg.as_ref().is_some_and(String::is_empty);
     if !wants_image && !wants_svg {
@@ -22,17 +66,89 @@ pub(super) fn attach(
     }
     let up = runtime
         .block_on(store.upload(job_id))
-        .map_err(|e| format!("reading the job's upload failed: {e}"))?
+        .map_err(Failure::Store)?
         .ok_or("the job's upload is no longer stored")?;
     if wants_image {
         let b64 = up.image.ok_or("the job's stored upload has no image")?;
         let bytes = base64::engine::general_purpose::STANDARD
             .decode(b64.as_bytes())
-            .map_err(|e| format!("the job's stored image is not base64: {e}"))?;
+            .map_err(|e| Failure::Invalid(format!("the job's stored image is not base64: {e}")))?;
         spec.image = Some(bytes);
     }
     if wants_svg {
         spec.svg = Some(up.svg.ok_or("the job's stored upload has no SVG")?);
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::pipeline::{JobKind, Method, Preset, Style};
+    use crate::store::{NewJob, NewUpload};
+
+    fn marked_spec() -> JobSpec {
+        JobSpec {
+            kind: JobKind::Vectorize,
+            caption: None,
+            image: Some(Vec::new()), // the marker: the image is in `uploads`
+            svg: None,
+            style: Style::Iconography,
+            method: Method::SdLiveSds,
+            paths: 4,
+            steps: 2,
+            seed: 1,
+            samples: 1,
+            preset: Preset::Balanced,
+            priority: 0,
+            retrieval: false,
+            plan: None,
+        }
+    }
+
+    #[test]
+    fn a_database_error_is_retryable_a_missing_upload_is_not() {
+        let rt = tokio::runtime::Runtime::new().unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let store = rt
+            .block_on(Store::open(&dir.path().join("jobs.db"), 2))
+            .unwrap();
+        let job = |id: &str, upload| NewJob {
+            id: id.into(),
+            kind: JobKind::Vectorize,
+            spec: "{}".into(),
+            priority: 0,
+            idempotency_key: None,
+            request_hash: None,
+            max_attempts: 3,
+            max_lost_attempts: 2,
+            tenant: None,
+            upload,
+            max_queued: None,
+        };
+        let up = NewUpload {
+            image: Some("AQID".into()),
+            svg: None,
+            max_total_bytes: 1 << 20,
+            max_tenant_bytes: 0,
+        };
+        rt.block_on(store.insert_job(&job("with", Some(up)), 1))
+            .unwrap();
+        rt.block_on(store.insert_job(&job("without", None), 1))
+            .unwrap();
+
+        let mut spec = marked_spec();
+        attach(&store, rt.handle(), "with", &mut spec).unwrap();
+        assert_eq!(spec.image, Some(vec![1, 2, 3]));
+
+        let mut spec = marked_spec();
+        let err = attach(&store, rt.handle(), "without", &mut spec).unwrap_err();
+        assert!(matches!(err, AttachError::Invalid(_)), "{err:?}");
+
+        // The database goes away under the worker: another attempt may succeed.
+        rt.block_on(store.close());
+        let mut spec = marked_spec();
+        let err = attach(&store, rt.handle(), "with", &mut spec).unwrap_err();
+        assert!(matches!(err, AttachError::Store(_)), "{err:?}");
+    }
 }
