@@ -45,19 +45,11 @@ async fn submit_latency(loc: &DbLocation) -> load::Stats {
 }
 
 fn job(i: usize) -> NewJob {
-    NewJob {
-        id: uuid::Uuid::new_v4().to_string(),
-        kind: JobKind::Vectorize,
-        spec: format!("{{\"i\":{i}}}"),
-        priority: 0,
-        idempotency_key: None,
-        request_hash: None,
-        max_attempts: 3,
-        max_lost_attempts: 2,
-        tenant: None,
-        upload: None,
-        max_queued: None,
-    }
+    NewJob::new(
+        uuid::Uuid::new_v4().to_string(),
+        JobKind::Vectorize,
+        format!("{{\"i\":{i}}}"),
+    )
 }
 
 /// Claims per second with `CLAIMERS` concurrent claim → complete loops.

@@ -206,6 +206,26 @@ pub struct NewJob {
     pub max_queued: Option<i64>,
 }
 
+impl NewJob {
+    /// A job with the defaults of tests and tools: priority 0, 3 attempts, 2 lost attempts, no
+    /// idempotency key, tenant, upload or queue limit.
+    pub fn new(id: impl Into<String>, kind: JobKind, spec: impl Into<String>) -> NewJob {
+        NewJob {
+            id: id.into(),
+            kind,
+            spec: spec.into(),
+            priority: 0,
+            idempotency_key: None,
+            request_hash: None,
+            max_attempts: 3,
+            max_lost_attempts: 2,
+            tenant: None,
+            upload: None,
+            max_queued: None,
+        }
+    }
+}
+
 /// Identifies one attempt of one job held by one worker; every worker write carries it.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Lease {

@@ -51,19 +51,11 @@ macro_rules! conformance {
 }
 
 fn new_job(i: usize) -> NewJob {
-    NewJob {
-        id: uuid::Uuid::new_v4().to_string(),
-        kind: JobKind::Vectorize,
-        spec: format!("{{\"i\":{i}}}"),
-        priority: 0,
-        idempotency_key: None,
-        request_hash: None,
-        max_attempts: 3,
-        max_lost_attempts: 2,
-        tenant: None,
-        upload: None,
-        max_queued: None,
-    }
+    NewJob::new(
+        uuid::Uuid::new_v4().to_string(),
+        JobKind::Vectorize,
+        format!("{{\"i\":{i}}}"),
+    )
 }
 
 async fn status_check_constraint_and_sqlite_wal(b: Backend) {

@@ -84,26 +84,16 @@ fn attach_inner(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::pipeline::{JobKind, Method, Preset, Style};
-    use crate::store::{NewJob, NewUpload};
+    use crate::store::{JobKind, NewJob, NewUpload};
 
+    /// A stored vectorize spec whose image is in `uploads` (the "" marker).
     fn marked_spec() -> JobSpec {
-        JobSpec {
-            kind: JobKind::Vectorize,
-            caption: None,
-            image: Some(Vec::new()), // the marker: the image is in `uploads`
-            svg: None,
-            style: Style::Iconography,
-            method: Method::SdLiveSds,
-            paths: 4,
-            steps: 2,
-            seed: 1,
-            samples: 1,
-            preset: Preset::Balanced,
-            priority: 0,
-            retrieval: false,
-            plan: None,
-        }
+        serde_json::from_str(
+            r#"{"kind": "vectorize", "caption": null, "image": "", "svg": null,
+                "style": "iconography", "method": "sd_live_sds", "paths": 4, "steps": 2,
+                "seed": 1, "samples": 1, "preset": "balanced", "priority": 0}"#,
+        )
+        .unwrap()
     }
 
     #[test]
@@ -114,17 +104,8 @@ mod tests {
             .block_on(Store::open(&dir.path().join("jobs.db"), 2))
             .unwrap();
         let job = |id: &str, upload| NewJob {
-            id: id.into(),
-            kind: JobKind::Vectorize,
-            spec: "{}".into(),
-            priority: 0,
-            idempotency_key: None,
-            request_hash: None,
-            max_attempts: 3,
-            max_lost_attempts: 2,
-            tenant: None,
             upload,
-            max_queued: None,
+            ..NewJob::new(id, JobKind::Vectorize, "{}")
         };
         let up = NewUpload {
             image: Some("AQID".into()),
