@@ -291,11 +291,8 @@ fn run_job(s: &Shared, row: JobRow, lease: Lease) {
         Ok(()) => {}
         Err(upload::AttachError::Store(msg)) => {
             // A database hiccup (more likely with a networked PostgreSQL): another attempt may
-            // read it, with the same backoff as a transient pipeline error.
-            let retry_at = (lease.attempt < s.settings.max_attempts as i64)
-                .then(|| now_ms() + s.settings.backoff(lease.attempt).as_millis() as i64);
-            warn!(retry = retry_at.is_some(), "{msg}");
-            finish_failed(s, &lease, "transient", &msg, retry_at);
+            // read it, as after a transient pipeline error.
+            fail_attempt(s, &lease, &PipelineError::Transient(msg), now_ms());
             return;
         }
         Err(upload::AttachError::Invalid(msg)) => {
@@ -415,12 +412,7 @@ fn run_job(s: &Shared, row: JobRow, lease: Lease) {
                 Err(e) => error!(error = %e, "recording the cancellation failed"),
             },
         },
-        Ok(Err(e)) => {
-            let retry_at = (e.is_retryable() && lease.attempt < s.settings.max_attempts as i64)
-                .then(|| now + s.settings.backoff(lease.attempt).as_millis() as i64);
-            warn!(error = %e, retry = retry_at.is_some(), "job attempt failed");
-            finish_failed(s, &lease, e.code(), &e.to_string(), retry_at);
-        }
+        Ok(Err(e)) => fail_attempt(s, &lease, &e, now),
         Err(panic) => {
             let msg = panic_message(panic.as_ref());
             error!(panic = %msg, "executor panicked");
@@ -442,6 +434,15 @@ pub(crate) fn panic_message(panic: &(dyn std::any::Any + Send)) -> String {
         .map(|s| s.to_string())
         .or_else(|| panic.downcast_ref::<String>().cloned())
         .unwrap_or_else(|| "unknown panic".into())
+}
+
+/// Records an attempt that failed with `e`: re-queued after the backoff when `e` is retryable and
+/// attempts remain, else failed for good.
+fn fail_attempt(s: &Shared, lease: &Lease, e: &PipelineError, now: i64) {
+    let retry_at = (e.is_retryable() && lease.attempt < s.settings.max_attempts as i64)
+        .then(|| now + s.settings.backoff(lease.attempt).as_millis() as i64);
+    warn!(error = %e, retry = retry_at.is_some(), "job attempt failed");
+    finish_failed(s, lease, e.code(), &e.to_string(), retry_at);
 }
 
 fn finish_failed(s: &Shared, lease: &Lease, code: &str, message: &str, retry_at: Option<i64>) {
