@@ -126,6 +126,26 @@ impl ApiError {
         }
     }
 
+    /// Seconds a client should wait before trying again (`Retry-After`), for errors that pass.
+    fn retry_after_secs(&self) -> Option<u64> {
+        match self {
+            ApiError::QueueFull {
+                retry_after_secs, ..
+            }
+            | ApiError::Busy {
+                retry_after_secs, ..
+            }
+            | ApiError::QuotaExceeded {
+                retry_after_secs, ..
+            }
+            | ApiError::UploadQuota {
+                retry_after_secs, ..
+            } => Some(*retry_after_secs),
+            ApiError::DatabaseUnavailable(_) => Some(2),
+            _ => None,
+        }
+    }
+
     fn field(&self) -> Option<&str> {
         match self {
             ApiError::Invalid { field, .. } | ApiError::InvalidQuery { field, .. } => Some(field),
@@ -194,25 +214,10 @@ impl IntoResponse for ApiError {
             },
         };
         let mut resp = (status, Json(body)).into_response();
-        if let ApiError::QueueFull {
-            retry_after_secs, ..
-        }
-        | ApiError::Busy {
-            retry_after_secs, ..
-        }
-        | ApiError::QuotaExceeded {
-            retry_after_secs, ..
-        }
-        | ApiError::UploadQuota {
-            retry_after_secs, ..
-        } = &self
-            && let Ok(v) = HeaderValue::from_str(&retry_after_secs.to_string())
+        if let Some(secs) = self.retry_after_secs()
+            && let Ok(v) = HeaderValue::from_str(&secs.to_string())
         {
             resp.headers_mut().insert(header::RETRY_AFTER, v);
-        }
-        if let ApiError::DatabaseUnavailable(_) = &self {
-            resp.headers_mut()
-                .insert(header::RETRY_AFTER, HeaderValue::from_static("2"));
         }
         if let ApiError::Unauthorized = &self {
             resp.headers_mut().insert(
@@ -233,6 +238,24 @@ mod tests {
                 "the directory /srv/models/sd (from sd_dir) does not exist: set ~/x."
             ),
             "the directory <path> (from sd_dir) does not exist: set <path>."
+        );
+    }
+
+    #[test]
+    fn an_unreachable_database_is_503_with_retry_after() {
+        use axum::response::IntoResponse;
+        let unreachable = crate::store::StoreError::Db(sqlx::Error::PoolTimedOut);
+        let resp = super::ApiError::from(unreachable).into_response();
+        assert_eq!(resp.status(), axum::http::StatusCode::SERVICE_UNAVAILABLE);
+        assert_eq!(resp.headers()[axum::http::header::RETRY_AFTER], "2");
+        // Other store errors stay internal errors, with no Retry-After.
+        let corrupt = crate::store::StoreError::Corrupt("bad row".into());
+        let resp = super::ApiError::from(corrupt).into_response();
+        assert_eq!(resp.status(), axum::http::StatusCode::INTERNAL_SERVER_ERROR);
+        assert!(
+            resp.headers()
+                .get(axum::http::header::RETRY_AFTER)
+                .is_none()
         );
     }
 }
