@@ -86,6 +86,21 @@ fn snapshot_event(n: i64, stage: &str, step: i64, svg: &str) -> Event {
     .id(n.to_string())
 }
 
+fn progress_event(
+    stage: Option<&str>,
+    step: i64,
+    total: i64,
+    loss: Option<f64>,
+    detail: Option<serde_json::Value>,
+) -> Event {
+    json_event(
+        "progress",
+        &serde_json::json!({
+            "stage": stage, "step": step, "total": total, "loss": loss, "detail": detail
+        }),
+    )
+}
+
 fn terminal_event(row: &JobRow) -> Option<Event> {
     let name = match row.status {
         JobStatus::Succeeded => "done",
@@ -146,16 +161,15 @@ impl Feed {
         if row.status != self.sent_status {
             self.sent_status = row.status;
             self.send(state_event(&row)).await?;
-        } else if (row.stage.as_ref(), row.step)
-            != (self.sent_progress.0.as_ref(), self.sent_progress.1)
+        } else if (&row.stage, row.step) != (&self.sent_progress.0, self.sent_progress.1)
             && row.status == JobStatus::Running
         {
-            self.send(json_event(
-                "progress",
-                &serde_json::json!({
-                    "stage": row.stage, "step": row.step, "total": row.total, "loss": row.loss,
-                    "detail": null
-                }),
+            self.send(progress_event(
+                row.stage.as_deref(),
+                row.step,
+                row.total,
+                row.loss,
+                None,
             ))
             .await?;
         }
@@ -229,11 +243,12 @@ async fn feed(
                 detail,
             }) => {
                 f.sent_progress = (Some(stage.clone()), i64::from(step));
-                f.send(json_event(
-                    "progress",
-                    &serde_json::json!({
-                        "stage": stage, "step": step, "total": total, "loss": loss, "detail": detail
-                    }),
+                f.send(progress_event(
+                    Some(&stage),
+                    i64::from(step),
+                    i64::from(total),
+                    loss,
+                    detail,
                 ))
                 .await?;
             }
