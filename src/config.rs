@@ -90,7 +90,7 @@ pub struct DatabaseConfig {
     /// `postgres://…` for a PostgreSQL queue shared by many nodes (or `sqlite://PATH`); empty:
     /// the SQLite file at `path`. Env: `VECTORFUSION_DATABASE_URL`.
     pub url: String,
-    /// Connections per node (the reader pool with SQLite; the one pool with PostgreSQL).
+    /// Connections per pool (SQLite: the reader pool; PostgreSQL: each of the two pools).
     pub max_connections: u32,
 }
 

@@ -17,7 +17,7 @@ mod wakeups;
 
 use crate::config::Config;
 use crate::pipeline::{Executor, Limits};
-use crate::store::{Backend, Store, StoreError};
+use crate::store::{DbLocation, Store, StoreError};
 use crate::worker::events::Hub;
 use crate::worker::metrics::Metrics;
 use crate::worker::{WorkerPool, WorkerSettings};
@@ -207,11 +207,11 @@ pub async fn run_node(
     }));
     let pruner = tokio::spawn(prune_loop(state.clone()));
     let counter = tokio::spawn(depth_loop(state.clone()));
-    let wakeups = match (&location, store.backend()) {
-        (crate::store::DbLocation::Postgres(url), Backend::Postgres) => {
+    let wakeups = match &location {
+        DbLocation::Postgres(url) => {
             Some(tokio::spawn(wakeups::listen(state.clone(), url.clone())))
         }
-        _ => None,
+        DbLocation::Sqlite(_) => None,
     };
     let app = router(state.clone(), role);
     let addr = listener.local_addr()?;

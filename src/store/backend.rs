@@ -162,8 +162,9 @@ async fn connect_sqlite(path: &Path, max_connections: u32) -> Result<Pools, Stor
         && !parent.as_os_str().is_empty()
     {
         std::fs::create_dir_all(parent).map_err(|e| {
-            StoreError::Db(sqlx::Error::Configuration(
-                format!("cannot create database directory {}: {e}", parent.display()).into(),
+            config_error(format!(
+                "cannot create database directory {}: {e}",
+                parent.display()
             ))
         })?;
     }
@@ -280,16 +281,23 @@ async fn notify(pool: &AnyPool, channel: &str, payload: &str) -> bool {
     }
 }
 
+/// A database that cannot be opened as configured.
+fn config_error(msg: String) -> StoreError {
+    StoreError::Db(sqlx::Error::Configuration(msg.into()))
+}
+
 /// `sqlite:///absolute/path?mode=rwc`, the path percent-encoded (the driver decodes it).
 fn sqlite_url(path: &Path) -> Result<String, StoreError> {
     let abs = std::path::absolute(path).map_err(|e| {
-        StoreError::Db(sqlx::Error::Configuration(
-            format!("cannot resolve database path {}: {e}", path.display()).into(),
+        config_error(format!(
+            "cannot resolve database path {}: {e}",
+            path.display()
         ))
     })?;
     let Some(text) = abs.to_str() else {
-        return Err(StoreError::Db(sqlx::Error::Configuration(
-            format!("database path {} is not UTF-8", abs.display()).into(),
+        return Err(config_error(format!(
+            "database path {} is not UTF-8",
+            abs.display()
         )));
     };
     let mut url = String::from("sqlite://");
@@ -309,8 +317,7 @@ fn sqlite_url(path: &Path) -> Result<String, StoreError> {
 #[doc(hidden)]
 pub async fn create_test_database(admin_url: &str) -> Result<String, StoreError> {
     use sqlx::Connection;
-    let mut url = url::Url::parse(admin_url)
-        .map_err(|e| StoreError::Db(sqlx::Error::Configuration(e.to_string().into())))?;
+    let mut url = url::Url::parse(admin_url).map_err(|e| config_error(e.to_string()))?;
     let name = format!("vf_test_{}", uuid::Uuid::new_v4().simple());
     let mut conn = sqlx::postgres::PgConnection::connect(admin_url).await?;
     // The name is ours (a UUID), not input: safe to put in the statement.

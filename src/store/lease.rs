@@ -23,8 +23,8 @@ impl Store {
     }
 
     /// Atomically claims the next job for `worker`, with a lease of `lease_ms`. One statement:
-    /// the trigger of `migrations/sqlite/0002_claim_opens_attempt.sql` (`jobs_claim_opens_attempt` in PostgreSQL) opens the attempt row (and marks
-    /// earlier running attempts lost) inside it.
+    /// the trigger `jobs_claim_opens_attempt` (`migrations/sqlite/0002`, `migrations/postgres/0001`)
+    /// opens the attempt row (and marks earlier running attempts lost) inside it.
     pub async fn claim(
         &self,
         worker: &str,

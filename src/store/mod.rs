@@ -270,8 +270,9 @@ pub fn now_ms() -> i64 {
     chrono::Utc::now().timestamp_millis()
 }
 
-/// Handle to the database; cheap to clone. SQLite: one writer connection and a pool of
-/// readers (`backend.rs` says why); PostgreSQL: one pool for both.
+/// Handle to the database; cheap to clone. SQLite: one writer connection (also the worker's
+/// lease writes) and a pool of readers; PostgreSQL: one pool for reads and durable writes and one
+/// with asynchronous commits for the worker's lease writes (`backend.rs` says why).
 #[derive(Clone, Debug)]
 pub struct Store {
     pool: AnyPool,
