@@ -44,8 +44,10 @@ for s in $EVAL; do fetch "$s"; eval_json+=("${s%@*}=$OUT/json/${s%@*}/package/ic
 PY=${PYTHON:-/work/venv/bin/python}
 VOCAB=$("$PY" -c 'import sys; sys.path.insert(0, "scripts/embedded"); import vf_icon, os; print(os.path.join(vf_icon.minilm_dir(), "vocab.txt"))')
 export CARGO_TARGET_DIR=${CARGO_TARGET_DIR:-$ROOT/target}
-cargo run --release --quiet --example icon_dataset -- "$OUT/train" 64 --words "$VOCAB" "${train_json[@]}" >"$OUT/train.stats.json"
-cargo run --release --quiet --example icon_dataset -- "$OUT/eval" 64 --words "$VOCAB" "${eval_json[@]}" >"$OUT/eval.stats.json"
+# The dev profile optimises every dependency (Cargo.toml), so reusing a test build is fine here.
+PROFILE=${VF_CARGO_PROFILE:-release}
+cargo run --profile "$PROFILE" --quiet --example icon_dataset -- "$OUT/train" 64 --words "$VOCAB" "${train_json[@]}" >"$OUT/train.stats.json"
+cargo run --profile "$PROFILE" --quiet --example icon_dataset -- "$OUT/eval" 64 --words "$VOCAB" "${eval_json[@]}" >"$OUT/eval.stats.json"
 
 python3 - "$OUT" <<'PY'
 import json, sys

@@ -22,7 +22,13 @@ vf="${VF:-target/release/vectorfusion}"
 py="${PY:-/work/venv/bin/python}"
 out="${OUT:-eval-out}"
 methods=(--method samples --method sd_live --method sd_live_sds)
-[ -n "${SCRATCH:-}" ] && methods+=(--method scratch)
+# METHODS="samples sd_live_sds" narrows the rows; SCRATCH=1 adds `scratch` (SDS from random
+# paths: it samples nothing, so it runs once, in the retrieval pass).
+# MODES=retrieval runs one pass; JSON_DIR moves the eval reports (default docs/embedded).
+# EVAL_ARGS="--samples 4" passes more `eval` flags; TAG names such a variant's outputs.
+read -r -a extra <<<"${EVAL_ARGS:-}"
+tag="$preset${TAG:+_$TAG}"
+if [ -n "${METHODS:-}" ]; then methods=(); for m in $METHODS; do methods+=(--method "$m"); done; fi
 for s in "${sets[@]}"; do
   case "$s" in
     fluent) prompts=docs/embedded/heldout_fluent48.txt; ref=fluent-emoji-flat ;;
@@ -30,13 +36,16 @@ for s in "${sets[@]}"; do
     paper) prompts=../shared/bench/svg_bench_prompts.txt; ref= ;;
     *) echo "unknown caption set $s" >&2; exit 2 ;;
   esac
-  for mode in retrieval noise; do
+  for mode in ${MODES:-retrieval noise}; do
     flag=(); [ "$mode" = noise ] && flag=(--no-retrieval)
-    dir="$out/$s-$mode"
-    "$vf" eval --prompts "$prompts" "${methods[@]}" "${flag[@]}" --preset "$preset" \
-      --scorer models/vf-icon --out-dir "$dir" --json "docs/embedded/eval_${s}_${mode}_$preset.json"
+    run=("${methods[@]}")
+    [ -n "${SCRATCH:-}" ] && [ "$mode" = retrieval ] && run+=(--method scratch)
+    dir="$out/$s-$mode${TAG:+-$TAG}"
+    "$vf" eval --prompts "$prompts" "${run[@]}" "${flag[@]}" "${extra[@]}" --preset "$preset" \
+      --scorer models/vf-icon --out-dir "$dir" --json "${JSON_DIR:-docs/embedded}/eval_${s}_${mode}_$tag.json"
     if [ -n "$ref" ]; then
-      for m in samples sd_live sd_live_sds; do
+      for ((i = 1; i < ${#run[@]}; i += 2)); do
+        m=${run[$i]}
         "$py" scripts/embedded/pixel_rprecision.py score --captions "$prompts" --set "$ref" \
           --dir "$dir/$m" --vf "$vf" --json "$dir/$m.pixel_rprecision.json"
       done

@@ -109,8 +109,10 @@ def main():
             r = list(csv.DictReader(open(path)))
             s = [int(x["step"]) for x in r]
             name = os.path.basename(os.path.dirname(os.path.abspath(path))) or path
+            name = "prior" if name == "embedded" else name
             plt.plot(s, [float(x["loss"]) for x in r], lw=0.5, alpha=0.35)
-            val = os.path.join(os.path.dirname(path), "val.csv")
+            # OUT/loss.csv -> OUT/val.csv; docs/embedded/prior_loss.csv -> prior_val.csv
+            val = os.path.join(os.path.dirname(path), os.path.basename(path).replace("loss.csv", "val.csv"))
             if os.path.exists(val):
                 v = list(csv.DictReader(open(val)))
                 plt.plot([int(x["step"]) for x in v], [float(x["val_loss"]) for x in v], "k.-", lw=1, ms=3,
