@@ -118,8 +118,59 @@ pub fn main() -> ExitCode {
     match run(cli) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            eprintln!("error: {}", one_line(&e));
             ExitCode::from(e.exit_code())
         }
+    }
+}
+
+/// The error and its causes on one line, each said once: a message that already quotes its
+/// source (`#[error("database error: {0}")]`) is not followed by that source again, as
+/// anyhow's `{:#}` would ("database error: refused: refused").
+fn one_line(e: &(dyn std::error::Error + 'static)) -> String {
+    let mut out = e.to_string();
+    let mut cause = e.source();
+    while let Some(c) = cause {
+        let text = c.to_string();
+        if !out.contains(&text) {
+            out.push_str(": ");
+            out.push_str(&text);
+        }
+        cause = c.source();
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[derive(Debug, thiserror::Error)]
+    #[error("connection refused")]
+    struct Refused;
+
+    #[derive(Debug, thiserror::Error)]
+    enum Quoting {
+        #[error("database error: {0}")]
+        Db(#[from] Refused),
+    }
+
+    #[derive(Debug, thiserror::Error)]
+    #[error("opening the store")]
+    struct Context(#[source] Quoting);
+
+    #[test]
+    fn each_cause_is_said_once() {
+        let e = CliError::Other(anyhow::Error::new(Quoting::Db(Refused)));
+        assert_eq!(one_line(&e), "database error: connection refused");
+        // a cause the message does not quote is appended, then its own source once
+        let e = CliError::Other(anyhow::Error::new(Context(Quoting::Db(Refused))));
+        assert_eq!(
+            one_line(&e),
+            "opening the store: database error: connection refused"
+        );
+        let e = CliError::Other(anyhow::Error::new(Refused).context("reading config.toml"));
+        assert_eq!(one_line(&e), "reading config.toml: connection refused");
+        assert_eq!(one_line(&CliError::Usage("bad".into())), "bad");
     }
 }
