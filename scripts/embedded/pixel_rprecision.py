@@ -82,6 +82,8 @@ def main():
     c.add_argument("--train", default="data/icons/train")
     c.add_argument("--eval", default="data/icons/eval")
     c.add_argument("--out-dir", default="docs/embedded")
+    c.add_argument("--suffix", default="", help="a further set: heldout_fluent48SUFFIX.txt, disjoint from the "
+                   "captions already in OUT_DIR's heldout_*48.txt")
     for name in ("score", "ceiling"):
         s = sub.add_parser(name)
         s.add_argument("--captions", required=True)
@@ -99,8 +101,13 @@ def main():
         raw, ecaps = load_split(args.eval)
         train_names = {c["caption"] for c in tcaps}
         rng = np.random.default_rng(args.seed)
-        for set_name, fname in (("fluent-emoji-flat", "heldout_fluent48.txt"), ("openmoji", "heldout_openmoji48.txt")):
-            pool = sorted(c for c in first_by_caption(raw, ecaps, set_name) if c in train_names and len(c.split()) <= 4)
+        for set_name, stem in (("fluent-emoji-flat", "heldout_fluent48"), ("openmoji", "heldout_openmoji48")):
+            fname = f"{stem}{args.suffix}.txt"
+            taken = set()
+            if args.suffix:
+                taken = {l.strip() for l in open(os.path.join(args.out_dir, f"{stem}.txt")) if l.strip()}
+            pool = sorted(c for c in first_by_caption(raw, ecaps, set_name)
+                          if c in train_names and len(c.split()) <= 4 and c not in taken)
             pick = sorted(rng.choice(pool, size=args.n, replace=False).tolist())
             with open(os.path.join(args.out_dir, fname), "w") as f:
                 f.write("\n".join(pick) + "\n")

@@ -5,7 +5,8 @@
 # memorisation check and the gallery.
 #
 #   scripts/embedded/run_eval.sh [PRESET] [CAPTION_SET...]    # defaults: fast, fluent
-#   CAPTION_SET: fluent (docs/embedded/heldout_fluent48.txt vs fluent-emoji-flat),
+#   CAPTION_SET: fluent (docs/embedded/heldout_fluent48.txt vs fluent-emoji-flat), fluentb (a
+#                second, disjoint 48: heldout_fluent48b.txt),
 #                openmoji (heldout_openmoji48.txt vs openmoji), paper (the paper's 128 captions;
 #                IconClip scores only)
 #
@@ -32,6 +33,7 @@ if [ -n "${METHODS:-}" ]; then methods=(); for m in $METHODS; do methods+=(--met
 for s in "${sets[@]}"; do
   case "$s" in
     fluent) prompts=docs/embedded/heldout_fluent48.txt; ref=fluent-emoji-flat ;;
+    fluentb) prompts=docs/embedded/heldout_fluent48b.txt; ref=fluent-emoji-flat ;;
     openmoji) prompts=docs/embedded/heldout_openmoji48.txt; ref=openmoji ;;
     paper) prompts=../shared/bench/svg_bench_prompts.txt; ref= ;;
     *) echo "unknown caption set $s" >&2; exit 2 ;;
