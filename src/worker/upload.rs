@@ -15,6 +15,24 @@ pub(super) enum AttachError {
     Invalid(String),
 }
 
+impl AttachError {
+    /// A failed read of the upload: the database itself (retryable), or what it returned.
+    fn from_store(e: StoreError) -> AttachError {
+        match e {
+            StoreError::Db(_) => {
+                AttachError::Store(format!("reading the job's upload failed: {e}"))
+            }
+            e => AttachError::Invalid(format!("the job's upload is unreadable: {e}")),
+        }
+    }
+}
+
+impl From<&str> for AttachError {
+    fn from(msg: &str) -> Self {
+        AttachError::Invalid(msg.to_string())
+    }
+}
+
 /// Puts the stored upload back into `spec`. A spec without markers is left as it is (a job
 /// stored before uploads had their own table carries its upload inline). Errors name what is
 /// missing or unreadable.
@@ -24,41 +42,6 @@ pub(super) fn attach(
     job_id: &str,
     spec: &mut JobSpec,
 ) -> Result<(), AttachError> {
-    attach_inner(store, runtime, job_id, spec).map_err(|e| e.into_attach())
-}
-
-/// The reasons inside [`attach`], before they are sorted into retryable or not.
-enum Failure {
-    Store(StoreError),
-    Invalid(String),
-}
-
-impl Failure {
-    fn into_attach(self) -> AttachError {
-        match self {
-            Failure::Store(e @ StoreError::Db(_)) => {
-                AttachError::Store(format!("reading the job's upload failed: {e}"))
-            }
-            Failure::Store(e) => {
-                AttachError::Invalid(format!("the job's upload is unreadable: {e}"))
-            }
-            Failure::Invalid(msg) => AttachError::Invalid(msg),
-        }
-    }
-}
-
-impl From<&str> for Failure {
-    fn from(msg: &str) -> Self {
-        Failure::Invalid(msg.to_string())
-    }
-}
-
-fn attach_inner(
-    store: &Store,
-    runtime: &Handle,
-    job_id: &str,
-    spec: &mut JobSpec,
-) -> Result<(), Failure> {
     let wants_image = spec.image.as_ref().is_some_and(Vec::is_empty);
     let wants_svg = spec.svg.as_ref().is_some_and(String::is_empty);
     if !wants_image && !wants_svg {
@@ -66,13 +49,15 @@ fn attach_inner(
     }
     let up = runtime
         .block_on(store.upload(job_id))
-        .map_err(Failure::Store)?
+        .map_err(AttachError::from_store)?
         .ok_or("the job's upload is no longer stored")?;
     if wants_image {
         let b64 = up.image.ok_or("the job's stored upload has no image")?;
         let bytes = base64::engine::general_purpose::STANDARD
             .decode(b64.as_bytes())
-            .map_err(|e| Failure::Invalid(format!("the job's stored image is not base64: {e}")))?;
+            .map_err(|e| {
+                AttachError::Invalid(format!("the job's stored image is not base64: {e}"))
+            })?;
         spec.image = Some(bytes);
     }
     if wants_svg {
