@@ -13,13 +13,19 @@ set -uo pipefail
 cd "$(dirname "$0")/../.."
 export VF=${VF:-target/debug/vectorfusion} PY=${PY:-/work/venv/bin/python} OUT=${OUT:-/tmp/evalout}
 t() { echo "== $* $(date -u +%T)"; }
+# Copies run_eval.sh's pixel R-Precision of every method it ran for caption set $1 into docs/.
+keep_pixel_scores() {
+  local f base
+  for f in "$OUT/$1"-{retrieval,noise}/*.pixel_rprecision.json; do
+    [ -f "$f" ] || continue
+    base=$(basename "$(dirname "$f")") # SET-MODE
+    cp "$f" "docs/embedded/pixel_rprecision_$1_${base#"$1"-}_$(basename "$f" .pixel_rprecision.json).json"
+  done
+}
 t refs; "$PY" scripts/embedded/make_refs.py | tail -1
 t test; cargo test --test embedded_model 2>&1 | grep -E "test result|FAILED|panicked"
 t fluent; SCRATCH=1 scripts/embedded/run_eval.sh balanced fluent
-for m in samples sd_live sd_live_sds scratch; do for mode in retrieval noise; do
-  f=$OUT/fluent-$mode/$m.pixel_rprecision.json
-  [ -f "$f" ] && cp "$f" "docs/embedded/pixel_rprecision_fluent_${mode}_$m.json"
-done; done
+keep_pixel_scores fluent
 t memorisation
 "$PY" scripts/embedded/memorisation.py --vf "$VF" --dir "$OUT/fluent-retrieval/samples" \
   --dir "$OUT/fluent-noise/samples" --dir "$OUT/fluent-retrieval/sd_live_sds" \
@@ -40,8 +46,5 @@ t samples
 "$PY" scripts/embedded/sample_grid.py --steps 12 --cfg 5 --batch 64 --out docs/embedded/samples.png \
   --loss docs/embedded/prior_loss.csv --loss-out docs/embedded/loss.png | tail -2
 t openmoji; scripts/embedded/run_eval.sh balanced openmoji
-for m in samples sd_live sd_live_sds; do for mode in retrieval noise; do
-  f=$OUT/openmoji-$mode/$m.pixel_rprecision.json
-  [ -f "$f" ] && cp "$f" "docs/embedded/pixel_rprecision_openmoji_${mode}_$m.json"
-done; done
+keep_pixel_scores openmoji
 t done

@@ -108,8 +108,10 @@ def main():
         for path in args.loss:
             r = list(csv.DictReader(open(path)))
             s = [int(x["step"]) for x in r]
-            name = os.path.basename(os.path.dirname(os.path.abspath(path))) or path
-            name = "prior" if name == "embedded" else name
+            # OUT/loss.csv is named by its folder, docs/embedded/prior_loss.csv by its prefix
+            base = os.path.basename(path)
+            name = (base[: -len("_loss.csv")] if base.endswith("_loss.csv")
+                    else os.path.basename(os.path.dirname(os.path.abspath(path))) or path)
             plt.plot(s, [float(x["loss"]) for x in r], lw=0.5, alpha=0.35)
             # OUT/loss.csv -> OUT/val.csv; docs/embedded/prior_loss.csv -> prior_val.csv
             val = os.path.join(os.path.dirname(path), os.path.basename(path).replace("loss.csv", "val.csv"))
