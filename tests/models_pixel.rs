@@ -334,7 +334,8 @@ fn loader_tells_pixel_space_from_a_latent_model_with_missing_files() {
 
 /// `"_style_suffix": false` in `model_index.json` (a model trained on bare captions) turns the
 /// paper's style suffix off for prompts; `_sample_guidance` / `_sds_guidance` set the model's
-/// guidance defaults; absent keys keep the paper's values; bad values are refused.
+/// guidance defaults; `_sdedit_strength` the strength of retrieved starts; absent keys keep the
+/// paper's values; bad values are refused.
 #[test]
 fn model_index_style_suffix_switch() {
     assert_eq!(pixel().hints, ModelHints::default(), "SD defaults");
@@ -348,6 +349,7 @@ fn model_index_style_suffix_switch() {
         serde_json::from_str(&std::fs::read_to_string(&index).unwrap()).unwrap();
     v["_style_suffix"] = serde_json::json!(false);
     v["_sample_guidance"] = serde_json::json!(3.0);
+    v["_sdedit_strength"] = serde_json::json!(0.25);
     std::fs::write(&index, v.to_string()).unwrap();
     let sd = StableDiffusion::load(&dir, &LoadOptions::default()).unwrap();
     assert!(!sd.hints.style_suffix);
@@ -371,9 +373,15 @@ fn model_index_style_suffix_switch() {
     let bare = plan_of(&dir);
     assert_eq!(bare.prompt, "a crown");
     assert_eq!(bare.sample.as_ref().unwrap().guidance, 3.0);
+    assert_eq!(bare.sample.as_ref().unwrap().strength, 0.25);
     let with = plan_of(&fixture("sd-tiny-pixel"));
     assert_eq!(with.prompt, S::Iconography.prompt("a crown"));
     assert_eq!(with.sample.as_ref().unwrap().guidance, 7.5);
+    assert_eq!(
+        with.sample.as_ref().unwrap().strength,
+        0.4,
+        "absent: the default"
+    );
     // `_sample_guidance` reaches the sampler: the same prompt, seed and noise, another image.
     let draw = |d: &Path| {
         let t = vectorfusion::teacher::SdTeacher::load(d, 64).unwrap();
@@ -401,5 +409,10 @@ fn model_index_style_suffix_switch() {
     std::fs::write(&index, v.to_string()).unwrap();
     let e = StableDiffusion::load(&dir, &LoadOptions::default()).unwrap_err();
     assert!(e.to_string().contains("_sds_guidance"), "{e}");
+    v["_sds_guidance"] = serde_json::json!(100.0);
+    v["_sdedit_strength"] = serde_json::json!(1.5);
+    std::fs::write(&index, v.to_string()).unwrap();
+    let e = StableDiffusion::load(&dir, &LoadOptions::default()).unwrap_err();
+    assert!(e.to_string().contains("_sdedit_strength"), "{e}");
     let _ = std::fs::remove_dir_all(&base);
 }

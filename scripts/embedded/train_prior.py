@@ -69,7 +69,7 @@ SCHEDULER_CONFIG = dict(
 )
 
 
-def model_index(latent, guidance):
+def model_index(latent, guidance, strength=0.4):
     idx = {
         "_class_name": "VectorFusionLatentPipeline" if latent else "VectorFusionPixelPipeline",
         "unet": ["diffusers", "UNet2DConditionModel"],
@@ -80,6 +80,8 @@ def model_index(latent, guidance):
         # trained on icon names: vectorfusion conditions on the caption without the style suffix
         "_style_suffix": False,
         "_sample_guidance": guidance,
+        # SDEdit strength of samples started from retrieved icons (tuned on held-out captions)
+        "_sdedit_strength": strength,
         # a small prior: the pipeline's presets for small models, not Stable Diffusion's
         "_small_prior": True,
     }
@@ -88,7 +90,7 @@ def model_index(latent, guidance):
     return idx
 
 
-def export(ema, out_dir, vae_dir, guidance):
+def export(ema, out_dir, vae_dir, guidance, strength=0.4):
     from diffusers import DDIMScheduler
 
     os.makedirs(out_dir, exist_ok=True)
@@ -103,7 +105,7 @@ def export(ema, out_dir, vae_dir, guidance):
     elif os.path.isdir(os.path.join(out_dir, "vae")):
         shutil.rmtree(os.path.join(out_dir, "vae"))
     with open(os.path.join(out_dir, "model_index.json"), "w") as f:
-        json.dump(model_index(vae_dir is not None, guidance), f, indent=2)
+        json.dump(model_index(vae_dir is not None, guidance, strength), f, indent=2)
         f.write("\n")
 
 
@@ -147,6 +149,8 @@ def main():
     ap.add_argument("--min-snr", type=float, default=5.0, help="min-SNR gamma (0: plain v loss)")
     ap.add_argument("--p-uncond", type=float, default=0.1)
     ap.add_argument("--guidance", type=float, default=5.0, help="sampling CFG scale written to model_index.json")
+    ap.add_argument("--sdedit-strength", type=float, default=0.4,
+                    help="SDEdit strength of retrieved starts written to model_index.json")
     ap.add_argument("--seed", type=int, default=1234)
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--bf16", action="store_true", help="bf16 autocast (AVX-512 BF16 / AMX CPUs)")
@@ -270,7 +274,7 @@ def main():
         torch.save({"unet": unet.state_dict(), "ema": ema.state_dict(), "opt": opt.state_dict(), "gen": gen.get_state(),
                     "step": step, "elapsed": elapsed0 + time.time() - t0, "args": vars(args)}, ckpt_path + ".tmp")
         os.replace(ckpt_path + ".tmp", ckpt_path)
-        export(ema, args.export, vae_dir, args.guidance)
+        export(ema, args.export, vae_dir, args.guidance, args.sdedit_strength)
         print(f"{'final ' if final else ''}checkpoint + export at step {step}", flush=True)
 
     t0 = time.time()
@@ -321,7 +325,7 @@ def main():
     print(f"final val loss: ema {v_ema:.5f} raw {v_raw:.5f}", flush=True)
     save(final=True)
     if v_raw < v_ema:
-        export(unet, args.export, vae_dir, args.guidance)
+        export(unet, args.export, vae_dir, args.guidance, args.sdedit_strength)
         print("exported the raw weights instead (the checkpoint keeps both)", flush=True)
 
 

@@ -164,6 +164,12 @@ pub struct ModelHints {
     /// Pixel-space models are small priors whatever this says.
     #[serde(rename = "_small_prior", default)]
     pub small_prior: bool,
+    /// `_sdedit_strength`: the SDEdit strength of samples started from retrieved icons, the
+    /// fraction of the sampler's schedule run from the icon (0 keeps it, 1 forgets it). 0.4
+    /// keeps an icon's layout and lets the prior redraw it for the caption; a model tuned on
+    /// held-out captions says its own (`docs/embedded/TRAINING.md`).
+    #[serde(rename = "_sdedit_strength", default = "sdedit_strength")]
+    pub sdedit_strength: f64,
 }
 
 fn sample_guidance() -> f32 {
@@ -171,6 +177,9 @@ fn sample_guidance() -> f32 {
 }
 fn sds_guidance() -> f32 {
     100.0
+}
+fn sdedit_strength() -> f64 {
+    0.4
 }
 
 impl Default for ModelHints {
@@ -180,6 +189,7 @@ impl Default for ModelHints {
             sample_guidance: sample_guidance(),
             sds_guidance: sds_guidance(),
             small_prior: false,
+            sdedit_strength: sdedit_strength(),
         }
     }
 }
@@ -202,6 +212,15 @@ impl ModelHints {
                     reason: format!("{name} must be in 0..=1000, got {g}"),
                 });
             }
+        }
+        if !(h.sdedit_strength.is_finite() && (0.0..=1.0).contains(&h.sdedit_strength)) {
+            return Err(ModelError::Config {
+                path: index.display().to_string(),
+                reason: format!(
+                    "_sdedit_strength must be in 0..=1, got {}",
+                    h.sdedit_strength
+                ),
+            });
         }
         Ok(h)
     }

@@ -9,7 +9,6 @@ use super::{EncoderChoice, JobKind, Limits, Method, Preset, SpecError, Style};
 use crate::augment::AugmentConfig;
 use crate::models::pipeline::ModelHints;
 use crate::stages::live::{LiveConfig, PathBudget};
-use crate::stages::sample::DEFAULT_STRENGTH;
 use serde::{Deserialize, Serialize};
 
 /// Version of the plan format (stored with jobs; part of every checkpoint key).
@@ -373,7 +372,7 @@ fn text_plan(
         steps: ps.sample_steps as u32,
         guidance: model.hints.sample_guidance,
         retrieval: req.retrieval,
-        strength: DEFAULT_STRENGTH,
+        strength: model.hints.sdedit_strength,
     });
     let distil = !from_method || req.method != Method::SdLive;
     let augment = from_method && req.method == Method::Scratch && t.augment != Some(false);

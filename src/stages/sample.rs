@@ -14,12 +14,6 @@ pub fn retrieved_count(k: u32) -> usize {
     k.div_ceil(2) as usize
 }
 
-/// SDEdit strength of samples started from an image: the fraction of the sampler's schedule
-/// run from it (0 keeps the image, 1 forgets it). 0.4 keeps the icon's layout and lets the prior
-/// redraw it for the caption; the embedded prior shifts colours at every strength it was tried
-/// at (`docs/embedded/sdedit.png`), so higher values only lose more of the icon.
-pub const DEFAULT_STRENGTH: f64 = 0.4;
-
 fn failed(what: &str, e: impl std::fmt::Display) -> SampleError {
     SampleError::Failed(format!("{what}: {e}"))
 }
