@@ -69,7 +69,7 @@ SCHEDULER_CONFIG = dict(
 )
 
 
-def model_index(latent, guidance, strength=0.4):
+def model_index(latent, guidance, strength):
     idx = {
         "_class_name": "VectorFusionLatentPipeline" if latent else "VectorFusionPixelPipeline",
         "unet": ["diffusers", "UNet2DConditionModel"],
@@ -90,7 +90,7 @@ def model_index(latent, guidance, strength=0.4):
     return idx
 
 
-def export(ema, out_dir, vae_dir, guidance, strength=0.4):
+def export(ema, out_dir, vae_dir, guidance, strength):
     from diffusers import DDIMScheduler
 
     os.makedirs(out_dir, exist_ok=True)

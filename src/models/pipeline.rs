@@ -202,26 +202,25 @@ impl ModelHints {
             return Ok(Self::default());
         }
         let h: Self = loader::read_config(&index)?;
-        for (name, g) in [
-            ("_sample_guidance", h.sample_guidance),
-            ("_sds_guidance", h.sds_guidance),
-        ] {
-            if !(g.is_finite() && (0.0..=1000.0).contains(&g)) {
-                return Err(ModelError::Config {
-                    path: index.display().to_string(),
-                    reason: format!("{name} must be in 0..=1000, got {g}"),
-                });
+        // Each number's range, checked in one place (printed as written: f32 or f64).
+        fn within<T: Into<f64> + Copy + std::fmt::Display>(
+            index: &Path,
+            name: &str,
+            v: T,
+            max: f64,
+        ) -> Result<()> {
+            let x: f64 = v.into();
+            if x.is_finite() && (0.0..=max).contains(&x) {
+                return Ok(());
             }
-        }
-        if !(h.sdedit_strength.is_finite() && (0.0..=1.0).contains(&h.sdedit_strength)) {
-            return Err(ModelError::Config {
+            Err(ModelError::Config {
                 path: index.display().to_string(),
-                reason: format!(
-                    "_sdedit_strength must be in 0..=1, got {}",
-                    h.sdedit_strength
-                ),
-            });
+                reason: format!("{name} must be in 0..={max}, got {v}"),
+            })
         }
+        within(&index, "_sample_guidance", h.sample_guidance, 1000.0)?;
+        within(&index, "_sds_guidance", h.sds_guidance, 1000.0)?;
+        within(&index, "_sdedit_strength", h.sdedit_strength, 1.0)?;
         Ok(h)
     }
 }
