@@ -212,15 +212,35 @@ fn retrieval_names_its_source_icons_when_the_index_is_installed() {
     let plan = common::runs::plan(&m, &req);
     let models = m.load_models(plan.text.as_ref().unwrap()).unwrap();
     let index = models.retrieval.as_ref().unwrap();
-    let hits =
-        vectorfusion::stages::sample::retrieve(models.teacher(), index, "red heart", 2, 0).unwrap();
+    use vectorfusion::stages::sample::{RetrievalPick, retrieve};
+    let pick = |n, per_caption| RetrievalPick {
+        n,
+        per_caption,
+        seed: 0,
+    };
+    let hits = retrieve(models.teacher(), index, "red heart", pick(2, 1)).unwrap();
     assert_eq!(hits.len(), 2);
     assert!(hits[0].0.icon.caption.contains("heart"), "{:?}", hits[0].0);
     assert!(!vectorfusion::retrieval::is_held_out(&hits[0].0.icon.set));
     assert_eq!((hits[0].1.width, hits[0].1.height), (64, 64));
+    // One drawing per caption: two captions; two per caption: two artists' drawings of one.
+    assert_ne!(hits[0].0.icon.caption, hits[1].0.icon.caption);
+    let same = retrieve(models.teacher(), index, "red heart", pick(2, 2)).unwrap();
+    assert_eq!(same[0].0.icon.caption, same[1].0.icon.caption, "{same:?}");
+    assert_ne!(same[0].0.icon, same[1].0.icon);
     let out = common::runs::run(&m, &req).unwrap();
     let starts = out.detail["retrieval"]["starts"].as_array().unwrap();
-    assert_eq!(starts.len(), 1, "{}", out.detail);
+    // The model's `_retrieval_share` of the two samples start from icons (one or both).
+    let share = out.detail["retrieval"]["share"].as_f64().unwrap();
+    let n = vectorfusion::stages::sample::retrieved_count(2, share);
+    assert!(n >= 1);
+    assert_eq!(starts.len(), n, "{}", out.detail);
+    // `_retrieval_per_caption` reaches the sampler: two drawings of one caption when it allows.
+    let per_caption = out.detail["retrieval"]["per_caption"].as_u64().unwrap();
+    if n == 2 {
+        let same = starts[0]["caption"] == starts[1]["caption"];
+        assert_eq!(same, per_caption >= 2, "{}", out.detail);
+    }
     for key in ["set", "name", "license", "caption"] {
         assert!(starts[0][key].is_string(), "{key}: {}", out.detail);
     }

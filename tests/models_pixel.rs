@@ -334,8 +334,9 @@ fn loader_tells_pixel_space_from_a_latent_model_with_missing_files() {
 
 /// `"_style_suffix": false` in `model_index.json` (a model trained on bare captions) turns the
 /// paper's style suffix off for prompts; `_sample_guidance` / `_sds_guidance` set the model's
-/// guidance defaults; `_sdedit_strength` the strength of retrieved starts; absent keys keep the
-/// paper's values; bad values are refused.
+/// guidance defaults; `_sdedit_strength` the strength of retrieved starts, `_retrieval_share` how
+/// many start from icons and `_retrieval_per_caption` how many drawings of one caption; absent
+/// keys keep the paper's values; bad values are refused.
 #[test]
 fn model_index_style_suffix_switch() {
     assert_eq!(pixel().hints, ModelHints::default(), "SD defaults");
@@ -350,6 +351,8 @@ fn model_index_style_suffix_switch() {
     v["_style_suffix"] = serde_json::json!(false);
     v["_sample_guidance"] = serde_json::json!(3.0);
     v["_sdedit_strength"] = serde_json::json!(0.25);
+    v["_retrieval_share"] = serde_json::json!(1.0);
+    v["_retrieval_per_caption"] = serde_json::json!(2);
     std::fs::write(&index, v.to_string()).unwrap();
     let sd = StableDiffusion::load(&dir, &LoadOptions::default()).unwrap();
     assert!(!sd.hints.style_suffix);
@@ -374,6 +377,8 @@ fn model_index_style_suffix_switch() {
     assert_eq!(bare.prompt, "a crown");
     assert_eq!(bare.sample.as_ref().unwrap().guidance, 3.0);
     assert_eq!(bare.sample.as_ref().unwrap().strength, 0.25);
+    assert_eq!(bare.sample.as_ref().unwrap().retrieval_share, 1.0);
+    assert_eq!(bare.sample.as_ref().unwrap().retrieval_per_caption, 2);
     let with = plan_of(&fixture("sd-tiny-pixel"));
     assert_eq!(with.prompt, S::Iconography.prompt("a crown"));
     assert_eq!(with.sample.as_ref().unwrap().guidance, 7.5);
@@ -382,6 +387,8 @@ fn model_index_style_suffix_switch() {
         0.4,
         "absent: the default"
     );
+    assert_eq!(with.sample.as_ref().unwrap().retrieval_share, 0.5);
+    assert_eq!(with.sample.as_ref().unwrap().retrieval_per_caption, 1);
     // `_sample_guidance` reaches the sampler: the same prompt, seed and noise, another image.
     let draw = |d: &Path| {
         let t = vectorfusion::teacher::SdTeacher::load(d, 64).unwrap();
@@ -405,14 +412,19 @@ fn model_index_style_suffix_switch() {
     let e = StableDiffusion::load(&dir, &LoadOptions::default()).unwrap_err();
     assert!(e.to_string().contains("model_index.json"), "{e}");
     v["_style_suffix"] = serde_json::json!(false);
-    v["_sds_guidance"] = serde_json::json!(-1.0);
-    std::fs::write(&index, v.to_string()).unwrap();
-    let e = StableDiffusion::load(&dir, &LoadOptions::default()).unwrap_err();
-    assert!(e.to_string().contains("_sds_guidance"), "{e}");
-    v["_sds_guidance"] = serde_json::json!(100.0);
-    v["_sdedit_strength"] = serde_json::json!(1.5);
-    std::fs::write(&index, v.to_string()).unwrap();
-    let e = StableDiffusion::load(&dir, &LoadOptions::default()).unwrap_err();
-    assert!(e.to_string().contains("_sdedit_strength"), "{e}");
+    // Each out-of-range hint is refused, naming its key; then it is set back to a good value.
+    use serde_json::json;
+    for (key, bad, good) in [
+        ("_sds_guidance", json!(-1.0), json!(100.0)),
+        ("_sdedit_strength", json!(1.5), json!(0.3)),
+        ("_retrieval_share", json!(-0.5), json!(0.5)),
+        ("_retrieval_per_caption", json!(0), json!(1)),
+    ] {
+        v[key] = bad;
+        std::fs::write(&index, v.to_string()).unwrap();
+        let e = StableDiffusion::load(&dir, &LoadOptions::default()).unwrap_err();
+        assert!(e.to_string().contains(key), "{e}");
+        v[key] = good;
+    }
     let _ = std::fs::remove_dir_all(&base);
 }

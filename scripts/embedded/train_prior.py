@@ -69,7 +69,7 @@ SCHEDULER_CONFIG = dict(
 )
 
 
-def model_index(latent, guidance, strength):
+def model_index(latent, guidance, strength, share, per_caption):
     idx = {
         "_class_name": "VectorFusionLatentPipeline" if latent else "VectorFusionPixelPipeline",
         "unet": ["diffusers", "UNet2DConditionModel"],
@@ -82,6 +82,10 @@ def model_index(latent, guidance, strength):
         "_sample_guidance": guidance,
         # SDEdit strength of samples started from retrieved icons (tuned on held-out captions)
         "_sdedit_strength": strength,
+        # the share of the K samples started from retrieved icons (the others from noise)
+        "_retrieval_share": share,
+        # at most this many retrieved icons of one caption (two artists' drawings of it, ...)
+        "_retrieval_per_caption": per_caption,
         # a small prior: the pipeline's presets for small models, not Stable Diffusion's
         "_small_prior": True,
     }
@@ -90,7 +94,7 @@ def model_index(latent, guidance, strength):
     return idx
 
 
-def export(ema, out_dir, vae_dir, guidance, strength):
+def export(ema, out_dir, vae_dir, guidance, strength, share, per_caption):
     from diffusers import DDIMScheduler
 
     os.makedirs(out_dir, exist_ok=True)
@@ -105,7 +109,7 @@ def export(ema, out_dir, vae_dir, guidance, strength):
     elif os.path.isdir(os.path.join(out_dir, "vae")):
         shutil.rmtree(os.path.join(out_dir, "vae"))
     with open(os.path.join(out_dir, "model_index.json"), "w") as f:
-        json.dump(model_index(vae_dir is not None, guidance, strength), f, indent=2)
+        json.dump(model_index(vae_dir is not None, guidance, strength, share, per_caption), f, indent=2)
         f.write("\n")
 
 
@@ -151,6 +155,10 @@ def main():
     ap.add_argument("--guidance", type=float, default=5.0, help="sampling CFG scale written to model_index.json")
     ap.add_argument("--sdedit-strength", type=float, default=0.4,
                     help="SDEdit strength of retrieved starts written to model_index.json")
+    ap.add_argument("--retrieval-share", type=float, default=0.5,
+                    help="share of the K samples started from retrieved icons, written to model_index.json")
+    ap.add_argument("--retrieval-per-caption", type=int, default=1,
+                    help="at most this many retrieved icons of one caption, written to model_index.json")
     ap.add_argument("--seed", type=int, default=1234)
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--bf16", action="store_true", help="bf16 autocast (AVX-512 BF16 / AMX CPUs)")
@@ -274,7 +282,8 @@ def main():
         torch.save({"unet": unet.state_dict(), "ema": ema.state_dict(), "opt": opt.state_dict(), "gen": gen.get_state(),
                     "step": step, "elapsed": elapsed0 + time.time() - t0, "args": vars(args)}, ckpt_path + ".tmp")
         os.replace(ckpt_path + ".tmp", ckpt_path)
-        export(ema, args.export, vae_dir, args.guidance, args.sdedit_strength)
+        export(ema, args.export, vae_dir, args.guidance, args.sdedit_strength, args.retrieval_share,
+               args.retrieval_per_caption)
         print(f"{'final ' if final else ''}checkpoint + export at step {step}", flush=True)
 
     t0 = time.time()
@@ -325,7 +334,8 @@ def main():
     print(f"final val loss: ema {v_ema:.5f} raw {v_raw:.5f}", flush=True)
     save(final=True)
     if v_raw < v_ema:
-        export(unet, args.export, vae_dir, args.guidance, args.sdedit_strength)
+        export(unet, args.export, vae_dir, args.guidance, args.sdedit_strength, args.retrieval_share,
+               args.retrieval_per_caption)
         print("exported the raw weights instead (the checkpoint keeps both)", flush=True)
 
 

@@ -8,6 +8,7 @@
 //! raster row of the paper's Table 1, the ceiling the vector methods are measured against.
 
 use super::CliError;
+use super::tuning::SdsTuningArgs;
 use crate::eval::clip::{
     EvalError, EvalReport, evaluate, evaluate_svg_dir, format_table, read_prompts, svg_name,
 };
@@ -91,6 +92,9 @@ pub struct EvalArgs {
     /// --method: sample from noise only (no retrieved icons as starting points).
     #[arg(long)]
     pub no_retrieval: bool,
+    /// --method: the SDS stage's settings (a sweep over guidance, timesteps, render size).
+    #[command(flatten)]
+    pub tuning: SdsTuningArgs,
 }
 
 fn map_err(e: EvalError) -> CliError {
@@ -364,6 +368,7 @@ fn request(
         samples: args.samples,
         seed: args.seed.wrapping_add(line as u64 - 1),
         retrieval: !args.no_retrieval,
+        tuning: args.tuning.tuning(None),
         ..PlanRequest::text(caption)
     }
 }
@@ -417,4 +422,64 @@ pub fn format_methods_table(r: &MethodsReport) -> String {
         s.push('\n');
     }
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        eval: EvalArgs,
+    }
+
+    fn args(extra: &[&str]) -> EvalArgs {
+        let base = ["eval", "--prompts", "p.txt", "--scorer", "s"];
+        Cli::try_parse_from(base.iter().chain(extra)).unwrap().eval
+    }
+
+    /// The SDS flags (a sweep's knobs) reach every caption's request; without them the preset
+    /// and the model decide.
+    #[test]
+    fn sds_flags_reach_the_request() {
+        let a = args(&[
+            "--guidance",
+            "30",
+            "--t-min",
+            "200",
+            "--t-max",
+            "800",
+            "--size",
+            "96",
+            "--no-augment",
+        ]);
+        let r = request(
+            &a,
+            Method::SdLiveSds,
+            Style::Iconography,
+            Preset::Balanced,
+            "a cat",
+            3,
+        );
+        assert_eq!(r.tuning.guidance, Some(30.0));
+        assert_eq!((r.tuning.t_min, r.tuning.t_max), (Some(200), Some(800)));
+        assert_eq!(r.tuning.size, Some(96));
+        assert_eq!(r.tuning.augment, Some(false));
+        assert_eq!(r.seed, 2, "line 3 of seed 0");
+        let plain = request(
+            &args(&[]),
+            Method::SdLiveSds,
+            Style::Iconography,
+            Preset::Balanced,
+            "a cat",
+            1,
+        );
+        assert_eq!(plain.tuning, Default::default());
+        assert!(
+            Cli::try_parse_from(["eval", "--prompts", "p", "--scorer", "s", "--t-min", "x"])
+                .is_err()
+        );
+    }
 }

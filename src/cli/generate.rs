@@ -8,10 +8,10 @@
 //! `VF_DEFAULT_MODEL`, else `models/vf-icon`), with its `scorer/` as the default scorer.
 
 use super::CliError;
+use super::tuning::SdsTuningArgs;
 use crate::pipeline::{
     DefaultExecutor, EncoderChoice, Executor, JobContext, JobKind, Limits, Method, ModelDirs,
-    PipelineError, PlanRequest, Preset, RunInput, SpecError, StartKind, Style, Tuning,
-    default_model_dir,
+    PipelineError, PlanRequest, Preset, RunInput, SpecError, StartKind, Style, default_model_dir,
 };
 use crate::progress::{CancelToken, Progress};
 use crate::scene::MAX_PATHS;
@@ -67,9 +67,6 @@ pub struct GenerateArgs {
     /// feature).
     #[arg(long, default_value = "cpu")]
     pub device: String,
-    /// Teacher input size in pixels (the SVG is written at this width) [default: the preset's].
-    #[arg(long)]
-    pub size: Option<u32>,
     /// SDS steps [default: the preset's].
     #[arg(long)]
     pub steps: Option<u32>,
@@ -78,33 +75,13 @@ pub struct GenerateArgs {
     pub paths: Option<u32>,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// SDS classifier-free guidance scale [default: the model's (`_sds_guidance` in its
-    /// model_index.json), 100 as in the paper for Stable Diffusion and the test teacher].
-    #[arg(long)]
-    pub guidance: Option<f32>,
     /// Sample from noise only: no retrieved training icons as starting points (the embedded
-    /// model starts about half of its K samples from the icons nearest to the caption).
+    /// model starts a share of its K samples, `_retrieval_share`, from the icons nearest to the
+    /// caption).
     #[arg(long)]
     pub no_retrieval: bool,
-    /// Smallest timestep drawn [default: 50].
-    #[arg(long)]
-    pub t_min: Option<usize>,
-    /// Largest timestep drawn (at the start, see `--t-max-end`) [default: 950].
-    #[arg(long)]
-    pub t_max: Option<usize>,
-    /// Anneal the largest timestep linearly to this value by the last step.
-    #[arg(long)]
-    pub t_max_end: Option<usize>,
-    /// Clip each parameter group's gradient to this L2 norm.
-    #[arg(long)]
-    pub grad_clip: Option<f32>,
-    /// Also re-initialise closed paths whose area is below this many px² (iconography) [default:
-    /// the paper's 64 px² at 512 px when the run starts from a sample, image or SVG].
-    #[arg(long)]
-    pub reinit_min_area: Option<f32>,
-    /// Turn off the random perspective + crop augmentation (from-scratch runs use it).
-    #[arg(long)]
-    pub no_augment: bool,
+    #[command(flatten)]
+    pub tuning: SdsTuningArgs,
     /// Output SVG path.
     #[arg(short, long)]
     pub output: PathBuf,
@@ -265,18 +242,7 @@ pub fn run(args: GenerateArgs) -> Result<(), CliError> {
         samples: args.samples,
         seed: args.seed,
         retrieval: !args.no_retrieval,
-        tuning: Tuning {
-            size: args.size,
-            guidance: args.guidance,
-            t_min: args.t_min,
-            t_max: args.t_max,
-            t_max_end: args.t_max_end,
-            grad_clip: args.grad_clip,
-            reinit_min_area: args.reinit_min_area,
-            augment: args.no_augment.then_some(false),
-            snapshot_every: args.snapshot_every,
-            live: None,
-        },
+        tuning: args.tuning.tuning(args.snapshot_every),
     };
     let exec = DefaultExecutor::with_downloads(dirs);
     let plan = exec.plan(&request, &cli_limits()).map_err(spec_err)?;

@@ -10,6 +10,7 @@ pub mod generate;
 pub mod render;
 pub mod serve;
 pub mod setup;
+pub mod tuning;
 pub mod vectorize;
 
 use crate::server::Role;

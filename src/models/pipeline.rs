@@ -170,6 +170,16 @@ pub struct ModelHints {
     /// held-out captions says its own (`docs/embedded/TRAINING.md`).
     #[serde(rename = "_sdedit_strength", default = "sdedit_strength")]
     pub sdedit_strength: f64,
+    /// `_retrieval_share`: the share of the K samples started from retrieved icons, rounded up
+    /// (0.5: one of two, two of four); the others start from noise. 1 starts every sample from
+    /// an icon (a model whose samples from noise rarely win the rerank).
+    #[serde(rename = "_retrieval_share", default = "retrieval_share")]
+    pub retrieval_share: f64,
+    /// `_retrieval_per_caption`: at most this many of the retrieved icons share a caption (1:
+    /// one drawing each of the nearest captions; 2: two artists' drawings of the nearest one,
+    /// then the next caption's). At least 1.
+    #[serde(rename = "_retrieval_per_caption", default = "one")]
+    pub retrieval_per_caption: u32,
 }
 
 fn sample_guidance() -> f32 {
@@ -181,6 +191,12 @@ fn sds_guidance() -> f32 {
 fn sdedit_strength() -> f64 {
     0.4
 }
+fn retrieval_share() -> f64 {
+    0.5
+}
+fn one() -> u32 {
+    1
+}
 
 impl Default for ModelHints {
     fn default() -> Self {
@@ -190,6 +206,8 @@ impl Default for ModelHints {
             sds_guidance: sds_guidance(),
             small_prior: false,
             sdedit_strength: sdedit_strength(),
+            retrieval_share: retrieval_share(),
+            retrieval_per_caption: one(),
         }
     }
 }
@@ -221,6 +239,13 @@ impl ModelHints {
         within(&index, "_sample_guidance", h.sample_guidance, 1000.0)?;
         within(&index, "_sds_guidance", h.sds_guidance, 1000.0)?;
         within(&index, "_sdedit_strength", h.sdedit_strength, 1.0)?;
+        within(&index, "_retrieval_share", h.retrieval_share, 1.0)?;
+        if h.retrieval_per_caption == 0 {
+            return Err(ModelError::Config {
+                path: index.display().to_string(),
+                reason: "_retrieval_per_caption must be at least 1, got 0".into(),
+            });
+        }
         Ok(h)
     }
 }

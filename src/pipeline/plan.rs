@@ -150,10 +150,25 @@ pub struct SamplePlan {
     /// Sampler (DDIM) steps for a sample from noise.
     pub steps: u32,
     pub guidance: f32,
-    /// Start about half of the samples from retrieved training icons.
+    /// Start some of the samples from retrieved training icons.
     pub retrieval: bool,
+    /// The share of the K samples that do, rounded up ([`crate::stages::sample::retrieved_count`]);
+    /// plans stored before it existed started half.
+    #[serde(default = "half")]
+    pub retrieval_share: f64,
+    /// At most this many retrieved icons per caption (the model's `_retrieval_per_caption`);
+    /// plans stored before it existed took one.
+    #[serde(default = "one")]
+    pub retrieval_per_caption: u32,
     /// SDEdit strength of those.
     pub strength: f64,
+}
+
+fn half() -> f64 {
+    0.5
+}
+fn one() -> u32 {
+    1
 }
 
 /// LIVE tracing of the kept sample (or of a given image).
@@ -372,6 +387,8 @@ fn text_plan(
         steps: ps.sample_steps as u32,
         guidance: model.hints.sample_guidance,
         retrieval: req.retrieval,
+        retrieval_share: model.hints.retrieval_share,
+        retrieval_per_caption: model.hints.retrieval_per_caption,
         strength: model.hints.sdedit_strength,
     });
     let distil = !from_method || req.method != Method::SdLive;

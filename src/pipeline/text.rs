@@ -22,7 +22,7 @@ use crate::retrieval::Hit;
 use crate::scene::Scene;
 use crate::stages::live::prune::weak_paths;
 use crate::stages::live::{self, LiveConfig, PathBudget};
-use crate::stages::sample::{Ranked, sample_and_rerank};
+use crate::stages::sample::{Ranked, RetrievalPick, retrieved_count, sample_and_rerank};
 use crate::stages::sds::{
     RasterBackend, SdsCheckpoint, SdsConfig, SdsError, SdsState, run_sds_resumable,
 };
@@ -155,10 +155,24 @@ pub fn sample_ranked(
         .sample
         .as_ref()
         .ok_or_else(|| failed("plan", "a sampled start needs a sample plan"))?;
-    let index = if sp.retrieval {
-        models.retrieval.as_deref().map_err(Clone::clone)
-    } else {
+    let n = retrieved_count(sp.samples, sp.retrieval_share);
+    let retrieval = if !sp.retrieval {
         Err("turned off".to_string())
+    } else if n == 0 {
+        Err("the model's _retrieval_share is 0".to_string())
+    } else {
+        models
+            .retrieval
+            .as_deref()
+            .map(|i| {
+                let pick = RetrievalPick {
+                    n,
+                    per_caption: sp.retrieval_per_caption.max(1) as usize,
+                    seed: plan.seeds.sample,
+                };
+                (i, pick)
+            })
+            .map_err(Clone::clone)
     };
     let cfg = SampleConfig {
         k: sp.samples,
@@ -170,7 +184,7 @@ pub fn sample_ranked(
     sample_and_rerank(
         models.teacher(),
         models.scorer.as_ref(),
-        index,
+        retrieval,
         &plan.prompt,
         caption,
         &cfg,
@@ -205,6 +219,8 @@ fn from_samples(
     });
     detail["retrieval"] = json!({
         "strength": sp.strength,
+        "share": sp.retrieval_share,
+        "per_caption": sp.retrieval_per_caption,
         "starts": ranked.sources().iter().flatten().collect::<Vec<_>>(),
         "chosen": ranked.best_source(),
         "unavailable": why_not,

@@ -1,6 +1,7 @@
-//! Stage 1 of `sd_live*`: K raster samples of the caption, about half of them started from the
-//! training icons nearest to it (retrieval, when the model has an index), and the scorer's pick
-//! among them (rejection sampling). Sampling itself is the teacher's ([`Teacher::sample`]).
+//! Stage 1 of `sd_live*`: K raster samples of the caption, a share of them (the model's
+//! `_retrieval_share`, half by default) started from the training icons nearest to it
+//! (retrieval, when the model has an index), and the scorer's pick among them (rejection
+//! sampling). Sampling itself is the teacher's ([`Teacher::sample`]).
 
 use crate::image::Image;
 use crate::models::scorer::{ImageTextScorer, Scorer};
@@ -9,9 +10,16 @@ use crate::retrieval::install::CAPTION_TOKENS;
 use crate::retrieval::{Hit, IconIndex};
 use crate::teacher::{SampleConfig, SampleError, Teacher};
 
-/// How many of the K samples start from retrieved images: half, rounded up (one of two).
-pub fn retrieved_count(k: u32) -> usize {
-    k.div_ceil(2) as usize
+/// How many of the K samples start from retrieved images: `share` of them, rounded up (share
+/// 0.5: one of two, two of four), at most K. `share` outside `0..=1` (or NaN) is clamped to it.
+pub fn retrieved_count(k: u32, share: f64) -> usize {
+    let share = if share.is_nan() {
+        0.0
+    } else {
+        share.clamp(0.0, 1.0)
+    };
+    // A small tolerance so that 0.5 × 4 stays 2 whatever the rounding of `share`.
+    ((f64::from(k) * share - 1e-9).ceil().max(0.0) as usize).min(k as usize)
 }
 
 fn failed(what: &str, e: impl std::fmt::Display) -> SampleError {
@@ -55,15 +63,23 @@ impl Ranked {
     }
 }
 
-/// The training icons of `index` nearest to `caption` to start `n` samples from, rendered at
-/// the teacher's image side; `Err` says why there are none (a text encoder that is not the
+/// Which icons of an index a run starts from: how many, at most how many drawings of one
+/// caption, and the seed that picks among a caption's drawings.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RetrievalPick {
+    pub n: usize,
+    pub per_caption: usize,
+    pub seed: u64,
+}
+
+/// The training icons of `index` nearest to `caption` to start `pick.n` samples from, rendered
+/// at the teacher's image side; `Err` says why there are none (a text encoder that is not the
 /// index's MiniLM, ...).
 pub fn retrieve(
     teacher: &dyn Teacher,
     index: &IconIndex,
     caption: &str,
-    n: usize,
-    seed: u64,
+    pick: RetrievalPick,
 ) -> Result<Vec<(Hit, Image)>, String> {
     let q = teacher
         .caption_embedding(caption, CAPTION_TOKENS)
@@ -71,7 +87,7 @@ pub fn retrieve(
         .ok_or("the model's text encoder is not the index's MiniLM")?;
     let side = teacher.image_size();
     index
-        .nearest(&q, n, 1, seed)
+        .nearest(&q, pick.n, pick.per_caption, pick.seed)
         .map_err(|e| e.to_string())?
         .into_iter()
         .map(|h| {
@@ -82,25 +98,26 @@ pub fn retrieve(
 }
 
 /// Samples `cfg.k` images of `prompt` and keeps the one `scorer` matches best to `caption`.
-/// With `index` (`Err`: why there is none, or retrieval is off), [`retrieved_count`] of them
-/// start from the training icons nearest to `caption` at `cfg.strength`; the second value says
-/// why none did, when none did.
+/// With `retrieval` (an index and which of its icons to start from: `n` of them,
+/// [`retrieved_count`]; `Err`: why there is none, or retrieval is off), that many start from the
+/// training icons nearest to `caption` at `cfg.strength`; the second value says why none did,
+/// when none did.
 #[allow(clippy::too_many_arguments)]
 pub fn sample_and_rerank(
     teacher: &dyn Teacher,
     scorer: Option<&Scorer>,
-    index: Result<&IconIndex, String>,
+    retrieval: Result<(&IconIndex, RetrievalPick), String>,
     prompt: &str,
     caption: &str,
     cfg: &SampleConfig,
     sink: &dyn ProgressSink,
     cancel: &CancelToken,
 ) -> Result<(Ranked, Option<String>), SampleError> {
-    let (hits, why_not) =
-        match index.and_then(|i| retrieve(teacher, i, caption, retrieved_count(cfg.k), cfg.seed)) {
-            Ok(h) => (h, None),
-            Err(e) => (Vec::new(), Some(e)),
-        };
+    let (hits, why_not) = match retrieval.and_then(|(i, pick)| retrieve(teacher, i, caption, pick))
+    {
+        Ok(h) => (h, None),
+        Err(e) => (Vec::new(), Some(e)),
+    };
     let (hits, starts): (Vec<Hit>, Vec<Image>) = hits.into_iter().unzip();
     let images = teacher.sample(prompt, &starts, cfg, sink, cancel)?;
     if images.is_empty() {
@@ -133,7 +150,17 @@ mod tests {
     use super::*;
 
     #[test]
-    fn half_the_samples_start_from_retrieval() {
-        assert_eq!([1, 2, 3, 8].map(retrieved_count), [1, 1, 2, 4]);
+    fn a_share_of_the_samples_start_from_retrieval() {
+        let half = |k| retrieved_count(k, 0.5);
+        assert_eq!([1, 2, 3, 4, 8].map(half), [1, 1, 2, 2, 4]);
+        let all = |k| retrieved_count(k, 1.0);
+        assert_eq!([1, 2, 3, 8].map(all), [1, 2, 3, 8]);
+        assert_eq!([0, 1, 4].map(|k| retrieved_count(k, 0.0)), [0, 0, 0]);
+        // Out of range shares are clamped; K = 0 retrieves nothing.
+        assert_eq!(retrieved_count(4, 7.0), 4);
+        assert_eq!(retrieved_count(4, -1.0), 0);
+        assert_eq!(retrieved_count(4, f64::NAN), 0);
+        assert_eq!(retrieved_count(0, 1.0), 0);
+        assert_eq!(retrieved_count(3, 0.25), 1);
     }
 }

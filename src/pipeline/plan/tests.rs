@@ -247,6 +247,19 @@ fn plans_round_trip_through_json_and_key_their_checkpoints() {
     .unwrap();
     let back: RunPlan = serde_json::from_str(&serde_json::to_string(&p).unwrap()).unwrap();
     assert_eq!(back, p);
+    // A plan stored before `retrieval_share` existed starts half its samples from icons, as it
+    // did then.
+    let mut old = serde_json::to_value(&p).unwrap();
+    let sample = &mut old["text"]["sample"];
+    assert!(
+        sample
+            .as_object_mut()
+            .unwrap()
+            .remove("retrieval_share")
+            .is_some()
+    );
+    let old: RunPlan = serde_json::from_value(old).unwrap();
+    assert_eq!(old.text.unwrap().sample.unwrap().retrieval_share, 0.5);
     let mut q = p.clone();
     q.text.as_mut().unwrap().paths += 1;
     assert_ne!(p.key(), q.key());

@@ -1,0 +1,40 @@
+#!/usr/bin/env bash
+# A sweep of one model hint on held-out captions (docs/embedded/TRAINING.md, "SDEdit strength",
+# "Retrieval share"): for each value, a copy of models/vf-icon (links to its weights) whose
+# model_index.json sets KEY, run through run_eval.sh via VF_DEFAULT_MODEL (METHODS, default
+# samples; retrieval on).
+#
+#   scripts/embedded/sweep_hint.sh _sdedit_strength "0.2 0.3 0.4" fluent fluentb   # repo root
+#   scripts/embedded/sweep_hint.sh _retrieval_share "0.5 1" fluent fluentb
+#   HINTS=_retrieval_share=1 TAG_SUFFIX=-pc scripts/embedded/sweep_hint.sh _retrieval_per_caption 2 fluent
+#
+# HINTS="KEY=VALUE ..." fixes other hints in every copy (TAG_SUFFIX then names the variant); VF,
+# PY, EVAL_ARGS as for run_eval.sh; SWEEP (default /tmp/sweep) holds the model copies,
+# outputs and reports (eval_SET_retrieval_balanced_KEYVALUE.json, and pixel R-Precision per
+# method under out/SET-retrieval-KEYVALUE/).
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+key=${1:?usage: sweep_hint.sh KEY "VALUES" [CAPTION_SET...]}
+values=${2:?usage: sweep_hint.sh KEY "VALUES" [CAPTION_SET...]}
+shift 2
+sweep=${SWEEP:-/tmp/sweep}
+for v in $values; do
+  tag="${key#_}$v${TAG_SUFFIX:-}"
+  d="$sweep/m-$tag"
+  rm -rf "$d" && mkdir -p "$d"
+  for c in unet vae scheduler scorer text_encoder tokenizer retrieval; do
+    [ -e "models/vf-icon/$c" ] && ln -s "$PWD/models/vf-icon/$c" "$d/$c"
+  done
+  # HINTS="KEY=VALUE ..." sets other hints first (a combination), then KEY=v.
+  python3 - "$d/model_index.json" ${HINTS:-} "$key=$v" <<'PY'
+import json, sys
+m = json.load(open("models/vf-icon/model_index.json"))
+for kv in sys.argv[2:]:
+    k, v = kv.split("=", 1)
+    m[k] = int(v) if v.isdigit() else float(v)
+json.dump(m, open(sys.argv[1], "w"), indent=2)
+PY
+  echo "== $key $v $(date -u +%T)"
+  VF_DEFAULT_MODEL=$d OUT="$sweep/out" JSON_DIR="$sweep" TAG="$tag" METHODS=${METHODS:-samples} MODES=retrieval \
+    scripts/embedded/run_eval.sh balanced "${@:-fluent}" | grep pixel_r_precision
+done
