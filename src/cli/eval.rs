@@ -436,7 +436,15 @@ mod tests {
     }
 
     fn args(extra: &[&str]) -> EvalArgs {
-        let base = ["eval", "--prompts", "p.txt", "--scorer", "s"];
+        let base = [
+            "eval",
+            "--prompts",
+            "p.txt",
+            "--scorer",
+            "s",
+            "--method",
+            "sd_live_sds",
+        ];
         Cli::try_parse_from(base.iter().chain(extra)).unwrap().eval
     }
 
@@ -478,8 +486,18 @@ mod tests {
         );
         assert_eq!(plain.tuning, Default::default());
         assert!(
-            Cli::try_parse_from(["eval", "--prompts", "p", "--scorer", "s", "--t-min", "x"])
-                .is_err()
+            Cli::try_parse_from([
+                "eval",
+                "--prompts",
+                "p",
+                "--scorer",
+                "s",
+                "--method",
+                "samples",
+                "--t-min",
+                "x"
+            ])
+            .is_err()
         );
     }
 }

@@ -38,7 +38,7 @@ pub enum Command {
     /// Run a worker-only node on a shared (PostgreSQL) queue: health, readiness and metrics.
     Worker(serve::WorkerArgs),
     /// Evaluate generated SVGs with CLIP scorers.
-    Eval(eval::EvalArgs),
+    Eval(Box<eval::EvalArgs>),
     /// Install the embedded model's MiniLM weights into the cache (once; fast when cached).
     Setup(setup::SetupArgs),
     /// Benchmarks.
@@ -100,7 +100,7 @@ pub fn run(cli: Cli) -> Result<(), CliError> {
         Command::Render(a) => render::run(a),
         Command::Serve(args) => serve::run(args.node, args.bind, Role::Server),
         Command::Worker(args) => serve::run(args.node, Some(args.bind), Role::Worker),
-        Command::Eval(a) => eval::run(a),
+        Command::Eval(a) => eval::run(*a),
         Command::Setup(a) => setup::run(a),
         Command::Bench(b) => bench::run(b),
         Command::JobChild => match crate::worker::isolate::run_stdio() {
