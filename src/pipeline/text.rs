@@ -167,7 +167,7 @@ pub fn sample_ranked(
             .map(|i| {
                 let pick = RetrievalPick {
                     n,
-                    per_caption: sp.retrieval_per_caption.max(1) as usize,
+                    per_caption: sp.retrieval_per_caption as usize,
                     seed: plan.seeds.sample,
                 };
                 (i, pick)
