@@ -10,8 +10,9 @@ all positives (soft targets). Light augmentation: horizontal flip and a random s
 `--hard F`: a fraction F of each batch is the nearest other captions (by MiniLM similarity) of
 the rest, so the scorer learns "red heart" from "orange heart", not only from "taxi". `--bf16`:
 autocast on CPUs with AVX-512 BF16. `--minutes` bounds the wall time (the cosine schedule runs
-over --epochs). Writes OUT/metrics.json, OUT/loss.csv, a restartable OUT/ckpt.pt, and
-EXPORT/{config.json, model.safetensors}.
+over --epochs). `--ema D` keeps a moving average of the weights beside them, evaluated at each
+--eval-every (OUT/eval_ema.csv) and exported to EXPORT_ema. Writes OUT/metrics.json,
+OUT/loss.csv, a restartable OUT/ckpt.pt, and EXPORT/{config.json, model.safetensors}.
 """
 
 import argparse
@@ -160,6 +161,9 @@ def main():
     ap.add_argument("--warmup", type=int, default=100)
     ap.add_argument("--outline", type=float, default=0.0,
                     help="fraction of each batch given dark outlines along its colour edges (augmentation)")
+    ap.add_argument("--ema", type=float, default=0.0,
+                    help="also keep an exponential moving average of the weights (decay per step, 0: off); "
+                         "evaluated beside the raw weights (OUT/eval_ema.csv) and exported to EXPORT_ema")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
     os.makedirs(args.out, exist_ok=True)
@@ -205,6 +209,15 @@ def main():
             sims[:, 0] = -2
             near = sims.topk(8, dim=1).indices
     amp = torch.autocast("cpu", dtype=torch.bfloat16, enabled=args.bf16)
+    ema = None
+    if args.ema > 0:
+        import copy
+
+        ema = copy.deepcopy(model)
+        if os.path.exists(ckpt) and "ema" in ck:
+            ema.load_state_dict(ck["ema"])
+        for p in ema.parameters():
+            p.requires_grad_(False)
     while step < total and not args.eval_only and time.time() - t0 < args.minutes * 60:
         nh = int(args.hard * args.batch) if near is not None else 0
         b = torch.randint(0, len(raw), (args.batch - nh,), generator=gen)
@@ -231,6 +244,9 @@ def main():
         opt.step()
         with torch.no_grad():
             model.logit_scale.clamp_(0, 4.6052)
+            if ema is not None:
+                for pe, pm in zip(ema.parameters(), model.parameters()):
+                    pe.lerp_(pm, 1 - args.ema)
         step += 1
         if step % 10 == 0:
             log.writerow([step, f"{loss.item():.4f}", f"{lr:.2e}", f"{elapsed0 + time.time() - t0:.1f}"])
@@ -246,15 +262,34 @@ def main():
                 w.writerow([step, f"{m['r1']:.4f}", f"{m['r5']:.4f}", f"{m[f'r_precision_1_of_{args.distractors + 1}']:.4f}",
                             f"{elapsed0 + time.time() - t0:.1f}"])
             print(f"eval step {step}: R-Precision {m[f'r_precision_1_of_{args.distractors + 1}']:.3f}", flush=True)
+            if ema is not None:
+                me = evaluate(ema, *ev, distractors=args.distractors)
+                new_file = not os.path.exists(os.path.join(args.out, "eval_ema.csv"))
+                with open(os.path.join(args.out, "eval_ema.csv"), "a", newline="") as f:
+                    w = csv.writer(f)
+                    if new_file:
+                        w.writerow(["step", "r1", "r5", f"r_precision_1_of_{args.distractors + 1}", "elapsed_s"])
+                    w.writerow([step, f"{me['r1']:.4f}", f"{me['r5']:.4f}",
+                                f"{me[f'r_precision_1_of_{args.distractors + 1}']:.4f}", f"{elapsed0 + time.time() - t0:.1f}"])
+                print(f"eval step {step} (EMA): R-Precision {me[f'r_precision_1_of_{args.distractors + 1}']:.3f}", flush=True)
         if time.time() - last > 600 or step == total:
-            torch.save({"model": model.state_dict(), "opt": opt.state_dict(), "gen": gen.get_state(), "step": step,
-                        "elapsed": elapsed0 + time.time() - t0}, ckpt)
+            state = {"model": model.state_dict(), "opt": opt.state_dict(), "gen": gen.get_state(), "step": step,
+                     "elapsed": elapsed0 + time.time() - t0}
+            if ema is not None:
+                state["ema"] = ema.state_dict()
+                export(ema, args.export + "_ema")
+            torch.save(state, ckpt)
             export(model, args.export)
             last = time.time()
     m = evaluate(model, *ev, distractors=args.distractors)
     m["train_steps"] = step
     m["train_wall_s"] = elapsed0 + time.time() - t0
     m["args"] = vars(args)
+    if ema is not None:
+        me = evaluate(ema, *ev, distractors=args.distractors)
+        m["ema"] = {k: v for k, v in me.items() if k != "per_set"}
+        m["ema"]["per_set"] = me["per_set"]
+        export(ema, args.export + "_ema")
     json.dump(m, open(os.path.join(args.out, "metrics.json"), "w"), indent=1)
     export(model, args.export)
     print(json.dumps({k: v for k, v in m.items() if k != "per_set"}), flush=True)
