@@ -1,10 +1,10 @@
 #!/usr/bin/env bash
 # After a retrain (docs/embedded/TRAINING.md): reference fixtures and the loader test, then the
-# evaluation (Table 1 in miniature on the held-out Fluent captions, `scratch` included), the
+# evaluation (Table 1 in miniature on both sets of held-out Fluent captions, `scratch` on the first), the
 # memorisation check, the gallery, the `generate` timing over 12 everyday captions with its
 # picture, the prior's sample grid and loss curve, and the held-out openmoji captions.
 #
-#   scripts/embedded/after_training.sh        # from the repo root; about 25 minutes on 2 cores
+#   scripts/embedded/after_training.sh        # from the repo root; about 30 minutes on 2 cores
 #
 # VF (default target/debug/vectorfusion, a dev build: every dependency optimised), PY (the venv
 # with torch/diffusers), OUT (eval outputs, default /tmp/evalout). Run it on an idle machine: the
@@ -26,6 +26,8 @@ t refs; "$PY" scripts/embedded/make_refs.py | tail -1
 t test; cargo test --test embedded_model 2>&1 | grep -E "test result|FAILED|panicked"
 t fluent; SCRATCH=1 scripts/embedded/run_eval.sh balanced fluent
 keep_pixel_scores fluent
+t fluentb; scripts/embedded/run_eval.sh balanced fluentb
+keep_pixel_scores fluentb
 t memorisation
 "$PY" scripts/embedded/memorisation.py --vf "$VF" --dir "$OUT/fluent-retrieval/samples" \
   --dir "$OUT/fluent-noise/samples" --dir "$OUT/fluent-retrieval/sd_live_sds" \
@@ -47,4 +49,9 @@ t samples
   --loss docs/embedded/prior_loss.csv --loss-out docs/embedded/loss.png | tail -2
 t openmoji; scripts/embedded/run_eval.sh balanced openmoji
 keep_pixel_scores openmoji
+# PAPER=1: the paper's 128 captions too (IconClip scores only; about 15 more minutes)
+if [ -n "${PAPER:-}" ]; then
+  t paper; METHODS="samples sd_live_sds" MODES=retrieval scripts/embedded/run_eval.sh balanced paper
+  METHODS=samples MODES=noise scripts/embedded/run_eval.sh balanced paper
+fi
 t done

@@ -166,6 +166,8 @@ def main():
     ap.add_argument("--until", default=None, help="stop at this UTC time HH:MM")
     ap.add_argument("--cooldown-min", type=float, default=0.0,
                     help="warmup-stable-decay: over the last M minutes before --until the LR falls linearly to --lr-floor x --lr")
+    ap.add_argument("--cooldown-steps", type=int, default=0,
+                    help="the same decay over the last N steps before --max-steps (with --until too, the lower LR wins)")
     ap.add_argument("--lr-floor", type=float, default=0.05)
     ap.add_argument("--export-every-min", type=float, default=15.0)
     ap.add_argument("--val-every", type=int, default=500)
@@ -299,10 +301,13 @@ def main():
         t = torch.randint(0, 1000, (args.batch,), generator=gen)
         noise = torch.randn(z0.shape, generator=gen)
         lr = args.lr * min(1.0, (step - run_start + 1) / args.warmup)
+        f = 1.0
         if deadline and args.cooldown_min > 0:
             left = (deadline - dt.datetime.now(dt.timezone.utc)).total_seconds() / 60
-            f = min(1.0, max(0.0, left / args.cooldown_min))
-            lr *= args.lr_floor + (1 - args.lr_floor) * f
+            f = min(f, max(0.0, left / args.cooldown_min))
+        if args.cooldown_steps > 0:
+            f = min(f, max(0.0, (args.max_steps - step) / args.cooldown_steps))
+        lr *= args.lr_floor + (1 - args.lr_floor) * f
         for g in opt.param_groups:
             g["lr"] = lr
         loss = v_loss(unet, z0, cond, t, noise).mean()

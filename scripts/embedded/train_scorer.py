@@ -161,6 +161,8 @@ def main():
     ap.add_argument("--warmup", type=int, default=100)
     ap.add_argument("--outline", type=float, default=0.0,
                     help="fraction of each batch given dark outlines along its colour edges (augmentation)")
+    ap.add_argument("--channels", default="32,64,128,256",
+                    help="the image tower's widths, stem then one per block (config.json 'channels'; the Rust loader reads them)")
     ap.add_argument("--ema", type=float, default=0.0,
                     help="also keep an exponential moving average of the weights (decay per step, 0: off); "
                          "evaluated beside the raw weights (OUT/eval_ema.csv) and exported to EXPORT_ema")
@@ -171,7 +173,7 @@ def main():
     raw, idx, sent, caps, meta = load(args.train)
     ev = load(args.eval)
     torch.manual_seed(args.seed)
-    model = vf_icon.IconClip()
+    model = vf_icon.IconClip(channels=tuple(int(c) for c in args.channels.split(",")))
     opt = torch.optim.AdamW(model.parameters(), lr=args.lr, weight_decay=0.05)
     steps_per_epoch = len(raw) // args.batch
     total = int(args.epochs * steps_per_epoch)
