@@ -220,6 +220,20 @@ def main():
             ema.load_state_dict(ck["ema"])
         for p in ema.parameters():
             p.requires_grad_(False)
+    rp_key = f"r_precision_1_of_{args.distractors + 1}"
+
+    def log_eval(net, name, label):
+        """Held-out R-Precision of `net` at this step, appended to OUT/`name`."""
+        m = evaluate(net, *ev, distractors=args.distractors)
+        path = os.path.join(args.out, name)
+        new_file = not os.path.exists(path)
+        with open(path, "a", newline="") as f:
+            w = csv.writer(f)
+            if new_file:
+                w.writerow(["step", "r1", "r5", rp_key, "elapsed_s"])
+            w.writerow([step, f"{m['r1']:.4f}", f"{m['r5']:.4f}", f"{m[rp_key]:.4f}", f"{elapsed0 + time.time() - t0:.1f}"])
+        print(f"eval step {step}{label}: R-Precision {m[rp_key]:.3f}", flush=True)
+
     while step < total and not args.eval_only and time.time() - t0 < args.minutes * 60:
         nh = int(args.hard * args.batch) if near is not None else 0
         b = torch.randint(0, len(raw), (args.batch - nh,), generator=gen)
@@ -255,25 +269,9 @@ def main():
             logf.flush()
             print(f"step {step}/{total} loss {loss.item():.3f}", flush=True)
         if args.eval_every and step % args.eval_every == 0:
-            m = evaluate(model, *ev, distractors=args.distractors)
-            new_file = not os.path.exists(os.path.join(args.out, "eval.csv"))
-            with open(os.path.join(args.out, "eval.csv"), "a", newline="") as f:
-                w = csv.writer(f)
-                if new_file:
-                    w.writerow(["step", "r1", "r5", f"r_precision_1_of_{args.distractors + 1}", "elapsed_s"])
-                w.writerow([step, f"{m['r1']:.4f}", f"{m['r5']:.4f}", f"{m[f'r_precision_1_of_{args.distractors + 1}']:.4f}",
-                            f"{elapsed0 + time.time() - t0:.1f}"])
-            print(f"eval step {step}: R-Precision {m[f'r_precision_1_of_{args.distractors + 1}']:.3f}", flush=True)
+            log_eval(model, "eval.csv", "")
             if ema is not None:
-                me = evaluate(ema, *ev, distractors=args.distractors)
-                new_file = not os.path.exists(os.path.join(args.out, "eval_ema.csv"))
-                with open(os.path.join(args.out, "eval_ema.csv"), "a", newline="") as f:
-                    w = csv.writer(f)
-                    if new_file:
-                        w.writerow(["step", "r1", "r5", f"r_precision_1_of_{args.distractors + 1}", "elapsed_s"])
-                    w.writerow([step, f"{me['r1']:.4f}", f"{me['r5']:.4f}",
-                                f"{me[f'r_precision_1_of_{args.distractors + 1}']:.4f}", f"{elapsed0 + time.time() - t0:.1f}"])
-                print(f"eval step {step} (EMA): R-Precision {me[f'r_precision_1_of_{args.distractors + 1}']:.3f}", flush=True)
+                log_eval(ema, "eval_ema.csv", " (EMA)")
         if time.time() - last > 600 or step == total:
             state = {"model": model.state_dict(), "opt": opt.state_dict(), "gen": gen.get_state(), "step": step,
                      "elapsed": elapsed0 + time.time() - t0}
@@ -288,9 +286,7 @@ def main():
     m["train_wall_s"] = elapsed0 + time.time() - t0
     m["args"] = vars(args)
     if ema is not None:
-        me = evaluate(ema, *ev, distractors=args.distractors)
-        m["ema"] = {k: v for k, v in me.items() if k != "per_set"}
-        m["ema"]["per_set"] = me["per_set"]
+        m["ema"] = evaluate(ema, *ev, distractors=args.distractors)
         export(ema, args.export + "_ema")
     json.dump(m, open(os.path.join(args.out, "metrics.json"), "w"), indent=1)
     export(model, args.export)
