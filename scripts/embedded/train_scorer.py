@@ -11,7 +11,9 @@ all positives (soft targets). Light augmentation: horizontal flip and a random s
 the rest, so the scorer learns "red heart" from "orange heart", not only from "taxi". `--bf16`:
 autocast on CPUs with AVX-512 BF16. `--minutes` bounds the wall time (the cosine schedule runs
 over --epochs). `--ema D` keeps a moving average of the weights beside them, evaluated at each
---eval-every (OUT/eval_ema.csv) and exported to EXPORT_ema. Writes OUT/metrics.json,
+--eval-every (OUT/eval_ema.csv) and exported to EXPORT_ema. `--channels` widens the image tower
+(config.json carries the widths), `--half` exports f16 weights, `--eval-seeds N` repeats the final
+R-Precision over N draws of the distractors. Writes OUT/metrics.json,
 OUT/loss.csv, a restartable OUT/ckpt.pt, and EXPORT/{config.json, model.safetensors}.
 """
 
@@ -126,11 +128,14 @@ def evaluate(model, raw, idx, sent, caps, meta, seed=0, distractors=99):
             "per_set": per_set}
 
 
-def export(model, out_dir):
+def export(model, out_dir, half=False):
+    """EXPORT/{model.safetensors, config.json}; `half` stores f16 (half the file; the Rust loader
+    and `--init` upcast to f32)."""
     from safetensors.torch import save_file
 
     os.makedirs(out_dir, exist_ok=True)
-    sd = {k: v.detach().float().contiguous() for k, v in model.state_dict().items()}
+    dt = torch.float16 if half else torch.float32
+    sd = {k: v.detach().to(dt).contiguous() for k, v in model.state_dict().items()}
     save_file(sd, os.path.join(out_dir, "model.safetensors"))
     with open(os.path.join(out_dir, "config.json"), "w") as f:
         json.dump(model.config, f, indent=2)
@@ -166,6 +171,10 @@ def main():
     ap.add_argument("--ema", type=float, default=0.0,
                     help="also keep an exponential moving average of the weights (decay per step, 0: off); "
                          "evaluated beside the raw weights (OUT/eval_ema.csv) and exported to EXPORT_ema")
+    ap.add_argument("--eval-seeds", type=int, default=1,
+                    help="the final R-Precision also over this many draws of the distractors (metrics.json "
+                         "'r_precision_over_seeds'): the spread of the measure itself")
+    ap.add_argument("--half", action="store_true", help="export f16 weights (the evaluation still runs in f32)")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
     os.makedirs(args.out, exist_ok=True)
@@ -277,19 +286,24 @@ def main():
                      "elapsed": elapsed0 + time.time() - t0}
             if ema is not None:
                 state["ema"] = ema.state_dict()
-                export(ema, args.export + "_ema")
+                export(ema, args.export + "_ema", args.half)
             torch.save(state, ckpt)
-            export(model, args.export)
+            export(model, args.export, args.half)
             last = time.time()
     m = evaluate(model, *ev, distractors=args.distractors)
+    if args.eval_seeds > 1:
+        rs = [evaluate(model, *ev, seed=s, distractors=args.distractors)[rp_key] for s in range(args.eval_seeds)]
+        m["r_precision_over_seeds"] = {"seeds": list(range(args.eval_seeds)), "values": rs, "mean": float(np.mean(rs))}
+        print(f"R-Precision over {len(rs)} distractor draws: {' '.join(f'{r:.4f}' for r in rs)}, mean {np.mean(rs):.4f}",
+              flush=True)
     m["train_steps"] = step
     m["train_wall_s"] = elapsed0 + time.time() - t0
     m["args"] = vars(args)
     if ema is not None:
         m["ema"] = evaluate(ema, *ev, distractors=args.distractors)
-        export(ema, args.export + "_ema")
+        export(ema, args.export + "_ema", args.half)
     json.dump(m, open(os.path.join(args.out, "metrics.json"), "w"), indent=1)
-    export(model, args.export)
+    export(model, args.export, args.half)
     print(json.dumps({k: v for k, v in m.items() if k != "per_set"}), flush=True)
 
 
