@@ -138,10 +138,20 @@ fn same_seed_same_svg() {
             guidance: Some(1.0),
             ..Tuning::default()
         },
-        ..r
+        ..r.clone()
     };
     let c = runs::run(&m, &g).unwrap();
     assert_ne!(a.svg, c.svg);
+    // A learning-rate scale moves the paths further: another drawing; 1 is the schedule as it is.
+    let lr = |lr_scale| PlanRequest {
+        tuning: Tuning {
+            lr_scale: Some(lr_scale),
+            ..Tuning::default()
+        },
+        ..r.clone()
+    };
+    assert_eq!(runs::run(&m, &lr(1.0)).unwrap().svg, a.svg);
+    assert_ne!(runs::run(&m, &lr(4.0)).unwrap().svg, a.svg);
 }
 
 fn disc_image(side: u32) -> Image {

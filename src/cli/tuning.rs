@@ -24,6 +24,9 @@ pub struct SdsTuningArgs {
     /// Clip each parameter group's gradient to this L2 norm.
     #[arg(long)]
     pub grad_clip: Option<f32>,
+    /// Multiply every SDS learning rate of the style's schedule by this (0 < x <= 100) [default: 1].
+    #[arg(long)]
+    pub lr_scale: Option<f32>,
     /// Also re-initialise closed paths whose area is below this many px² (iconography) [default:
     /// the paper's 64 px² at 512 px when the run starts from a sample, image or SVG].
     #[arg(long)]
@@ -43,6 +46,7 @@ impl SdsTuningArgs {
             t_max: self.t_max,
             t_max_end: self.t_max_end,
             grad_clip: self.grad_clip,
+            lr_scale: self.lr_scale,
             reinit_min_area: self.reinit_min_area,
             augment: self.no_augment.then_some(false),
             snapshot_every,

@@ -96,6 +96,17 @@ pub struct GroupSchedules {
 }
 
 impl GroupSchedules {
+    /// Every group's schedule with its rates multiplied by `k` (step counts unchanged).
+    pub fn scaled(&self, k: f32) -> GroupSchedules {
+        GroupSchedules {
+            points: self.points.scaled(k),
+            fill: self.fill.scaled(k),
+            stroke: self.stroke.scaled(k),
+            width: self.width.scaled(k),
+            background: self.background.scaled(k),
+        }
+    }
+
     pub fn get(&self, g: ParamGroup) -> &LrSchedule {
         match g {
             ParamGroup::Points => &self.points,

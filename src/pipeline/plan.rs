@@ -90,6 +90,8 @@ pub struct Tuning {
     pub t_max: Option<usize>,
     pub t_max_end: Option<usize>,
     pub grad_clip: Option<f32>,
+    /// Multiplies every SDS learning rate (the style's schedule).
+    pub lr_scale: Option<f32>,
     pub reinit_min_area: Option<f32>,
     /// `Some(false)`: no augmentation even where the method uses it.
     pub augment: Option<bool>,
@@ -170,6 +172,9 @@ fn half() -> f64 {
 fn one() -> u32 {
     1
 }
+fn unit_scale() -> f32 {
+    1.0
+}
 
 /// LIVE tracing of the kept sample (or of a given image).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -189,6 +194,10 @@ pub struct SdsPlan {
     pub t_max: usize,
     pub t_max_end: Option<usize>,
     pub grad_clip: Option<f32>,
+    /// Every learning rate of the style's schedule is multiplied by this; plans stored before
+    /// it existed ran at 1.
+    #[serde(default = "unit_scale")]
+    pub lr_scale: f32,
     /// Random perspective + crop of the render (from-scratch runs).
     pub augment: bool,
     /// Closed paths below this area (px²) are re-initialised too.
@@ -269,6 +278,9 @@ impl RunPlan {
         )
     }
 }
+
+/// Largest SDS learning-rate multiplier a plan accepts.
+pub const MAX_LR_SCALE: f32 = 100.0;
 
 fn range(field: &'static str, v: u32, max: u32) -> Result<u32, SpecError> {
     if v == 0 || v > max {
@@ -400,6 +412,7 @@ fn text_plan(
         t_max: t.t_max.unwrap_or(950),
         t_max_end: t.t_max_end,
         grad_clip: t.grad_clip,
+        lr_scale: t.lr_scale.unwrap_or(1.0),
         augment,
         reinit_min_area: if augment {
             t.reinit_min_area
@@ -421,6 +434,15 @@ fn text_plan(
             return Err(SpecError::new(
                 "guidance",
                 "guidance must be finite and grad_clip positive",
+            ));
+        }
+        if !(s.lr_scale > 0.0 && s.lr_scale <= MAX_LR_SCALE) {
+            return Err(SpecError::new(
+                "lr_scale",
+                format!(
+                    "must be above 0 and at most {MAX_LR_SCALE}, got {}",
+                    s.lr_scale
+                ),
             ));
         }
     }

@@ -348,6 +348,7 @@ pub fn run_text(
         cfg.t_max = sp.t_max;
         cfg.t_max_end = sp.t_max_end;
         cfg.grad_clip = sp.grad_clip;
+        cfg.schedules = cfg.schedules.scaled(sp.lr_scale);
         if !sp.augment {
             cfg.augment = None;
         }

@@ -24,7 +24,7 @@ pub use config::*;
 use super::styles::random_circle;
 use crate::augment::Warp;
 use crate::image::Image;
-use crate::optim::{Adam, GroupSchedules, StepOutcome};
+use crate::optim::{Adam, StepOutcome};
 use crate::progress::{CancelToken, Progress, ProgressSink};
 use crate::scene::{ParamGroup, Params, Scene};
 use crate::teacher::{Conditioning, Latent, Teacher, TeacherError};
@@ -227,16 +227,6 @@ pub fn saturation_penalty(image: &Image, weight: f32, d_image: &mut [f32]) -> f6
         }
     }
     weight as f64 * total / (3.0 * n as f64)
-}
-
-fn scaled_schedules(s: &GroupSchedules, k: f32) -> GroupSchedules {
-    GroupSchedules {
-        points: s.points.scaled(k),
-        fill: s.fill.scaled(k),
-        stroke: s.stroke.scaled(k),
-        width: s.width.scaled(k),
-        background: s.background.scaled(k),
-    }
 }
 
 /// Clips each group's gradient to an L2 norm of at most `max`; returns whether anything changed.
@@ -477,7 +467,7 @@ pub fn run_sds_resumable<B: Backend>(
                 } else {
                     params = before;
                     lr_scale *= 0.5;
-                    adam.schedules = scaled_schedules(&cfg.schedules, lr_scale);
+                    adam.schedules = cfg.schedules.scaled(lr_scale);
                     stats.lr_halvings += 1;
                 }
             }

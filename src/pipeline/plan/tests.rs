@@ -258,10 +258,45 @@ fn plans_round_trip_through_json_and_key_their_checkpoints() {
             .remove("retrieval_share")
             .is_some()
     );
+    // ... and one stored before `lr_scale` existed ran the style's schedule as it is.
+    assert!(
+        old["text"]["sds"]
+            .as_object_mut()
+            .unwrap()
+            .remove("lr_scale")
+            .is_some()
+    );
     let old: RunPlan = serde_json::from_value(old).unwrap();
-    assert_eq!(old.text.unwrap().sample.unwrap().retrieval_share, 0.5);
+    let old = old.text.unwrap();
+    assert_eq!(old.sample.unwrap().retrieval_share, 0.5);
+    assert_eq!(old.sds.unwrap().lr_scale, 1.0);
     let mut q = p.clone();
     q.text.as_mut().unwrap().paths += 1;
     assert_ne!(p.key(), q.key());
     assert_eq!(p.key(), back.key());
+}
+
+#[test]
+fn the_sds_learning_rate_scale_reaches_the_plan_within_its_range() {
+    let with = |lr_scale: Option<f32>| {
+        resolve(
+            &PlanRequest {
+                tuning: Tuning {
+                    lr_scale,
+                    ..Tuning::default()
+                },
+                ..PlanRequest::text("x")
+            },
+            Some(&facts(true)),
+            &Limits::default(),
+        )
+    };
+    let lr = |r: Result<RunPlan, SpecError>| r.unwrap().text.unwrap().sds.unwrap().lr_scale;
+    assert_eq!(lr(with(None)), 1.0);
+    assert_eq!(lr(with(Some(4.0))), 4.0);
+    assert_eq!(lr(with(Some(MAX_LR_SCALE))), MAX_LR_SCALE);
+    for bad in [0.0, -1.0, f32::NAN, f32::INFINITY, MAX_LR_SCALE * 1.01] {
+        let e = with(Some(bad)).unwrap_err();
+        assert_eq!(e.field, "lr_scale", "{bad}: {e}");
+    }
 }
