@@ -9,6 +9,7 @@
 //! | [`scene`] | geometry and parameters (validated invariants, flat parameter groups) |
 //! | [`svg`] | scene ⇄ SVG text |
 //! | [`raster`] | differentiable CPU rasteriser: forward and backward |
+//! | [`vector`] | the vector stage's finish: simple outlines, palettes, editability checks, compact export |
 //! | [`image`] | RGBA f32 buffers, PNG in/out, metrics |
 //! | [`models`] | Stable Diffusion on candle: diffusers loading, UNet, VAE (+VJP), TAESD, samplers |
 //! | [`fetch`] | size-capped HTTPS downloads of pinned files (MiniLM wheel, icon sets) |
@@ -50,4 +51,5 @@ pub mod stages;
 pub mod store;
 pub mod svg;
 pub mod teacher;
+pub mod vector;
 pub mod worker;
