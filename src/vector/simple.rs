@@ -30,7 +30,7 @@ use kurbo::{BezPath, PathEl};
 
 /// Flattening tolerance (px) used by [`is_simple`]: the largest distance between the curve and
 /// the polygon that stands for it.
-pub const FLATTEN_TOLERANCE: f32 = 0.05;
+pub const FLATTEN_TOLERANCE: f32 = 0.01;
 
 /// Contact tolerance (px) of [`ring_is_simple`]: points closer than this are one point, edges
 /// closer than this touch. Far below what a renderer or a designer can see, far above f32
@@ -474,13 +474,37 @@ fn fit_piece(ring: &[P], template: &Shape, tolerance: f64) -> Option<Shape> {
     let fit = kurbo::simplify::simplify_bezpath(path, tolerance, &opts);
     let pts = bez_cubic_points(&fit);
     if !pts.is_empty() && pts.iter().all(|p| p.x.is_finite() && p.y.is_finite()) {
-        let s = make(pts);
-        if s.validate(0).is_ok() && is_simple(&s) {
+        let s = make(snapped(pts));
+        if piece_ok(&s) {
             return Some(s);
         }
     }
+    let s = make(snapped(polygon_cubic_points(ring)));
+    if piece_ok(&s) {
+        return Some(s);
+    }
     let s = make(polygon_cubic_points(ring));
     s.validate(0).is_ok().then_some(s)
+}
+
+/// Grid (px) the pieces' points are snapped to: the exporter's default precision (2
+/// decimals), so that a piece verified simple stays simple as written.
+const SNAP: f32 = 0.01;
+
+fn snapped(pts: Vec<Point>) -> Vec<Point> {
+    let s = |v: f32| (v / SNAP).round() * SNAP;
+    pts.into_iter()
+        .map(|p| Point::new(s(p.x), s(p.y)))
+        .collect()
+}
+
+/// A piece is accepted when it is valid, [`is_simple`], and simple at a tenth of
+/// [`FLATTEN_TOLERANCE`] too: a fit may hide a loop smaller than the usual flattening (a
+/// near-cusp handle), and a finer outside measure would see it.
+fn piece_ok(s: &Shape) -> bool {
+    s.validate(0).is_ok()
+        && is_simple(s)
+        && ring_is_simple(&flatten_f64(s, 0.1 * FLATTEN_TOLERANCE as f64))
 }
 
 /// Simple polygons (rings) covering `shape`'s nonzero fill, flattened at `tolerance`.

@@ -203,3 +203,95 @@ fn sixty_four_paths_at_256_px_are_fast() {
     eprintln!("check of 64 paths at 256 px: {secs:.3} s");
     assert!(secs < 1.0, "{secs} s");
 }
+
+/// Cross-check helper (ignored): with `VF_CHECK_DIR` set, writes 12 LIVE-like scenes of
+/// randomly deformed circles there as SVG (`random_*.svg`), then prints one JSON line of
+/// counts per `*.svg` in the folder, for `scripts/svg_editability.py` to compare against.
+#[test]
+#[ignore]
+fn print_counts_of_svg_dir() {
+    use rand::{RngExt, SeedableRng};
+    let Ok(dir) = std::env::var("VF_CHECK_DIR") else {
+        return;
+    };
+    let dir = std::path::Path::new(&dir);
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+    for k in 0..12 {
+        let mut s = Scene::new(128, 128, Rgba::WHITE).unwrap();
+        for _ in 0..16 {
+            let r = 6.0 + 20.0 * rng.random::<f32>();
+            let (cx, cy) = (128.0 * rng.random::<f32>(), 128.0 * rng.random::<f32>());
+            let c = Rgba::new(rng.random(), rng.random(), rng.random(), 1.0);
+            let mut sh =
+                Shape::circle(cx, cy, r, 4 + (rng.random::<u32>() % 4) as usize, c).unwrap();
+            let amp = r * 1.2 * rng.random::<f32>();
+            for p in &mut sh.points {
+                p.x += amp * (2.0 * rng.random::<f32>() - 1.0);
+                p.y += amp * (2.0 * rng.random::<f32>() - 1.0);
+            }
+            s.shapes.push(sh);
+        }
+        std::fs::write(
+            dir.join(format!("random_{k:02}.svg")),
+            crate::svg::to_svg(&s, &Default::default()),
+        )
+        .unwrap();
+        let mut fixed = s.clone();
+        crate::vector::simple::make_scene_simple(&mut fixed, 0.25, 0.5);
+        std::fs::write(
+            dir.join(format!("random_{k:02}_fixed.svg")),
+            crate::svg::to_svg(&fixed, &Default::default()),
+        )
+        .unwrap();
+    }
+    let mut files: Vec<_> = std::fs::read_dir(dir)
+        .unwrap()
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "svg"))
+        .collect();
+    files.sort();
+    for f in files {
+        let text = std::fs::read_to_string(&f).unwrap();
+        let name = f.file_name().unwrap().to_string_lossy().to_string();
+        if std::env::var("VF_CHECK_DETAILS").is_ok() {
+            // Which filled paths (in paint order, background included as -1 when first) fail.
+            let tree = crate::svg::parse_usvg(&text).unwrap();
+            let mut bad = Vec::new();
+            let mut i = 0usize;
+            fn walk(g: &usvg::Group, i: &mut usvg_count::Idx, bad: &mut Vec<usize>) {
+                for n in g.children() {
+                    match n {
+                        usvg::Node::Group(c) => walk(c, i, bad),
+                        usvg::Node::Path(p) if p.is_visible() => {
+                            if p.fill().is_some()
+                                && !rings_valid(&rings_of(p.data(), p.abs_transform()))
+                            {
+                                bad.push(i.0);
+                            }
+                            i.0 += 1;
+                        }
+                        _ => {}
+                    }
+                }
+            }
+            let mut idx = usvg_count::Idx(0);
+            walk(tree.root(), &mut idx, &mut bad);
+            i += idx.0;
+            println!("DETAIL {name} {i} {bad:?}");
+        }
+        match check_svg(&text) {
+            Ok(e) => println!(
+                "RUST {}",
+                serde_json::json!({"file": name, "paths": e.paths, "self_intersecting": e.self_intersecting, "hidden": e.hidden, "slivers": e.slivers, "colors": e.colors})
+            ),
+            Err(err) => println!(
+                "RUST {}",
+                serde_json::json!({"file": name, "error": err.to_string()})
+            ),
+        }
+    }
+}
+
+mod usvg_count {
+    pub struct Idx(pub usize);
+}
