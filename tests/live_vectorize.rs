@@ -71,7 +71,10 @@ fn same_seed_same_svg() {
     };
     let a = vectorize(&t, &cfg, &NullSink, &CancelToken::new()).unwrap();
     let b = vectorize(&t, &cfg, &NullSink, &CancelToken::new()).unwrap();
-    let opts = vectorfusion::svg::SvgOptions { precision: 6 };
+    let opts = vectorfusion::svg::SvgOptions {
+        precision: 6,
+        ..Default::default()
+    };
     assert_eq!(
         vectorfusion::svg::to_svg(&a.scene, &opts),
         vectorfusion::svg::to_svg(&b.scene, &opts)

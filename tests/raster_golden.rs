@@ -59,7 +59,13 @@ fn write_diff(name: &str, ours: &Image, theirs: &Image) -> String {
 fn check(name: &str, scene: &Scene) -> f64 {
     scene.validate().unwrap();
     let ours = raster::render(scene);
-    let text = to_svg(scene, &SvgOptions { precision: 4 });
+    let text = to_svg(
+        scene,
+        &SvgOptions {
+            precision: 4,
+            ..Default::default()
+        },
+    );
     let theirs = resvg_render(&text);
     let d = mean_abs_diff(&ours, &theirs);
     eprintln!("{name}: mean abs diff {:.3}/255", d * 255.0);

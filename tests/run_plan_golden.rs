@@ -4,9 +4,11 @@
 //! tiny fixtures, against `tests/fixtures/golden/run_plan.json`.
 //!
 //! The golden file was written by the code before the run-plan refactor (issue #20); the
-//! refactor had to reproduce it. Numbers are compared with a tolerance (`TOL` SVG units), so a
-//! CPU with other SIMD kernels (AVX2 vs AVX-512 rounding) still passes while any change of
-//! behaviour (another seed, size, step count, path count or init) fails. `VF_GOLDEN_WRITE=1`
+//! refactor had to reproduce it. Both SVGs are read back into scenes (`same`), so the spelling of
+//! the numbers (absolute or relative, shorthand commands, grouping: the compact writer) does not
+//! matter, and points are compared with a tolerance (`TOL` SVG units), so a CPU with other SIMD
+//! kernels (AVX2 vs AVX-512 rounding) still passes while any change of behaviour (another seed,
+//! size, step count, path count or init) fails. `VF_GOLDEN_WRITE=1`
 //! rewrites the file (only when a change of output is intended, and say so in the commit).
 
 mod common;
@@ -17,8 +19,10 @@ use std::path::PathBuf;
 use std::process::Command;
 use vectorfusion::pipeline::{DefaultExecutor, Executor, JobContext, Limits, ModelDirs};
 use vectorfusion::progress::CancelToken;
+use vectorfusion::scene::{Rgba, Scene};
+use vectorfusion::svg::from_svg;
 
-/// Largest allowed difference of any number in an SVG (coordinates are on 32–64 px canvases).
+/// Largest allowed difference of a coordinate or stroke width (canvases are 32–64 px).
 const TOL: f64 = 0.35;
 
 fn fixture(name: &str) -> PathBuf {
@@ -38,58 +42,83 @@ fn tmpdir(name: &str) -> PathBuf {
     d
 }
 
-/// Every number in `svg`, in order.
-fn numbers(svg: &str) -> Vec<f64> {
-    let mut out = Vec::new();
-    let mut cur = String::new();
-    let flush = |cur: &mut String, out: &mut Vec<f64>| {
-        if let Ok(v) = cur.parse::<f64>() {
-            out.push(v);
+/// Largest difference of a colour channel: 8-bit RGB must match; opacities may differ by the
+/// rounding of the two formats (2 decimals in the golden file, 3 since the compact writer).
+const RGB_TOL: f32 = 0.5 / 255.0;
+const ALPHA_TOL: f32 = 0.005 + 0.0005 + 1e-6;
+
+fn close_color(a: Option<Rgba>, b: Option<Rgba>) -> bool {
+    match (a, b) {
+        (None, None) => true,
+        (Some(a), Some(b)) => {
+            let [a, b] = [a.to_array(), b.to_array()];
+            (0..3).all(|i| (a[i] - b[i]).abs() <= RGB_TOL) && (a[3] - b[3]).abs() <= ALPHA_TOL
         }
-        cur.clear();
-    };
-    for ch in svg.chars() {
-        if ch.is_ascii_digit()
-            || ch == '.'
-            || (ch == '-' && cur.is_empty())
-            || ch == 'e' && !cur.is_empty()
-        {
-            cur.push(ch);
-        } else {
-            flush(&mut cur, &mut out);
-            if ch == '-' {
-                cur.push(ch);
-            }
-        }
+        _ => false,
     }
-    flush(&mut cur, &mut out);
-    out
 }
 
+/// The text of the `<metadata>` element, if any.
+fn metadata(svg: &str) -> Option<&str> {
+    let start = svg.find("<metadata>")? + "<metadata>".len();
+    let len = svg[start..].find("</metadata>")?;
+    Some(&svg[start..start + len])
+}
+
+/// Compares two SVGs by what they draw, not by how the numbers are spelled (absolute or
+/// relative, shorthand commands, grouping): both are read with `from_svg`, the scenes must have
+/// the same canvas, background, shapes (kind, point count, fill and stroke), every point and
+/// stroke width within `TOL` and colours within `RGB_TOL`/`ALPHA_TOL`; metadata text equal.
 fn same(name: &str, want: &str, got: &str) -> Result<(), String> {
-    let strip = |s: &str| {
-        s.chars()
-            .filter(|c| !c.is_ascii_digit() && !matches!(c, '.' | '-' | 'e'))
-            .collect::<String>()
+    let read = |which: &str, svg: &str| {
+        from_svg(svg).map_err(|e| format!("{name}: cannot read the {which} SVG: {e}\n{svg}"))
     };
-    if strip(want) != strip(got) {
-        return Err(format!(
-            "{name}: the SVG's structure differs\nwant {want}\n got {got}"
+    let (a, b): (Scene, Scene) = (read("golden", want)?, read("produced", got)?);
+    let differ = |what: String| Err(format!("{name}: {what}\nwant {want}\n got {got}"));
+    if metadata(want) != metadata(got) {
+        return differ("the metadata differs".into());
+    }
+    if (a.width, a.height) != (b.width, b.height) {
+        return differ(format!(
+            "canvas {}x{}, want {}x{}",
+            b.width, b.height, a.width, a.height
         ));
     }
-    let (a, b) = (numbers(want), numbers(got));
-    if a.len() != b.len() {
-        return Err(format!("{name}: {} numbers, want {}", b.len(), a.len()));
+    if !close_color(Some(a.background), Some(b.background)) {
+        return differ("the background differs".into());
     }
-    let worst = a
-        .iter()
-        .zip(&b)
-        .map(|(x, y)| (x - y).abs())
-        .fold(0.0f64, f64::max);
+    if a.shapes.len() != b.shapes.len() {
+        return differ(format!(
+            "{} shapes, want {}",
+            b.shapes.len(),
+            a.shapes.len()
+        ));
+    }
+    let mut worst = 0.0f64;
+    for (i, (p, q)) in a.shapes.iter().zip(&b.shapes).enumerate() {
+        if p.kind != q.kind
+            || p.points.len() != q.points.len()
+            || p.fill.is_some() != q.fill.is_some()
+            || p.stroke.is_some() != q.stroke.is_some()
+        {
+            return differ(format!("shape {i}'s structure differs"));
+        }
+        if !close_color(p.fill, q.fill)
+            || !close_color(p.stroke.map(|s| s.color), q.stroke.map(|s| s.color))
+        {
+            return differ(format!("shape {i}'s colour differs"));
+        }
+        for (u, v) in p.points.iter().zip(&q.points) {
+            worst = worst
+                .max((u.x - v.x).abs() as f64)
+                .max((u.y - v.y).abs() as f64);
+        }
+        if let (Some(s), Some(t)) = (p.stroke, q.stroke) {
+            worst = worst.max((s.width - t.width).abs() as f64);
+        }
+    }
     if worst > TOL {
-        return Err(format!(
-            "{name}: a number differs by {worst} (> {TOL})\nwant {want}\n got {got}"
-        ));
+        return differ(format!("a number differs by {worst} (> {TOL})"));
     }
     Ok(())
 }
@@ -275,4 +304,29 @@ fn the_same_request_gives_the_same_svg() {
         }
     }
     assert!(errors.is_empty(), "{}", errors.join("\n\n"));
+}
+
+/// The comparison looks through the spelling: every golden SVG (the old absolute format), read
+/// and written again by the compact writer with every option, still compares equal, and a moved
+/// point does not.
+#[test]
+fn the_comparison_accepts_the_compact_format() {
+    use vectorfusion::svg::{SvgOptions, to_svg};
+    let want: BTreeMap<String, String> =
+        serde_json::from_str(&std::fs::read_to_string(golden_path()).unwrap()).unwrap();
+    for (name, w) in &want {
+        let scene = from_svg(w).unwrap();
+        for (group_by_color, ids) in [(false, false), (true, true)] {
+            let opts = SvgOptions {
+                group_by_color,
+                ids,
+                ..SvgOptions::default()
+            };
+            let again = to_svg(&scene, &opts);
+            same(name, w, &again).unwrap_or_else(|e| panic!("{e}"));
+        }
+        let mut moved = scene.clone();
+        moved.shapes[0].points[0].x += 1.0;
+        assert!(same(name, w, &to_svg(&moved, &SvgOptions::default())).is_err());
+    }
 }

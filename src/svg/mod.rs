@@ -1,13 +1,33 @@
 //! Scene ⇄ SVG text, plus the benchmark scene JSON format.
 //!
-//! # Export ([`to_svg`])
-//! Compact and deterministic: numbers use a fixed number of decimals ([`SvgOptions::precision`])
-//! with trailing zeros removed, one `<path>` per shape, attributes only when they differ from the
-//! SVG default. The background becomes a full-canvas `<rect>` only when it is not fully
-//! transparent. Strokes are written with `stroke-linecap="round" stroke-linejoin="round"`, which
-//! is exactly what [`crate::raster`] draws (a union of capsules), so resvg, browsers and our
-//! rasteriser agree. Colours are written as `#rrggbb` (8 bits per channel, as in every SVG
-//! renderer); opacities with the chosen precision.
+//! # Export ([`to_svg`], in `export.rs`)
+//! The best picture per byte, deterministic and exact to the chosen decimals
+//! ([`SvgOptions::precision`]):
+//! - every coordinate is rounded once to an integer number of `10^-precision` units; each path
+//!   command then takes the shorter of its absolute and relative form, the relative numbers being
+//!   differences of those integers (exact: no error builds up along a path);
+//! - numbers without trailing zeros, leading `0` (`.5`), `-0` or unneeded separators (`1-2`,
+//!   `.5.5`); repeated command letters dropped (`M0 0 5 5` for `M0 0L5 5`);
+//! - a cubic whose control points lie (within half a unit) at 1/3 and 2/3 of its rounded chord is
+//!   written as a line, `H`/`V` when axis-aligned; a cubic whose first control point is (after
+//!   rounding) the reflection of the previous one's second becomes `S`; a closed outline's last
+//!   segment is left to `Z` when it is such a straight line of non-zero length;
+//! - colours as `#rgb` when possible else `#rrggbb` (8 bits per channel, as in every SVG
+//!   renderer); opacities with `max(3, precision)` decimals; attributes equal to the SVG default
+//!   (fill black, opacity 1) left out; shapes that paint nothing (transparent fill, no visible
+//!   stroke) left out;
+//! - strokes are round-capped and round-joined (`stroke-linecap="round"
+//!   stroke-linejoin="round"`), which is exactly what [`crate::raster`] draws (a union of
+//!   capsules), so resvg, browsers and our rasteriser agree. With two or more stroked paths these
+//!   go on one `<g>` around all the shapes, with the stroke width (and, when every shape is
+//!   stroked alike, the stroke colour and opacity; when no shape is filled, `fill="none"`) that
+//!   they share;
+//! - [`SvgOptions::group_by_color`]: runs of consecutive paths with the same fill in one
+//!   `<g fill="…">`; [`SvgOptions::ids`]: `id="p<k>"` on paths (shape index + 1) and
+//!   `id="c<k>"` on colour groups.
+//!
+//! The background becomes a full-canvas `<rect>` first when it is not fully transparent.
+//! [`crate::vector::export::compact_svg`] picks the fewest decimals that still render the same.
 //!
 //! # Import ([`from_svg`])
 //! Parsing, CSS/style attributes, `<rect>`/`<circle>`/`<ellipse>`/`<polygon>`/`<line>`, arcs,
@@ -31,9 +51,12 @@
 //! - if the first shape is a filled rectangle covering the whole canvas (what [`to_svg`] writes
 //!   for the background) it becomes the scene background.
 
+mod export;
 mod file;
 mod guard;
 mod profile;
+
+pub use export::{MAX_PRECISION, SvgOptions, to_svg, with_metadata, written_color};
 
 pub use file::{SCENE_FILE_MAX_BYTES, load_scene, read_text_capped, scene_from_json};
 pub use guard::SvgLimits;
@@ -41,7 +64,6 @@ pub use profile::check_safe_output;
 
 use crate::scene::{MAX_SIDE, Point, Rgba, Scene, SceneError, Shape, ShapeKind, Stroke};
 use resvg::usvg;
-use std::fmt::Write as _;
 
 /// Why an SVG (or scene JSON) could not be turned into a scene.
 #[derive(Debug, thiserror::Error)]
@@ -61,153 +83,6 @@ pub enum SvgError {
         path: String,
         source: std::io::Error,
     },
-}
-
-/// Export options.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct SvgOptions {
-    /// Decimal places for coordinates, widths and opacities (0..=6; larger values are capped).
-    pub precision: u8,
-}
-
-impl Default for SvgOptions {
-    fn default() -> Self {
-        SvgOptions { precision: 2 }
-    }
-}
-
-fn push_num(out: &mut String, v: f32, prec: usize) {
-    let mut s = format!("{:.*}", prec, v);
-    if s.contains('.') {
-        while s.ends_with('0') {
-            s.pop();
-        }
-        if s.ends_with('.') {
-            s.pop();
-        }
-    }
-    if s == "-0" {
-        s = "0".into();
-    }
-    out.push_str(&s);
-}
-
-fn hex(c: Rgba) -> String {
-    let b = |v: f32| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
-    format!("#{:02x}{:02x}{:02x}", b(c.r), b(c.g), b(c.b))
-}
-
-fn push_path_data(out: &mut String, sh: &Shape, prec: usize) {
-    let pt = |out: &mut String, p: Point| {
-        push_num(out, p.x, prec);
-        out.push(' ');
-        push_num(out, p.y, prec);
-    };
-    match sh.kind {
-        ShapeKind::Polygon => {
-            for (i, p) in sh.points.iter().enumerate() {
-                out.push(if i == 0 { 'M' } else { 'L' });
-                pt(out, *p);
-            }
-            out.push('Z');
-        }
-        ShapeKind::ClosedCubic | ShapeKind::OpenCubic => {
-            out.push('M');
-            pt(out, sh.points[0]);
-            for i in 0..sh.num_segments() {
-                let s = sh.segment(i);
-                out.push('C');
-                pt(out, s[1]);
-                out.push(' ');
-                pt(out, s[2]);
-                out.push(' ');
-                pt(out, s[3]);
-            }
-            if sh.kind == ShapeKind::ClosedCubic {
-                out.push('Z');
-            }
-        }
-    }
-}
-
-/// Writes `scene` as a standalone SVG document (see the module docs). Never fails for a scene
-/// that passes [`Scene::validate`]; invalid values are written as they are.
-pub fn to_svg(scene: &Scene, opts: &SvgOptions) -> String {
-    let prec = opts.precision.min(6) as usize;
-    let mut out = String::with_capacity(128 + 160 * scene.shapes.len());
-    let (w, h) = (scene.width, scene.height);
-    let _ = write!(
-        out,
-        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" viewBox="0 0 {w} {h}">"#
-    );
-    out.push('\n');
-    let opacity = |out: &mut String, name: &str, a: f32| {
-        if a < 1.0 {
-            let _ = write!(out, r#" {name}=""#);
-            push_num(out, a, prec.max(2));
-            out.push('"');
-        }
-    };
-    if scene.background.a > 0.0 {
-        let _ = write!(
-            out,
-            r#"<rect width="{w}" height="{h}" fill="{}""#,
-            hex(scene.background)
-        );
-        opacity(&mut out, "fill-opacity", scene.background.a);
-        out.push_str("/>\n");
-    }
-    for sh in &scene.shapes {
-        out.push_str(r#"<path d=""#);
-        push_path_data(&mut out, sh, prec);
-        out.push('"');
-        match sh.fill {
-            Some(f) if sh.is_closed() && f.a > 0.0 => {
-                if hex(f) != "#000000" {
-                    let _ = write!(out, r#" fill="{}""#, hex(f));
-                }
-                opacity(&mut out, "fill-opacity", f.a);
-            }
-            _ => out.push_str(r#" fill="none""#),
-        }
-        if let Some(st) = sh.stroke
-            && st.width > 0.0
-            && st.color.a > 0.0
-        {
-            let _ = write!(out, r#" stroke="{}" stroke-width=""#, hex(st.color));
-            push_num(&mut out, st.width, prec);
-            out.push('"');
-            opacity(&mut out, "stroke-opacity", st.color.a);
-            out.push_str(r#" stroke-linecap="round" stroke-linejoin="round""#);
-        }
-        out.push_str("/>\n");
-    }
-    out.push_str("</svg>\n");
-    out
-}
-
-/// `svg` (a document [`to_svg`] wrote) with a `<metadata>` element holding `text` (XML-escaped;
-/// control characters dropped) right after the opening `<svg ...>` tag. A document without an
-/// opening tag is returned unchanged.
-pub fn with_metadata(svg: &str, text: &str) -> String {
-    let Some(end) = svg
-        .find("<svg")
-        .and_then(|i| svg[i..].find('>').map(|j| i + j + 1))
-    else {
-        return svg.to_string();
-    };
-    let mut esc = String::with_capacity(text.len() + 16);
-    for ch in text.chars() {
-        match ch {
-            '&' => esc.push_str("&amp;"),
-            '<' => esc.push_str("&lt;"),
-            '>' => esc.push_str("&gt;"),
-            '"' => esc.push_str("&quot;"),
-            c if c.is_control() => {}
-            c => esc.push(c),
-        }
-    }
-    format!("{}\n<metadata>{esc}</metadata>{}", &svg[..end], &svg[end..])
 }
 
 /// One subpath as cubic segments `[p1, p2, p3]` after a start point.

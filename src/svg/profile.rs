@@ -6,7 +6,8 @@
 //! - elements from an allowlist (`svg`, `g`, `path`, `rect`, `metadata`, `title`, `desc`) in the
 //!   SVG namespace, each with attributes from its allowlist: no `<script>`, `<foreignObject>`,
 //!   `<image>`, `<use>`, event handlers (`on*`), `href`, `style`, or `url(…)` values, so nothing
-//!   runs and nothing outside the file is fetched;
+//!   runs and nothing outside the file is fetched; `id` only on `<g>` and `<path>`, and only a
+//!   plain name (a letter, then letters, digits, `_`, `-`);
 //! - the root has `viewBox`, `width` and `height`; every number is finite.
 //!
 //! Our writer ([`super::to_svg`], [`super::with_metadata`]) builds documents from a scene, so an
@@ -32,8 +33,8 @@ fn allowed(tag: &str, attr: &str) -> bool {
     ];
     match tag {
         "svg" => matches!(attr, "width" | "height" | "viewBox" | "version"),
-        "g" => PAINT.contains(&attr),
-        "path" => attr == "d" || PAINT.contains(&attr),
+        "g" => attr == "id" || PAINT.contains(&attr),
+        "path" => matches!(attr, "d" | "id") || PAINT.contains(&attr),
         "rect" => matches!(attr, "x" | "y" | "width" | "height") || PAINT.contains(&attr),
         _ => false,
     }
@@ -64,6 +65,14 @@ pub fn check_safe_output(svg: &str) -> Result<(), String> {
     Ok(())
 }
 
+/// An id as our writer spells them: a letter, then letters, digits, `_` or `-` (at most 64).
+fn plain_id(v: &str) -> bool {
+    let mut chars = v.chars();
+    chars.next().is_some_and(|c| c.is_ascii_alphabetic())
+        && v.len() <= 64
+        && chars.all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
+}
+
 fn check_element(node: Node) -> Result<(), String> {
     let tag = node.tag_name().name();
     if node.tag_name().namespace() != Some(SVG_NS) {
@@ -85,6 +94,9 @@ fn check_element(node: Node) -> Result<(), String> {
             return Err(format!("<{tag}> has the attribute {name}"));
         }
         let v = a.value();
+        if name == "id" && !plain_id(v) {
+            return Err(format!("<{tag}> has the id {v:.80}"));
+        }
         if v.contains("url(") {
             return Err(format!("<{tag} {name}> refers to another resource"));
         }

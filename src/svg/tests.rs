@@ -39,23 +39,148 @@ fn export_is_compact_and_deterministic() {
     let a = to_svg(&s, &SvgOptions::default());
     assert_eq!(a, to_svg(&s, &SvgOptions::default()));
     assert_eq!(a.matches("<path").count(), 3);
-    assert!(a.contains(r##"<rect width="64" height="48" fill="#ffffff"/>"##));
-    assert!(a.contains(r##"fill="#ff0000" fill-opacity="0.5""##), "{a}");
-    assert!(a.contains(r##"fill="none" stroke="#000000" stroke-width="3" stroke-opacity="0.75""##));
-    assert!(a.contains("M30 5L60 10L40 40Z"), "{a}");
-    // No redundant attributes: opaque fill has no fill-opacity.
+    assert!(
+        a.contains(r##"<rect width="64" height="48" fill="#fff"/>"##),
+        "{a}"
+    );
+    assert!(a.contains(r##"fill="#f00" fill-opacity=".5""##), "{a}");
+    assert!(
+        a.contains(r##"fill="none" stroke="#000" stroke-width="3" stroke-opacity=".75" stroke-linecap="round" stroke-linejoin="round""##),
+        "{a}"
+    );
+    // The triangle: relative where shorter, the closing edge left to Z.
+    assert!(a.contains(r#"d="M30 5l30 5L40 40Z""#), "{a}");
+    // No redundant attributes: opaque fill has no fill-opacity; black fill is the default.
     assert_eq!(a.matches("fill-opacity").count(), 1);
+    assert!(!a.contains(r##"fill="#000""##), "{a}");
     let mut t = s.clone();
     t.background = Rgba::TRANSPARENT;
     assert!(!to_svg(&t, &SvgOptions::default()).contains("<rect"));
-    let p0 = to_svg(&s, &SvgOptions { precision: 0 });
+    let p0 = to_svg(
+        &s,
+        &SvgOptions {
+            precision: 0,
+            ..Default::default()
+        },
+    );
     assert!(!p0.contains("M32."), "{p0}");
+}
+
+#[test]
+fn path_data_uses_shorthands() {
+    let mut s = Scene::new(100, 100, Rgba::TRANSPARENT).unwrap();
+    // Pixel-art cell: H/V and the closing edge to Z.
+    s.shapes
+        .push(Shape::square(3.0, 4.0, 1.0, Rgba::new(0.0, 0.0, 0.0, 1.0)).unwrap());
+    // A closed cubic that is a rectangle written with straight cubics, and a smooth S join.
+    let line = |a: Point, b: Point| {
+        let l = |t: f32| Point::new(a.x + (b.x - a.x) * t, a.y + (b.y - a.y) * t);
+        [a, l(1.0 / 3.0), l(2.0 / 3.0)]
+    };
+    let (p0, p1, p2) = (
+        Point::new(10.0, 10.0),
+        Point::new(40.0, 10.0),
+        Point::new(40.0, 40.0),
+    );
+    let mut pts = Vec::new();
+    pts.extend(line(p0, p1));
+    // p1 → p2 as a curve, then p2 → (10, 40) smooth, then a straight edge back.
+    pts.extend([p1, Point::new(50.0, 20.0), Point::new(50.0, 30.0)]);
+    pts.extend([p2, Point::new(30.0, 50.0), Point::new(20.0, 50.0)]);
+    pts.extend(line(Point::new(10.0, 40.0), p0));
+    s.shapes
+        .push(Shape::closed_cubic(pts, Rgba::new(0.2, 0.4, 0.6, 1.0)).unwrap());
+    let svg = to_svg(&s, &SvgOptions::default());
+    // Ties between the absolute and the relative form go to the absolute one.
+    assert!(svg.contains(r#"<path d="M3 4H4V5H3Z"/>"#), "{svg}");
+    assert!(
+        svg.contains(r#"d="M10 10H40c10 10 10 20 0 30S20 50 10 40Z""#),
+        "{svg}"
+    );
+    // The same shape moved by a fraction: relative numbers stay exact.
+    let moved = Scene {
+        shapes: s
+            .shapes
+            .iter()
+            .map(|sh| Shape {
+                points: sh
+                    .points
+                    .iter()
+                    .map(|p| Point::new(p.x + 0.25, p.y + 0.5))
+                    .collect(),
+                ..sh.clone()
+            })
+            .collect(),
+        ..s.clone()
+    };
+    let svg = to_svg(&moved, &SvgOptions::default());
+    assert!(svg.contains(r#"d="M3.25 4.5h1v1h-1Z""#), "{svg}");
+    assert!(
+        svg.contains(r#"d="M10.25 10.5h30c10 10 10 20 0 30s-20 10-30 0Z""#),
+        "{svg}"
+    );
+}
+
+#[test]
+fn groups_and_ids() {
+    let mut s = Scene::new(64, 64, Rgba::WHITE).unwrap();
+    let red = Rgba::new(1.0, 0.0, 0.0, 1.0);
+    for i in 0..3 {
+        s.shapes
+            .push(Shape::square(i as f32 * 4.0, 0.0, 3.0, red).unwrap());
+    }
+    s.shapes
+        .push(Shape::square(0.0, 10.0, 3.0, Rgba::BLACK).unwrap());
+    s.shapes.push(Shape::square(0.0, 20.0, 3.0, red).unwrap());
+    let opts = SvgOptions {
+        group_by_color: true,
+        ids: true,
+        ..Default::default()
+    };
+    let svg = to_svg(&s, &opts);
+    check_safe_output(&svg).unwrap();
+    assert!(svg.contains(r##"<g id="c1" fill="#f00">"##), "{svg}");
+    assert_eq!(svg.matches("<g").count(), 1, "{svg}");
+    for k in 1..=5 {
+        assert!(svg.contains(&format!(r#"id="p{k}""#)), "{svg}");
+    }
+    // Paths in the group carry no fill; the black one none at all; the lone red one its own.
+    assert_eq!(svg.matches(r##"fill="#f00""##).count(), 2, "{svg}");
+    assert!(svg.contains(r#"<path id="p4" d="M0 10H3v3H0Z"/>"#), "{svg}");
+    let plain = to_svg(&s, &SvgOptions::default());
+    assert!(!plain.contains("<g") && !plain.contains("id="), "{plain}");
+    // Sketch-like scenes: the shared stroke goes on one group.
+    let mut k = Scene::new(64, 64, Rgba::WHITE).unwrap();
+    let st = Stroke {
+        color: Rgba::BLACK,
+        width: 1.5,
+    };
+    for i in 0..3 {
+        let y = 5.0 + 10.0 * i as f32;
+        let pts = [(5.0, y), (20.0, y + 7.0), (40.0, y - 3.0), (60.0, y)];
+        k.shapes.push(
+            Shape::open_cubic(pts.iter().map(|&(x, y)| Point::new(x, y)).collect(), st).unwrap(),
+        );
+    }
+    let svg = to_svg(&k, &SvgOptions::default());
+    check_safe_output(&svg).unwrap();
+    assert!(
+        svg.contains(r##"<g fill="none" stroke="#000" stroke-width="1.5" stroke-linecap="round" stroke-linejoin="round">"##),
+        "{svg}"
+    );
+    assert_eq!(svg.matches("stroke").count(), 4, "{svg}");
 }
 
 #[test]
 fn export_import_round_trip() {
     let s = sample_scene();
-    let svg = to_svg(&s, &SvgOptions { precision: 4 });
+    let svg = to_svg(
+        &s,
+        &SvgOptions {
+            precision: 4,
+            ..Default::default()
+        },
+    );
     let back = from_svg(&svg).unwrap();
     assert_eq!((back.width, back.height), (64, 48));
     assert_eq!(back.background, Rgba::WHITE);
@@ -194,4 +319,206 @@ fn metadata_is_escaped_and_the_document_still_parses() {
     assert!(parse_usvg(&out).is_ok());
     assert_eq!(from_svg(&out).unwrap().width, 64);
     assert_eq!(with_metadata("not svg", "x"), "not svg");
+}
+
+/// A random scene with every shape kind and the cases the writer shortens: straight and
+/// axis-aligned segments, smooth joins, repeated colours, strokes on closed shapes, stroke-only
+/// closed shapes, coordinates on and off the decimal grid.
+fn random_scene(seed: u64) -> Scene {
+    use rand::{RngExt, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let (w, h) = (rng.random_range(16..=256u32), rng.random_range(16..=256u32));
+    let background = match rng.random_range(0..3) {
+        0 => Rgba::TRANSPARENT,
+        1 => Rgba::WHITE,
+        _ => Rgba::new(
+            rng.random(),
+            rng.random(),
+            rng.random(),
+            rng.random_range(0.1..1.0),
+        ),
+    };
+    let mut scene = Scene::new(w, h, background).unwrap();
+    let palette: Vec<Rgba> = (0..3)
+        .map(|_| {
+            let a = if rng.random_bool(0.5) {
+                1.0
+            } else {
+                rng.random_range(0.1..1.0)
+            };
+            Rgba::new(rng.random(), rng.random(), rng.random(), a)
+        })
+        .collect();
+    // Coordinates on a grid of 10^-q for q in 0..=3, or anywhere.
+    let grid = rng.random_range(0..5);
+    let coord = |rng: &mut rand_chacha::ChaCha8Rng, lo: f32, hi: f32| {
+        let v: f32 = rng.random_range(lo..hi);
+        if grid < 4 {
+            let s = 10f32.powi(grid);
+            (v * s).round() / s
+        } else {
+            v
+        }
+    };
+    let line = |a: Point, b: Point| {
+        let l = |t: f32| Point::new(a.x + (b.x - a.x) * t, a.y + (b.y - a.y) * t);
+        [l(1.0 / 3.0), l(2.0 / 3.0)]
+    };
+    for _ in 0..rng.random_range(1..12) {
+        let color = palette[rng.random_range(0..palette.len())];
+        let (wf, hf) = (w as f32, h as f32);
+        match rng.random_range(0..4) {
+            0 => {
+                let (x, y) = (
+                    coord(&mut rng, 0.0, wf - 4.0),
+                    coord(&mut rng, 0.0, hf - 4.0),
+                );
+                let side = coord(&mut rng, 2.0, 4.0).max(1.0);
+                scene.shapes.push(Shape::square(x, y, side, color).unwrap());
+            }
+            1 => {
+                let n = rng.random_range(3..8);
+                let pts = (0..n)
+                    .map(|_| Point::new(coord(&mut rng, 0.0, wf), coord(&mut rng, 0.0, hf)))
+                    .collect();
+                scene.shapes.push(Shape::polygon(pts, color).unwrap());
+            }
+            kind => {
+                let closed = kind == 2;
+                let n = rng.random_range(1..6);
+                let mut anchors: Vec<Point> = (0..n + 1)
+                    .map(|_| Point::new(coord(&mut rng, 0.0, wf), coord(&mut rng, 0.0, hf)))
+                    .collect();
+                if closed {
+                    anchors[n] = anchors[0];
+                }
+                let mut pts = vec![anchors[0]];
+                let mut prev_c2: Option<Point> = None;
+                for i in 0..n {
+                    let (a, mut b) = (anchors[i], anchors[i + 1]);
+                    let c = match rng.random_range(0..5) {
+                        0 => {
+                            // Axis-aligned straight segment (not for the closing one).
+                            if i + 1 < n || !closed {
+                                b.y = a.y;
+                                anchors[i + 1] = b;
+                            }
+                            line(a, b)
+                        }
+                        1 => line(a, b),
+                        2 if prev_c2.is_some() => {
+                            let q = prev_c2.unwrap_or(a);
+                            let c1 = Point::new(2.0 * a.x - q.x, 2.0 * a.y - q.y);
+                            [
+                                c1,
+                                Point::new(coord(&mut rng, 0.0, wf), coord(&mut rng, 0.0, hf)),
+                            ]
+                        }
+                        _ => [
+                            Point::new(coord(&mut rng, 0.0, wf), coord(&mut rng, 0.0, hf)),
+                            Point::new(coord(&mut rng, 0.0, wf), coord(&mut rng, 0.0, hf)),
+                        ],
+                    };
+                    pts.extend_from_slice(&c);
+                    if i + 1 < n || !closed {
+                        pts.push(b);
+                    }
+                    prev_c2 = Some(c[1]);
+                }
+                let stroke = Stroke {
+                    color: palette[rng.random_range(0..palette.len())],
+                    width: rng.random_range(1.0..4.0),
+                };
+                let shape = if closed {
+                    let mut s = Shape::closed_cubic(pts, color).unwrap();
+                    match rng.random_range(0..3) {
+                        0 => s.stroke = Some(stroke),
+                        1 => {
+                            s.fill = Some(Rgba::new(0.3, 0.2, 0.1, 0.0));
+                            s.stroke = Some(stroke);
+                        }
+                        _ => {}
+                    }
+                    s
+                } else {
+                    Shape::open_cubic(pts, stroke).unwrap()
+                };
+                scene.shapes.push(shape);
+            }
+        }
+    }
+    scene.validate().unwrap();
+    scene
+}
+
+/// Compares `back` (imported) with `scene` (exported at `precision`): every segment's points
+/// within half a unit of the last decimal (plus f32 noise), colours exactly as written.
+fn assert_round_trip(scene: &Scene, back: &Scene, precision: u8, svg: &str) {
+    let tol = 0.5 * 10f32.powi(-(precision as i32)) + 4.0 * f32::EPSILON * 256.0;
+    assert_eq!((back.width, back.height), (scene.width, scene.height));
+    let bg = if scene.background.a > 0.0 {
+        written_color(scene.background, precision)
+    } else {
+        Rgba::TRANSPARENT
+    };
+    assert_eq!(back.background, bg, "{svg}");
+    assert_eq!(back.shapes.len(), scene.shapes.len(), "{svg}");
+    for (k, (a, b)) in scene.shapes.iter().zip(&back.shapes).enumerate() {
+        assert_eq!(a.is_closed(), b.is_closed(), "shape {k}\n{svg}");
+        assert_eq!(a.num_segments(), b.num_segments(), "shape {k}\n{svg}");
+        for i in 0..a.num_segments() {
+            for (p, q) in a.segment(i).iter().zip(b.segment(i)) {
+                let d = (p.x - q.x).abs().max((p.y - q.y).abs());
+                assert!(
+                    d <= tol,
+                    "shape {k} segment {i}: {p:?} vs {q:?} ({d} > {tol})\n{svg}"
+                );
+            }
+        }
+        let visible = |c: Option<Rgba>| c.filter(|c| c.a > 0.0);
+        assert_eq!(
+            visible(a.fill).map(|c| written_color(c, precision)),
+            visible(b.fill),
+            "shape {k} fill\n{svg}"
+        );
+        assert_eq!(a.stroke.is_some(), b.stroke.is_some(), "shape {k}\n{svg}");
+        if let (Some(s), Some(t)) = (a.stroke, b.stroke) {
+            assert_eq!(written_color(s.color, precision), t.color, "shape {k}");
+            assert!((s.width - t.width).abs() <= tol, "shape {k} width");
+        }
+    }
+}
+
+#[test]
+fn random_scenes_round_trip_with_every_option() {
+    let mut letters = std::collections::BTreeSet::new();
+    for seed in 0..60 {
+        let scene = random_scene(seed);
+        for precision in 0..=4u8 {
+            for group_by_color in [false, true] {
+                for ids in [false, true] {
+                    let opts = SvgOptions {
+                        precision,
+                        group_by_color,
+                        ids,
+                    };
+                    let svg = to_svg(&scene, &opts);
+                    assert_eq!(svg, to_svg(&scene, &opts));
+                    for d in svg.split(r#" d=""#).skip(1) {
+                        letters.extend(
+                            d.chars()
+                                .take_while(|&c| c != '"')
+                                .filter(char::is_ascii_alphabetic),
+                        );
+                    }
+                    check_safe_output(&svg).unwrap_or_else(|e| panic!("{e}\n{svg}"));
+                    let back = from_svg(&svg).unwrap_or_else(|e| panic!("{e}\n{svg}"));
+                    assert_round_trip(&scene, &back, precision, &svg);
+                }
+            }
+        }
+    }
+    // Every shorthand was exercised.
+    let all: String = letters.into_iter().collect();
+    assert_eq!(all, "CHLMSVZchlsv", "{all}");
 }

@@ -1,0 +1,628 @@
+//! The SVG writer ([`to_svg`], [`with_metadata`]); the format is described in the docs of
+//! [`crate::svg`].
+//!
+//! Coordinates are rounded once to integers in units of `10^-precision` and every later decision
+//! (relative or absolute, `H`/`V`, `S`, closing by `Z`) works on those integers, so relative
+//! coordinates are exact: a reader that sums them gets the same decimals as the absolute form,
+//! and rounding errors never accumulate along a path.
+
+use crate::scene::{Point, Rgba, Scene, Shape, ShapeKind};
+use std::fmt::Write as _;
+
+/// Export options.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SvgOptions {
+    /// Decimal places for coordinates and stroke widths (0..=6; larger values are capped).
+    /// Opacities get `max(3, precision)` decimals.
+    pub precision: u8,
+    /// Wraps runs of two or more consecutive shapes with the same fill in one
+    /// `<g fill="…">` (and the run's common `fill-opacity`, if any), instead of repeating it.
+    pub group_by_color: bool,
+    /// Gives every path the id `p<k>` (`k` = the shape's index in the scene + 1, so ids follow
+    /// paint order and stay the same for the same scene) and every colour group `c<k>`
+    /// (`k` = 1, 2, … in document order).
+    pub ids: bool,
+}
+
+impl Default for SvgOptions {
+    fn default() -> Self {
+        SvgOptions {
+            precision: 2,
+            group_by_color: false,
+            ids: false,
+        }
+    }
+}
+
+/// Largest number of decimals written.
+pub const MAX_PRECISION: u8 = 6;
+
+/// Fewest decimals an opacity gets (1/1000 is finer than an 8-bit alpha step).
+const OPACITY_DECIMALS: usize = 3;
+
+/// Largest magnitude (in units of `10^-precision`) written through the integer path; larger or
+/// non-finite values are written as they are (see [`push_float`]).
+const MAX_UNITS: f64 = 1e15;
+
+/// `v` in units of `10^-p` (as `scale = 10^p`), rounded, if finite and not huge.
+fn to_units(v: f32, scale: f64) -> Option<i64> {
+    let x = (v as f64 * scale).round();
+    (x.is_finite() && x.abs() <= MAX_UNITS).then_some(x as i64)
+}
+
+/// `u * 10^-p` in its shortest form: no trailing zeros, no `0` before the point (`.5`, `-.5`),
+/// no `-0`.
+fn push_fixed(out: &mut String, u: i64, p: usize) {
+    if u < 0 {
+        out.push('-');
+    }
+    let a = u.unsigned_abs();
+    let s = 10u64.pow(p as u32);
+    let (int, mut frac) = (a / s, a % s);
+    if frac == 0 {
+        let _ = write!(out, "{int}");
+        return;
+    }
+    if int != 0 {
+        let _ = write!(out, "{int}");
+    }
+    let mut digits = p;
+    while frac % 10 == 0 {
+        frac /= 10;
+        digits -= 1;
+    }
+    let _ = write!(out, ".{frac:0digits$}");
+}
+
+/// A value the integer path cannot hold (non-finite or huge), written as Rust prints it, with `p`
+/// decimals when finite: invalid scenes are written as they are, never silently changed.
+fn push_float(out: &mut String, v: f32, p: usize) {
+    if v.is_finite() {
+        let _ = write!(out, "{v:.p$}");
+    } else {
+        let _ = write!(out, "{v}");
+    }
+}
+
+/// `v` with `p` decimals in the shortest form.
+fn num(v: f32, p: usize) -> String {
+    let mut s = String::new();
+    match to_units(v, 10f64.powi(p as i32)) {
+        Some(u) => push_fixed(&mut s, u, p),
+        None => push_float(&mut s, v, p),
+    }
+    s
+}
+
+/// A colour channel as the 8 bits every SVG renderer keeps.
+fn byte(v: f32) -> u8 {
+    (v.clamp(0.0, 1.0) * 255.0).round() as u8
+}
+
+/// `#rgb` when every channel's two hex digits are equal, else `#rrggbb`.
+fn hex(c: Rgba) -> String {
+    let b = [byte(c.r), byte(c.g), byte(c.b)];
+    if b.iter().all(|v| v >> 4 == v & 15) {
+        format!("#{:x}{:x}{:x}", b[0] & 15, b[1] & 15, b[2] & 15)
+    } else {
+        format!("#{:02x}{:02x}{:02x}", b[0], b[1], b[2])
+    }
+}
+
+fn opacity_decimals(p: usize) -> usize {
+    p.max(OPACITY_DECIMALS)
+}
+
+/// The colour a reader gets back from what [`to_svg`] writes for `c` at `precision` decimals:
+/// 8-bit RGB and the opacity with `max(3, precision)` decimals.
+pub fn written_color(c: Rgba, precision: u8) -> Rgba {
+    let p = opacity_decimals(precision.min(MAX_PRECISION) as usize);
+    let s = 10f64.powi(p as i32);
+    let a = ((c.a.clamp(0.0, 1.0) as f64 * s).round() / s) as f32;
+    Rgba::new(
+        byte(c.r) as f32 / 255.0,
+        byte(c.g) as f32 / 255.0,
+        byte(c.b) as f32 / 255.0,
+        a,
+    )
+}
+
+/// How a shape is painted, as attribute values.
+#[derive(Clone, Debug, PartialEq)]
+struct Paint {
+    /// `none` or a colour.
+    fill: String,
+    /// `None` when opaque (the default).
+    fill_opacity: Option<String>,
+    stroke: Option<StrokePaint>,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+struct StrokePaint {
+    color: String,
+    width: String,
+    opacity: Option<String>,
+}
+
+impl Paint {
+    fn of(sh: &Shape, p: usize) -> Paint {
+        let op = |a: f32| {
+            let s = num(a.clamp(0.0, 1.0), opacity_decimals(p));
+            match s.as_str() {
+                "1" => Some(None),
+                "0" => None,
+                _ => Some(Some(s)),
+            }
+        };
+        let (fill, fill_opacity) = match sh.fill {
+            Some(f) if sh.is_closed() => match op(f.a) {
+                Some(o) => (hex(f), o),
+                None => ("none".to_string(), None),
+            },
+            _ => ("none".to_string(), None),
+        };
+        let stroke = sh.stroke.and_then(|st| {
+            let width = num(st.width, p);
+            let visible = st.width > 0.0 && width != "0";
+            let opacity = op(st.color.a)?;
+            visible.then(|| StrokePaint {
+                color: hex(st.color),
+                width,
+                opacity,
+            })
+        });
+        Paint {
+            fill,
+            fill_opacity,
+            stroke,
+        }
+    }
+
+    fn visible(&self) -> bool {
+        self.fill != "none" || self.stroke.is_some()
+    }
+}
+
+/// What the enclosing elements already set, so a path leaves those attributes out.
+#[derive(Clone, Debug)]
+struct Inherited {
+    fill: String,
+    fill_opacity: Option<String>,
+    stroke: Option<String>,
+    stroke_width: Option<String>,
+    stroke_opacity: Option<String>,
+    caps: bool,
+}
+
+impl Inherited {
+    fn root() -> Self {
+        Inherited {
+            fill: "#000".into(),
+            fill_opacity: None,
+            stroke: None,
+            stroke_width: None,
+            stroke_opacity: None,
+            caps: false,
+        }
+    }
+}
+
+fn push_attr(out: &mut String, name: &str, value: &str) {
+    let _ = write!(out, r#" {name}="{value}""#);
+}
+
+const CAPS: &str = r#" stroke-linecap="round" stroke-linejoin="round""#;
+
+fn push_paint(out: &mut String, paint: &Paint, ctx: &Inherited) {
+    if paint.fill != ctx.fill {
+        push_attr(out, "fill", &paint.fill);
+    }
+    if paint.fill != "none"
+        && paint.fill_opacity != ctx.fill_opacity
+        && let Some(o) = &paint.fill_opacity
+    {
+        push_attr(out, "fill-opacity", o);
+    }
+    if let Some(st) = &paint.stroke {
+        if ctx.stroke.as_ref() != Some(&st.color) {
+            push_attr(out, "stroke", &st.color);
+        }
+        if ctx.stroke_width.as_ref() != Some(&st.width) {
+            push_attr(out, "stroke-width", &st.width);
+        }
+        if st.opacity != ctx.stroke_opacity
+            && let Some(o) = &st.opacity
+        {
+            push_attr(out, "stroke-opacity", o);
+        }
+        if !ctx.caps {
+            out.push_str(CAPS);
+        }
+    }
+}
+
+/// The value every item of `items` has, if there are any and they agree.
+fn common<T: PartialEq + Clone>(mut items: impl Iterator<Item = T>) -> Option<T> {
+    let first = items.next()?;
+    items.all(|v| v == first).then_some(first)
+}
+
+/// Writes `scene` as a standalone SVG document (see the docs of [`crate::svg`]). Never fails
+/// for a scene that passes [`Scene::validate`]; invalid values are written as they are.
+pub fn to_svg(scene: &Scene, opts: &SvgOptions) -> String {
+    let p = opts.precision.min(MAX_PRECISION) as usize;
+    let mut out = String::with_capacity(128 + 96 * scene.shapes.len());
+    let (w, h) = (scene.width, scene.height);
+    let _ = write!(
+        out,
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" viewBox="0 0 {w} {h}">"#
+    );
+    out.push('\n');
+    if scene.background.a > 0.0 {
+        let _ = write!(out, r#"<rect width="{w}" height="{h}""#);
+        let c = hex(scene.background);
+        if c != "#000" {
+            push_attr(&mut out, "fill", &c);
+        }
+        let o = num(scene.background.a.clamp(0.0, 1.0), opacity_decimals(p));
+        if o != "1" {
+            push_attr(&mut out, "fill-opacity", &o);
+        }
+        out.push_str("/>\n");
+    }
+
+    let items: Vec<(usize, Paint)> = scene
+        .shapes
+        .iter()
+        .enumerate()
+        .map(|(i, sh)| (i, Paint::of(sh, p)))
+        .filter(|(_, paint)| paint.visible())
+        .collect();
+
+    // Stroke attributes shared by all stroked paths go on one outer group (caps and joins are
+    // always round, so two stroked paths already pay for it).
+    let mut ctx = Inherited::root();
+    let stroked: Vec<&StrokePaint> = items
+        .iter()
+        .filter_map(|(_, q)| q.stroke.as_ref())
+        .collect();
+    let outer = stroked.len() >= 2;
+    if outer {
+        let all_stroked = stroked.len() == items.len();
+        out.push_str("<g");
+        if let Some(f) = common(items.iter().map(|(_, q)| &q.fill))
+            && f == "none"
+        {
+            ctx.fill = f.clone();
+            push_attr(&mut out, "fill", f);
+        }
+        if all_stroked && let Some(c) = common(stroked.iter().map(|s| &s.color)) {
+            push_attr(&mut out, "stroke", c);
+            ctx.stroke = Some(c.clone());
+        }
+        if let Some(wd) = common(stroked.iter().map(|s| &s.width)) {
+            push_attr(&mut out, "stroke-width", wd);
+            ctx.stroke_width = Some(wd.clone());
+        }
+        if all_stroked && let Some(Some(o)) = common(stroked.iter().map(|s| &s.opacity)) {
+            push_attr(&mut out, "stroke-opacity", o);
+            ctx.stroke_opacity = Some(o.clone());
+        }
+        out.push_str(CAPS);
+        ctx.caps = true;
+        out.push_str(">\n");
+    }
+
+    let mut groups = 0usize;
+    let mut i = 0;
+    while i < items.len() {
+        let fill = &items[i].1.fill;
+        let mut j = i + 1;
+        while j < items.len() && &items[j].1.fill == fill {
+            j += 1;
+        }
+        let run = &items[i..j];
+        let grouped = opts.group_by_color && run.len() >= 2 && *fill != ctx.fill;
+        let mut inner = ctx.clone();
+        if grouped {
+            groups += 1;
+            out.push_str("<g");
+            if opts.ids {
+                push_attr(&mut out, "id", &format!("c{groups}"));
+            }
+            push_attr(&mut out, "fill", fill);
+            inner.fill = fill.clone();
+            if *fill != "none"
+                && let Some(Some(o)) = common(run.iter().map(|(_, q)| &q.fill_opacity))
+            {
+                push_attr(&mut out, "fill-opacity", o);
+                inner.fill_opacity = Some(o.clone());
+            }
+            out.push_str(">\n");
+        }
+        let run_end = if grouped { j } else { i + 1 };
+        for (index, paint) in &items[i..run_end] {
+            out.push_str("<path");
+            if opts.ids {
+                push_attr(&mut out, "id", &format!("p{}", index + 1));
+            }
+            out.push_str(r#" d=""#);
+            push_path_data(&mut out, &scene.shapes[*index], p);
+            out.push('"');
+            push_paint(&mut out, paint, &inner);
+            out.push_str("/>\n");
+        }
+        if grouped {
+            out.push_str("</g>\n");
+        }
+        i = run_end;
+    }
+    if outer {
+        out.push_str("</g>\n");
+    }
+    out.push_str("</svg>\n");
+    out
+}
+
+/// Where the previous token of path data ended, for the separator rules.
+#[derive(Clone, Copy, Debug)]
+struct Pen {
+    /// The last command letter written (`0` before the first).
+    cmd: u8,
+    /// `Some(has_point)` when the last token was a number.
+    last_num: Option<bool>,
+}
+
+impl Pen {
+    /// The command a bare number list continues with after `cmd`.
+    fn implicit(self) -> u8 {
+        match self.cmd {
+            b'M' => b'L',
+            b'm' => b'l',
+            c => c,
+        }
+    }
+}
+
+/// Appends command `letter` with `nums` (units of `10^-p`) to `out`: the letter only if the
+/// grammar would not repeat it anyway, a space only where the next number would otherwise run
+/// into the previous one.
+fn push_cmd(out: &mut String, pen: &mut Pen, letter: u8, nums: &[i64], p: usize) {
+    if pen.cmd == 0 || letter != pen.implicit() {
+        out.push(letter as char);
+        pen.cmd = letter;
+        pen.last_num = None;
+    }
+    let mut tok = String::new();
+    for &n in nums {
+        tok.clear();
+        push_fixed(&mut tok, n, p);
+        if let Some(had_point) = pen.last_num {
+            let glued = tok.starts_with('-') || (tok.starts_with('.') && had_point);
+            if !glued {
+                out.push(' ');
+            }
+        }
+        out.push_str(&tok);
+        pen.last_num = Some(tok.contains('.'));
+    }
+}
+
+/// Appends the shortest of `candidates` (letter, numbers); the first wins ties.
+fn push_best(out: &mut String, pen: &mut Pen, p: usize, candidates: &[(u8, Vec<i64>)]) {
+    let mut best: Option<(String, Pen)> = None;
+    for (letter, nums) in candidates {
+        let mut s = String::new();
+        let mut q = *pen;
+        push_cmd(&mut s, &mut q, *letter, nums, p);
+        if best.as_ref().is_none_or(|(b, _)| s.len() < b.len()) {
+            best = Some((s, q));
+        }
+    }
+    if let Some((s, q)) = best {
+        out.push_str(&s);
+        *pen = q;
+    }
+}
+
+type U2 = [i64; 2];
+
+/// The current point and the previous segment's second control point (after `C`/`S` only),
+/// in rounded units: exactly what a reader of the text has.
+struct Cursor {
+    pen: Pen,
+    cur: U2,
+    prev_c2: Option<U2>,
+}
+
+fn rel(a: U2, from: U2) -> U2 {
+    [a[0] - from[0], a[1] - from[1]]
+}
+
+impl Cursor {
+    fn line(&mut self, out: &mut String, e: U2, p: usize) {
+        let (c, d) = (self.cur, rel(e, self.cur));
+        let mut cands = Vec::with_capacity(4);
+        if e[1] == c[1] {
+            cands.push((b'H', vec![e[0]]));
+            cands.push((b'h', vec![d[0]]));
+        }
+        if e[0] == c[0] {
+            cands.push((b'V', vec![e[1]]));
+            cands.push((b'v', vec![d[1]]));
+        }
+        cands.push((b'L', e.to_vec()));
+        cands.push((b'l', d.to_vec()));
+        push_best(out, &mut self.pen, p, &cands);
+        self.cur = e;
+        self.prev_c2 = None;
+    }
+
+    fn cubic(&mut self, out: &mut String, c1: U2, c2: U2, e: U2, p: usize) {
+        let c = self.cur;
+        let reflected = match self.prev_c2 {
+            Some(q) => [2 * c[0] - q[0], 2 * c[1] - q[1]],
+            None => c,
+        };
+        let mut cands = Vec::with_capacity(4);
+        if c1 == reflected {
+            cands.push((b'S', [c2, e].concat()));
+            cands.push((b's', [rel(c2, c), rel(e, c)].concat()));
+        }
+        cands.push((b'C', [c1, c2, e].concat()));
+        cands.push((b'c', [rel(c1, c), rel(c2, c), rel(e, c)].concat()));
+        push_best(out, &mut self.pen, p, &cands);
+        self.cur = e;
+        self.prev_c2 = Some(c2);
+    }
+}
+
+/// Whether the cubic `seg` (original coordinates) is, within half a unit per coordinate, the
+/// straight segment a reader builds for `L` from the rounded ends `a`, `b`: its control points
+/// at 1/3 and 2/3 of the chord.
+fn is_straight(seg: &[Point; 4], a: U2, b: U2, scale: f64) -> bool {
+    let near = |c: Point, t: f64| {
+        let at = |i: usize| a[i] as f64 + (b[i] - a[i]) as f64 * t;
+        (c.x as f64 * scale - at(0)).abs() <= 0.5 && (c.y as f64 * scale - at(1)).abs() <= 0.5
+    };
+    near(seg[1], 1.0 / 3.0) && near(seg[2], 2.0 / 3.0)
+}
+
+fn push_path_data(out: &mut String, sh: &Shape, p: usize) {
+    let scale = 10f64.powi(p as i32);
+    let n = sh.num_segments();
+    let segs: Vec<[Point; 4]> = (0..n).map(|i| sh.segment(i)).collect();
+    let rounded: Option<Vec<[U2; 4]>> = segs
+        .iter()
+        .map(|s| {
+            let mut r = [[0i64; 2]; 4];
+            for (k, pt) in s.iter().enumerate() {
+                r[k] = [to_units(pt.x, scale)?, to_units(pt.y, scale)?];
+            }
+            Some(r)
+        })
+        .collect();
+    let Some(rounded) = rounded.filter(|r| !r.is_empty()) else {
+        push_path_data_plain(out, sh, p);
+        return;
+    };
+    let straight = |i: usize| {
+        sh.kind == ShapeKind::Polygon || is_straight(&segs[i], rounded[i][0], rounded[i][3], scale)
+    };
+    let mut cur = Cursor {
+        pen: Pen {
+            cmd: 0,
+            last_num: None,
+        },
+        cur: rounded[0][0],
+        prev_c2: None,
+    };
+    push_cmd(out, &mut cur.pen, b'M', &rounded[0][0], p);
+    let closed = sh.is_closed();
+    // A closed outline's last segment is left to `Z` when it is a straight line of non-zero
+    // length (`Z` draws nothing for a zero-length one, and a reader would drop the segment).
+    let implicit_close = closed && straight(n - 1) && rounded[n - 1][0] != rounded[0][0];
+    let explicit = if implicit_close { n - 1 } else { n };
+    for (i, r) in rounded.iter().enumerate().take(explicit) {
+        if straight(i) {
+            cur.line(out, r[3], p);
+        } else {
+            cur.cubic(out, r[1], r[2], r[3], p);
+        }
+    }
+    if closed {
+        out.push('Z');
+    }
+}
+
+/// The plain absolute form, for shapes with values the integer path cannot hold.
+fn push_path_data_plain(out: &mut String, sh: &Shape, p: usize) {
+    let pt = |out: &mut String, q: Point| {
+        out.push_str(&num(q.x, p));
+        out.push(' ');
+        out.push_str(&num(q.y, p));
+    };
+    let Some(first) = sh.points.first() else {
+        return;
+    };
+    out.push('M');
+    pt(out, *first);
+    for i in 0..sh.num_segments() {
+        let s = sh.segment(i);
+        out.push('C');
+        for (k, q) in s[1..].iter().enumerate() {
+            if k > 0 {
+                out.push(' ');
+            }
+            pt(out, *q);
+        }
+    }
+    if sh.is_closed() {
+        out.push('Z');
+    }
+}
+
+/// `svg` (a document [`to_svg`] wrote) with a `<metadata>` element holding `text` (XML-escaped;
+/// control characters dropped) right after the opening `<svg ...>` tag. A document without an
+/// opening tag is returned unchanged.
+pub fn with_metadata(svg: &str, text: &str) -> String {
+    let Some(end) = svg
+        .find("<svg")
+        .and_then(|i| svg[i..].find('>').map(|j| i + j + 1))
+    else {
+        return svg.to_string();
+    };
+    let mut esc = String::with_capacity(text.len() + 16);
+    for ch in text.chars() {
+        match ch {
+            '&' => esc.push_str("&amp;"),
+            '<' => esc.push_str("&lt;"),
+            '>' => esc.push_str("&gt;"),
+            '"' => esc.push_str("&quot;"),
+            c if c.is_control() => {}
+            c => esc.push(c),
+        }
+    }
+    format!("{}\n<metadata>{esc}</metadata>{}", &svg[..end], &svg[end..])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn numbers_are_short() {
+        let f = |u: i64, p: usize| {
+            let mut s = String::new();
+            push_fixed(&mut s, u, p);
+            s
+        };
+        assert_eq!(f(0, 2), "0");
+        assert_eq!(f(50, 2), ".5");
+        assert_eq!(f(-50, 2), "-.5");
+        assert_eq!(f(1205, 2), "12.05");
+        assert_eq!(f(-1200, 2), "-12");
+        assert_eq!(f(7, 3), ".007");
+        assert_eq!(f(42, 0), "42");
+        assert_eq!(num(-0.001, 2), "0");
+        assert_eq!(num(f32::NAN, 2), "NaN");
+        assert_eq!(hex(Rgba::WHITE), "#fff");
+        assert_eq!(hex(Rgba::new(1.0, 0.0, 0.2, 1.0)), "#f03");
+        assert_eq!(hex(Rgba::new(1.0, 0.0, 0.21, 1.0)), "#ff0036");
+    }
+
+    #[test]
+    fn separators_only_where_needed() {
+        let mut s = String::new();
+        let mut pen = Pen {
+            cmd: 0,
+            last_num: None,
+        };
+        push_cmd(&mut s, &mut pen, b'M', &[10, 20], 1);
+        push_cmd(&mut s, &mut pen, b'L', &[5, -5], 1);
+        push_cmd(&mut s, &mut pen, b'l', &[-5, 5], 1);
+        push_cmd(&mut s, &mut pen, b'l', &[15, 5], 1);
+        push_cmd(&mut s, &mut pen, b'h', &[5], 1);
+        assert_eq!(s, "M1 2 .5-.5l-.5.5 1.5.5h.5");
+    }
+}
