@@ -254,11 +254,11 @@ fn print_counts_of_svg_dir() {
         let text = std::fs::read_to_string(&f).unwrap();
         let name = f.file_name().unwrap().to_string_lossy().to_string();
         if std::env::var("VF_CHECK_DETAILS").is_ok() {
-            // Which filled paths (in paint order, background included as -1 when first) fail.
+            // Which filled paths fail (indices in paint order, the background is path 0), and
+            // how many paths there are.
             let tree = crate::svg::parse_usvg(&text).unwrap();
             let mut bad = Vec::new();
-            let mut i = 0usize;
-            fn walk(g: &usvg::Group, i: &mut usvg_count::Idx, bad: &mut Vec<usize>) {
+            fn walk(g: &usvg::Group, i: &mut usize, bad: &mut Vec<usize>) {
                 for n in g.children() {
                     match n {
                         usvg::Node::Group(c) => walk(c, i, bad),
@@ -266,18 +266,17 @@ fn print_counts_of_svg_dir() {
                             if p.fill().is_some()
                                 && !rings_valid(&rings_of(p.data(), p.abs_transform()))
                             {
-                                bad.push(i.0);
+                                bad.push(*i);
                             }
-                            i.0 += 1;
+                            *i += 1;
                         }
                         _ => {}
                     }
                 }
             }
-            let mut idx = usvg_count::Idx(0);
-            walk(tree.root(), &mut idx, &mut bad);
-            i += idx.0;
-            println!("DETAIL {name} {i} {bad:?}");
+            let mut count = 0usize;
+            walk(tree.root(), &mut count, &mut bad);
+            println!("DETAIL {name} {count} {bad:?}");
         }
         match check_svg(&text) {
             Ok(e) => println!(
@@ -290,8 +289,4 @@ fn print_counts_of_svg_dir() {
             ),
         }
     }
-}
-
-mod usvg_count {
-    pub struct Idx(pub usize);
 }
