@@ -4,6 +4,7 @@
 //! background (the usual case) premultiplied and straight alpha coincide.
 
 pub mod ops;
+pub mod ssim;
 
 use std::path::Path;
 
