@@ -2,6 +2,9 @@
 //! (its defaults, polygon mode, and a setting tuned per image to land near each path count) on
 //! every PNG in DIR. Every SVG is rendered back with resvg at the input size and compared with
 //! the input on RGB over white.
+//!
+//! With `--rd`, a rate–distortion run over image sets against several peers instead
+//! ([`super::bench_rd`]).
 
 use super::CliError;
 use super::vectorize::load_input;
@@ -40,9 +43,12 @@ pub struct BenchVectorizeArgs {
     pub precision: u8,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Print one JSON object instead of a table.
-    #[arg(long)]
-    pub json: bool,
+    /// Print one JSON object instead of a table; `--json FILE` writes it to FILE (with `--rd`,
+    /// the table is still printed).
+    #[arg(long, num_args = 0..=1, value_name = "FILE")]
+    pub json: Option<Option<PathBuf>>,
+    #[command(flatten)]
+    pub rd: super::bench_rd::RdArgs,
 }
 
 /// One method on one image.
@@ -113,6 +119,10 @@ fn tuning_grid() -> Vec<TracerSetting> {
 }
 
 pub fn run(a: BenchVectorizeArgs) -> Result<(), CliError> {
+    if a.rd.rd {
+        return super::bench_rd::run(&a);
+    }
+    let json = a.json.is_some();
     // A list of independent budgets, each at most the per-run path limit.
     let budgets = live::schedule::parse_schedule(&a.paths, usize::MAX)
         .map_err(|e| CliError::Usage(format!("--paths: {e}")))?;
@@ -140,6 +150,7 @@ pub fn run(a: BenchVectorizeArgs) -> Result<(), CliError> {
     let mut samples = Vec::new();
     let svg_opts = crate::svg::SvgOptions {
         precision: a.precision,
+        ..Default::default()
     };
     for file in &files {
         let name = file
@@ -239,7 +250,7 @@ pub fn run(a: BenchVectorizeArgs) -> Result<(), CliError> {
                     .map_err(|e| e.to_string())?;
                 Ok((crate::svg::to_svg(&r.scene, &svg_opts), r.paths))
             })?;
-            if !a.json {
+            if !json {
                 eprintln!(
                     "{name:50} {method:18} budget {b:3} paths {:3} psnr {:6.2} bytes {:6} {:.2} s",
                     s.paths, s.psnr, s.svg_bytes, s.seconds
@@ -249,7 +260,7 @@ pub fn run(a: BenchVectorizeArgs) -> Result<(), CliError> {
         }
     }
     let rows = summarise(&samples);
-    if a.json {
+    if json {
         let out = serde_json::json!({
             "images": files.len(),
             "rows": rows.iter().map(|r| serde_json::json!({
@@ -262,7 +273,12 @@ pub fn run(a: BenchVectorizeArgs) -> Result<(), CliError> {
             })).collect::<Vec<_>>(),
             "per_image": samples,
         });
-        println!("{out}");
+        match &a.json {
+            Some(Some(path)) => std::fs::write(path, format!("{out}\n")).map_err(|e| {
+                CliError::Other(anyhow::anyhow!("cannot write {}: {e}", path.display()))
+            })?,
+            _ => println!("{out}"),
+        }
     } else {
         println!("{} images", files.len());
         println!(
