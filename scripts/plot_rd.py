@@ -18,6 +18,7 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
+import matplotlib.ticker  # noqa: E402
 
 COLORS = {"live": "#d62728", "vtracer": "#1f77b4", "imagetracer": "#2ca02c", "potrace": "#7f7f7f"}
 
@@ -57,6 +58,9 @@ def main():
                     ax.plot([p[0] for p in env], [p[1] for p in env], "-o", ms=3, color=c,
                             label=tool, lw=2 if tool == "live" else 1.3)
             ax.set_xscale("log")
+            ax.xaxis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
+            ax.xaxis.set_minor_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
+            ax.tick_params(axis="x", which="minor", labelsize=7)
             ax.set_title(f"{set_name} ({n} images)")
             ax.set_xlabel(f"mean SVG size, KB ({basis})")
             ax.set_ylabel("mean PSNR over white, dB")
