@@ -2,6 +2,7 @@
 //!
 //! | file | job |
 //! |---|---|
+//! | [`lobes`] | exact repair of a looping outline: cut it where it meets itself into lobes |
 //! | [`simple`] | simple outlines: find paths that cross themselves or fold into spikes, split them into simple pieces |
 //! | [`check`] | editability counts of any SVG (self-intersecting, hidden, slivers, colours) |
 //! | [`export`] | compact, exact SVG text (fewest decimals within a render tolerance) |
@@ -9,5 +10,229 @@
 
 pub mod check;
 pub mod export;
+pub mod lobes;
 pub mod palette;
 pub mod simple;
+
+use crate::scene::{Rgba, Scene};
+use palette::{Background, ColorPlan};
+use serde::{Deserialize, Serialize};
+
+/// The vector options of a request, in user terms, as the API and the command line take them
+/// (field names are the job fields).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct VectorOptions {
+    #[serde(flatten)]
+    pub colors: ColorPlan,
+    /// Vectorize runs: stop adding paths once the PSNR (dB) reaches this.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub target_psnr: Option<f64>,
+    /// Vectorize runs: the SVG at most this many bytes.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_bytes: Option<usize>,
+}
+
+/// Smallest `max_bytes` accepted: an SVG's header and one small path.
+pub const MIN_BYTES: usize = 256;
+/// Largest `max_bytes` accepted (16 MiB).
+pub const MAX_BYTES: usize = 16 << 20;
+
+/// `target_psnr` is in `(0, 100]` dB.
+pub fn check_target_psnr(v: f64) -> Result<f64, String> {
+    if v.is_finite() && v > 0.0 && v <= 100.0 {
+        Ok(v)
+    } else {
+        Err(format!("must be above 0 and at most 100 (dB), got {v}"))
+    }
+}
+
+/// `max_bytes` is in `MIN_BYTES..=MAX_BYTES`.
+pub fn check_max_bytes(v: usize) -> Result<usize, String> {
+    if (MIN_BYTES..=MAX_BYTES).contains(&v) {
+        Ok(v)
+    } else {
+        Err(format!(
+            "must be between {MIN_BYTES} and {MAX_BYTES}, got {v}"
+        ))
+    }
+}
+
+impl VectorOptions {
+    /// Checks every option; the error names the field.
+    pub fn validate(&self) -> Result<(), (&'static str, String)> {
+        self.colors
+            .validate()
+            .map_err(|(f, e)| (f, e.to_string()))?;
+        if let Some(v) = self.target_psnr {
+            check_target_psnr(v).map_err(|e| ("target_psnr", e))?;
+        }
+        if let Some(v) = self.max_bytes {
+            check_max_bytes(v).map_err(|e| ("max_bytes", e))?;
+        }
+        Ok(())
+    }
+}
+
+/// Curve-fitting tolerance (px) when a looping path is split into simple pieces.
+pub const SIMPLE_TOLERANCE: f32 = 0.1;
+/// Pieces of a split path below this area (px²) are dropped.
+pub const SIMPLE_MIN_AREA: f32 = 0.5;
+
+/// Replaces every closed path whose outline meets itself by simple pieces, in place (same
+/// place in the paint order): its lobes, cut exactly out of its outline
+/// ([`lobes::split_lobes`]); a lobe that is still not simple (a cusp or a fold without a
+/// crossing) by the union repair ([`simple::split_simple`]). Pieces under `min_area` px² are
+/// dropped. Returns how many paths were repaired. The scene never grows past `MAX_PATHS`.
+pub fn make_simple(scene: &mut Scene, min_area: f32) -> usize {
+    let mut repaired = 0;
+    let mut out = Vec::with_capacity(scene.shapes.len());
+    for s in std::mem::take(&mut scene.shapes) {
+        if simple::is_simple(&s) {
+            out.push(s);
+            continue;
+        }
+        repaired += 1;
+        for l in lobes::split_lobes(&s, min_area) {
+            if simple::is_simple(&l) {
+                out.push(l);
+            } else {
+                out.extend(simple::split_simple(&l, SIMPLE_TOLERANCE, min_area));
+            }
+        }
+    }
+    out.truncate(crate::scene::MAX_PATHS);
+    scene.shapes = out;
+    repaired
+}
+
+/// Removes the paths a designer would find hidden or too small to see or edit, by the
+/// measure of [`check`]: visible area under [`check::SLIVER_AREA`] px², or a mean width
+/// (2·area/perimeter) under [`check::SLIVER_WIDTH`] px, in px of the output canvas, which is
+/// `scale` times the scene's. Returns how many.
+pub fn drop_unseen(scene: &mut Scene, scale: f32) -> usize {
+    let vis = palette::visibility(scene, None);
+    let k2 = (scale * scale) as f64;
+    let before = scene.shapes.len();
+    let keep: Vec<bool> = scene
+        .shapes
+        .iter()
+        .zip(&vis)
+        .map(|(sh, v)| {
+            let ring = simple::flatten(sh, 0.1);
+            let area = crate::losses::polygon_area(&ring).abs() as f64;
+            let perim: f64 = (0..ring.len())
+                .map(|i| {
+                    let (a, b) = (ring[i], ring[(i + 1) % ring.len()]);
+                    ((a.0 - b.0) as f64).hypot((a.1 - b.1) as f64)
+                })
+                .sum();
+            let wide = !sh.is_closed()
+                || perim <= 0.0
+                || 2.0 * area / perim * scale as f64 >= check::SLIVER_WIDTH;
+            v.area as f64 * k2 >= check::SLIVER_AREA && wide
+        })
+        .collect();
+    let mut keep = keep.into_iter();
+    scene.shapes.retain(|_| keep.next().unwrap_or(true));
+    before - scene.shapes.len()
+}
+
+/// The SVG text of a finished scene: the fewest decimals whose render stays within
+/// [`export::Tolerance`] (see [`export::compact_svg`]), grouped by colour with stable ids when
+/// `colors.group` says so. Rounding can make an outline meet itself: the text is read back, and
+/// while any outline does, those are made simple again ([`make_simple`]) at the rounded
+/// coordinates and the scene is written anew (three rounds at most).
+pub fn write_svg(scene: &Scene, colors: &ColorPlan) -> String {
+    let grouped = colors.group == palette::Grouping::Color;
+    let opts = crate::svg::SvgOptions {
+        group_by_color: grouped,
+        ids: grouped,
+        ..Default::default()
+    };
+    let mut text = export::compact_svg(scene, &opts).svg;
+    for _ in 0..3 {
+        let Ok(mut back) = crate::svg::from_svg(&text) else {
+            break;
+        };
+        if back.shapes.iter().all(simple::is_simple) {
+            break;
+        }
+        make_simple(&mut back, SIMPLE_MIN_AREA);
+        text = export::compact_svg(&back, &opts).svg;
+    }
+    text
+}
+
+/// Removes, from the top of the paint order down, every path whose removal changes no pixel of
+/// the render by more than [`check::VISIBLE_STEP`] (a path hidden under others, or painted
+/// over a region of its own colour). Returns how many.
+pub fn drop_hidden(scene: &mut Scene) -> usize {
+    let step = check::VISIBLE_STEP;
+    let mut current = crate::raster::render(scene);
+    let mut removed = 0;
+    let mut i = scene.shapes.len();
+    while i > 0 {
+        i -= 1;
+        let mut trial = scene.clone();
+        trial.shapes.remove(i);
+        let img = crate::raster::render(&trial);
+        let unchanged = img
+            .data
+            .iter()
+            .zip(&current.data)
+            .all(|(a, b)| (a - b).abs() <= step);
+        if unchanged {
+            *scene = trial;
+            current = img;
+            removed += 1;
+        }
+    }
+    removed
+}
+
+/// What [`finish_scene`] did.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct FinishReport {
+    /// Paths split into simple pieces.
+    pub split: usize,
+    /// Paths dropped as hidden or too small to see.
+    pub dropped: usize,
+    /// Distinct fills left.
+    pub colors: usize,
+}
+
+/// The finish of a run without a target image (after score distillation): looping outlines
+/// split into simple pieces, hidden paths dropped, with `drop_small` paths too small to see
+/// (not for styles whose cells are meant to be one pixel: pixel art, strokes), fills reduced as `colors`
+/// says (a user palette: each fill to its nearest entry; a colour cap: k-means of the fills
+/// weighted by what they show; otherwise near-equal fills merged), and the background set.
+pub fn finish_scene(scene: &mut Scene, colors: &ColorPlan, drop_small: bool) -> FinishReport {
+    let split = make_simple(scene, SIMPLE_MIN_AREA);
+    let mut dropped = drop_hidden(scene);
+    if drop_small {
+        dropped += drop_unseen(scene, 1.0);
+    }
+    let pal = colors.resolve(|k| palette::palette_of_fills(scene, k));
+    match &pal {
+        Some(p) => {
+            palette::choose_fills(scene, None, p);
+        }
+        None => {
+            palette::merge_similar(scene, palette::MERGE_DISTANCE);
+        }
+    }
+    match colors.background {
+        Background::Transparent => scene.background = Rgba::TRANSPARENT,
+        Background::Color(c) => scene.background = c.to_rgba(),
+        Background::Auto => {
+            if let Some(p) = &pal {
+                palette::snap_background(scene, p);
+            }
+        }
+    }
+    FinishReport {
+        split,
+        dropped,
+        colors: palette::distinct_fills(scene),
+    }
+}
