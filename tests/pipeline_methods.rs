@@ -280,6 +280,7 @@ fn spec(kind: JobKind) -> JobSpec {
         preset: Preset::Draft,
         priority: 0,
         retrieval: true,
+        vector: Default::default(),
         plan: None,
     }
 }

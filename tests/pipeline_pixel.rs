@@ -119,6 +119,7 @@ fn service_executor_runs_a_text_job_on_the_default_pixel_model() {
         preset: Preset::Draft,
         priority: 0,
         retrieval: true,
+        vector: Default::default(),
         plan: None,
     };
     let out = exec

@@ -46,6 +46,7 @@ fn spec(method: Method, style: Style) -> JobSpec {
         preset: Preset::Draft,
         priority: 0,
         retrieval: true,
+        vector: Default::default(),
         plan: None,
     }
 }
@@ -229,6 +230,7 @@ fn vectorize_jobs_checkpoint_each_live_stage_and_resume_exactly() {
         preset: Preset::Draft,
         priority: 0,
         retrieval: true,
+        vector: Default::default(),
         plan: None,
     };
     let exec = DefaultExecutor::new(ModelDirs::default());

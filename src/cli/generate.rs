@@ -82,6 +82,8 @@ pub struct GenerateArgs {
     pub no_retrieval: bool,
     #[command(flatten)]
     pub tuning: SdsTuningArgs,
+    #[command(flatten)]
+    pub vector: super::vector_args::VectorArgs,
     /// Output SVG path.
     #[arg(short, long)]
     pub output: PathBuf,
@@ -242,6 +244,10 @@ pub fn run(args: GenerateArgs) -> Result<(), CliError> {
         samples: args.samples,
         seed: args.seed,
         retrieval: !args.no_retrieval,
+        vector: crate::vector::VectorOptions {
+            colors: args.vector.color_plan()?,
+            ..Default::default()
+        },
         tuning: args.tuning.tuning(args.snapshot_every),
     };
     let exec = DefaultExecutor::with_downloads(dirs);

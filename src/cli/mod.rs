@@ -12,6 +12,7 @@ pub mod render;
 pub mod serve;
 pub mod setup;
 pub mod tuning;
+pub mod vector_args;
 pub mod vectorize;
 
 use crate::server::Role;

@@ -44,15 +44,28 @@ pub struct VectorizeArgs {
     /// Weight of the self-intersection (Xing) loss.
     #[arg(long)]
     pub xing_weight: Option<f32>,
-    /// Decimal places in the SVG.
-    #[arg(long, default_value_t = 1)]
-    pub precision: u8,
+    #[command(flatten)]
+    pub vector: super::vector_args::VectorArgs,
+    /// Stop adding paths once the PSNR (dB, over white) reaches this.
+    #[arg(long)]
+    pub target_psnr: Option<f64>,
+    /// Keep the SVG at most this many bytes: stop adding paths, then drop the paths whose
+    /// removal costs least.
+    #[arg(long)]
+    pub max_bytes: Option<usize>,
+    /// Decimal places in the SVG [default: the fewest that keep the render within 0.5/255 and
+    /// every outline simple].
+    #[arg(long)]
+    pub precision: Option<u8>,
     /// Also write our render of the result as PNG.
     #[arg(long)]
     pub preview: Option<PathBuf>,
     /// No progress bar.
     #[arg(long, short)]
     pub quiet: bool,
+    /// Print a JSON summary on stdout (the plan, paths, PSNR, bytes, editability, seconds).
+    #[arg(long)]
+    pub json: bool,
 }
 
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
@@ -123,6 +136,17 @@ pub fn config_from_args(a: &VectorizeArgs) -> Result<LiveConfig, CliError> {
         cfg.xing_weight = x;
     }
     cfg.seed = a.seed;
+    cfg.colors = a.vector.color_plan()?;
+    cfg.target_psnr = a
+        .target_psnr
+        .map(crate::vector::check_target_psnr)
+        .transpose()
+        .map_err(|e| CliError::Usage(format!("--target-psnr: {e}")))?;
+    cfg.max_bytes = a
+        .max_bytes
+        .map(crate::vector::check_max_bytes)
+        .transpose()
+        .map_err(|e| CliError::Usage(format!("--max-bytes: {e}")))?;
     cfg.init = match a.init {
         InitArg::Circles => InitMode::Circles,
         InitArg::Vtracer => InitMode::Vtracer,
@@ -133,6 +157,7 @@ pub fn config_from_args(a: &VectorizeArgs) -> Result<LiveConfig, CliError> {
 
 pub fn run(a: VectorizeArgs) -> Result<(), CliError> {
     let cfg = config_from_args(&a)?;
+    let cfg_colors = cfg.colors.clone();
     let target = load_input(&a.input)?;
     let bar = if a.quiet {
         indicatif::ProgressBar::hidden()
@@ -193,12 +218,22 @@ pub fn run(a: VectorizeArgs) -> Result<(), CliError> {
         .run_plan(&plan, &input, &ctx)
         .map_err(|e| CliError::Other(anyhow::anyhow!("vectorize failed: {e}")))?;
     bar.finish_and_clear();
-    let svg = crate::svg::to_svg(
-        &result.scene,
-        &crate::svg::SvgOptions {
-            precision: a.precision,
-        },
-    );
+    // The run's SVG (the fewest decimals that keep the picture and simple outlines), or the
+    // scene at the decimals asked for.
+    let svg = match a.precision {
+        None => result.svg.clone(),
+        Some(precision) => {
+            let grouped = cfg_colors.group == crate::vector::palette::Grouping::Color;
+            crate::svg::to_svg(
+                &result.scene,
+                &crate::svg::SvgOptions {
+                    precision,
+                    group_by_color: grouped,
+                    ids: grouped,
+                },
+            )
+        }
+    };
     std::fs::write(&a.output, &svg).map_err(|e| {
         CliError::Other(anyhow::anyhow!("cannot write {}: {e}", a.output.display()))
     })?;
@@ -207,8 +242,10 @@ pub fn run(a: VectorizeArgs) -> Result<(), CliError> {
             .save_png(p)
             .map_err(|e| CliError::Other(anyhow::anyhow!("preview: {e}")))?;
     }
+    let e = crate::vector::check::check_svg(&svg).unwrap_or_default();
     eprintln!(
-        "{}: {} paths{}, PSNR {:.2} dB, {} bytes, {:.1} s",
+        "{}: {} paths{}, PSNR {:.2} dB, {} bytes, {} colours, {} self-intersecting, {} hidden, \
+         {} slivers, {:.1} s",
         a.output.display(),
         result.paths,
         match result.detail["paths_pruned"].as_u64() {
@@ -217,8 +254,24 @@ pub fn run(a: VectorizeArgs) -> Result<(), CliError> {
         },
         result.detail["psnr"].as_f64().unwrap_or(f64::NAN),
         svg.len(),
+        e.colors,
+        e.self_intersecting,
+        e.hidden,
+        e.slivers,
         t0.elapsed().as_secs_f64()
     );
+    if a.json {
+        let summary = serde_json::json!({
+            "output": a.output,
+            "paths": result.paths,
+            "bytes": svg.len(),
+            "editability": e,
+            "seconds": t0.elapsed().as_secs_f64(),
+            "plan": plan,
+            "detail": result.detail,
+        });
+        println!("{summary}");
+    }
     Ok(())
 }
 

@@ -158,6 +158,7 @@ pub fn request_of(spec: &JobSpec) -> PlanRequest {
         samples: Some(spec.samples),
         seed: spec.seed,
         retrieval: spec.retrieval,
+        vector: spec.vector.clone(),
         tuning: Tuning::default(),
     }
 }

@@ -9,6 +9,8 @@ use super::{EncoderChoice, JobKind, Limits, Method, Preset, SpecError, Style};
 use crate::augment::AugmentConfig;
 use crate::models::pipeline::ModelHints;
 use crate::stages::live::{LiveConfig, PathBudget};
+use crate::vector::VectorOptions;
+use crate::vector::palette::ColorPlan;
 use serde::{Deserialize, Serialize};
 
 /// Version of the plan format (stored with jobs; part of every checkpoint key).
@@ -55,6 +57,8 @@ pub struct PlanRequest {
     pub samples: Option<u32>,
     pub seed: u64,
     pub retrieval: bool,
+    /// Colours, background, grouping; for vectorize runs the stopping rules too.
+    pub vector: VectorOptions,
     /// Settings only the command line exposes (none from HTTP).
     pub tuning: Tuning,
 }
@@ -74,6 +78,7 @@ impl PlanRequest {
             samples: None,
             seed: 0,
             retrieval: true,
+            vector: VectorOptions::default(),
             tuning: Tuning::default(),
         }
     }
@@ -250,6 +255,10 @@ pub struct TextPlan {
     pub snapshot_every: u32,
     pub seeds: Seeds,
     pub model: ModelPlan,
+    /// Fill colours, background and grouping of the trace and the finish; plans stored
+    /// before it existed take the default (near-equal fills merged).
+    #[serde(default)]
+    pub colors: ColorPlan,
 }
 
 /// The fully numeric plan of a run.
@@ -332,6 +341,9 @@ pub fn resolve(
 }
 
 fn vectorize_plan(req: &PlanRequest, limits: &Limits) -> Result<LiveConfig, SpecError> {
+    req.vector
+        .validate()
+        .map_err(|(field, reason)| SpecError::new(field, reason))?;
     if let Some(cfg) = &req.tuning.live {
         cfg.validate()
             .map_err(|e| SpecError::new("paths", e.to_string()))?;
@@ -345,6 +357,9 @@ fn vectorize_plan(req: &PlanRequest, limits: &Limits) -> Result<LiveConfig, Spec
     )? as usize;
     let mut cfg = req.preset.live_config();
     cfg.seed = req.seed;
+    cfg.colors = req.vector.colors.clone();
+    cfg.target_psnr = req.vector.target_psnr;
+    cfg.max_bytes = req.vector.max_bytes;
     if let PathBudget::Auto { max_paths: m, .. } = &mut cfg.budget {
         *m = paths;
     } else {
@@ -369,6 +384,9 @@ fn text_plan(
         .ok_or_else(|| SpecError::new("caption", "is required for a text run"))?;
     let ps: PresetSettings = req.preset.settings_for(model.hints.small_prior);
     let t = &req.tuning;
+    req.vector
+        .validate()
+        .map_err(|(field, reason)| SpecError::new(field, reason))?;
     let size = t.size.unwrap_or(ps.size);
     if !(8..=2048).contains(&size) {
         return Err(SpecError::new(
@@ -466,6 +484,7 @@ fn text_plan(
             small_prior: model.hints.small_prior,
             encoder: model.encoder(ps.prefer_taesd),
         },
+        colors: req.vector.colors.clone(),
     })
 }
 

@@ -5,6 +5,7 @@
 use super::plan::RunPlan;
 use crate::scene::MAX_PATHS;
 pub use crate::stages::styles::Style;
+use crate::vector::VectorOptions;
 use serde::{Deserialize, Serialize};
 
 /// What a job produces (the queue's typed `kind` column).
@@ -127,6 +128,10 @@ pub struct JobSpec {
     /// (retrieval, when the model has an installed index); false samples from noise only.
     #[serde(default = "default_retrieval")]
     pub retrieval: bool,
+    /// Colours, background, grouping and (vectorize) the stopping rules of the vector stage;
+    /// jobs stored before them take the defaults.
+    #[serde(default, flatten)]
+    pub vector: VectorOptions,
     /// The run, resolved once when the job was accepted ([`RunPlan`]): workers run this and
     /// nothing else, so a queued job runs the same whatever the preset table says later. Jobs
     /// stored before plans existed have none and are resolved when they run.
@@ -218,8 +223,22 @@ impl JobSpec {
                 ),
             ));
         }
+        self.vector
+            .validate()
+            .map_err(|(field, reason)| SpecError::new(field, reason))?;
         match self.kind {
             JobKind::Text => {
+                for (set, field) in [
+                    (self.vector.target_psnr.is_some(), "target_psnr"),
+                    (self.vector.max_bytes.is_some(), "max_bytes"),
+                ] {
+                    if set {
+                        return Err(SpecError::new(
+                            field,
+                            "only applies to kind \"vectorize\" (a text job's path count is its paths)",
+                        ));
+                    }
+                }
                 if self.caption.is_none() {
                     return Err(SpecError::new("caption", "is required for kind \"text\""));
                 }

@@ -17,6 +17,7 @@ fn spec() -> JobSpec {
         preset: Preset::Balanced,
         priority: 0,
         retrieval: true,
+        vector: Default::default(),
         plan: None,
     }
 }

@@ -114,6 +114,7 @@ fn trace(
         final_iters: plan.trace.iters,
         seed: plan.seeds.trace,
         snapshot_every: plan.snapshot_every,
+        colors: plan.colors.clone(),
         ..LiveConfig::preset(live::Preset::Fast)
     };
     let img = if image.width.max(image.height) > size {
@@ -399,12 +400,17 @@ pub fn run_text(
             pruned = weak.len();
         }
     }
+    // 4. The vector stage's finish: simple outlines, no hidden paths, the colours asked for.
+    let finish =
+        crate::vector::finish_scene(&mut scene, &plan.colors, plan.style.spec().prune_weak());
+    detail["finish"] = json!(finish);
+    detail["editability"] = json!(crate::vector::check::check(&scene));
     detail["paths_initial"] = json!(before);
     detail["paths_pruned"] = json!(pruned);
     detail["paths_needed"] = json!(scene.shapes.len());
     detail["seconds"] = json!(t0.elapsed().as_secs_f64());
     scene.validate().map_err(|e| failed("final scene", e))?;
-    let svg = RasterBackend::svg_text(&scene);
+    let svg = crate::vector::write_svg(&scene, &plan.colors);
     // A drawing that started from a retrieved icon names it and its licence.
     let svg = match serde_json::from_value::<Hit>(detail["retrieval"]["chosen"].clone()) {
         Ok(h) => crate::svg::with_metadata(

@@ -8,7 +8,6 @@ use super::{JobContext, PipelineError};
 use crate::image::Image;
 use crate::progress::{CancelToken, ProgressSink};
 use crate::stages::live::{self, LiveConfig};
-use crate::stages::sds::RasterBackend;
 use serde::{Deserialize, Serialize};
 use serde_json::json;
 
@@ -82,7 +81,7 @@ pub fn run_vectorize(
         live::LiveError::Checkpoint(m) => PipelineError::Transient(m),
         other => failed("LIVE", other),
     })?;
-    let svg = RasterBackend::svg_text(&r.scene);
+    let svg = crate::vector::write_svg(&r.scene, &cfg.colors);
     let mut detail = json!({
         "method": "live",
         "psnr": r.psnr,
@@ -90,6 +89,7 @@ pub fn run_vectorize(
         "paths_pruned": r.pruned,
         "steps": r.steps,
         "stages": r.stages,
+        "editability": r.editability,
     });
     if let Some(n) = resumed_from {
         detail["resumed_from_stage"] = json!(n);

@@ -5,6 +5,8 @@ use crate::pipeline::{
     Executor, JobKind, JobSpec, Limits, Method, PlanRequest, Preset, RunPlan, Style, request_of,
 };
 use crate::store::{AttemptRow, JobRow, JobStatus};
+use crate::vector::VectorOptions;
+use crate::vector::palette::ColorPlan;
 use base64::Engine;
 use serde::Serialize;
 use serde::de::DeserializeOwned;
@@ -25,6 +27,12 @@ pub const SUBMIT_FIELDS: &[&str] = &[
     "preset",
     "priority",
     "retrieval",
+    "colors",
+    "palette",
+    "background",
+    "group",
+    "target_psnr",
+    "max_bytes",
 ];
 
 /// Fields whose omission means "the preset decides" (the job's [`crate::pipeline::RunPlan`]);
@@ -127,6 +135,16 @@ pub fn parse_submit(
         preset,
         priority: field(&obj, "priority")?.unwrap_or(0),
         retrieval: field(&obj, "retrieval")?.unwrap_or(true),
+        vector: VectorOptions {
+            colors: ColorPlan {
+                colors: field(&obj, "colors")?,
+                palette: field(&obj, "palette")?,
+                background: field(&obj, "background")?.unwrap_or_default(),
+                group: field(&obj, "group")?.unwrap_or_default(),
+            },
+            target_psnr: field(&obj, "target_psnr")?,
+            max_bytes: field(&obj, "max_bytes")?,
+        },
         plan: None,
     };
     // The request's own fields first (omitted numbers stand in as 1) ...
@@ -253,6 +271,9 @@ pub struct ParamsView {
     pub has_image: bool,
     pub has_svg: bool,
     pub retrieval: bool,
+    /// Colours, background, grouping and the vectorize stopping rules, as submitted.
+    #[serde(flatten)]
+    pub vector: VectorOptions,
     /// The run plan resolved when the job was accepted: every number the job runs with.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub plan: Option<RunPlan>,
@@ -411,6 +432,7 @@ impl JobView {
                 has_image: s.image.is_some(),
                 has_svg: s.svg.is_some(),
                 retrieval: s.retrieval,
+                vector: s.vector,
                 plan: s.plan,
             }),
             links: Links {

@@ -33,6 +33,9 @@ use crate::losses::{outline, udf_weights, weighted_l2, xing_loss};
 use crate::optim::{Adam, AdamConfig, GroupSchedules, LrSchedule};
 use crate::progress::{CancelToken, Progress, ProgressSink};
 use crate::scene::{ParamGroup, Params, Rgba, Scene, Trainable};
+use crate::vector::check::Editability;
+use crate::vector::lobes;
+use crate::vector::palette::{self, Background, ColorPlan};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use std::ops::Range;
@@ -68,6 +71,8 @@ pub struct LiveResult {
     pub pruned: usize,
     /// Adam steps taken.
     pub steps: u32,
+    /// What a designer finds in the SVG: self-intersecting, hidden and sliver paths, colours.
+    pub editability: Editability,
 }
 
 struct Run<'a> {
@@ -78,6 +83,11 @@ struct Run<'a> {
     step: u32,
     total: u32,
     out_width: u32,
+    /// The palette fills are chosen from (`--palette`, or k-means of the target for
+    /// `--colors`); `None`: fills are optimised freely.
+    palette: Option<Vec<Rgba>>,
+    /// The background is optimised with the paths (`auto` with an opaque border).
+    background_free: bool,
 }
 
 impl Run<'_> {
@@ -99,20 +109,22 @@ impl Run<'_> {
     }
 
     /// Optimises every path of `scene` for `iters` steps; the UDF term focuses on `focus`.
+    /// Fills are optimised only when `fills` is set and no palette is in force.
     fn optimise(
         &mut self,
         scene: &mut Scene,
         focus: Range<usize>,
         iters: u32,
         stage: usize,
+        fills: bool,
     ) -> Result<f64, LiveError> {
         let mut params = Params::from_scene(scene);
         let trainable = Trainable {
             points: true,
-            fill: true,
+            fill: fills && self.palette.is_none(),
             stroke: false,
             width: false,
-            background: true,
+            background: self.background_free,
         };
         let mut adam = Adam::new(
             &params,
@@ -123,16 +135,23 @@ impl Run<'_> {
         let n = self.target.len_pixels();
         let uniform = 1.0 / (3.0 * n as f32);
         let mut last = f64::NAN;
-        for _ in 0..iters {
+        // Which paths the UDF term focuses on (kept through untwisting, which moves indices).
+        let mut in_focus: Vec<bool> = (0..scene.shapes.len())
+            .map(|i| focus.contains(&i))
+            .collect();
+        for it in 0..iters {
             if self.cancel.is_cancelled() {
                 return Err(LiveError::Cancelled);
             }
             let (img, tape) = crate::raster::render_tape(scene);
             let mut weights = vec![uniform; n];
-            if self.cfg.udf_weight > 0.0 && !focus.is_empty() {
-                let outlines: Vec<Vec<(f32, f32)>> = scene.shapes[focus.clone()]
+            if self.cfg.udf_weight > 0.0 && in_focus.contains(&true) {
+                let outlines: Vec<Vec<(f32, f32)>> = scene
+                    .shapes
                     .iter()
-                    .map(|s| outline(s, 8))
+                    .zip(&in_focus)
+                    .filter(|(_, f)| **f)
+                    .map(|(s, _)| outline(s, 8))
                     .collect();
                 let udf = udf_weights(scene.width, scene.height, &outlines, self.cfg.udf_tau);
                 let k = self.cfg.udf_weight / 3.0;
@@ -163,10 +182,15 @@ impl Run<'_> {
                     *a = 1.0;
                 }
             }
-            if let Some(a) = params.get_mut(ParamGroup::Background).get_mut(3) {
+            if self.background_free
+                && let Some(a) = params.get_mut(ParamGroup::Background).get_mut(3)
+            {
                 *a = 1.0;
             }
             params.write_to(scene)?;
+            if (it + 1) % UNTWIST_EVERY == 0 && untwist(scene, &mut in_focus) {
+                adam.relayout(&Params::from_scene(scene));
+            }
             // Keep the optimiser's copy inside the valid (clamped) range.
             params = Params::from_scene(scene);
             last = loss + xing;
@@ -219,6 +243,78 @@ impl Run<'_> {
     fn psnr(&self, scene: &Scene) -> f64 {
         crate::image::psnr(&crate::raster::render(scene), &self.target)
     }
+
+    /// Gives the paths their palette colours (when a palette is in force).
+    fn choose_colours(&self, scene: &mut Scene) {
+        if let Some(p) = &self.palette {
+            palette::choose_fills(scene, Some(&self.target), p);
+        }
+    }
+
+    /// Splits every path whose outline crosses itself or folds into a spike into simple pieces
+    /// that cover the same pixels (see [`crate::vector::simple`]). Returns how many were split.
+    fn make_simple(&self, scene: &mut Scene) -> usize {
+        crate::vector::make_simple(scene, crate::vector::SIMPLE_MIN_AREA)
+    }
+}
+
+/// Steps between two checks for paths that meet themselves during optimisation.
+const UNTWIST_EVERY: u32 = 10;
+/// Lobes below this area (px² at the working size) are dropped when a path is untwisted.
+const UNTWIST_MIN_AREA: f32 = 4.0;
+
+/// Cuts every closed path that meets itself (the quick check) into its lobes, dropping lobes
+/// under [`UNTWIST_MIN_AREA`]: the optimisation goes on from simple outlines instead of
+/// folding further. `in_focus` follows the paths. Returns whether the scene changed.
+fn untwist(scene: &mut Scene, in_focus: &mut Vec<bool>) -> bool {
+    if !scene.shapes.iter().any(lobes::meets_itself) {
+        return false;
+    }
+    let old = std::mem::take(&mut scene.shapes);
+    let mut focus = Vec::with_capacity(old.len());
+    for (sh, f) in old.into_iter().zip(in_focus.iter().copied()) {
+        if scene.shapes.len() >= crate::scene::MAX_PATHS {
+            break;
+        }
+        let pieces = if lobes::meets_itself(&sh) {
+            lobes::split_lobes(&sh, UNTWIST_MIN_AREA)
+        } else {
+            vec![sh]
+        };
+        focus.extend(std::iter::repeat_n(f, pieces.len()));
+        scene.shapes.extend(pieces);
+    }
+    scene.shapes.truncate(crate::scene::MAX_PATHS);
+    focus.truncate(scene.shapes.len());
+    *in_focus = focus;
+    true
+}
+
+/// `scene` (at the working size) scaled to the target's `tw`×`th` canvas.
+fn output_scene(scene: &Scene, tw: u32, th: u32) -> Scene {
+    let mut out = scene.scaled_to_width(tw);
+    out.height = th;
+    out
+}
+
+/// Bytes of the SVG the run would write now.
+fn svg_bytes(scene: &Scene, tw: u32, th: u32, colors: &ColorPlan) -> usize {
+    crate::vector::write_svg(&output_scene(scene, tw, th), colors).len()
+}
+
+/// Mean opacity of the image border: a transparent border means a transparent background.
+fn border_alpha(img: &Image) -> f32 {
+    let (w, h) = (img.width, img.height);
+    let (mut s, mut n) = (0.0f64, 0.0f64);
+    for y in 0..h {
+        for x in 0..w {
+            if x == 0 || y == 0 || x + 1 == w || y + 1 == h {
+                s += img.pixel(x, y)[3] as f64;
+                n += 1.0;
+            }
+        }
+    }
+    (s / n.max(1.0)) as f32
 }
 
 /// Mean colour of the image border (over white): the starting background.
@@ -322,7 +418,17 @@ pub fn vectorize_resumable(
         ((th as f32 * k).round() as u32).max(1),
     );
     let work = resize(&target.over([1.0, 1.0, 1.0]), ww, wh);
-    let mut scene = Scene::new(ww, wh, border_colour(&work))?;
+    let palette = cfg.colors.resolve(|k| palette::palette_of_image(&work, k));
+    let (background, background_free) = match cfg.colors.background {
+        Background::Transparent => (Rgba::TRANSPARENT, false),
+        Background::Color(c) => (c.to_rgba(), false),
+        Background::Auto if border_alpha(target) < 0.5 => (Rgba::TRANSPARENT, false),
+        Background::Auto => (border_colour(&work), palette.is_none()),
+    };
+    let mut scene = Scene::new(ww, wh, background)?;
+    if let (Some(p), Background::Auto) = (&palette, cfg.colors.background) {
+        palette::snap_background(&mut scene, p);
+    }
     let stages_plan: Vec<usize> = match &cfg.budget {
         PathBudget::Schedule { stages } => stages.clone(),
         PathBudget::Auto {
@@ -344,6 +450,8 @@ pub fn vectorize_resumable(
         step: 0,
         total,
         out_width: tw,
+        palette,
+        background_free,
     };
     let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);
     let mut reports = Vec::new();
@@ -391,10 +499,15 @@ pub fn vectorize_resumable(
             tracer::trace(&small, &tracer::TracerSetting::default()).map_err(LiveError::Tracer)?;
         let start = tracer::traced_to_scene(&traced, ww, wh, max_total, 12)?;
         scene.shapes = start.shapes;
-        scene.background = start.background;
+        if run.background_free {
+            scene.background = start.background;
+        }
+        run.choose_colours(&mut scene);
         let n = scene.shapes.len();
-        let loss = run.optimise(&mut scene, 0..n, cfg.iters_per_stage, 0)?;
+        let loss = run.optimise(&mut scene, 0..n, cfg.iters_per_stage, 0, true)?;
         let reinit = run.reinit_weak(&mut scene, &mut rng);
+        run.make_simple(&mut scene);
+        run.choose_colours(&mut scene);
         reports.push(StageReport {
             stage: 0,
             added: n,
@@ -416,7 +529,9 @@ pub fn vectorize_resumable(
     };
     for (si, &want) in plan.iter().enumerate() {
         let si = si + first_stage;
-        let room = max_total.saturating_sub(scene.shapes.len());
+        // The budget counts paths added: a looping path split into simple pieces is one.
+        let added_so_far: usize = reports.iter().map(|r| r.added).sum();
+        let room = max_total.saturating_sub(added_so_far);
         let want = want.min(room);
         if want == 0 {
             break;
@@ -430,8 +545,11 @@ pub fn vectorize_resumable(
         let start = scene.shapes.len();
         scene.shapes.extend(fresh);
         let end = scene.shapes.len();
-        let loss = run.optimise(&mut scene, start..end, cfg.iters_per_stage, si + 1)?;
+        run.choose_colours(&mut scene);
+        let loss = run.optimise(&mut scene, start..end, cfg.iters_per_stage, si + 1, true)?;
         let reinit = run.reinit_weak(&mut scene, &mut rng);
+        run.make_simple(&mut scene);
+        run.choose_colours(&mut scene);
         let psnr = run.psnr(&scene);
         reports.push(StageReport {
             stage: si + 1,
@@ -441,37 +559,64 @@ pub fn vectorize_resumable(
             psnr,
             loss,
         });
-        let stop = match cfg.budget {
+        let budget_stop = match cfg.budget {
             PathBudget::Auto {
                 min_gain_db_per_path,
                 ..
             } => !schedule::auto_should_continue(prev_psnr, psnr, added, min_gain_db_per_path),
             PathBudget::Schedule { .. } => false,
         };
+        let stop = budget_stop
+            || cfg.target_psnr.is_some_and(|t| psnr >= t)
+            || cfg
+                .max_bytes
+                .is_some_and(|max| svg_bytes(&scene, tw, th, &cfg.colors) >= max);
         save(&scene, &reports, si + 1, stop, psnr, run.step, &rng)?;
         if stop {
             break;
         }
         prev_psnr = psnr;
     }
+    // Colours settle before the last pass, which then fits the geometry to them.
+    if run.palette.is_some() {
+        run.choose_colours(&mut scene);
+    } else if std::env::var("VF_NOMERGE").is_err() {
+        palette::merge_similar(&mut scene, palette::MERGE_DISTANCE);
+    }
     if cfg.final_iters > 0 && !scene.shapes.is_empty() {
         let n = scene.shapes.len();
-        run.optimise(&mut scene, n..n, cfg.final_iters, reports.len() + 1)?;
+        run.optimise(
+            &mut scene,
+            n..n,
+            cfg.final_iters,
+            reports.len() + 1,
+            std::env::var("VF_NOMERGE").is_ok(),
+        )?;
     }
     // Drop paths that stayed faint or tiny after the last re-initialisation.
     let weak = prune::weak_paths(&scene, cfg.reinit_min_opacity, 1.0);
     for &i in weak.iter().rev() {
         scene.shapes.remove(i);
     }
-    let mut pruned = 0;
+    // Clean geometry: the last pass may have folded outlines again; splitting keeps the pixels.
+    run.make_simple(&mut scene);
+    let scale = tw as f32 / ww as f32;
+    let mut pruned = crate::vector::drop_unseen(&mut scene, scale);
     if let PathBudget::Auto {
         prune_tolerance, ..
     } = cfg.budget
     {
-        pruned = prune::prune_paths(&mut scene, prune_tolerance, crate::raster::render).len();
+        pruned += prune::prune_paths(&mut scene, prune_tolerance, crate::raster::render).len();
     }
-    let mut out = scene.scaled_to_width(tw);
-    out.height = th;
+    if let Some(max) = cfg.max_bytes {
+        pruned += prune::trim_to_bytes(&mut scene, &run.target, max, |s| {
+            svg_bytes(s, tw, th, &cfg.colors)
+        });
+    }
+    // At the output size: flattening is finer there, and hidden paths are judged there.
+    let mut out = output_scene(&scene, tw, th);
+    crate::vector::make_simple(&mut out, crate::vector::SIMPLE_MIN_AREA);
+    pruned += crate::vector::drop_hidden(&mut out);
     out.validate()?;
     let psnr = crate::image::psnr(&crate::raster::render(&out), target);
     let mut done = Progress::new("live", run.total, run.total);
@@ -480,6 +625,7 @@ pub fn vectorize_resumable(
     sink.report(done);
     Ok(LiveResult {
         paths: out.shapes.len(),
+        editability: crate::vector::check::check(&out),
         scene: out,
         psnr,
         stages: reports,

@@ -3,6 +3,8 @@
 use super::schedule;
 use crate::losses::LossError;
 use crate::scene::{MAX_PATHS, SceneError};
+use crate::vector::palette::ColorPlan;
+use crate::vector::{check_max_bytes, check_target_psnr};
 use serde::{Deserialize, Serialize};
 
 /// Why vectorisation failed.
@@ -126,6 +128,17 @@ pub struct LiveConfig {
     pub seed: u64,
     /// Attach the current SVG to a progress event every this many steps (0 = never).
     pub snapshot_every: u32,
+    /// Fill colours (palette, colour cap, background, grouping); plans stored before it
+    /// existed take the default: near-equal fills merged, background `auto`.
+    #[serde(default)]
+    pub colors: ColorPlan,
+    /// Stop adding paths once the PSNR (dB, at the working size) reaches this.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub target_psnr: Option<f64>,
+    /// Keep the SVG at most this many bytes: stop adding paths when it is reached, then drop
+    /// the paths whose removal costs least until it fits.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_bytes: Option<usize>,
 }
 
 impl LiveConfig {
@@ -151,6 +164,9 @@ impl LiveConfig {
             reinit_min_area: 16.0,
             seed: 0,
             snapshot_every: 50,
+            colors: ColorPlan::default(),
+            target_psnr: None,
+            max_bytes: None,
         };
         match preset {
             Preset::Fast => base,
@@ -220,6 +236,15 @@ impl LiveConfig {
         }
         if self.init_segments == 0 || self.init_segments > 64 {
             return bad("init_segments must be in 1..=64");
+        }
+        self.colors
+            .validate()
+            .map_err(|(field, e)| LiveError::Config(format!("{field}: {e}")))?;
+        if let Some(v) = self.target_psnr {
+            check_target_psnr(v).map_err(|e| LiveError::Config(format!("target_psnr: {e}")))?;
+        }
+        if let Some(v) = self.max_bytes {
+            check_max_bytes(v).map_err(|e| LiveError::Config(format!("max_bytes: {e}")))?;
         }
         if self.iters_per_stage > MAX_ITERS || self.final_iters > MAX_ITERS {
             return bad("iterations per stage must be at most 100000");

@@ -31,6 +31,43 @@ pub fn prune_paths(
     removed
 }
 
+/// Removes the paths whose removal costs least (MSE against `target`, over white) until
+/// `bytes(scene)` is at most `max` or no path is left. Each round ranks every path once and
+/// removes as many of the cheapest as the excess asks for at the scene's mean bytes per path
+/// (at least one). Returns how many paths were removed.
+pub fn trim_to_bytes(
+    scene: &mut Scene,
+    target: &Image,
+    max: usize,
+    bytes: impl Fn(&Scene) -> usize,
+) -> usize {
+    let mut removed = 0;
+    loop {
+        let size = bytes(scene);
+        let n = scene.shapes.len();
+        if size <= max || n == 0 {
+            return removed;
+        }
+        let mut cost: Vec<(f64, usize)> = (0..n)
+            .map(|i| {
+                let mut trial = scene.clone();
+                trial.shapes.remove(i);
+                let m = mse_rgb_over_white(&crate::raster::render(&trial), target);
+                (m, i)
+            })
+            .collect();
+        cost.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        let per_path = (size / n).max(1);
+        let k = (size - max).div_ceil(per_path).clamp(1, n);
+        let mut drop: Vec<usize> = cost[..k].iter().map(|c| c.1).collect();
+        drop.sort_unstable();
+        for &i in drop.iter().rev() {
+            scene.shapes.remove(i);
+        }
+        removed += k;
+    }
+}
+
 /// Indices of paths that are faint (fill opacity below `min_opacity`) or tiny (outline area
 /// below `min_area` square pixels): candidates for re-initialisation.
 pub fn weak_paths(scene: &Scene, min_opacity: f32, min_area: f32) -> Vec<usize> {

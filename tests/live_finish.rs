@@ -1,0 +1,182 @@
+//! The vector stage's finish on LIVE runs: clean geometry (no outline crossing itself, nothing
+//! hidden), colours from a palette or under a cap, the background as asked, and the stopping
+//! rules `target_psnr` and `max_bytes`. Small (64 px) so it runs fast.
+
+use vectorfusion::image::{Image, psnr};
+use vectorfusion::progress::{CancelToken, NullSink};
+use vectorfusion::raster;
+use vectorfusion::scene::{Point, Rgba, Scene, Shape};
+use vectorfusion::stages::live::{LiveConfig, LiveResult, PathBudget, Preset, vectorize};
+use vectorfusion::vector::palette::{Background, Color8, ColorPlan, distinct_fills, parse_palette};
+use vectorfusion::vector::simple::is_simple;
+
+/// A flat 64 px "icon": a red disc, a blue square, a green triangle and a yellow ring (a
+/// shape LIVE's circles tend to fold around), on transparent.
+fn target() -> Image {
+    let mut s = Scene::new(64, 64, Rgba::TRANSPARENT).unwrap();
+    s.shapes
+        .push(Shape::circle(22.0, 24.0, 14.0, 4, Rgba::new(0.9, 0.1, 0.1, 1.0)).unwrap());
+    s.shapes
+        .push(Shape::square(36.0, 36.0, 20.0, Rgba::new(0.1, 0.2, 0.8, 1.0)).unwrap());
+    s.shapes.push(
+        Shape::polygon(
+            vec![
+                Point::new(40.0, 4.0),
+                Point::new(60.0, 28.0),
+                Point::new(40.0, 28.0),
+            ],
+            Rgba::new(0.1, 0.7, 0.2, 1.0),
+        )
+        .unwrap(),
+    );
+    s.shapes
+        .push(Shape::circle(16.0, 50.0, 10.0, 8, Rgba::new(0.95, 0.8, 0.1, 1.0)).unwrap());
+    s.shapes
+        .push(Shape::circle(16.0, 50.0, 5.0, 8, Rgba::WHITE).unwrap());
+    raster::render(&s)
+}
+
+fn cfg(colors: ColorPlan) -> LiveConfig {
+    LiveConfig {
+        size: 64,
+        budget: PathBudget::Schedule {
+            stages: vec![3, 3, 4],
+        },
+        iters_per_stage: 60,
+        final_iters: 30,
+        snapshot_every: 0,
+        colors,
+        ..LiveConfig::preset(Preset::Fast)
+    }
+}
+
+fn run(c: &LiveConfig) -> LiveResult {
+    vectorize(&target(), c, &NullSink, &CancelToken::new()).unwrap()
+}
+
+#[test]
+fn every_path_is_simple_and_visible_across_seeds() {
+    for seed in 0..4 {
+        let r = run(&LiveConfig {
+            seed,
+            xing_weight: 0.0,
+            ..cfg(ColorPlan::default())
+        });
+        let e = &r.editability;
+        assert_eq!(e.paths, r.scene.shapes.len(), "seed {seed}");
+        assert_eq!(e.self_intersecting, 0, "seed {seed}: {e:?}");
+        assert_eq!(e.hidden, 0, "seed {seed}: {e:?}");
+        assert!(r.scene.shapes.iter().all(is_simple), "seed {seed}");
+        assert!(r.psnr > 20.0, "seed {seed}: psnr {}", r.psnr);
+    }
+}
+
+#[test]
+fn a_palette_restricts_every_fill() {
+    let pal = parse_palette("#e61a1a,#1a33cc,#1ab333,#f2cc1a,#ffffff").unwrap();
+    let r = run(&cfg(ColorPlan {
+        palette: Some(pal.clone()),
+        ..ColorPlan::default()
+    }));
+    for sh in &r.scene.shapes {
+        let f = Color8::from_rgba(sh.fill.unwrap());
+        assert!(pal.contains(&f), "{f} is not in the palette");
+    }
+    assert!(r.psnr > 20.0, "psnr {}", r.psnr);
+}
+
+#[test]
+fn a_colour_cap_bounds_distinct_fills() {
+    for n in [1u32, 2, 3] {
+        let r = run(&cfg(ColorPlan {
+            colors: Some(n),
+            ..ColorPlan::default()
+        }));
+        assert!(
+            distinct_fills(&r.scene) <= n as usize,
+            "--colors {n}: {} fills",
+            distinct_fills(&r.scene)
+        );
+    }
+    let free = run(&cfg(ColorPlan::default()));
+    let capped = run(&cfg(ColorPlan {
+        colors: Some(2),
+        ..ColorPlan::default()
+    }));
+    assert!(free.psnr > capped.psnr, "{} vs {}", free.psnr, capped.psnr);
+}
+
+#[test]
+fn background_is_as_asked() {
+    // A transparent border: `auto` writes no background rectangle.
+    let auto = run(&cfg(ColorPlan::default()));
+    assert_eq!(auto.scene.background.a, 0.0);
+    let fixed = run(&cfg(ColorPlan {
+        background: Background::Color(Color8([10, 20, 30])),
+        ..ColorPlan::default()
+    }));
+    assert_eq!(
+        Color8::from_rgba(fixed.scene.background),
+        Color8([10, 20, 30])
+    );
+    assert_eq!(fixed.scene.background.a, 1.0);
+    // An opaque target keeps a background rectangle of its border colour under `auto`.
+    let opaque = target().over([0.2, 0.3, 0.4]);
+    let r = vectorize(
+        &opaque,
+        &cfg(ColorPlan::default()),
+        &NullSink,
+        &CancelToken::new(),
+    )
+    .unwrap();
+    assert_eq!(r.scene.background.a, 1.0);
+    let transparent = vectorize(
+        &opaque,
+        &cfg(ColorPlan {
+            background: Background::Transparent,
+            ..ColorPlan::default()
+        }),
+        &NullSink,
+        &CancelToken::new(),
+    )
+    .unwrap();
+    assert_eq!(transparent.scene.background.a, 0.0);
+}
+
+#[test]
+fn target_psnr_and_max_bytes_stop_adding_paths() {
+    let auto = |target_psnr, max_bytes| LiveConfig {
+        budget: PathBudget::Auto {
+            stage: 2,
+            max_paths: 24,
+            min_gain_db_per_path: 0.0,
+            prune_tolerance: 0.0,
+        },
+        target_psnr,
+        max_bytes,
+        ..cfg(ColorPlan::default())
+    };
+    let full = run(&auto(None, None));
+    let low = run(&auto(Some(18.0), None));
+    assert!(low.paths < full.paths, "{} vs {}", low.paths, full.paths);
+    assert!(low.psnr >= 18.0 - 1.0, "psnr {}", low.psnr);
+    let small = run(&auto(None, Some(700)));
+    let svg = vectorfusion::svg::to_svg(&small.scene, &Default::default());
+    assert!(svg.len() <= 700, "{} bytes", svg.len());
+    assert!(small.paths >= 1);
+}
+
+#[test]
+fn the_finish_is_deterministic() {
+    let c = cfg(ColorPlan {
+        colors: Some(3),
+        ..ColorPlan::default()
+    });
+    assert_eq!(run(&c).scene, run(&c).scene);
+}
+
+#[test]
+fn psnr_of_the_result_is_measured_on_it() {
+    let r = run(&cfg(ColorPlan::default()));
+    assert!((psnr(&raster::render(&r.scene), &target()) - r.psnr).abs() < 1e-9);
+}
