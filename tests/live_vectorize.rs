@@ -144,7 +144,9 @@ fn vtracer_init_starts_close_and_refines() {
         init: InitMode::Vtracer,
         budget: PathBudget::Schedule { stages: vec![4] },
         iters_per_stage: 40,
-        final_iters: 10,
+        // The last stage re-initialises a weak path (a lobe cut off a looping outline) as a
+        // fresh circle: the final pass needs a few dozen steps to fit it.
+        final_iters: 40,
         ..small_cfg()
     };
     let r = vectorize(&t, &cfg, &NullSink, &CancelToken::new()).unwrap();

@@ -6,7 +6,7 @@
 //! form one set named after it). On every image it runs:
 //!
 //! - **live**: `live::vectorize` at each `--paths` budget (and `auto` with `--auto`), written by
-//!   `crate::svg::to_svg` at `--precision` decimals;
+//!   [`crate::vector::write_svg`] as every run writes it (`--precision` is not used here);
 //! - **vtracer** (the crate we link): spline/polygon × `--vt-speckle` × `--vt-precision`, on
 //!   the RGBA image and (label suffix `white`) the image over white (`--vt-input`);
 //! - **imagetracer** (npm `imagetracerjs`, through `node scripts/rd/imagetracer.js`): default
@@ -591,10 +591,6 @@ pub fn run(a: &BenchVectorizeArgs) -> Result<(), CliError> {
     }
     let vtracer = peers.iter().any(|p| p == "vtracer");
 
-    let svg_opts = crate::svg::SvgOptions {
-        precision: a.precision,
-        ..Default::default()
-    };
     let base = LiveConfig {
         seed: a.seed,
         snapshot_every: 0,
@@ -711,7 +707,9 @@ pub fn run(a: &BenchVectorizeArgs) -> Result<(), CliError> {
                 let t0 = Instant::now();
                 let res = live::vectorize(&target, cfg, &NullSink, &CancelToken::new())
                     .map_err(|e| CliError::Other(anyhow::anyhow!("{image}: live {label}: {e}")))?;
-                let svg = crate::svg::to_svg(&res.scene, &svg_opts);
+                // Our output as every run writes it (fewest decimals within the render
+                // tolerance, simple outlines), timed with the tracing.
+                let svg = crate::vector::write_svg(&res.scene, &cfg.colors);
                 let secs = t0.elapsed().as_secs_f64();
                 let s = score(&set, &image, "live", label, &target, &svg, secs)?;
                 eprintln!(
@@ -738,7 +736,7 @@ pub fn run(a: &BenchVectorizeArgs) -> Result<(), CliError> {
         "images": set_sizes.iter().map(|(_, n)| n).sum::<usize>(),
         "sets": set_sizes.iter().map(|(s, n)| serde_json::json!({"set": s, "images": n})).collect::<Vec<_>>(),
         "preset": format!("{:?}", a.preset).to_lowercase(),
-        "precision": a.precision,
+        "precision": "auto (vector::write_svg)",
         "seed": a.seed,
         "skipped": skipped.iter().map(|(t, w)| serde_json::json!({"tool": t, "why": w})).collect::<Vec<_>>(),
         "editability_checker": editability("<svg xmlns=\"http://www.w3.org/2000/svg\"/>").is_some(),

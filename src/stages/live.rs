@@ -580,18 +580,12 @@ pub fn vectorize_resumable(
     // Colours settle before the last pass, which then fits the geometry to them.
     if run.palette.is_some() {
         run.choose_colours(&mut scene);
-    } else if std::env::var("VF_NOMERGE").is_err() {
+    } else {
         palette::merge_similar(&mut scene, palette::MERGE_DISTANCE);
     }
     if cfg.final_iters > 0 && !scene.shapes.is_empty() {
         let n = scene.shapes.len();
-        run.optimise(
-            &mut scene,
-            n..n,
-            cfg.final_iters,
-            reports.len() + 1,
-            std::env::var("VF_NOMERGE").is_ok(),
-        )?;
+        run.optimise(&mut scene, n..n, cfg.final_iters, reports.len() + 1, false)?;
     }
     // Drop paths that stayed faint or tiny after the last re-initialisation.
     let weak = prune::weak_paths(&scene, cfg.reinit_min_opacity, 1.0);
