@@ -509,6 +509,60 @@ async fn bad_input_gets_clear_4xx_json_never_500() {
             "colour",
         ),
         json_case(
+            "colors zero",
+            json!({"kind": "vectorize", "image": png_b64(8), "colors": 0}),
+            "invalid_field",
+            "colors",
+        ),
+        json_case(
+            "colors above the cap",
+            json!({"kind": "text", "caption": "a cat", "colors": 65}),
+            "invalid_field",
+            "colors",
+        ),
+        json_case(
+            "malformed palette",
+            json!({"kind": "vectorize", "image": png_b64(8), "palette": ["#ff0000", "red"]}),
+            "invalid_field",
+            "palette",
+        ),
+        json_case(
+            "empty palette",
+            json!({"kind": "vectorize", "image": png_b64(8), "palette": []}),
+            "invalid_field",
+            "palette",
+        ),
+        json_case(
+            "bad background",
+            json!({"kind": "vectorize", "image": png_b64(8), "background": "blue"}),
+            "invalid_field",
+            "background",
+        ),
+        json_case(
+            "bad group",
+            json!({"kind": "vectorize", "image": png_b64(8), "group": "stage"}),
+            "invalid_field",
+            "group",
+        ),
+        json_case(
+            "target_psnr out of range",
+            json!({"kind": "vectorize", "image": png_b64(8), "target_psnr": 0}),
+            "invalid_field",
+            "target_psnr",
+        ),
+        json_case(
+            "max_bytes too small",
+            json!({"kind": "vectorize", "image": png_b64(8), "max_bytes": 10}),
+            "invalid_field",
+            "max_bytes",
+        ),
+        json_case(
+            "max_bytes on a text job",
+            json!({"kind": "text", "caption": "a cat", "max_bytes": 4000}),
+            "invalid_field",
+            "max_bytes",
+        ),
+        json_case(
             "paths wrong type",
             json!({"kind": "text", "caption": "a cat", "paths": "many"}),
             "invalid_field",
@@ -872,6 +926,42 @@ async fn omitted_paths_steps_samples_are_the_presets_and_are_recorded() {
     let reason = r.json()["error"]["reason"].as_str().unwrap().to_string();
     assert!(reason.contains("preset paper"), "{reason}");
     srv.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn vector_options_are_stored_and_reach_the_plan() {
+    let srv = TestServer::start(Arc::new(TestExecutor::new(1)), |_| {}).await;
+    let body = json!({
+        "kind": "vectorize", "image": png_b64(8), "colors": 3,
+        "palette": ["#E63946", " #fff", "#e63946"], "background": "#abc", "group": "color",
+        "target_psnr": 31.5, "max_bytes": 4000, "style": null
+    });
+    let r = post_json(srv.addr, "/jobs", &body).await;
+    assert_eq!(r.status, 202, "{}", r.text());
+    let id = r.json()["id"].as_str().unwrap().to_string();
+    let job = get(srv.addr, &format!("/jobs/{id}")).await.json();
+    let p = &job["params"];
+    // Normalised once: lower-case #rrggbb, repeated colours kept once.
+    assert_eq!(p["colors"], json!(3));
+    assert_eq!(p["palette"], json!(["#e63946", "#ffffff"]));
+    assert_eq!(p["background"], json!("#aabbcc"));
+    assert_eq!(p["group"], json!("color"));
+    assert_eq!(p["target_psnr"], json!(31.5));
+    assert_eq!(p["max_bytes"], json!(4000));
+    let live = &p["plan"]["vectorize"];
+    assert_eq!(live["colors"]["palette"], json!(["#e63946", "#ffffff"]));
+    assert_eq!(live["colors"]["background"], json!("#aabbcc"));
+    assert_eq!(live["max_bytes"], json!(4000));
+    // Omitted: the defaults, and nothing extra in params.
+    let r = post_json(srv.addr, "/jobs", &vectorize_body(3, 10, 1)).await;
+    let id = r.json()["id"].as_str().unwrap().to_string();
+    let p = get(srv.addr, &format!("/jobs/{id}")).await.json()["params"].clone();
+    assert_eq!(p["background"], json!("auto"));
+    assert_eq!(p["group"], json!("none"));
+    assert!(
+        p.get("palette").is_none() && p.get("max_bytes").is_none(),
+        "{p}"
+    );
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -138,7 +138,7 @@ pub fn parse_submit(
         vector: VectorOptions {
             colors: ColorPlan {
                 colors: field(&obj, "colors")?,
-                palette: field(&obj, "palette")?,
+                palette: field(&obj, "palette")?.map(crate::vector::palette::dedup_palette),
                 background: field(&obj, "background")?.unwrap_or_default(),
                 group: field(&obj, "group")?.unwrap_or_default(),
             },

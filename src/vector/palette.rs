@@ -96,15 +96,25 @@ impl<'de> Deserialize<'de> for Color8 {
 /// Parses a comma-separated palette such as `"#e63946,#f1faee,#1d3557"`: 1 to [`MAX_COLORS`]
 /// colours; repeated colours are kept once, in first-seen order.
 pub fn parse_palette(text: &str) -> Result<Vec<Color8>, ColorError> {
-    let mut out: Vec<Color8> = Vec::new();
-    for part in text.split(',').filter(|p| !p.trim().is_empty()) {
-        let c: Color8 = part.parse()?;
+    let colours = text
+        .split(',')
+        .filter(|p| !p.trim().is_empty())
+        .map(str::parse)
+        .collect::<Result<Vec<Color8>, _>>()?;
+    let out = dedup_palette(colours);
+    check_palette(&out)?;
+    Ok(out)
+}
+
+/// `colours` with repeats kept once, in first-seen order.
+pub fn dedup_palette(colours: Vec<Color8>) -> Vec<Color8> {
+    let mut out: Vec<Color8> = Vec::with_capacity(colours.len());
+    for c in colours {
         if !out.contains(&c) {
             out.push(c);
         }
     }
-    check_palette(&out)?;
-    Ok(out)
+    out
 }
 
 /// A palette's size is in `1..=MAX_COLORS`.
