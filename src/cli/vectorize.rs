@@ -53,6 +53,11 @@ pub struct VectorizeArgs {
     /// removal costs least.
     #[arg(long)]
     pub max_bytes: Option<usize>,
+    /// End each stage early once 20 steps improve the loss by less than this fraction of the
+    /// previous 20's (e.g. 0.002: about 2× faster, 1.7 dB lower at 24 paths on icons) [default:
+    /// 0, every step].
+    #[arg(long)]
+    pub converge: Option<f32>,
     /// Decimal places in the SVG [default: the fewest that keep the render within 0.5/255 and
     /// every outline simple].
     #[arg(long)]
@@ -147,6 +152,14 @@ pub fn config_from_args(a: &VectorizeArgs) -> Result<LiveConfig, CliError> {
         .map(crate::vector::check_max_bytes)
         .transpose()
         .map_err(|e| CliError::Usage(format!("--max-bytes: {e}")))?;
+    if let Some(c) = a.converge {
+        if !(0.0..1.0).contains(&c) {
+            return Err(CliError::Usage(format!(
+                "--converge must be at least 0 and below 1, got {c}"
+            )));
+        }
+        cfg.converge_tol = c;
+    }
     cfg.init = match a.init {
         InitArg::Circles => InitMode::Circles,
         InitArg::Vtracer => InitMode::Vtracer,

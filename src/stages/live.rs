@@ -139,6 +139,8 @@ impl Run<'_> {
         let mut in_focus: Vec<bool> = (0..scene.shapes.len())
             .map(|i| focus.contains(&i))
             .collect();
+        let mut window: Vec<f64> = Vec::with_capacity(CONVERGE_WINDOW);
+        let mut previous: Option<f64> = None;
         for it in 0..iters {
             if self.cancel.is_cancelled() {
                 return Err(LiveError::Cancelled);
@@ -196,8 +198,28 @@ impl Run<'_> {
             last = loss + xing;
             self.step += 1;
             self.report(scene, stage, last);
+            window.push(last);
+            if self.converged(&mut window, &mut previous) {
+                // The rest of the stage's steps are not taken: progress counts them as done.
+                self.step += iters - it - 1;
+                break;
+            }
         }
         Ok(last)
+    }
+
+    /// The early stop: after every [`CONVERGE_WINDOW`] steps, whether the window's mean loss
+    /// improved on the previous window's by less than `converge_tol` (relative). Off at 0.
+    fn converged(&self, window: &mut Vec<f64>, previous: &mut Option<f64>) -> bool {
+        if self.cfg.converge_tol <= 0.0 || window.len() < CONVERGE_WINDOW {
+            return false;
+        }
+        let mean = window.iter().sum::<f64>() / window.len() as f64;
+        window.clear();
+        let done =
+            previous.is_some_and(|p| p > 0.0 && (p - mean) / p < self.cfg.converge_tol as f64);
+        *previous = Some(mean);
+        done
     }
 
     fn report(&self, scene: &Scene, stage: usize, loss: f64) {
@@ -257,6 +279,9 @@ impl Run<'_> {
         crate::vector::make_simple(scene, crate::vector::SIMPLE_MIN_AREA)
     }
 }
+
+/// Steps per window of the early stop ([`LiveConfig::converge_tol`]).
+const CONVERGE_WINDOW: usize = 20;
 
 /// Steps between two checks for paths that meet themselves during optimisation.
 const UNTWIST_EVERY: u32 = 10;

@@ -139,6 +139,11 @@ pub struct LiveConfig {
     /// the paths whose removal costs least until it fits.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub max_bytes: Option<usize>,
+    /// End a stage (and the final pass) early once the mean loss of 20 steps improves on the
+    /// previous 20's by less than this fraction; 0 (the presets', and plans stored before it
+    /// existed) runs every step.
+    #[serde(default)]
+    pub converge_tol: f32,
 }
 
 impl LiveConfig {
@@ -167,6 +172,7 @@ impl LiveConfig {
             colors: ColorPlan::default(),
             target_psnr: None,
             max_bytes: None,
+            converge_tol: 0.0,
         };
         match preset {
             Preset::Fast => base,
@@ -230,6 +236,7 @@ impl LiveConfig {
             self.init_radius,
             self.reinit_min_opacity,
             self.reinit_min_area,
+            self.converge_tol,
         ];
         if finite.iter().any(|v| !v.is_finite() || *v < 0.0) {
             return bad("rates, weights, radii and thresholds must be finite and >= 0");
