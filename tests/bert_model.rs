@@ -89,9 +89,9 @@ fn real_minilm_matches_reference_sentence_embeddings_when_available() {
     let dir = match loc.ensure(false) {
         Ok(d) => d,
         Err(e) => {
-            eprintln!(
-                "SKIP real_minilm_matches_reference_sentence_embeddings_when_available: \
-                 MiniLM weights not installed (run `vectorfusion setup`): {e}"
+            common::skip(
+                "real_minilm_matches_reference_sentence_embeddings_when_available",
+                &format!("MiniLM weights not installed (run `vectorfusion setup`): {e}"),
             );
             return;
         }

@@ -1,7 +1,10 @@
 //! Our SVGs look the same in resvg and in Chromium (issue #23, the fast subset of
 //! `scripts/cross_render.py`, which adds Inkscape): real outputs of every kind (the run-plan
 //! golden SVGs: three styles, vectorize, from-SVG, the small prior) drawn at 256 px by both, over
-//! white, differ by at most 1.5/255 on average. Without chromium the test prints SKIP.
+//! white, differ by at most 1.5/255 on average. Without chromium the test prints SKIP (and
+//! fails where `.ci/run` sets `VF_REQUIRE_ALL`).
+
+mod common;
 
 use resvg::{tiny_skia, usvg};
 use std::path::PathBuf;
@@ -74,7 +77,10 @@ fn chromium_rgb(exe: &str, file: &std::path::Path, png: &std::path::Path) -> Vec
 #[test]
 fn outputs_render_the_same_in_resvg_and_chromium() {
     let Some(exe) = chromium() else {
-        eprintln!("SKIP outputs_render_the_same_in_resvg_and_chromium: chromium is not installed");
+        common::skip(
+            "outputs_render_the_same_in_resvg_and_chromium",
+            "chromium is not installed",
+        );
         return;
     };
     let golden: serde_json::Value = serde_json::from_str(

@@ -158,7 +158,10 @@ fn iconclip_image_tower_matches_torch_on_the_shipped_weights() {
 #[test]
 fn text_conditioning_and_scorer_text_match_when_minilm_is_installed() {
     if let Err(e) = MiniLmLocations::from_env().ensure(false) {
-        eprintln!("SKIP text_conditioning_and_scorer_text_match_when_minilm_is_installed: {e}");
+        common::skip(
+            "text_conditioning_and_scorer_text_match_when_minilm_is_installed",
+            &e.to_string(),
+        );
         return;
     }
     let (r, meta) = refs();
@@ -191,11 +194,17 @@ fn retrieval_names_its_source_icons_when_the_index_is_installed() {
     use vectorfusion::pipeline::{Method, PlanRequest, Preset};
     use vectorfusion::retrieval::RetrievalLocations;
     if let Err(e) = MiniLmLocations::from_env().ensure(false) {
-        eprintln!("SKIP retrieval_names_its_source_icons_when_the_index_is_installed: {e}");
+        common::skip(
+            "retrieval_names_its_source_icons_when_the_index_is_installed",
+            &e.to_string(),
+        );
         return;
     }
     if let Err(e) = RetrievalLocations::from_env().load(&root()) {
-        eprintln!("SKIP retrieval_names_its_source_icons_when_the_index_is_installed: {e}");
+        common::skip(
+            "retrieval_names_its_source_icons_when_the_index_is_installed",
+            &e.to_string(),
+        );
         return;
     }
     let m = common::runs::executor(root(), Some(root().join("scorer")));

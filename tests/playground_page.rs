@@ -3,7 +3,8 @@
 //! upload shows the API's message; on a server with an API key the page asks for it, and with
 //! the key typed in, runs the same job. Screenshots go to `target/tmp/playground/` (and to
 //! `$VF_PAGE_SCREENSHOTS` when set, e.g. `docs/img`). `.ci/run` installs chromium and
-//! chromium-driver when it can; without them the test prints SKIP.
+//! chromium-driver when it can; without them the test prints SKIP (and
+//! fails where `.ci/run` sets `VF_REQUIRE_ALL`).
 
 mod common;
 
@@ -36,8 +37,9 @@ fn save(b: &Browser, name: &str) {
 /// end; `checks` runs after that, with the browser and the base URL.
 fn with_page(api_key: Option<&str>, checks: impl FnOnce(&Browser, &str) -> Result<(), String>) {
     let Some((driver, chromium)) = installed() else {
-        eprintln!(
-            "SKIP: chromium / chromedriver not installed (apt-get install chromium chromium-driver)"
+        common::skip(
+            "playground page",
+            "chromium / chromedriver not installed (apt-get install chromium chromium-driver)",
         );
         return;
     };

@@ -1,7 +1,7 @@
 //! The store's conformance suite (River's pattern): every test runs against SQLite and against
 //! PostgreSQL. The PostgreSQL half needs a server whose user may create databases, named by
 //! `VF_TEST_POSTGRES_URL` (`.ci/run` starts one with `scripts/pg_cluster.sh`); without it those
-//! tests print SKIP and pass.
+//! tests print SKIP and pass, except under `VF_REQUIRE_ALL` (set by `.ci/run`), where they fail.
 
 use super::*;
 use std::collections::HashSet;
@@ -20,6 +20,13 @@ async fn temp_store(
         }
         Backend::Postgres => {
             let Ok(admin) = std::env::var("VF_TEST_POSTGRES_URL") else {
+                // `.ci/run` sets VF_REQUIRE_ALL: there the PostgreSQL half must run.
+                let required =
+                    std::env::var("VF_REQUIRE_ALL").is_ok_and(|v| !v.is_empty() && v != "0");
+                assert!(
+                    !required,
+                    "VF_TEST_POSTGRES_URL is not set and VF_REQUIRE_ALL is: no PostgreSQL to test"
+                );
                 eprintln!("SKIP: VF_TEST_POSTGRES_URL is not set (no PostgreSQL server to test)");
                 return None;
             };

@@ -69,3 +69,18 @@ pub fn red_square_targets(dir: &std::path::Path) -> std::path::PathBuf {
     im.save_png(&targets.join("red.png")).unwrap();
     targets
 }
+
+/// The variable `.ci/run` sets: there a test whose tool or data is missing fails instead of
+/// skipping, so a green CI run means every half of every test ran.
+pub const REQUIRE_ALL_ENV: &str = "VF_REQUIRE_ALL";
+
+/// Skips the rest of `test` because `why` (a tool or data is missing): prints `SKIP test: why`
+/// locally, and panics where [`REQUIRE_ALL_ENV`] is set to anything but `0`.
+pub fn skip(test: &str, why: &str) {
+    let required = std::env::var(REQUIRE_ALL_ENV).is_ok_and(|v| !v.is_empty() && v != "0");
+    assert!(
+        !required,
+        "{test}: {why} — {REQUIRE_ALL_ENV} is set, so missing tools fail the test"
+    );
+    eprintln!("SKIP {test}: {why}");
+}
