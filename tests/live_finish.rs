@@ -6,7 +6,7 @@ use vectorfusion::image::{Image, psnr};
 use vectorfusion::progress::{CancelToken, NullSink};
 use vectorfusion::raster;
 use vectorfusion::scene::{Point, Rgba, Scene, Shape};
-use vectorfusion::stages::live::{LiveConfig, LiveResult, PathBudget, Preset, vectorize};
+use vectorfusion::stages::live::{LiveConfig, LiveResult, PathBudget, vectorize};
 use vectorfusion::vector::palette::{Background, Color8, ColorPlan, distinct_fills, parse_palette};
 use vectorfusion::vector::simple::is_simple;
 
@@ -46,7 +46,7 @@ fn cfg(colors: ColorPlan) -> LiveConfig {
         final_iters: 30,
         snapshot_every: 0,
         colors,
-        ..LiveConfig::preset(Preset::Fast)
+        ..LiveConfig::default()
     }
 }
 

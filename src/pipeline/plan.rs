@@ -5,10 +5,12 @@
 //! table says later, and the CLI and the service cannot disagree.
 
 use super::presets::PresetSettings;
+use super::spec::check_range;
 use super::{EncoderChoice, JobKind, Limits, Method, Preset, SpecError, Style};
 use crate::augment::AugmentConfig;
 use crate::models::pipeline::ModelHints;
-use crate::stages::live::{LiveConfig, PathBudget};
+use crate::stages::live::{CANVAS_SIDES, LiveConfig, PathBudget};
+use crate::stages::sds::{ReinitConfig, SdsConfig, T_MAX, T_MIN};
 use crate::vector::VectorOptions;
 use crate::vector::palette::ColorPlan;
 use serde::{Deserialize, Serialize};
@@ -19,8 +21,8 @@ pub const PLAN_VERSION: u32 = 1;
 /// Paths below this area (px² at 512 px) are re-initialised in `sd_live_sds` and pruned at the
 /// end (paper: 64 px²).
 pub const MIN_AREA_512: f32 = 64.0;
-/// Paths with fill opacity below this are faint.
-pub const MIN_OPACITY: f32 = 0.05;
+/// Paths with fill opacity below this are faint (LIVE's threshold, shared by every stage).
+pub use crate::stages::live::MIN_OPACITY;
 
 /// [`MIN_AREA_512`] at a `size` px canvas.
 pub fn min_area_at(size: u32) -> f32 {
@@ -278,6 +280,25 @@ pub struct RunPlan {
 }
 
 impl RunPlan {
+    /// The most paths the run makes: a text run's paths, a vectorize run's LIVE budget.
+    pub fn paths(&self) -> Option<u32> {
+        match (&self.text, &self.vectorize) {
+            (Some(t), _) => Some(t.paths),
+            (None, Some(v)) => Some(u32::try_from(v.budget.max_paths()).unwrap_or(u32::MAX)),
+            (None, None) => None,
+        }
+    }
+
+    /// SDS steps of a text run that distils.
+    pub fn sds_steps(&self) -> Option<u32> {
+        Some(self.text.as_ref()?.sds.as_ref()?.steps)
+    }
+
+    /// K, the samples of a text run that samples.
+    pub fn samples(&self) -> Option<u32> {
+        Some(self.text.as_ref()?.sample.as_ref()?.samples)
+    }
+
     /// Identifies the run for its checkpoints: a state saved under another plan is ignored.
     pub fn key(&self) -> String {
         format!(
@@ -290,16 +311,6 @@ impl RunPlan {
 
 /// Largest SDS learning-rate multiplier a plan accepts.
 pub const MAX_LR_SCALE: f32 = 100.0;
-
-fn range(field: &'static str, v: u32, max: u32) -> Result<u32, SpecError> {
-    if v == 0 || v > max {
-        return Err(SpecError::new(
-            field,
-            format!("must be between 1 and {max}, got {v}"),
-        ));
-    }
-    Ok(v)
-}
 
 /// Resolves `req`: the preset's numbers for everything it omits (sized for `model`, whose
 /// hints also give the prompt form and the guidance), checked against `limits`. `model` is
@@ -349,28 +360,116 @@ fn vectorize_plan(req: &PlanRequest, limits: &Limits) -> Result<LiveConfig, Spec
             .map_err(|e| SpecError::new("paths", e.to_string()))?;
         return Ok(cfg.clone());
     }
-    let paths = range(
+    let paths = check_range(
         "paths",
         req.paths
             .unwrap_or(u32::try_from(req.preset.vectorize_paths()).unwrap_or(u32::MAX)),
         limits.max_paths,
     )? as usize;
-    let mut cfg = req.preset.live_config();
-    cfg.seed = req.seed;
-    cfg.colors = req.vector.colors.clone();
-    cfg.target_psnr = req.vector.target_psnr;
-    cfg.max_bytes = req.vector.max_bytes;
-    if let PathBudget::Auto { max_paths: m, .. } = &mut cfg.budget {
-        *m = paths;
-    } else {
-        cfg.budget = PathBudget::Auto {
-            stage: 8.min(paths),
-            max_paths: paths,
-            min_gain_db_per_path: 0.05,
-            prune_tolerance: 2e-5,
-        };
+    Ok(LiveConfig {
+        // The preset's LIVE settings, with a budget that stops adding paths once they stop
+        // paying off.
+        budget: PathBudget::auto_up_to(paths),
+        seed: req.seed,
+        colors: req.vector.colors.clone(),
+        target_psnr: req.vector.target_psnr,
+        max_bytes: req.vector.max_bytes,
+        ..req.preset.live_config()
+    })
+}
+
+/// The counts a text run resolves from the request and the preset.
+struct TextNumbers {
+    size: u32,
+    paths: u32,
+    steps: u32,
+    samples: u32,
+}
+
+/// `req`'s size, paths, steps and samples, the preset's `ps` where it omits them, within
+/// `limits`.
+fn text_numbers(
+    req: &PlanRequest,
+    ps: &PresetSettings,
+    limits: &Limits,
+) -> Result<TextNumbers, SpecError> {
+    let size = req.tuning.size.unwrap_or(ps.size);
+    if !CANVAS_SIDES.contains(&size) {
+        return Err(SpecError::new(
+            "size",
+            format!(
+                "must be between {} and {}, got {size}",
+                CANVAS_SIDES.start(),
+                CANVAS_SIDES.end()
+            ),
+        ));
     }
-    Ok(cfg)
+    // A vectorize job fine-tuned to its caption keeps a vectorize job's path budget.
+    let preset_paths = match req.kind {
+        JobKind::Vectorize => req.preset.vectorize_paths(),
+        JobKind::Text => req.style.spec().preset_paths(ps.paths),
+    };
+    let preset_paths = u32::try_from(preset_paths).unwrap_or(u32::MAX);
+    Ok(TextNumbers {
+        size,
+        paths: check_range("paths", req.paths.unwrap_or(preset_paths), limits.max_paths)?,
+        steps: check_range("steps", req.steps.unwrap_or(ps.steps), limits.max_steps)?,
+        samples: check_range(
+            "samples",
+            req.samples.unwrap_or(ps.samples),
+            limits.max_samples,
+        )?,
+    })
+}
+
+/// The score distillation of a text run that distils (`augment`: from-scratch runs), checked.
+fn sds_plan(
+    req: &PlanRequest,
+    model: &ModelFacts,
+    n: &TextNumbers,
+    augment: bool,
+) -> Result<SdsPlan, SpecError> {
+    let t = &req.tuning;
+    let s = SdsPlan {
+        steps: n.steps,
+        guidance: t.guidance.unwrap_or(model.hints.sds_guidance),
+        t_min: t.t_min.unwrap_or(T_MIN),
+        t_max: t.t_max.unwrap_or(T_MAX),
+        t_max_end: t.t_max_end,
+        grad_clip: t.grad_clip,
+        lr_scale: t.lr_scale.unwrap_or(1.0),
+        augment,
+        reinit_min_area: if augment {
+            t.reinit_min_area
+        } else {
+            Some(t.reinit_min_area.unwrap_or(min_area_at(n.size)))
+        },
+    };
+    if s.t_min > s.t_max || s.t_max_end.is_some_and(|e| e < s.t_min) {
+        return Err(SpecError::new(
+            "t_min",
+            format!(
+                "the timestep range [{}, {}] must be ordered",
+                s.t_min, s.t_max
+            ),
+        ));
+    }
+    if !s.guidance.is_finite() || s.grad_clip.is_some_and(|c| c.is_nan() || c <= 0.0) {
+        return Err(SpecError::new(
+            "guidance",
+            "guidance must be finite and grad_clip positive",
+        ));
+    }
+    if !(s.lr_scale > 0.0 && s.lr_scale <= MAX_LR_SCALE) {
+        return Err(SpecError::new(
+            "lr_scale",
+            format!(
+                "must be above 0 and at most {MAX_LR_SCALE}, got {}",
+                s.lr_scale
+            ),
+        ));
+    }
+    Ok(s)
 }
 
 fn text_plan(
@@ -383,37 +482,17 @@ fn text_plan(
         .as_deref()
         .ok_or_else(|| SpecError::new("caption", "is required for a text run"))?;
     let ps: PresetSettings = req.preset.settings_for(model.hints.small_prior);
-    let t = &req.tuning;
     req.vector
         .validate()
         .map_err(|(field, reason)| SpecError::new(field, reason))?;
-    let size = t.size.unwrap_or(ps.size);
-    if !(8..=2048).contains(&size) {
-        return Err(SpecError::new(
-            "size",
-            format!("must be between 8 and 2048, got {size}"),
-        ));
-    }
-    // A vectorize job fine-tuned to its caption keeps a vectorize job's path budget.
-    let preset_paths = match req.kind {
-        JobKind::Vectorize => req.preset.vectorize_paths(),
-        JobKind::Text => req.style.spec().preset_paths(ps.paths),
-    };
-    let preset_paths = u32::try_from(preset_paths).unwrap_or(u32::MAX);
-    let paths = range("paths", req.paths.unwrap_or(preset_paths), limits.max_paths)?;
-    let steps = range("steps", req.steps.unwrap_or(ps.steps), limits.max_steps)?;
-    let samples = range(
-        "samples",
-        req.samples.unwrap_or(ps.samples),
-        limits.max_samples,
-    )?;
+    let n = text_numbers(req, &ps, limits)?;
     let start = match req.kind {
         JobKind::Vectorize => StartKind::Image,
         JobKind::Text => req.start,
     };
     let from_method = start == StartKind::Method;
     let sample = (from_method && req.method != Method::Scratch).then_some(SamplePlan {
-        samples,
+        samples: n.samples,
         steps: ps.sample_steps as u32,
         guidance: model.hints.sample_guidance,
         retrieval: req.retrieval,
@@ -422,62 +501,24 @@ fn text_plan(
         strength: model.hints.sdedit_strength,
     });
     let distil = !from_method || req.method != Method::SdLive;
-    let augment = from_method && req.method == Method::Scratch && t.augment != Some(false);
-    let sds = distil.then(|| SdsPlan {
-        steps,
-        guidance: t.guidance.unwrap_or(model.hints.sds_guidance),
-        t_min: t.t_min.unwrap_or(50),
-        t_max: t.t_max.unwrap_or(950),
-        t_max_end: t.t_max_end,
-        grad_clip: t.grad_clip,
-        lr_scale: t.lr_scale.unwrap_or(1.0),
-        augment,
-        reinit_min_area: if augment {
-            t.reinit_min_area
-        } else {
-            Some(t.reinit_min_area.unwrap_or(min_area_at(size)))
-        },
-    });
-    if let Some(s) = &sds {
-        if s.t_min > s.t_max || s.t_max_end.is_some_and(|e| e < s.t_min) {
-            return Err(SpecError::new(
-                "t_min",
-                format!(
-                    "the timestep range [{}, {}] must be ordered",
-                    s.t_min, s.t_max
-                ),
-            ));
-        }
-        if !s.guidance.is_finite() || s.grad_clip.is_some_and(|c| c.is_nan() || c <= 0.0) {
-            return Err(SpecError::new(
-                "guidance",
-                "guidance must be finite and grad_clip positive",
-            ));
-        }
-        if !(s.lr_scale > 0.0 && s.lr_scale <= MAX_LR_SCALE) {
-            return Err(SpecError::new(
-                "lr_scale",
-                format!(
-                    "must be above 0 and at most {MAX_LR_SCALE}, got {}",
-                    s.lr_scale
-                ),
-            ));
-        }
-    }
+    let augment = from_method && req.method == Method::Scratch && req.tuning.augment != Some(false);
+    let sds = distil
+        .then(|| sds_plan(req, model, &n, augment))
+        .transpose()?;
     Ok(TextPlan {
         method: req.method,
         style: req.style,
         start,
         prompt: req.style.prompt_with(caption, model.hints.style_suffix),
-        size,
-        paths,
+        size: n.size,
+        paths: n.paths,
         sample,
         trace: TracePlan {
-            size: if from_method { ps.trace_size } else { size },
+            size: if from_method { ps.trace_size } else { n.size },
             iters: ps.live_iters,
         },
         sds,
-        snapshot_every: t.snapshot_every.unwrap_or(ps.snapshot_every),
+        snapshot_every: req.tuning.snapshot_every.unwrap_or(ps.snapshot_every),
         seeds: Seeds::from_seed(req.seed),
         model: ModelPlan {
             name: model.name.clone(),
@@ -486,6 +527,50 @@ fn text_plan(
         },
         colors: req.vector.colors.clone(),
     })
+}
+
+impl TextPlan {
+    /// The LIVE configuration that traces the run's starting image (the kept sample at
+    /// [`TracePlan::size`], or a given image at the teacher's size): LIVE's own settings with
+    /// the plan's path count, iterations, seed, snapshot period and colours.
+    pub fn trace_config(&self) -> LiveConfig {
+        LiveConfig {
+            size: self.trace.size,
+            budget: PathBudget::fixed(self.paths as usize),
+            iters_per_stage: self.trace.iters,
+            final_iters: self.trace.iters,
+            seed: self.seeds.trace,
+            snapshot_every: self.snapshot_every,
+            colors: self.colors.clone(),
+            ..LiveConfig::default()
+        }
+    }
+
+    /// The score distillation this plan runs (`None`: `sd_live`, no distillation): the
+    /// paper's settings for the style ([`SdsConfig::for_style`]) with the plan's prompt,
+    /// guidance, timestep range, clipping, learning-rate scale, augmentation, re-init area,
+    /// snapshot period and seed.
+    pub fn sds_config(&self) -> Option<SdsConfig> {
+        let sp = self.sds.as_ref()?;
+        let paper = SdsConfig::for_style(self.style, "", sp.steps, self.size);
+        Some(SdsConfig {
+            prompt: self.prompt.clone(),
+            t_min: sp.t_min,
+            t_max: sp.t_max,
+            t_max_end: sp.t_max_end,
+            guidance: sp.guidance,
+            grad_clip: sp.grad_clip,
+            augment: paper.augment.filter(|_| sp.augment),
+            schedules: paper.schedules.scaled(sp.lr_scale),
+            reinit: paper.reinit.map(|r| ReinitConfig {
+                min_area: sp.reinit_min_area,
+                ..r
+            }),
+            snapshot_every: self.snapshot_every,
+            seed: self.seeds.sds,
+            ..paper
+        })
+    }
 }
 
 /// The render size of an SDS run with `augment` at a `size` px teacher (augmentation renders

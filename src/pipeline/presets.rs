@@ -1,9 +1,10 @@
-//! The preset tables: what `draft`, `fast`, `balanced` and `paper` mean for Stable Diffusion and
-//! for a small prior. Read only by [`super::plan`] when a request is resolved; a stored plan
-//! keeps the numbers, so editing these tables changes new jobs only.
+//! The preset tables: what `draft`, `fast`, `balanced` and `paper` mean for Stable Diffusion,
+//! for a small prior and for LIVE (vectorize runs). Read only by [`super::plan`] when a request
+//! is resolved (and by the benchmarks, which name a preset); a stored plan keeps the numbers, so
+//! editing these tables changes new jobs only.
 
 use super::Preset;
-use crate::stages::live::{self, LiveConfig};
+use crate::stages::live::LiveConfig;
 use serde::Serialize;
 
 /// What a preset sets. Explicit `paths`/`steps`/`samples` in a request override it.
@@ -146,27 +147,41 @@ impl Preset {
     /// The path budget of a vectorize job when the request names none: the total of this
     /// preset's LIVE budget.
     pub fn vectorize_paths(self) -> usize {
-        LiveConfig::preset(self.live()).budget.max_paths()
+        self.live_config().budget.max_paths()
     }
 
-    /// The LIVE configuration of a vectorize run of this preset (its budget and seed are the
-    /// request's): [`Preset::live`]'s, with `draft` cut to 64 px and 20/10 iterations.
+    /// The LIVE configuration of a vectorize run of this preset (its budget, seed and colours
+    /// are the request's): LIVE's own settings ([`LiveConfig::default`]) for `fast`, cut to
+    /// 64 px and 20/10 iterations for `draft`, at a larger canvas with more iterations, larger
+    /// new circles and a wider UDF band for `balanced` and `paper`.
     pub fn live_config(self) -> LiveConfig {
-        let mut cfg = LiveConfig::preset(self.live());
-        if self == Preset::Draft {
-            cfg.iters_per_stage = 20;
-            cfg.final_iters = 10;
-            cfg.size = 64;
-        }
-        cfg
-    }
-
-    /// The LIVE preset used for vectorize jobs.
-    pub fn live(self) -> live::Preset {
+        let base = LiveConfig::default();
         match self {
-            Preset::Draft | Preset::Fast => live::Preset::Fast,
-            Preset::Balanced => live::Preset::Balanced,
-            Preset::Paper => live::Preset::Quality,
+            Preset::Draft => LiveConfig {
+                size: 64,
+                iters_per_stage: 20,
+                final_iters: 10,
+                ..base
+            },
+            Preset::Fast => base,
+            Preset::Balanced => LiveConfig {
+                size: 160,
+                iters_per_stage: 200,
+                final_iters: 100,
+                init_radius: 4.0,
+                udf_tau: 6.0,
+                reinit_min_area: 36.0,
+                ..base
+            },
+            Preset::Paper => LiveConfig {
+                size: 256,
+                iters_per_stage: 300,
+                final_iters: 150,
+                init_radius: 5.0,
+                udf_tau: 8.0,
+                reinit_min_area: 64.0,
+                ..base
+            },
         }
     }
 }

@@ -1,5 +1,5 @@
 //! The job contract: what a caller asks for ([`JobSpec`]: kind, inputs, style, method, preset,
-//! explicit numbers, the resolved [`RunPlan`]), its vocabularies ([`JobKind`], [`Method`],
+//! the numbers it gave, and the [`RunPlan`] resolved from them), its vocabularies ([`JobKind`], [`Method`],
 //! [`Preset`]) and the hard [`Limits`] every entry point checks it against.
 
 use super::plan::RunPlan;
@@ -34,18 +34,22 @@ impl Method {
     }
 }
 
-/// Named speed/quality trade-offs (resolution, steps, paths, samples, encoder; see
-/// [`Preset::settings`]). `default` and `quality` are accepted as older names of `balanced` and
-/// `paper`.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+/// Named speed/quality trade-offs, the one preset vocabulary of the service, `generate`,
+/// `vectorize` and the benchmarks: for text runs resolution, steps, paths, samples and encoder
+/// ([`Preset::settings_for`]), for vectorize runs LIVE's working size and iterations
+/// ([`Preset::live_config`]). `default` and `quality` are accepted as older names of `balanced`
+/// and `paper` (`quality` was the vectorize command's name of its largest preset).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "snake_case")]
 pub enum Preset {
     Draft,
     Fast,
     #[default]
     #[serde(alias = "default")]
+    #[value(alias = "default")]
     Balanced,
     #[serde(alias = "quality")]
+    #[value(alias = "quality")]
     Paper,
 }
 
@@ -105,8 +109,14 @@ impl Limits {
     }
 }
 
-/// A validated job. Construct through the service's request validation (or fill it in directly
-/// in code and call [`JobSpec::validate`]).
+/// A validated job: the request as the caller made it and the plan resolved from it, which is
+/// what the store keeps. Construct through the service's request validation (or fill it in
+/// directly in code and call [`JobSpec::validate`]).
+///
+/// `paths`, `steps` and `samples` are the caller's: `None` means the preset's, and the numbers
+/// that run are the plan's. Jobs stored before this held the resolved numbers there; they read
+/// as explicit values equal to their plan's (or, for jobs stored before plans, are resolved
+/// as explicit values when they run), so they run as they did.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct JobSpec {
     pub kind: JobKind,
@@ -118,10 +128,13 @@ pub struct JobSpec {
     pub svg: Option<String>,
     pub style: Style,
     pub method: Method,
-    pub paths: u32,
-    pub steps: u32,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub paths: Option<u32>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub steps: Option<u32>,
     pub seed: u64,
-    pub samples: u32,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub samples: Option<u32>,
     pub preset: Preset,
     pub priority: i32,
     /// Text jobs: start some samples from the training icons nearest to the caption
@@ -163,21 +176,30 @@ impl SpecError {
 /// Allowed priority range (higher runs first).
 pub const PRIORITY_RANGE: std::ops::RangeInclusive<i32> = -100..=100;
 
+/// `v` when it is within `1..=max`, otherwise an error naming `field`.
+pub(super) fn check_range(field: &'static str, v: u32, max: u32) -> Result<u32, SpecError> {
+    if v == 0 || v > max {
+        return Err(SpecError::new(
+            field,
+            format!("must be between 1 and {max}, got {v}"),
+        ));
+    }
+    Ok(v)
+}
+
 impl JobSpec {
-    /// Checks every field against `limits` and the kind's requirements.
+    /// Checks every field against `limits` and the kind's requirements (the numbers it gives;
+    /// the plan checks the preset's).
     pub fn validate(&self, limits: &Limits) -> Result<(), SpecError> {
-        fn range(field: &'static str, v: u32, max: u32) -> Result<(), SpecError> {
-            if v == 0 || v > max {
-                return Err(SpecError::new(
-                    field,
-                    format!("must be between 1 and {max}, got {v}"),
-                ));
+        for (field, v, max) in [
+            ("paths", self.paths, limits.max_paths),
+            ("steps", self.steps, limits.max_steps),
+            ("samples", self.samples, limits.max_samples),
+        ] {
+            if let Some(v) = v {
+                check_range(field, v, max)?;
             }
-            Ok(())
         }
-        range("paths", self.paths, limits.max_paths)?;
-        range("steps", self.steps, limits.max_steps)?;
-        range("samples", self.samples, limits.max_samples)?;
         if !PRIORITY_RANGE.contains(&self.priority) {
             return Err(SpecError::new(
                 "priority",
@@ -190,26 +212,7 @@ impl JobSpec {
             ));
         }
         if let Some(c) = &self.caption {
-            let n = c.chars().count();
-            if c.trim_matches(|ch: char| ch.is_whitespace() || ch == '\u{feff}')
-                .is_empty()
-            {
-                return Err(SpecError::new("caption", "must not be empty"));
-            }
-            if n > limits.max_caption_chars {
-                return Err(SpecError::new(
-                    "caption",
-                    format!(
-                        "is {n} characters, at most {} allowed",
-                        limits.max_caption_chars
-                    ),
-                ));
-            }
-            if c.chars()
-                .any(|ch| ch.is_control() && ch != '\n' && ch != '\t')
-            {
-                return Err(SpecError::new("caption", "contains control characters"));
-            }
+            check_caption(c, limits)?;
         }
         if let Some(svg) = &self.svg
             && svg.len() > limits.max_svg_bytes
@@ -227,39 +230,65 @@ impl JobSpec {
             .validate()
             .map_err(|(field, reason)| SpecError::new(field, reason))?;
         match self.kind {
-            JobKind::Text => {
-                for (set, field) in [
-                    (self.vector.target_psnr.is_some(), "target_psnr"),
-                    (self.vector.max_bytes.is_some(), "max_bytes"),
-                ] {
-                    if set {
-                        return Err(SpecError::new(
-                            field,
-                            "only applies to kind \"vectorize\" (a text job's path count is its paths)",
-                        ));
-                    }
-                }
-                if self.caption.is_none() {
-                    return Err(SpecError::new("caption", "is required for kind \"text\""));
-                }
-                if self.image.is_some() {
-                    return Err(SpecError::new(
-                        "image",
-                        "only applies to kind \"vectorize\" (use \"svg\" to start a text job from a drawing)",
-                    ));
-                }
+            JobKind::Text => self.check_text_inputs(),
+            JobKind::Vectorize if self.image.is_none() => Err(SpecError::new(
+                "image",
+                "is required for kind \"vectorize\" (base64 PNG or JPEG)",
+            )),
+            JobKind::Vectorize => Ok(()),
+        }
+    }
+
+    /// A text job has a caption, no image and no vectorize stopping rule.
+    fn check_text_inputs(&self) -> Result<(), SpecError> {
+        for (set, field) in [
+            (self.vector.target_psnr.is_some(), "target_psnr"),
+            (self.vector.max_bytes.is_some(), "max_bytes"),
+        ] {
+            if set {
+                return Err(SpecError::new(
+                    field,
+                    "only applies to kind \"vectorize\" (a text job's path count is its paths)",
+                ));
             }
-            JobKind::Vectorize => {
-                if self.image.is_none() {
-                    return Err(SpecError::new(
-                        "image",
-                        "is required for kind \"vectorize\" (base64 PNG or JPEG)",
-                    ));
-                }
-            }
+        }
+        if self.caption.is_none() {
+            return Err(SpecError::new("caption", "is required for kind \"text\""));
+        }
+        if self.image.is_some() {
+            return Err(SpecError::new(
+                "image",
+                "only applies to kind \"vectorize\" (use \"svg\" to start a text job from a drawing)",
+            ));
         }
         Ok(())
     }
+}
+
+/// A caption is not blank, within the length limit and free of control characters (other than
+/// newlines and tabs).
+fn check_caption(c: &str, limits: &Limits) -> Result<(), SpecError> {
+    if c.trim_matches(|ch: char| ch.is_whitespace() || ch == '\u{feff}')
+        .is_empty()
+    {
+        return Err(SpecError::new("caption", "must not be empty"));
+    }
+    let n = c.chars().count();
+    if n > limits.max_caption_chars {
+        return Err(SpecError::new(
+            "caption",
+            format!(
+                "is {n} characters, at most {} allowed",
+                limits.max_caption_chars
+            ),
+        ));
+    }
+    if c.chars()
+        .any(|ch| ch.is_control() && ch != '\n' && ch != '\t')
+    {
+        return Err(SpecError::new("caption", "contains control characters"));
+    }
+    Ok(())
 }
 
 /// A vocabulary word as serde spells it (snake_case, or one of the type's aliases), in any

@@ -10,10 +10,10 @@ fn spec() -> JobSpec {
         svg: None,
         style: Style::Iconography,
         method: Method::SdLiveSds,
-        paths: 16,
-        steps: 100,
+        paths: Some(16),
+        steps: Some(100),
         seed: u64::MAX,
-        samples: 4,
+        samples: Some(4),
         preset: Preset::Balanced,
         priority: 0,
         retrieval: true,
@@ -36,7 +36,7 @@ fn validation_names_the_field() {
     let l = Limits::default();
     assert!(spec().validate(&l).is_ok());
     let mut s = spec();
-    s.paths = 0;
+    s.paths = Some(0);
     assert_eq!(s.validate(&l).unwrap_err().field, "paths");
     let mut s = spec();
     s.image = None;

@@ -198,9 +198,139 @@ fn vectorize_plans_follow_the_preset_and_budget() {
         .unwrap()
         .vectorize
         .unwrap();
+    let paper = Preset::Paper.live_config();
+    assert_eq!((p.size, p.udf_tau), (paper.size, paper.udf_tau));
+}
+
+#[test]
+fn live_presets_are_valid_and_ordered_by_effort() {
+    let [d, f, b, p] =
+        [Preset::Draft, Preset::Fast, Preset::Balanced, Preset::Paper].map(Preset::live_config);
+    for c in [&d, &f, &b, &p] {
+        c.validate().unwrap();
+        assert_eq!(c.budget, PathBudget::fixed(64));
+        assert_eq!(c.reinit_min_opacity, MIN_OPACITY);
+    }
+    assert_eq!(f, LiveConfig::default());
+    assert!(d.size < f.size && f.size < b.size && b.size < p.size);
+    assert!(d.iters_per_stage < f.iters_per_stage);
+    assert!(f.iters_per_stage < b.iters_per_stage && b.iters_per_stage < p.iters_per_stage);
+    assert_eq!(p.reinit_min_area, 64.0);
+    // One vocabulary: the older names still parse.
+    assert_eq!("quality".parse::<Preset>(), Ok(Preset::Paper));
+    assert_eq!("default".parse::<Preset>(), Ok(Preset::Balanced));
+}
+
+#[test]
+fn stage_configs_come_from_the_plan_alone() {
+    for (method, start, small) in [
+        (Method::SdLiveSds, StartKind::Method, false),
+        (Method::Scratch, StartKind::Method, true),
+        (Method::SdLive, StartKind::Image, false),
+    ] {
+        let t = text(
+            PlanRequest {
+                method,
+                start,
+                seed: 11,
+                tuning: Tuning {
+                    lr_scale: Some(2.0),
+                    grad_clip: Some(0.5),
+                    ..Tuning::default()
+                },
+                ..PlanRequest::text("a crown")
+            },
+            small,
+        );
+        let live = t.trace_config();
+        assert_eq!(
+            live,
+            LiveConfig {
+                size: t.trace.size,
+                budget: PathBudget::fixed(t.paths as usize),
+                iters_per_stage: t.trace.iters,
+                final_iters: t.trace.iters,
+                seed: t.seeds.trace,
+                snapshot_every: t.snapshot_every,
+                colors: t.colors.clone(),
+                ..LiveConfig::default()
+            }
+        );
+        let sp = t.sds.clone().unwrap();
+        let sds = t.sds_config().unwrap();
+        let mut want = SdsConfig::for_style(t.style, "a crown", sp.steps, t.size);
+        want.prompt = t.prompt.clone();
+        want.guidance = sp.guidance;
+        want.seed = t.seeds.sds;
+        want.snapshot_every = t.snapshot_every;
+        want.t_min = sp.t_min;
+        want.t_max = sp.t_max;
+        want.t_max_end = sp.t_max_end;
+        want.grad_clip = sp.grad_clip;
+        want.schedules = want.schedules.scaled(sp.lr_scale);
+        if !sp.augment {
+            want.augment = None;
+        }
+        if let Some(r) = want.reinit.as_mut() {
+            r.min_area = sp.reinit_min_area;
+        }
+        assert_eq!(sds, want, "{method:?} {start:?}");
+        assert_eq!((sds.t_min, sds.t_max), (T_MIN, T_MAX));
+    }
+    let sd_live = text(
+        PlanRequest {
+            method: Method::SdLive,
+            ..PlanRequest::text("a crown")
+        },
+        false,
+    );
+    assert!(sd_live.sds_config().is_none());
+}
+
+#[test]
+fn stored_specs_keep_the_request_and_older_ones_still_read() {
+    use crate::pipeline::{JobSpec, request_of};
+    // A spec stored before the request and the plan were apart: the resolved numbers beside
+    // the plan. They read as explicit numbers equal to the plan's, so the job runs its plan.
+    let plan = resolve(
+        &PlanRequest {
+            kind: JobKind::Vectorize,
+            caption: None,
+            ..PlanRequest::text("")
+        },
+        None,
+        &Limits::default(),
+    )
+    .unwrap();
+    let old = serde_json::json!({
+        "kind": "vectorize", "caption": null, "image": "AQID", "svg": null,
+        "style": "iconography", "method": "sd_live_sds", "paths": 64, "steps": 500,
+        "seed": 0, "samples": 8, "preset": "balanced", "priority": 0, "plan": plan,
+    });
+    let spec: JobSpec = serde_json::from_value(old).unwrap();
     assert_eq!(
-        p.size,
-        LiveConfig::preset(crate::stages::live::Preset::Quality).size
+        (spec.paths, spec.steps, spec.samples),
+        (Some(64), Some(500), Some(8))
+    );
+    assert_eq!(spec.plan.as_ref(), Some(&plan));
+    assert_eq!(plan.paths(), Some(64));
+    // A new spec stores what the request gave: omitted numbers stay omitted.
+    let new = JobSpec {
+        paths: None,
+        steps: None,
+        samples: None,
+        ..spec.clone()
+    };
+    let json = serde_json::to_value(&new).unwrap();
+    for field in ["paths", "steps", "samples"] {
+        assert!(json.get(field).is_none(), "{json}");
+    }
+    let back: JobSpec = serde_json::from_value(json).unwrap();
+    assert_eq!(back, new);
+    // The request resolves to the stored plan again.
+    assert_eq!(
+        resolve(&request_of(&new), None, &Limits::default()).unwrap(),
+        plan
     );
 }
 

@@ -36,112 +36,19 @@ pub(in crate::server) async fn submit(
     if *state.shutdown.borrow() {
         return Err(ApiError::ShuttingDown);
     }
-    let is_json = headers
-        .get(header::CONTENT_TYPE)
-        .and_then(|v| v.to_str().ok())
-        .is_some_and(|ct| {
-            let mime = ct
-                .split(';')
-                .next()
-                .unwrap_or("")
-                .trim()
-                .to_ascii_lowercase();
-            mime == "application/json"
-                || (mime.starts_with("application/") && mime.ends_with("+json"))
-        });
-    if !is_json {
+    if !is_json(&headers) {
         return Err(ApiError::UnsupportedMediaType);
     }
-    // Refuse oversized bodies from their declared length, before reading (and before a client
-    // that sent `Expect: 100-continue` uploads anything).
-    let limit = state.cfg.server.max_body_bytes;
-    let declared = headers
-        .get(header::CONTENT_LENGTH)
-        .and_then(|v| v.to_str().ok())
-        .and_then(|s| s.trim().parse::<u64>().ok());
-    if declared.is_some_and(|n| n > limit as u64) {
-        return Err(ApiError::PayloadTooLarge { limit });
-    }
-    let read_for = std::time::Duration::from_secs(state.cfg.server.body_read_timeout_secs);
-    let body = tokio::time::timeout(read_for, axum::body::to_bytes(body, limit))
-        .await
-        .map_err(|_| ApiError::BodyTimeout {
-            secs: read_for.as_secs(),
-        })?
-        .map_err(|e| {
-            let msg = format!("{e:#}");
-            if msg.contains("length limit") {
-                ApiError::PayloadTooLarge { limit }
-            } else {
-                ApiError::MalformedJson(format!("could not read the request body: {msg}"))
-            }
-        })?;
-    let key = match headers.get(IDEMPOTENCY_HEADER) {
-        None => None,
-        Some(v) => {
-            let s = v
-                .to_str()
-                .ok()
-                .filter(|s| !s.is_empty() && s.len() <= 255)
-                .ok_or_else(|| {
-                    ApiError::invalid(
-                        "Idempotency-Key",
-                        "must be 1 to 255 visible ASCII characters",
-                    )
-                })?;
-            Some(caller.scoped_key(s))
-        }
-    };
+    let body = read_body(&state, &headers, body).await?;
+    let key = idempotency_key(&headers, &caller)?;
     let id = uuid::Uuid::new_v4();
     let default_seed = u64::from_le_bytes(
         id.as_bytes()[..8]
             .try_into()
             .map_err(|_| ApiError::Internal("uuid has 16 bytes".into()))?,
     );
-    let limits = state.limits.clone();
-    let executor = state.executor.clone();
-    // Small bodies are parsed in place (microseconds); big ones, and image decoding and SVG
-    // parsing, are CPU work that runs off the async threads.
-    let spec = if body.len() <= INLINE_PARSE_BYTES {
-        parse_submit(&body, &limits, default_seed, executor.as_ref())?
-    } else {
-        let b = body.clone();
-        let l = limits.clone();
-        tokio::task::spawn_blocking(move || parse_submit(&b, &l, default_seed, executor.as_ref()))
-            .await
-            .map_err(|e| ApiError::Internal(format!("validation task failed: {e}")))??
-    };
-    let (spec, upload) = if spec.image.is_some() || spec.svg.is_some() {
-        let permit =
-            tokio::time::timeout(DECODE_WAIT, state.decode_permits.clone().acquire_owned())
-                .await
-                .ok()
-                .and_then(Result::ok)
-                .ok_or(ApiError::Busy {
-                    what: "too many uploads are being validated at once",
-                    retry_after_secs: 2,
-                })?;
-        // The permit moves into the task: it is held until decoding ends, even if the client
-        // goes away meanwhile. The upload leaves the spec there too (base64 of a large image
-        // is CPU work as well).
-        tokio::task::spawn_blocking(move || {
-            let _permit = permit;
-            let mut spec = spec;
-            if let Some(img) = &spec.image {
-                check_image(img, &limits)?;
-            }
-            if let Some(svg) = &spec.svg {
-                check_svg(svg)?;
-            }
-            let upload = take_upload(&mut spec);
-            Ok::<_, ApiError>((spec, Some(upload)))
-        })
-        .await
-        .map_err(|e| ApiError::Internal(format!("validation task failed: {e}")))??
-    } else {
-        (spec, None)
-    };
-
+    let spec = parse(&state, &body, default_seed).await?;
+    let (spec, upload) = check_upload(&state, spec).await?;
     if spec.kind == JobKind::Text
         && let Err(msg) = state.executor.text_ready()
     {
@@ -151,36 +58,11 @@ pub(in crate::server) async fn submit(
     let hash = key
         .as_ref()
         .map(|_| format!("{:x}", sha2::Sha256::digest(&body)));
-    if let Caller::Tenant {
-        name,
-        max_active_jobs,
-        ..
-    } = &caller
-        && *max_active_jobs > 0
-    {
-        let active = state.store.active_jobs(name).await?;
-        if active >= i64::from(*max_active_jobs) {
-            if let Some(resp) = replay_known(&state, &key, &hash).await? {
-                return Ok(resp);
-            }
-            return Err(ApiError::QuotaExceeded {
-                limit: *max_active_jobs,
-                retry_after_secs: 5,
-            });
-        }
-    }
-    let max_depth = state.cfg.server.max_queue_depth;
-    if state.queued_estimate.load(Ordering::Relaxed) >= max_depth {
-        if let Some(resp) = replay_known(&state, &key, &hash).await? {
-            return Ok(resp);
-        }
-        let depth = state.store.queue_depth().await?;
-        state.queued_estimate.store(depth, Ordering::Relaxed);
-        if depth >= max_depth {
-            return Err(queue_full(&state, depth));
-        }
+    if let Some(replayed) = admit(&state, &caller, &key, &hash).await? {
+        return Ok(replayed);
     }
     let spec_json = serde_json::to_string(&spec).map_err(|e| ApiError::Internal(e.to_string()))?;
+    let max_depth = state.cfg.server.max_queue_depth;
     let new = NewJob {
         id: id.hyphenated().to_string(),
         kind: spec.kind,
@@ -210,6 +92,168 @@ pub(in crate::server) async fn submit(
     state.pool.notify();
     tracing::info!(job = %row.id, kind = %row.kind, "job submitted");
     Ok(accepted(&row))
+}
+
+/// Whether the request says its body is JSON (`application/json` or `application/*+json`).
+fn is_json(headers: &HeaderMap) -> bool {
+    headers
+        .get(header::CONTENT_TYPE)
+        .and_then(|v| v.to_str().ok())
+        .is_some_and(|ct| {
+            let mime = ct
+                .split(';')
+                .next()
+                .unwrap_or("")
+                .trim()
+                .to_ascii_lowercase();
+            mime == "application/json"
+                || (mime.starts_with("application/") && mime.ends_with("+json"))
+        })
+}
+
+/// The body, within the server's size limit and read time. Oversized bodies are refused from
+/// their declared length, before reading (and before a client that sent
+/// `Expect: 100-continue` uploads anything).
+async fn read_body(
+    state: &AppState,
+    headers: &HeaderMap,
+    body: Body,
+) -> Result<axum::body::Bytes, ApiError> {
+    let limit = state.cfg.server.max_body_bytes;
+    let declared = headers
+        .get(header::CONTENT_LENGTH)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|s| s.trim().parse::<u64>().ok());
+    if declared.is_some_and(|n| n > limit as u64) {
+        return Err(ApiError::PayloadTooLarge { limit });
+    }
+    let read_for = std::time::Duration::from_secs(state.cfg.server.body_read_timeout_secs);
+    tokio::time::timeout(read_for, axum::body::to_bytes(body, limit))
+        .await
+        .map_err(|_| ApiError::BodyTimeout {
+            secs: read_for.as_secs(),
+        })?
+        .map_err(|e| {
+            let msg = format!("{e:#}");
+            if msg.contains("length limit") {
+                ApiError::PayloadTooLarge { limit }
+            } else {
+                ApiError::MalformedJson(format!("could not read the request body: {msg}"))
+            }
+        })
+}
+
+/// The caller's Idempotency-Key, scoped to the caller.
+fn idempotency_key(headers: &HeaderMap, caller: &Caller) -> Result<Option<String>, ApiError> {
+    let Some(v) = headers.get(IDEMPOTENCY_HEADER) else {
+        return Ok(None);
+    };
+    let s = v
+        .to_str()
+        .ok()
+        .filter(|s| !s.is_empty() && s.len() <= 255)
+        .ok_or_else(|| {
+            ApiError::invalid(
+                "Idempotency-Key",
+                "must be 1 to 255 visible ASCII characters",
+            )
+        })?;
+    Ok(Some(caller.scoped_key(s)))
+}
+
+/// [`parse_submit`]: small bodies in place (microseconds), big ones off the async threads.
+async fn parse(
+    state: &AppState,
+    body: &axum::body::Bytes,
+    default_seed: u64,
+) -> Result<JobSpec, ApiError> {
+    let limits = state.limits.clone();
+    let executor = state.executor.clone();
+    if body.len() <= INLINE_PARSE_BYTES {
+        return parse_submit(body, &limits, default_seed, executor.as_ref());
+    }
+    let b = body.clone();
+    tokio::task::spawn_blocking(move || parse_submit(&b, &limits, default_seed, executor.as_ref()))
+        .await
+        .map_err(|e| ApiError::Internal(format!("validation task failed: {e}")))?
+}
+
+/// Checks a spec's image (decoded) and SVG (parsed) off the async threads, under an
+/// upload-validation permit, and moves them out of it: the spec to store and its upload.
+async fn check_upload(
+    state: &AppState,
+    spec: JobSpec,
+) -> Result<(JobSpec, Option<NewUpload>), ApiError> {
+    if spec.image.is_none() && spec.svg.is_none() {
+        return Ok((spec, None));
+    }
+    let permit = tokio::time::timeout(DECODE_WAIT, state.decode_permits.clone().acquire_owned())
+        .await
+        .ok()
+        .and_then(Result::ok)
+        .ok_or(ApiError::Busy {
+            what: "too many uploads are being validated at once",
+            retry_after_secs: 2,
+        })?;
+    let limits = state.limits.clone();
+    // The permit moves into the task: it is held until decoding ends, even if the client goes
+    // away meanwhile. The upload leaves the spec there too (base64 of a large image is CPU
+    // work as well).
+    tokio::task::spawn_blocking(move || {
+        let _permit = permit;
+        let mut spec = spec;
+        if let Some(img) = &spec.image {
+            check_image(img, &limits)?;
+        }
+        if let Some(svg) = &spec.svg {
+            check_svg(svg)?;
+        }
+        let upload = take_upload(&mut spec);
+        Ok::<_, ApiError>((spec, Some(upload)))
+    })
+    .await
+    .map_err(|e| ApiError::Internal(format!("validation task failed: {e}")))?
+}
+
+/// Admission past the tenant's quota and the queue depth: `Ok(None)` admits the job,
+/// `Ok(Some(_))` is the replay of a known Idempotency-Key (which adds nothing to the queue),
+/// otherwise the 429.
+async fn admit(
+    state: &AppState,
+    caller: &Caller,
+    key: &Option<String>,
+    hash: &Option<String>,
+) -> Result<Option<Response>, ApiError> {
+    if let Caller::Tenant {
+        name,
+        max_active_jobs,
+        ..
+    } = caller
+        && *max_active_jobs > 0
+    {
+        let active = state.store.active_jobs(name).await?;
+        if active >= i64::from(*max_active_jobs) {
+            if let Some(resp) = replay_known(state, key, hash).await? {
+                return Ok(Some(resp));
+            }
+            return Err(ApiError::QuotaExceeded {
+                limit: *max_active_jobs,
+                retry_after_secs: 5,
+            });
+        }
+    }
+    let max_depth = state.cfg.server.max_queue_depth;
+    if state.queued_estimate.load(Ordering::Relaxed) >= max_depth {
+        if let Some(resp) = replay_known(state, key, hash).await? {
+            return Ok(Some(resp));
+        }
+        let depth = state.store.queue_depth().await?;
+        state.queued_estimate.store(depth, Ordering::Relaxed);
+        if depth >= max_depth {
+            return Err(queue_full(state, depth));
+        }
+    }
+    Ok(None)
 }
 
 /// Moves a validated spec's upload out of it (the image as base64, the SVG), leaving the ""

@@ -6,6 +6,14 @@ use crate::scene::{MAX_PATHS, SceneError};
 use crate::vector::palette::ColorPlan;
 use crate::vector::{check_max_bytes, check_target_psnr};
 use serde::{Deserialize, Serialize};
+use std::ops::RangeInclusive;
+
+/// Canvas sides (pixels) a run may work at: LIVE's working size and a text run's teacher size.
+pub const CANVAS_SIDES: RangeInclusive<u32> = 8..=2048;
+
+/// Paths with fill opacity below this are faint: LIVE and SDS re-initialise them, and a text
+/// run prunes them at the end.
+pub const MIN_OPACITY: f32 = 0.05;
 
 /// Why vectorisation failed.
 #[derive(Debug, thiserror::Error)]
@@ -59,12 +67,18 @@ impl PathBudget {
         }
     }
 
-    /// The default `auto` budget: stages of 8 up to 64 paths, continue while each added path
-    /// gains more than 0.05 dB, prune paths worth less than 2e-5 MSE.
+    /// The default `auto` budget: [`PathBudget::auto_up_to`] 64 paths.
     pub fn auto() -> Self {
+        PathBudget::auto_up_to(64)
+    }
+
+    /// An `auto` budget of at most `max_paths`: stages of 8 (or fewer, when `max_paths` is
+    /// smaller), continue while each added path gains more than 0.05 dB, prune paths worth less
+    /// than 2e-5 MSE.
+    pub fn auto_up_to(max_paths: usize) -> Self {
         PathBudget::Auto {
-            stage: 8,
-            max_paths: 64,
+            stage: 8.min(max_paths),
+            max_paths,
             min_gain_db_per_path: 0.05,
             prune_tolerance: 2e-5,
         }
@@ -79,15 +93,6 @@ pub enum InitMode {
     Circles,
     /// Start from vtracer's trace (simple closed paths), refine, then add what it misses.
     Vtracer,
-}
-
-/// Named speed/quality trade-offs.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
-#[serde(rename_all = "snake_case")]
-pub enum Preset {
-    Fast,
-    Balanced,
-    Quality,
 }
 
 /// User-facing LIVE settings.
@@ -147,63 +152,17 @@ pub struct LiveConfig {
 }
 
 impl LiveConfig {
-    /// A preset with a path budget of `paths` (LIVE proportions).
-    pub fn preset(preset: Preset) -> Self {
-        let base = LiveConfig {
-            size: 128,
-            budget: PathBudget::fixed(64),
-            init: InitMode::Circles,
-            iters_per_stage: 100,
-            final_iters: 50,
-            lr_points: 1.0,
-            lr_fill: 0.02,
-            lr_background: 0.01,
-            udf_weight: 0.5,
-            udf_tau: 4.0,
-            xing_weight: 0.01,
-            init_radius: 3.0,
-            init_segments: 4,
-            init_fit_region: true,
-            opaque: true,
-            reinit_min_opacity: 0.05,
-            reinit_min_area: 16.0,
-            seed: 0,
-            snapshot_every: 50,
-            colors: ColorPlan::default(),
-            target_psnr: None,
-            max_bytes: None,
-            converge_tol: 0.0,
-        };
-        match preset {
-            Preset::Fast => base,
-            Preset::Balanced => LiveConfig {
-                size: 160,
-                iters_per_stage: 200,
-                final_iters: 100,
-                init_radius: 4.0,
-                udf_tau: 6.0,
-                reinit_min_area: 36.0,
-                ..base
-            },
-            Preset::Quality => LiveConfig {
-                size: 256,
-                iters_per_stage: 300,
-                final_iters: 150,
-                init_radius: 5.0,
-                udf_tau: 8.0,
-                reinit_min_area: 64.0,
-                ..base
-            },
-        }
-    }
-
     /// Checks ranges; called by [`vectorize`].
     pub fn validate(&self) -> Result<(), LiveError> {
         /// Per-stage iteration limit: keeps step counters far from `u32` overflow.
         const MAX_ITERS: u32 = 100_000;
         let bad = |m: &str| Err(LiveError::Config(m.to_string()));
-        if !(8..=2048).contains(&self.size) {
-            return bad("size must be in 8..=2048");
+        if !CANVAS_SIDES.contains(&self.size) {
+            return Err(LiveError::Config(format!(
+                "size must be in {}..={}",
+                CANVAS_SIDES.start(),
+                CANVAS_SIDES.end()
+            )));
         }
         match &self.budget {
             PathBudget::Schedule { stages } => {
@@ -261,7 +220,34 @@ impl LiveConfig {
 }
 
 impl Default for LiveConfig {
+    /// LIVE's own settings (the `fast` vectorize preset's): 128 px, 64 paths in LIVE's
+    /// proportions, 100 iterations per stage and 50 for the final pass. The other presets and
+    /// a text run's trace change a few of them.
     fn default() -> Self {
-        LiveConfig::preset(Preset::Balanced)
+        LiveConfig {
+            size: 128,
+            budget: PathBudget::fixed(64),
+            init: InitMode::Circles,
+            iters_per_stage: 100,
+            final_iters: 50,
+            lr_points: 1.0,
+            lr_fill: 0.02,
+            lr_background: 0.01,
+            udf_weight: 0.5,
+            udf_tau: 4.0,
+            xing_weight: 0.01,
+            init_radius: 3.0,
+            init_segments: 4,
+            init_fit_region: true,
+            opaque: true,
+            reinit_min_opacity: MIN_OPACITY,
+            reinit_min_area: 16.0,
+            seed: 0,
+            snapshot_every: 50,
+            colors: ColorPlan::default(),
+            target_psnr: None,
+            max_bytes: None,
+            converge_tol: 0.0,
+        }
     }
 }

@@ -20,19 +20,21 @@ pub(super) fn white_with_rects(side: u32, rects: &[(Range<u32>, Range<u32>, [f32
 }
 
 #[test]
-fn presets_are_valid_and_ordered_by_effort() {
-    let f = LiveConfig::preset(Preset::Fast);
-    let b = LiveConfig::preset(Preset::Balanced);
-    let q = LiveConfig::preset(Preset::Quality);
-    for c in [&f, &b, &q] {
-        c.validate().unwrap();
-        assert_eq!(c.budget, PathBudget::fixed(64));
-        assert_eq!(c.reinit_min_opacity, 0.05);
-    }
-    assert!(f.size < b.size && b.size < q.size);
-    assert!(f.iters_per_stage < b.iters_per_stage && b.iters_per_stage < q.iters_per_stage);
-    assert_eq!(q.reinit_min_area, 64.0);
-    assert_eq!(LiveConfig::default(), b);
+fn default_is_valid_with_live_proportions() {
+    let d = LiveConfig::default();
+    d.validate().unwrap();
+    assert_eq!(d.budget, PathBudget::fixed(64));
+    assert_eq!(d.reinit_min_opacity, MIN_OPACITY);
+    assert_eq!(
+        PathBudget::auto_up_to(5),
+        PathBudget::Auto {
+            stage: 5,
+            max_paths: 5,
+            min_gain_db_per_path: 0.05,
+            prune_tolerance: 2e-5,
+        }
+    );
+    assert_eq!(PathBudget::auto().max_paths(), 64);
 }
 
 #[test]

@@ -3,9 +3,15 @@
 use crate::augment::{AugmentConfig, AugmentError};
 use crate::optim::{AdamConfig, GroupSchedules};
 use crate::scene::{SceneError, Trainable};
+use crate::stages::live::MIN_OPACITY;
 use crate::stages::styles::Style;
 use crate::teacher::TeacherError;
 use serde::{Deserialize, Serialize};
+
+/// The paper's timestep range `[T_MIN, T_MAX]` (of 1000 training timesteps).
+pub const T_MIN: usize = 50;
+/// See [`T_MIN`].
+pub const T_MAX: usize = 950;
 
 /// Why SDS could not run.
 #[derive(Debug, thiserror::Error)]
@@ -64,7 +70,7 @@ impl Default for ReinitConfig {
     fn default() -> Self {
         Self {
             every: 50,
-            min_opacity: 0.05,
+            min_opacity: MIN_OPACITY,
             min_area: None,
             until_fraction: 0.75,
         }
@@ -115,8 +121,8 @@ impl SdsConfig {
             steps,
             prompt: style.prompt(caption),
             negative_prompt: String::new(),
-            t_min: 50,
-            t_max: 950,
+            t_min: T_MIN,
+            t_max: T_MAX,
             t_max_end: None,
             guidance: 100.0,
             weighting: Weighting::OneMinusAlpha,
