@@ -96,7 +96,7 @@ pub struct DatabaseConfig {
 
 impl DatabaseConfig {
     /// The database this configuration names: `url` if set, else the file at `path`.
-    pub fn location(&self) -> Result<crate::store::DbLocation, String> {
+    pub fn location(&self) -> Result<crate::store::DbLocation, crate::store::LocationError> {
         if self.url.trim().is_empty() {
             Ok(crate::store::DbLocation::Sqlite(self.path.clone()))
         } else {
@@ -270,9 +270,9 @@ impl Config {
                 // Not a setting (e.g. VECTORFUSION_TEST_*): ignore.
                 continue;
             };
-            let parsed = parse_like(&default, &value).map_err(|reason| ConfigError::Env {
+            let parsed = parse_like(&default, &value).map_err(|e| ConfigError::Env {
                 var: var.clone(),
-                reason,
+                reason: e.to_string(),
             })?;
             let entry = table
                 .entry(section)
@@ -310,7 +310,7 @@ impl Config {
         if let Err(e) = self.database.location() {
             return Err(ConfigError::Invalid {
                 key: "database.url",
-                reason: e,
+                reason: e.to_string(),
             });
         }
         if self.database.max_connections < 1 {
@@ -361,10 +361,10 @@ impl Config {
                 reason: e,
             });
         }
-        if let Err(reason) = ComputeDevice::parse_built(&self.models.device) {
+        if let Err(e) = ComputeDevice::parse_built(&self.models.device) {
             return Err(ConfigError::Invalid {
                 key: "models.device",
-                reason,
+                reason: e.to_string(),
             });
         }
         let mut keys: Vec<&str> = [&self.server.api_key, &self.server.metrics_key]
@@ -430,26 +430,30 @@ impl Config {
     }
 }
 
-fn parse_like(default: &toml::Value, value: &str) -> Result<toml::Value, String> {
+/// An environment override that is not of its setting's type.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("expected {expected}, got {value:?}")]
+pub struct OverrideTypeError {
+    /// What the setting takes: `an integer`, `a number`, `true or false`.
+    pub expected: &'static str,
+    pub value: String,
+}
+
+/// `value` read as the type of the setting whose default is `default`.
+fn parse_like(default: &toml::Value, value: &str) -> Result<toml::Value, OverrideTypeError> {
+    let wrong = |expected| OverrideTypeError {
+        expected,
+        value: value.to_string(),
+    };
+    let t = value.trim();
     Ok(match default {
-        toml::Value::Integer(_) => toml::Value::Integer(
-            value
-                .trim()
-                .parse()
-                .map_err(|_| format!("expected an integer, got {value:?}"))?,
-        ),
-        toml::Value::Float(_) => toml::Value::Float(
-            value
-                .trim()
-                .parse()
-                .map_err(|_| format!("expected a number, got {value:?}"))?,
-        ),
-        toml::Value::Boolean(_) => toml::Value::Boolean(
-            value
-                .trim()
-                .parse()
-                .map_err(|_| format!("expected true or false, got {value:?}"))?,
-        ),
+        toml::Value::Integer(_) => {
+            toml::Value::Integer(t.parse().map_err(|_| wrong("an integer"))?)
+        }
+        toml::Value::Float(_) => toml::Value::Float(t.parse().map_err(|_| wrong("a number"))?),
+        toml::Value::Boolean(_) => {
+            toml::Value::Boolean(t.parse().map_err(|_| wrong("true or false"))?)
+        }
         _ => toml::Value::String(value.to_string()),
     })
 }

@@ -5,9 +5,28 @@
 use std::io::Read;
 use std::path::PathBuf;
 
+/// Why a download failed.
+#[derive(Debug, thiserror::Error)]
+pub enum DownloadError {
+    #[error("download of {url} failed: {source}")]
+    Request {
+        url: String,
+        #[source]
+        source: Box<ureq::Error>,
+    },
+    #[error("download of {url} broke off: {source}")]
+    Read {
+        url: String,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{url} is larger than {max} bytes")]
+    TooLarge { url: String, max: u64 },
+}
+
 /// Blocking GET of the whole body, refusing more than `max_bytes`, honouring
 /// `HTTPS_PROXY`/`ALL_PROXY`.
-pub fn download(url: &str, max_bytes: u64) -> Result<Vec<u8>, String> {
+pub fn download(url: &str, max_bytes: u64) -> Result<Vec<u8>, DownloadError> {
     use std::time::Duration;
     let mut builder = ureq::AgentBuilder::new();
     if let Some(tls) = tls_config() {
@@ -19,17 +38,23 @@ pub fn download(url: &str, max_bytes: u64) -> Result<Vec<u8>, String> {
         .try_proxy_from_env(true)
         .build();
     tracing::info!(url, "downloading");
-    let resp = agent
-        .get(url)
-        .call()
-        .map_err(|e| format!("download of {url} failed: {e}"))?;
+    let resp = agent.get(url).call().map_err(|e| DownloadError::Request {
+        url: url.to_string(),
+        source: Box::new(e),
+    })?;
     let mut data = Vec::new();
     resp.into_reader()
         .take(max_bytes + 1)
         .read_to_end(&mut data)
-        .map_err(|e| format!("download of {url} broke off: {e}"))?;
+        .map_err(|e| DownloadError::Read {
+            url: url.to_string(),
+            source: e,
+        })?;
     if data.len() as u64 > max_bytes {
-        return Err(format!("{url} is larger than {max_bytes} bytes"));
+        return Err(DownloadError::TooLarge {
+            url: url.to_string(),
+            max: max_bytes,
+        });
     }
     Ok(data)
 }

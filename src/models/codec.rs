@@ -8,7 +8,7 @@
 use super::taesd::Taesd;
 use super::unet::UnetConfig;
 use super::vae::AutoencoderKl;
-use super::{ModelError, Result};
+use super::{ConfigIssue, ModelError, Result};
 use candle_core::{DType, Device, Tensor};
 use std::path::Path;
 
@@ -179,23 +179,25 @@ impl Codec {
 
     /// Side of the latent of a square image of side `image_side`, or why that side is not
     /// accepted (autoencoders need a multiple of their downsampling factor).
-    pub fn latent_side(&self, image_side: usize) -> std::result::Result<usize, String> {
+    pub fn latent_side(&self, image_side: usize) -> std::result::Result<usize, ConfigIssue> {
         let down = match self {
             Codec::Vae(v) => v.config.downscale(),
             Codec::Taesd(t) => t.config.downscale(),
             Codec::Pixel(p) => {
                 return if image_side == 0 {
-                    Err("image size must be positive".into())
+                    Err(ConfigIssue::Inconsistent(
+                        "image size must be positive".into(),
+                    ))
                 } else {
                     Ok(p.size)
                 };
             }
         };
         if image_side == 0 || image_side % down != 0 {
-            return Err(format!(
+            return Err(ConfigIssue::Inconsistent(format!(
                 "image size {image_side} must be a positive multiple of the {}'s downsampling {down}",
                 self.kind().as_str().to_uppercase()
-            ));
+            )));
         }
         Ok(image_side / down)
     }

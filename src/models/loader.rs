@@ -27,16 +27,35 @@ impl Precision {
     }
 }
 
+/// A precision name that is none of f32, f16, bf16.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("unknown precision {0:?} (f32, f16, bf16)")]
+pub struct UnknownPrecision(pub String);
+
 impl std::str::FromStr for Precision {
-    type Err = String;
-    fn from_str(s: &str) -> std::result::Result<Self, String> {
+    type Err = UnknownPrecision;
+    fn from_str(s: &str) -> std::result::Result<Self, UnknownPrecision> {
         match s.to_ascii_lowercase().as_str() {
             "f32" | "fp32" => Ok(Self::F32),
             "f16" | "fp16" => Ok(Self::F16),
             "bf16" => Ok(Self::Bf16),
-            other => Err(format!("unknown precision {other:?} (f32, f16, bf16)")),
+            other => Err(UnknownPrecision(other.to_string())),
         }
     }
+}
+
+/// Why a device setting cannot be used.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum DeviceError {
+    /// Not a device name.
+    #[error("unknown device {0:?} (expected cpu, cuda or cuda:N)")]
+    Unknown(String),
+    /// A CUDA device in a build without the `cuda` feature.
+    #[error(
+        "device {0} needs a build with CUDA support: cargo build --release --features cuda \
+         (see docs/MODELS.md)"
+    )]
+    NotBuilt(ComputeDevice),
 }
 
 /// Where the models run: `cpu` (the default) or `cuda` / `cuda:N`, a CUDA GPU, in builds with
@@ -54,20 +73,17 @@ pub enum ComputeDevice {
 impl ComputeDevice {
     /// Whether this build can open the device: always for the CPU; for CUDA only with the
     /// `cuda` feature (whether a GPU is present is known only when [`Self::open`] tries).
-    pub fn check_built(self) -> std::result::Result<(), String> {
+    pub fn check_built(self) -> std::result::Result<(), DeviceError> {
         match self {
             ComputeDevice::Cpu => Ok(()),
             ComputeDevice::Cuda(_) if cfg!(feature = "cuda") => Ok(()),
-            ComputeDevice::Cuda(_) => Err(format!(
-                "device {self} needs a build with CUDA support: \
-                 cargo build --release --features cuda (see docs/MODELS.md)"
-            )),
+            ComputeDevice::Cuda(_) => Err(DeviceError::NotBuilt(self)),
         }
     }
 
     /// Parses `s` and refuses a device this build cannot open ([`Self::check_built`]): what a
     /// setting or a flag naming the device should accept.
-    pub fn parse_built(s: &str) -> std::result::Result<Self, String> {
+    pub fn parse_built(s: &str) -> std::result::Result<Self, DeviceError> {
         let d: Self = s.parse()?;
         d.check_built()?;
         Ok(d)
@@ -75,12 +91,11 @@ impl ComputeDevice {
 
     /// Opens the candle device.
     pub fn open(self) -> Result<Device> {
-        self.check_built()
-            .map_err(|reason| ModelError::Unsupported {
-                component: "device",
-                path: self.to_string(),
-                reason,
-            })?;
+        self.check_built().map_err(|e| ModelError::Unsupported {
+            component: "device",
+            path: self.to_string(),
+            reason: e.to_string(),
+        })?;
         match self {
             ComputeDevice::Cpu => Ok(Device::Cpu),
             ComputeDevice::Cuda(n) => Device::new_cuda(n).map_err(|e| ModelError::Unsupported {
@@ -102,8 +117,8 @@ impl std::fmt::Display for ComputeDevice {
 }
 
 impl std::str::FromStr for ComputeDevice {
-    type Err = String;
-    fn from_str(s: &str) -> std::result::Result<Self, String> {
+    type Err = DeviceError;
+    fn from_str(s: &str) -> std::result::Result<Self, DeviceError> {
         let t = s.trim().to_ascii_lowercase();
         match t.as_str() {
             "cpu" => Ok(Self::Cpu),
@@ -112,14 +127,14 @@ impl std::str::FromStr for ComputeDevice {
                 .strip_prefix("cuda:")
                 .and_then(|n| n.parse().ok())
                 .map(Self::Cuda)
-                .ok_or_else(|| format!("unknown device {s:?} (expected cpu, cuda or cuda:N)")),
+                .ok_or_else(|| DeviceError::Unknown(s.to_string())),
         }
     }
 }
 
 impl TryFrom<String> for ComputeDevice {
-    type Error = String;
-    fn try_from(s: String) -> std::result::Result<Self, String> {
+    type Error = DeviceError;
+    fn try_from(s: String) -> std::result::Result<Self, DeviceError> {
         s.parse()
     }
 }
@@ -310,16 +325,16 @@ fn check_safetensors(path: &Path) -> Result<()> {
 pub fn load_autoencoder<C: DeserializeOwned, M>(
     dir: &Path,
     component: &'static str,
-    validate: impl FnOnce(&C) -> std::result::Result<(), String>,
+    validate: impl FnOnce(&C) -> std::result::Result<(), super::ConfigIssue>,
     (precision, device): (Precision, &Device),
     build: impl FnOnce(VarBuilder<'static>, C) -> candle_core::Result<M>,
 ) -> Result<M> {
     let cfg_path = dir.join("config.json");
     let cfg: C = read_config(&cfg_path)?;
-    validate(&cfg).map_err(|reason| ModelError::Unsupported {
+    validate(&cfg).map_err(|e| ModelError::Unsupported {
         component,
         path: cfg_path.display().to_string(),
-        reason,
+        reason: e.to_string(),
     })?;
     let w = find_weights(dir, UNET_WEIGHTS)?;
     let vb = var_builder(&w, precision.dtype(), device)?;
@@ -530,7 +545,7 @@ mod tests {
         }
         for bad in ["", "tpu", "cuda:", "cuda:x", "cuda:-1"] {
             let e = bad.parse::<ComputeDevice>().unwrap_err();
-            assert!(e.contains("cpu, cuda or cuda:N"), "{bad}: {e}");
+            assert!(e.to_string().contains("cpu, cuda or cuda:N"), "{bad}: {e}");
         }
         let json = serde_json::to_string(&ComputeDevice::Cuda(2)).unwrap();
         assert_eq!(json, "\"cuda:2\"");
@@ -547,7 +562,7 @@ mod tests {
         assert!(ComputeDevice::Cpu.open().unwrap().is_cpu());
         if !cfg!(feature = "cuda") {
             let e = ComputeDevice::Cuda(0).check_built().unwrap_err();
-            assert!(e.contains("--features cuda"), "{e}");
+            assert!(e.to_string().contains("--features cuda"), "{e}");
             assert!(matches!(
                 ComputeDevice::Cuda(0).open(),
                 Err(ModelError::Unsupported { .. })

@@ -33,7 +33,9 @@ pub mod taesd;
 pub mod unet;
 pub mod vae;
 
-pub use loader::{ComputeDevice, LoadOptions, ModelSource, Precision};
+pub use loader::{
+    ComputeDevice, DeviceError, LoadOptions, ModelSource, Precision, UnknownPrecision,
+};
 pub use pipeline::{ModelHints, StableDiffusion};
 
 /// Errors of the models layer.
@@ -91,6 +93,22 @@ pub enum ModelError {
 }
 
 pub type Result<T> = std::result::Result<T, ModelError>;
+
+/// Why a model config cannot run here (what [`ModelError::Unsupported`] and
+/// [`ModelError::Config`] report as their reason).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum ConfigIssue {
+    /// A setting this implementation does not run, with the value the config gives it.
+    #[error("{setting}{} is not supported", value.as_deref().map(|v| format!(" {v}")).unwrap_or_default())]
+    Unsupported {
+        setting: &'static str,
+        value: Option<String>,
+    },
+    /// Settings that cannot hold together: an empty list, lengths or divisibility that do not
+    /// agree, a number outside its range.
+    #[error("{0}")]
+    Inconsistent(String),
+}
 
 /// The dims of `latents`, or an error unless it is `[b, channels, h, w]` (`model` names the
 /// model that expects it).

@@ -8,7 +8,7 @@ use super::scheduler::{PredictionType, Sampler, SamplerKind, SchedulerConfig, sp
 use super::taesd::Taesd;
 use super::unet::{Unet, UnetConfig};
 use super::vae::{AutoencoderKl, VaeConfig};
-use super::{ModelError, Result};
+use super::{ConfigIssue, ModelError, Result};
 use crate::models::serde_defaults::yes;
 use candle_core::{DType, Device, Tensor};
 use std::path::Path;
@@ -54,9 +54,9 @@ pub fn load_vae(dir: &Path, precision: Precision, device: &Device) -> Result<Aut
 pub fn load_scheduler(dir: &Path) -> Result<SchedulerConfig> {
     let p = dir.join("scheduler_config.json");
     let cfg: SchedulerConfig = loader::read_config(&p)?;
-    cfg.alphas_cumprod().map_err(|reason| ModelError::Config {
+    cfg.alphas_cumprod().map_err(|e| ModelError::Config {
         path: p.display().to_string(),
-        reason,
+        reason: e.to_string(),
     })?;
     Ok(cfg)
 }
@@ -294,12 +294,10 @@ impl StableDiffusion {
                 unet.config.in_channels
             )));
         }
-        let alphas_cumprod = scheduler
-            .alphas_cumprod()
-            .map_err(|reason| ModelError::Config {
-                path: "scheduler_config.json".into(),
-                reason,
-            })?;
+        let alphas_cumprod = scheduler.alphas_cumprod().map_err(|e| ModelError::Config {
+            path: "scheduler_config.json".into(),
+            reason: e.to_string(),
+        })?;
         Ok(Self {
             text: None,
             unet,
@@ -365,7 +363,7 @@ impl StableDiffusion {
 
     /// Side of the latent for a square image of side `image_side` (SD: `image_side / 8`; pixel
     /// space: the UNet's `sample_size`).
-    pub fn latent_side(&self, image_side: usize) -> std::result::Result<usize, String> {
+    pub fn latent_side(&self, image_side: usize) -> std::result::Result<usize, ConfigIssue> {
         self.codec.latent_side(image_side)
     }
 

@@ -1,6 +1,6 @@
 //! Noise schedules from `scheduler/scheduler_config.json` and the DDIM / Euler samplers.
 
-use super::{ModelError, Result};
+use super::{ConfigIssue, ModelError, Result};
 use crate::models::serde_defaults::num;
 use candle_core::Tensor;
 use serde::Deserialize;
@@ -74,12 +74,12 @@ impl SchedulerConfig {
     }
 
     /// `ᾱ_t` for `t = 0..num_train_timesteps`.
-    pub fn alphas_cumprod(&self) -> std::result::Result<Vec<f64>, String> {
+    pub fn alphas_cumprod(&self) -> std::result::Result<Vec<f64>, ConfigIssue> {
         let n = self.num_train_timesteps;
         if !(2..=100_000).contains(&n) {
-            return Err(format!(
+            return Err(ConfigIssue::Inconsistent(format!(
                 "num_train_timesteps must be in 2..=100000, got {n}"
-            ));
+            )));
         }
         let lin = |a: f64, b: f64| -> Vec<f64> {
             (0..n)
@@ -88,10 +88,10 @@ impl SchedulerConfig {
         };
         let mut betas = if let Some(b) = &self.trained_betas {
             if b.len() != n {
-                return Err(format!(
+                return Err(ConfigIssue::Inconsistent(format!(
                     "trained_betas has {} entries, expected {n}",
                     b.len()
-                ));
+                )));
             }
             b.clone()
         } else {
@@ -115,7 +115,12 @@ impl SchedulerConfig {
                         })
                         .collect()
                 }
-                other => return Err(format!("beta_schedule {other:?} is not supported")),
+                other => {
+                    return Err(ConfigIssue::Unsupported {
+                        setting: "beta_schedule",
+                        value: Some(format!("{other:?}")),
+                    });
+                }
             }
         };
         let mut ac = Vec::with_capacity(n);
@@ -180,7 +185,7 @@ impl Sampler {
             path: "scheduler_config.json".into(),
             reason: r,
         };
-        let ac = cfg.alphas_cumprod().map_err(bad)?;
+        let ac = cfg.alphas_cumprod().map_err(|e| bad(e.to_string()))?;
         if cfg.thresholding {
             return Err(bad(
                 "thresholding (dynamic x0 thresholding) is not supported".into(),

@@ -4,7 +4,7 @@
 
 use super::loader::{self, Precision};
 use super::nn::{Conv2d, add_relu, relu_backward};
-use super::{ModelError, Result};
+use super::{ConfigIssue, ModelError, Result};
 use crate::models::serde_defaults::num;
 use candle_core::{Device, Tensor};
 use candle_nn::VarBuilder;
@@ -53,28 +53,39 @@ fn nearest() -> String {
 }
 
 impl TaesdConfig {
-    pub fn validate(&self) -> std::result::Result<(), String> {
+    pub fn validate(&self) -> std::result::Result<(), ConfigIssue> {
         if self.act_fn != "relu" {
-            return Err(format!("act_fn {:?} (only relu)", self.act_fn));
+            return Err(ConfigIssue::Unsupported {
+                setting: "act_fn",
+                value: Some(format!("{:?} (only relu)", self.act_fn)),
+            });
         }
         if self.upsample_fn != "nearest" || self.upsampling_scaling_factor != 2 {
-            return Err("only nearest ×2 upsampling is supported".into());
+            return Err(ConfigIssue::Inconsistent(
+                "only nearest ×2 upsampling is supported".into(),
+            ));
         }
         if self.encoder_block_out_channels.len() != self.num_encoder_blocks.len()
             || self.decoder_block_out_channels.len() != self.num_decoder_blocks.len()
             || self.encoder_block_out_channels.is_empty()
             || self.decoder_block_out_channels.is_empty()
         {
-            return Err("block channel / block count lists differ in length or are empty".into());
+            return Err(ConfigIssue::Inconsistent(
+                "block channel / block count lists differ in length or are empty".into(),
+            ));
         }
         for w in self.encoder_block_out_channels.windows(2) {
             if w[0] != w[1] {
-                return Err("encoder blocks with different widths are not supported".into());
+                return Err(ConfigIssue::Inconsistent(
+                    "encoder blocks with different widths are not supported".into(),
+                ));
             }
         }
         for w in self.decoder_block_out_channels.windows(2) {
             if w[0] != w[1] {
-                return Err("decoder blocks with different widths are not supported".into());
+                return Err(ConfigIssue::Inconsistent(
+                    "decoder blocks with different widths are not supported".into(),
+                ));
             }
         }
         Ok(())

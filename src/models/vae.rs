@@ -5,7 +5,7 @@
 //! [`super::nn`] (no weight gradients are ever formed).
 
 use super::nn::{Conv2d, Downsample, GroupNorm, ResnetBlock, SpatialSelfAttention};
-use super::{ModelError, Result};
+use super::{ConfigIssue, ModelError, Result};
 use crate::models::serde_defaults::{num, silu, yes};
 use candle_core::Tensor;
 use candle_nn::VarBuilder;
@@ -49,33 +49,44 @@ fn default_scaling() -> f64 {
 
 impl VaeConfig {
     /// Rejects configs this implementation cannot run, with the reason.
-    pub fn validate(&self) -> std::result::Result<(), String> {
+    pub fn validate(&self) -> std::result::Result<(), ConfigIssue> {
         if self.block_out_channels.is_empty() {
-            return Err("block_out_channels is empty".into());
+            return Err(ConfigIssue::Inconsistent(
+                "block_out_channels is empty".into(),
+            ));
         }
         if self.act_fn != "silu" {
-            return Err(format!("act_fn {:?} (only \"silu\")", self.act_fn));
+            return Err(ConfigIssue::Unsupported {
+                setting: "act_fn",
+                value: Some(format!("{:?} (only \"silu\")", self.act_fn)),
+            });
         }
         if let Some(t) = self
             .down_block_types
             .iter()
             .find(|t| t.as_str() != "DownEncoderBlock2D")
         {
-            return Err(format!("down block type {t:?}"));
+            return Err(ConfigIssue::Unsupported {
+                setting: "down_block_types",
+                value: Some(format!("{t:?}")),
+            });
         }
         if let Some(t) = self
             .up_block_types
             .iter()
             .find(|t| t.as_str() != "UpDecoderBlock2D")
         {
-            return Err(format!("up block type {t:?}"));
+            return Err(ConfigIssue::Unsupported {
+                setting: "up_block_types",
+                value: Some(format!("{t:?}")),
+            });
         }
         for &c in &self.block_out_channels {
             if self.norm_num_groups == 0 || c % self.norm_num_groups != 0 {
-                return Err(format!(
+                return Err(ConfigIssue::Inconsistent(format!(
                     "{c} channels not divisible by norm_num_groups {}",
                     self.norm_num_groups
-                ));
+                )));
             }
         }
         Ok(())

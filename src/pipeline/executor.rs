@@ -181,17 +181,11 @@ impl Executor for DefaultExecutor {
             }
         };
         let image = match (&spec.image, spec.kind) {
-            (Some(bytes), JobKind::Vectorize) => Some(
-                Image::decode(bytes)
-                    .map_err(|e| PipelineError::InvalidInput(format!("image: {e}")))?,
-            ),
+            (Some(bytes), JobKind::Vectorize) => Some(Image::decode(bytes)?),
             _ => None,
         };
         let svg = match &spec.svg {
-            Some(svg) => Some(
-                crate::svg::from_svg(svg)
-                    .map_err(|e| PipelineError::InvalidInput(format!("svg: {e}")))?,
-            ),
+            Some(svg) => Some(crate::svg::from_svg(svg)?),
             None => None,
         };
         let input = RunInput {

@@ -22,7 +22,7 @@ mod text;
 mod vectorize;
 
 pub use context::{Executor, JobContext, JobOutput};
-pub use error::PipelineError;
+pub use error::{FailureCode, PipelineError};
 pub use executor::{DefaultExecutor, RunInput, request_of};
 pub use models::{
     DEFAULT_MODEL_ENV, EMBEDDED_MODEL, EncoderChoice, ModelDirs, Models, default_model_dir,

@@ -3,7 +3,7 @@
 //! (`detail.resumed_from_stage`), ending with the SVG an uninterrupted run gives.
 
 use super::context::{resume_as, save_checkpoint};
-use super::text::{MethodOutput, failed};
+use super::text::MethodOutput;
 use super::{JobContext, PipelineError};
 use crate::image::Image;
 use crate::progress::{CancelToken, ProgressSink};
@@ -74,13 +74,7 @@ pub fn run_vectorize(
         cancel,
         resume,
         hook.as_ref().map(|h| h as &dyn live::LiveCheckpoint),
-    )
-    .map_err(|e| match e {
-        live::LiveError::Cancelled => PipelineError::Cancelled,
-        live::LiveError::Target(m) | live::LiveError::Config(m) => PipelineError::InvalidInput(m),
-        live::LiveError::Checkpoint(m) => PipelineError::Transient(m),
-        other => failed("LIVE", other),
-    })?;
+    )?;
     let svg = crate::vector::write_svg(&r.scene, &cfg.colors);
     let mut detail = json!({
         "method": "live",

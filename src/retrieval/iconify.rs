@@ -2,8 +2,18 @@
 //! SVG document, rendered with resvg to a square RGB image over white.
 
 use crate::image::Image;
+use crate::svg::RenderError;
 use resvg::tiny_skia;
 use serde_json::Value;
+
+/// Why a text is not an iconify JSON set.
+#[derive(Debug, thiserror::Error)]
+pub enum IconSetError {
+    #[error("not an iconify JSON set: {0}")]
+    Json(#[source] serde_json::Error),
+    #[error("not an iconify JSON set: no \"icons\" object")]
+    NoIcons,
+}
 
 /// One icon of a set: its name and a standalone SVG document.
 #[derive(Debug, Clone, PartialEq)]
@@ -18,13 +28,12 @@ fn num(v: &Value, key: &str, default: f64) -> f64 {
 
 /// The icons of an iconify JSON set, sorted by name (`aliases` are skipped, as are icons without
 /// a `body`). Each is `<svg viewBox="left top w h">body</svg>` with the set's default size.
-pub fn icons(set_json: &str) -> Result<Vec<IconSvg>, String> {
-    let data: Value =
-        serde_json::from_str(set_json).map_err(|e| format!("not an iconify JSON set: {e}"))?;
+pub fn icons(set_json: &str) -> Result<Vec<IconSvg>, IconSetError> {
+    let data: Value = serde_json::from_str(set_json).map_err(IconSetError::Json)?;
     let icons = data
         .get("icons")
         .and_then(Value::as_object)
-        .ok_or("not an iconify JSON set: no \"icons\" object")?;
+        .ok_or(IconSetError::NoIcons)?;
     let (dw, dh) = (num(&data, "width", 16.0), num(&data, "height", 16.0));
     let mut out: Vec<IconSvg> = icons
         .iter()
@@ -46,9 +55,9 @@ pub fn icons(set_json: &str) -> Result<Vec<IconSvg>, String> {
 
 /// Renders an icon fitted and centred in a `size x size` square over white, as 8-bit RGB;
 /// `Ok(None)` when nothing is drawn (all white).
-pub fn render_rgb8(svg: &str, size: u32) -> Result<Option<Vec<u8>>, String> {
+pub fn render_rgb8(svg: &str, size: u32) -> Result<Option<Vec<u8>>, RenderError> {
     let tree = crate::svg::parse_usvg(svg)?;
-    let mut pixmap = tiny_skia::Pixmap::new(size, size).ok_or("bad render size")?;
+    let mut pixmap = crate::svg::pixmap(size, size)?;
     pixmap.fill(tiny_skia::Color::WHITE);
     let s = tree.size();
     let k = size as f32 / s.width().max(s.height());
@@ -71,7 +80,7 @@ pub fn render_rgb8(svg: &str, size: u32) -> Result<Option<Vec<u8>>, String> {
 }
 
 /// [`render_rgb8`] as an opaque [`Image`] (a blank icon renders white).
-pub fn render_image(svg: &str, size: u32) -> Result<Image, String> {
+pub fn render_image(svg: &str, size: u32) -> Result<Image, RenderError> {
     let rgb = render_rgb8(svg, size)?.unwrap_or_else(|| vec![255; (3 * size * size) as usize]);
     let mut im = Image::new(size, size);
     for (dst, px) in im.data.chunks_exact_mut(4).zip(rgb.chunks_exact(3)) {

@@ -259,11 +259,11 @@ impl IconIndex {
         let path = set_path(&self.dir, &icon.set, &icon.version);
         let text = std::fs::read_to_string(&path).map_err(|e| RetrievalError::file(&path, e))?;
         let svg = iconify::icons(&text)
-            .map_err(err)?
+            .map_err(|e| err(e.to_string()))?
             .into_iter()
             .find(|i| i.name == icon.name)
             .ok_or_else(|| err("not in its set".into()))?;
-        iconify::render_image(&svg.svg, size).map_err(err)
+        iconify::render_image(&svg.svg, size).map_err(|e| err(e.to_string()))
     }
 }
 

@@ -3,6 +3,7 @@
 
 use super::index::{IconIndex, set_path};
 use super::{RetrievalError, iconify, is_held_out, names};
+use crate::models::bert::BertError;
 use crate::models::bert::weights::{env_path, sha256_hex};
 use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, HashSet};
@@ -126,14 +127,24 @@ impl RetrievalLocations {
     }
 }
 
+/// Why an npm tarball holds no readable `package/icons.json`.
+#[derive(Debug, thiserror::Error)]
+pub enum TarballError {
+    #[error("not a tar.gz: {0}")]
+    NotTarGz(#[source] std::io::Error),
+    #[error("bad tar entry: {0}")]
+    Entry(#[source] std::io::Error),
+    #[error("package/icons.json: {0}")]
+    IconsJson(#[source] std::io::Error),
+    #[error("no package/icons.json in the tarball")]
+    NoIconsJson,
+}
+
 /// `package/icons.json` of an npm tarball (gzip + tar).
-pub fn icons_json_from_tgz(bytes: &[u8]) -> Result<String, String> {
+pub fn icons_json_from_tgz(bytes: &[u8]) -> Result<String, TarballError> {
     let mut archive = tar::Archive::new(flate2::read::GzDecoder::new(bytes));
-    for entry in archive
-        .entries()
-        .map_err(|e| format!("not a tar.gz: {e}"))?
-    {
-        let mut entry = entry.map_err(|e| format!("bad tar entry: {e}"))?;
+    for entry in archive.entries().map_err(TarballError::NotTarGz)? {
+        let mut entry = entry.map_err(TarballError::Entry)?;
         let is_icons = entry
             .path()
             .map(|p| p == Path::new("package/icons.json"))
@@ -143,11 +154,11 @@ pub fn icons_json_from_tgz(bytes: &[u8]) -> Result<String, String> {
             (&mut entry)
                 .take(MAX_ICONS_JSON_BYTES)
                 .read_to_string(&mut text)
-                .map_err(|e| format!("package/icons.json: {e}"))?;
+                .map_err(TarballError::IconsJson)?;
             return Ok(text);
         }
     }
-    Err("no package/icons.json in the tarball".into())
+    Err(TarballError::NoIconsJson)
 }
 
 /// The tarball of `p`: from `VF_ICONS_DIR` when it is there, else downloaded (when allowed);
@@ -178,7 +189,9 @@ fn fetch_tarball(
                 p.set, p.version
             )));
         }
-        None => crate::fetch::download(&p.tarball, MAX_TARBALL_BYTES).map_err(err)?,
+        None => {
+            crate::fetch::download(&p.tarball, MAX_TARBALL_BYTES).map_err(|e| err(e.to_string()))?
+        }
     };
     let got = sha256_hex(&bytes);
     if !got.eq_ignore_ascii_case(&p.sha256) {
@@ -192,7 +205,7 @@ fn fetch_tarball(
 }
 
 /// Embeds captions: L2-normalised vectors, one per caption, all of one dimension.
-pub type Embedder<'a> = dyn FnMut(&[&str]) -> Result<Vec<Vec<f32>>, String> + 'a;
+pub type Embedder<'a> = dyn FnMut(&[&str]) -> Result<Vec<Vec<f32>>, BertError> + 'a;
 
 /// Installs (or finds) the index of `model_dir`'s pinned icon sets. `vocab` is the MiniLM
 /// WordPiece vocabulary text (to split names without separators, as the training data does);
@@ -223,9 +236,9 @@ pub fn install(
             Ok(t) => t,
             Err(_) => {
                 let bytes = fetch_tarball(p, loc, allow_download)?;
-                let t = icons_json_from_tgz(&bytes).map_err(|reason| RetrievalError::Package {
+                let t = icons_json_from_tgz(&bytes).map_err(|e| RetrievalError::Package {
                     set: p.set.clone(),
-                    reason,
+                    reason: e.to_string(),
                 })?;
                 let parent = path.parent().unwrap_or(&dir);
                 std::fs::create_dir_all(parent).map_err(|e| RetrievalError::file(parent, e))?;
@@ -233,9 +246,9 @@ pub fn install(
                 t
             }
         };
-        let icons = iconify::icons(&text).map_err(|reason| RetrievalError::Package {
+        let icons = iconify::icons(&text).map_err(|e| RetrievalError::Package {
             set: p.set.clone(),
-            reason,
+            reason: e.to_string(),
         })?;
         let all: HashSet<&str> = icons.iter().map(|i| i.name.as_str()).collect();
         let seg = Some(&vocab).filter(|_| names::needs_segmentation(all.iter().copied()));
@@ -259,7 +272,7 @@ pub fn install(
     let mut dim = 0usize;
     for chunk in order.chunks(64) {
         let refs: Vec<&str> = chunk.iter().map(|&i| list[i].as_str()).collect();
-        let vecs = embed(&refs).map_err(RetrievalError::Embed)?;
+        let vecs = embed(&refs).map_err(RetrievalError::Encoder)?;
         if vecs.len() != chunk.len() {
             return Err(RetrievalError::Embed(format!(
                 "{} embeddings for {} captions",
@@ -318,7 +331,7 @@ mod tests {
         "sun":{"body":"<circle cx=\"8\" cy=\"8\" r=\"7\" fill=\"#fd0\"/>"}}}"##;
 
     /// A deterministic toy embedder: one axis per known word.
-    fn toy_embed(texts: &[&str]) -> Result<Vec<Vec<f32>>, String> {
+    fn toy_embed(texts: &[&str]) -> Result<Vec<Vec<f32>>, BertError> {
         Ok(texts
             .iter()
             .map(|t| {
@@ -383,7 +396,9 @@ mod tests {
         assert!(centre[0] > 0.8 && centre[1] < 0.1, "{centre:?}");
         // loads back through the locations; a second install does not rebuild
         assert_eq!(loc.load(&model).unwrap().unwrap().icon_count(), 3);
-        let mut never = |_: &[&str]| -> Result<Vec<Vec<f32>>, String> { Err("rebuilt".into()) };
+        let mut never = |_: &[&str]| -> Result<Vec<Vec<f32>>, BertError> {
+            Err(BertError::Input("rebuilt".into()))
+        };
         assert!(install(&model, &loc, false, "", &mut never).is_ok());
         let _ = std::fs::remove_dir_all(&root);
     }

@@ -45,6 +45,9 @@ pub enum RetrievalError {
     Package { set: String, reason: String },
     #[error("text embedding: {0}")]
     Embed(String),
+    /// The text encoder failed while embedding captions.
+    #[error("text embedding: {0}")]
+    Encoder(#[source] crate::models::bert::BertError),
     #[error("icon {set}:{name}: {reason}")]
     Icon {
         set: String,

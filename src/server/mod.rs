@@ -175,7 +175,10 @@ pub async fn run_node(
     shutdown: impl Future<Output = ()> + Send + 'static,
     role: Role,
 ) -> Result<(), ServerError> {
-    let location = cfg.database.location().map_err(ServerError::Config)?;
+    let location = cfg
+        .database
+        .location()
+        .map_err(|e| ServerError::Config(e.to_string()))?;
     let store = Store::connect(&location, cfg.database.max_connections).await?;
     let hub = Hub::new();
     let metrics = Arc::new(Metrics::default());

@@ -254,7 +254,7 @@ pub struct ProgressView {
 
 #[derive(Serialize)]
 pub struct ErrorView {
-    pub code: String,
+    pub code: crate::store::FailureCode,
     pub message: String,
 }
 
@@ -416,8 +416,8 @@ impl JobView {
             updated_at: rfc3339(Some(row.updated_at)),
             queued_ms: row.started_at.map(|s| s - row.created_at),
             run_ms: row.started_at.zip(row.finished_at).map(|(s, f)| f - s),
-            error: row.error_code.as_ref().map(|code| ErrorView {
-                code: code.clone(),
+            error: row.error_code.map(|code| ErrorView {
+                code,
                 message: row.error_message.clone().unwrap_or_default(),
             }),
             params: spec.map(|s| ParamsView {

@@ -29,16 +29,29 @@ pub enum DbLocation {
     Postgres(String),
 }
 
+/// Why a database location does not name a database.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum LocationError {
+    #[error("the database location is empty")]
+    Empty,
+    #[error("invalid PostgreSQL URL: {0}")]
+    Url(#[source] url::ParseError),
+    #[error("a sqlite:// location takes a file path and no options")]
+    SqliteOptions,
+    #[error("unsupported database URL scheme in {0:?}: use postgres://… or a SQLite file path")]
+    Scheme(String),
+}
+
 impl DbLocation {
     /// `postgres://…` or `postgresql://…` is PostgreSQL; `sqlite://PATH`, `sqlite:PATH` or a plain
     /// path is a SQLite file.
-    pub fn parse(s: &str) -> Result<Self, String> {
+    pub fn parse(s: &str) -> Result<Self, LocationError> {
         let s = s.trim();
         if s.is_empty() {
-            return Err("the database location is empty".into());
+            return Err(LocationError::Empty);
         }
         if s.starts_with("postgres://") || s.starts_with("postgresql://") {
-            url::Url::parse(s).map_err(|e| format!("invalid PostgreSQL URL: {e}"))?;
+            url::Url::parse(s).map_err(LocationError::Url)?;
             return Ok(DbLocation::Postgres(s.to_string()));
         }
         if let Some(rest) = s
@@ -46,14 +59,13 @@ impl DbLocation {
             .or_else(|| s.strip_prefix("sqlite:"))
         {
             if rest.is_empty() || rest.contains('?') {
-                return Err("a sqlite:// location takes a file path and no options".into());
+                return Err(LocationError::SqliteOptions);
             }
             return Ok(DbLocation::Sqlite(PathBuf::from(rest)));
         }
         if s.contains("://") {
-            return Err(format!(
-                "unsupported database URL scheme in {:?}: use postgres://… or a SQLite file path",
-                s.split("://").next().unwrap_or_default()
+            return Err(LocationError::Scheme(
+                s.split("://").next().unwrap_or_default().to_string(),
             ));
         }
         Ok(DbLocation::Sqlite(PathBuf::from(s)))

@@ -1,15 +1,23 @@
-//! Typed columns: `JobStatus` and `JobKind` are stored as their lowercase names (TEXT with a
-//! CHECK constraint on both backends) and decoded into the enums, so a row holds a status and a
-//! kind, never a free string.
+//! Typed columns: `JobStatus`, `JobKind` and `FailureCode` are stored as their names (TEXT; a
+//! CHECK constraint on both backends for the first two) and decoded into the enums, so a row
+//! holds a status, a kind and a failure code, never a free string.
 
-use super::{JobKind, JobStatus};
+use super::{FailureCode, JobKind, JobStatus};
 use sqlx::encode::IsNull;
 use sqlx::error::BoxDynError;
 use sqlx::{Database, Decode, Encode, Type};
 
-/// Display and FromStr by the names of an enum with `ALL` and `as_str`, and its column impls for
-/// every backend whose `str` is TEXT.
-macro_rules! text_column {
+/// A name that is not one of an enum's stored names.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("unknown {what} {name:?}")]
+pub struct UnknownName {
+    /// What the name should have named (`status`, `job kind`).
+    pub what: &'static str,
+    pub name: String,
+}
+
+/// Display and FromStr by the names of an enum with `ALL` and `as_str`.
+macro_rules! named {
     ($ty:ty, $what:literal) => {
         impl std::fmt::Display for $ty {
             fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -18,16 +26,25 @@ macro_rules! text_column {
         }
 
         impl std::str::FromStr for $ty {
-            type Err = String;
-            fn from_str(s: &str) -> Result<Self, String> {
+            type Err = UnknownName;
+            fn from_str(s: &str) -> Result<Self, UnknownName> {
                 <$ty>::ALL
                     .iter()
                     .copied()
                     .find(|v| v.as_str() == s)
-                    .ok_or_else(|| format!(concat!("unknown ", $what, " {:?}"), s))
+                    .ok_or_else(|| UnknownName {
+                        what: $what,
+                        name: s.to_string(),
+                    })
             }
         }
+    };
+}
 
+/// The column impls of an enum with `as_str`, for every backend whose `str` is TEXT; `$parse`
+/// turns the stored text back into the enum.
+macro_rules! text_column {
+    ($ty:ty, $parse:expr) => {
         impl<DB: Database> Type<DB> for $ty
         where
             str: Type<DB>,
@@ -47,7 +64,8 @@ macro_rules! text_column {
         {
             fn decode(value: DB::ValueRef<'r>) -> Result<Self, BoxDynError> {
                 let text = <&'r str as Decode<'r, DB>>::decode(value)?;
-                Ok(text.parse::<$ty>()?)
+                let parse: fn(&str) -> Result<$ty, BoxDynError> = $parse;
+                parse(text)
             }
         }
 
@@ -67,5 +85,9 @@ macro_rules! text_column {
     };
 }
 
-text_column!(JobStatus, "status");
-text_column!(JobKind, "job kind");
+named!(JobStatus, "status");
+named!(JobKind, "job kind");
+text_column!(JobStatus, |s| Ok(s.parse::<JobStatus>()?));
+text_column!(JobKind, |s| Ok(s.parse::<JobKind>()?));
+// Leniently: a code an older version stored reads as what it means now.
+text_column!(FailureCode, |s| Ok(FailureCode::from_stored(s)));

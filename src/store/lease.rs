@@ -1,7 +1,7 @@
 //! The worker's side of the store: claiming jobs and every write fenced by the lease
 //! (`(lease_owner, attempts)`): heartbeats, progress, checkpoints, snapshots, and the outcome.
 
-use super::{AttemptOutcome, Heartbeat, JobRow, Lease, Store, StoreError, sql};
+use super::{AttemptOutcome, FailureCode, Heartbeat, JobRow, Lease, Store, StoreError, sql};
 
 impl Store {
     /// Finishes running jobs whose lease expired and that cannot be retried; returns them.
@@ -194,7 +194,7 @@ impl Store {
     pub async fn fail(
         &self,
         lease: &Lease,
-        code: &str,
+        code: FailureCode,
         message: &str,
         retry_at: Option<i64>,
         now: i64,

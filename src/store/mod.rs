@@ -11,10 +11,13 @@
 
 mod backend;
 mod columns;
+mod failure;
 mod lease;
 mod uploads;
 
-pub use backend::{Backend, DbLocation, create_test_database};
+pub use backend::{Backend, DbLocation, LocationError, create_test_database};
+pub use columns::UnknownName;
+pub use failure::FailureCode;
 pub use uploads::{NewUpload, UploadRow};
 
 use backend::sql;
@@ -143,7 +146,7 @@ pub struct JobRow {
     pub cancel_requested: i64,
     pub checkpoint: Option<String>,
     pub checkpoint_at: Option<i64>,
-    pub error_code: Option<String>,
+    pub error_code: Option<FailureCode>,
     pub error_message: Option<String>,
     pub created_at: i64,
     pub started_at: Option<i64>,

@@ -228,7 +228,7 @@ async fn lease_expiry_after_last_attempt_fails_job(b: Backend) {
     assert_eq!(reaped.len(), 1);
     let row = store.get_job(&job.id).await.unwrap().unwrap();
     assert_eq!(row.status, JobStatus::Failed);
-    assert_eq!(row.error_code.as_deref(), Some("lease_expired"));
+    assert_eq!(row.error_code, Some(FailureCode::LeaseExpired));
     assert_eq!(store.attempts(&job.id).await.unwrap()[0].outcome, "lost");
 }
 
@@ -251,7 +251,7 @@ async fn job_lost_max_lost_attempts_times_fails_as_poison(b: Backend) {
     assert_eq!(reaped.len(), 1);
     let row = store.get_job(&job.id).await.unwrap().unwrap();
     assert_eq!(row.status, JobStatus::Failed);
-    assert_eq!(row.error_code.as_deref(), Some("poison"));
+    assert_eq!(row.error_code, Some(FailureCode::Poison));
     assert_eq!(row.lost_attempts, 2);
     let outcomes: Vec<String> = store
         .attempts(&job.id)
@@ -269,7 +269,7 @@ async fn job_lost_max_lost_attempts_times_fails_as_poison(b: Backend) {
     assert!(store.claim("b", 700, 100).await.unwrap().is_none());
     store.reap_expired(700).await.unwrap();
     let row = store.get_job(&k.id).await.unwrap().unwrap();
-    assert_eq!(row.error_code.as_deref(), Some("poison"));
+    assert_eq!(row.error_code, Some(FailureCode::Poison));
 }
 
 async fn retry_with_backoff_then_fail(b: Backend) {
@@ -281,7 +281,7 @@ async fn retry_with_backoff_then_fail(b: Backend) {
     let job = store.insert_job(&j, 0).await.unwrap().0;
     let (_, l1) = store.claim("a", 0, 1000).await.unwrap().unwrap();
     let row = store
-        .fail(&l1, "transient", "boom", Some(500), 10)
+        .fail(&l1, FailureCode::Transient, "boom", Some(500), 10)
         .await
         .unwrap()
         .unwrap();
@@ -292,7 +292,7 @@ async fn retry_with_backoff_then_fail(b: Backend) {
     );
     let (_, l2) = store.claim("a", 500, 1000).await.unwrap().unwrap();
     let row = store
-        .fail(&l2, "transient", "boom", None, 600)
+        .fail(&l2, FailureCode::Transient, "boom", None, 600)
         .await
         .unwrap()
         .unwrap();

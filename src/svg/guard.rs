@@ -72,14 +72,64 @@ impl Default for SvgLimits {
     }
 }
 
+/// Why untrusted SVG text was refused: which bound of [`SvgLimits`] it passed, or why it does
+/// not parse. Messages read after "the SVG …" ("is 3000000 bytes; at most …").
+#[derive(Debug, thiserror::Error)]
+pub enum SvgRejected {
+    #[error("is {bytes} bytes; at most {max} allowed")]
+    TooLarge { bytes: usize, max: usize },
+    #[error("declares a parameter entity, which is not allowed")]
+    ParameterEntity,
+    #[error("has a malformed entity declaration")]
+    MalformedEntity,
+    #[error("declares the external entity {0:?}, which is not allowed")]
+    ExternalEntity(String),
+    #[error("declares the entity {0:?} with markup or references in it, which is not allowed")]
+    EntityMarkup(String),
+    #[error("expands entities to more than {max} bytes")]
+    EntityExpansion { max: usize },
+    #[error("has more than {max} XML nodes")]
+    TooManyNodes { max: u32 },
+    /// Not well-formed XML.
+    #[error("{0}")]
+    Xml(#[source] roxmltree::Error),
+    /// Well-formed, but usvg cannot convert it.
+    #[error("{0}")]
+    Usvg(#[source] usvg::Error),
+    #[error("has {count} path numbers; at most {max} allowed")]
+    PathNumbers { count: usize, max: usize },
+    #[error("<{tag}> {attr} has the number {value}, outside ±{max}")]
+    Number {
+        tag: String,
+        attr: String,
+        value: f64,
+        max: f64,
+    },
+    #[error("nests elements (through references) more than {max} deep")]
+    TooDeep { max: usize },
+    #[error("has references that form a cycle")]
+    Cycle,
+    #[error("expands (through references and markers) to more than {max} elements")]
+    TooManyElements { max: u64 },
+    #[error("uses clip paths, masks, filters or patterns more than {max} times")]
+    TooManyLayers { max: u64 },
+    #[error("draws as far as {at} px, outside ±{range} px ({ratio} × the canvas size)")]
+    TooFar { at: f64, range: f64, ratio: f64 },
+    #[error("has a pattern tile of {side} px, over {range} px")]
+    PatternTile { side: f64, range: f64 },
+}
+
 /// Parses `text` within `limits`, then converts it with usvg (`opts`).
-pub fn parse(text: &str, limits: &SvgLimits, opts: &usvg::Options) -> Result<usvg::Tree, String> {
+pub fn parse(
+    text: &str,
+    limits: &SvgLimits,
+    opts: &usvg::Options,
+) -> Result<usvg::Tree, SvgRejected> {
     if text.len() > limits.max_bytes {
-        return Err(format!(
-            "is {} bytes; at most {} allowed",
-            text.len(),
-            limits.max_bytes
-        ));
+        return Err(SvgRejected::TooLarge {
+            bytes: text.len(),
+            max: limits.max_bytes,
+        });
     }
     check_entities(text, limits.max_bytes)?;
     let xml = roxmltree::ParsingOptions {
@@ -88,51 +138,45 @@ pub fn parse(text: &str, limits: &SvgLimits, opts: &usvg::Options) -> Result<usv
         ..Default::default()
     };
     let doc = roxmltree::Document::parse_with_options(text, xml).map_err(|e| match e {
-        roxmltree::Error::NodesLimitReached => {
-            format!("has more than {} XML nodes", limits.max_nodes)
-        }
-        e => e.to_string(),
+        roxmltree::Error::NodesLimitReached => SvgRejected::TooManyNodes {
+            max: limits.max_nodes,
+        },
+        e => SvgRejected::Xml(e),
     })?;
     check_document(&doc, limits)?;
-    let tree = usvg::Tree::from_xmltree(&doc, opts).map_err(|e| e.to_string())?;
+    let tree = usvg::Tree::from_xmltree(&doc, opts).map_err(SvgRejected::Usvg)?;
     check_extent(&tree, limits)?;
     Ok(tree)
 }
 
 /// Step 2: every `<!ENTITY` is a plain internal general entity, and all uses together expand to
 /// at most `max_bytes`.
-fn check_entities(text: &str, max_bytes: usize) -> Result<(), String> {
+fn check_entities(text: &str, max_bytes: usize) -> Result<(), SvgRejected> {
     let mut total = 0usize;
     let mut rest = text;
     while let Some(p) = rest.find("<!ENTITY") {
         rest = rest[p + "<!ENTITY".len()..].trim_start();
         if rest.starts_with('%') {
-            return Err("declares a parameter entity, which is not allowed".into());
+            return Err(SvgRejected::ParameterEntity);
         }
         let name_end = rest
             .find(|c: char| c.is_whitespace())
-            .ok_or("has a malformed entity declaration")?;
+            .ok_or(SvgRejected::MalformedEntity)?;
         let name = &rest[..name_end];
         rest = rest[name_end..].trim_start();
         let Some(quote) = rest.chars().next().filter(|c| *c == '"' || *c == '\'') else {
-            return Err(format!(
-                "declares the external entity {name:?}, which is not allowed"
-            ));
+            return Err(SvgRejected::ExternalEntity(name.to_string()));
         };
         let body = &rest[1..];
-        let end = body
-            .find(quote)
-            .ok_or("has a malformed entity declaration")?;
+        let end = body.find(quote).ok_or(SvgRejected::MalformedEntity)?;
         let value = &body[..end];
         if value.contains('&') || value.contains('<') || value.contains('%') {
-            return Err(format!(
-                "declares the entity {name:?} with markup or references in it, which is not allowed"
-            ));
+            return Err(SvgRejected::EntityMarkup(name.to_string()));
         }
         let uses = text.matches(&format!("&{name};")).count();
         total = total.saturating_add(uses.saturating_mul(value.len()));
         if total > max_bytes {
-            return Err(format!("expands entities to more than {max_bytes} bytes"));
+            return Err(SvgRejected::EntityExpansion { max: max_bytes });
         }
         rest = &body[end..];
     }
@@ -140,7 +184,7 @@ fn check_entities(text: &str, max_bytes: usize) -> Result<(), String> {
 }
 
 /// Steps 4–5, on the parsed XML.
-fn check_document(doc: &roxmltree::Document, limits: &SvgLimits) -> Result<(), String> {
+fn check_document(doc: &roxmltree::Document, limits: &SvgLimits) -> Result<(), SvgRejected> {
     let mut ids: HashMap<&str, Node> = HashMap::new();
     let mut path_numbers = 0usize;
     let mut uses_markers = false;
@@ -175,10 +219,10 @@ fn check_document(doc: &roxmltree::Document, limits: &SvgLimits) -> Result<(), S
         }
     }
     if path_numbers > limits.max_path_numbers {
-        return Err(format!(
-            "has {path_numbers} path numbers; at most {} allowed",
-            limits.max_path_numbers
-        ));
+        return Err(SvgRejected::PathNumbers {
+            count: path_numbers,
+            max: limits.max_path_numbers,
+        });
     }
     // Sheet rules may apply to any element: every element is charged each sheet reference.
     let sheet_targets: Vec<Node> = sheet_refs
@@ -225,14 +269,16 @@ fn skipped(name: &str) -> bool {
         || name.starts_with("aria-")
 }
 
-fn in_range(v: f64, limits: &SvgLimits, tag: &str, attr: &str) -> Result<(), String> {
+fn in_range(v: f64, limits: &SvgLimits, tag: &str, attr: &str) -> Result<(), SvgRejected> {
     if v.is_finite() && v.abs() <= limits.max_number {
         Ok(())
     } else {
-        Err(format!(
-            "<{tag}> {attr} has the number {v}, outside ±{}",
-            limits.max_number
-        ))
+        Err(SvgRejected::Number {
+            tag: tag.to_string(),
+            attr: attr.to_string(),
+            value: v,
+            max: limits.max_number,
+        })
     }
 }
 
@@ -267,8 +313,8 @@ fn href_target<'a, 'i>(
 fn scan_numbers(
     s: &str,
     path_like: bool,
-    mut f: impl FnMut(f64) -> Result<(), String>,
-) -> Result<usize, String> {
+    mut f: impl FnMut(f64) -> Result<(), SvgRejected>,
+) -> Result<usize, SvgRejected> {
     let b = s.as_bytes();
     let name_char = |c: u8| c.is_ascii_alphanumeric() || c == b'_' || c == b'-';
     let mut i = 0;
@@ -362,14 +408,9 @@ struct Expansion<'d, 'a, 'i> {
 }
 
 impl<'a, 'i> Expansion<'_, 'a, 'i> {
-    fn cost(&mut self, node: Node<'a, 'i>, depth: usize) -> Result<Cost, String> {
+    fn cost(&mut self, node: Node<'a, 'i>, depth: usize) -> Result<Cost, SvgRejected> {
         let l = self.limits;
-        let deep = || {
-            format!(
-                "nests elements (through references) more than {} deep",
-                l.max_depth
-            )
-        };
+        let deep = || SvgRejected::TooDeep { max: l.max_depth };
         if let Some(&c) = self.memo.get(&node.id()) {
             if depth + c.height - 1 > l.max_depth {
                 return Err(deep());
@@ -380,7 +421,7 @@ impl<'a, 'i> Expansion<'_, 'a, 'i> {
             return Err(deep());
         }
         if !self.visiting.insert(node.id()) {
-            return Err("has references that form a cycle".into());
+            return Err(SvgRejected::Cycle);
         }
         let mut c = Cost {
             elements: 1,
@@ -434,26 +475,22 @@ impl<'a, 'i> Expansion<'_, 'a, 'i> {
         Ok(c)
     }
 
-    fn within(&self, c: &Cost) -> Result<(), String> {
+    fn within(&self, c: &Cost) -> Result<(), SvgRejected> {
         let l = self.limits;
         if c.elements > l.max_expanded {
-            return Err(format!(
-                "expands (through references and markers) to more than {} elements",
-                l.max_expanded
-            ));
+            return Err(SvgRejected::TooManyElements {
+                max: l.max_expanded,
+            });
         }
         if c.layers > l.max_layers {
-            return Err(format!(
-                "uses clip paths, masks, filters or patterns more than {} times",
-                l.max_layers
-            ));
+            return Err(SvgRejected::TooManyLayers { max: l.max_layers });
         }
         Ok(())
     }
 }
 
 /// Step 6: the converted drawing and its pattern tiles stay near the canvas.
-fn check_extent(tree: &usvg::Tree, limits: &SvgLimits) -> Result<(), String> {
+fn check_extent(tree: &usvg::Tree, limits: &SvgLimits) -> Result<(), SvgRejected> {
     let size = tree.size();
     let range = limits.max_coord_ratio * f64::from(size.width().max(size.height()));
     let b = tree.root().abs_layer_bounding_box();
@@ -462,15 +499,16 @@ fn check_extent(tree: &usvg::Tree, limits: &SvgLimits) -> Result<(), String> {
         .map(f64::from)
         .find(|v| !v.is_finite() || v.abs() > range);
     if let Some(v) = far {
-        return Err(format!(
-            "draws as far as {v} px, outside ±{range} px ({} × the canvas size)",
-            limits.max_coord_ratio
-        ));
+        return Err(SvgRejected::TooFar {
+            at: v,
+            range,
+            ratio: limits.max_coord_ratio,
+        });
     }
     pattern_tiles(tree.root(), range)
 }
 
-fn pattern_tiles(g: &usvg::Group, range: f64) -> Result<(), String> {
+fn pattern_tiles(g: &usvg::Group, range: f64) -> Result<(), SvgRejected> {
     for node in g.children() {
         match node {
             usvg::Node::Group(child) => pattern_tiles(child, range)?,
@@ -482,9 +520,7 @@ fn pattern_tiles(g: &usvg::Group, range: f64) -> Result<(), String> {
                         let r = pat.rect();
                         let side = f64::from(r.width() * sx).max(f64::from(r.height() * sy));
                         if !side.is_finite() || side > range {
-                            return Err(format!(
-                                "has a pattern tile of {side} px, over {range} px"
-                            ));
+                            return Err(SvgRejected::PatternTile { side, range });
                         }
                     }
                 }

@@ -59,8 +59,8 @@ mod profile;
 pub use export::{MAX_PRECISION, SvgOptions, to_svg, with_metadata, written_color};
 
 pub use file::{SCENE_FILE_MAX_BYTES, load_scene, read_text_capped, scene_from_json};
-pub use guard::SvgLimits;
-pub use profile::check_safe_output;
+pub use guard::{SvgLimits, SvgRejected};
+pub use profile::{ProfileViolation, check_safe_output};
 
 use crate::scene::{MAX_SIDE, Point, Rgba, Scene, SceneError, Shape, ShapeKind, Stroke};
 use resvg::usvg;
@@ -69,7 +69,7 @@ use resvg::usvg;
 #[derive(Debug, thiserror::Error)]
 pub enum SvgError {
     #[error("cannot parse SVG: {0}")]
-    Parse(String),
+    Parse(#[from] SvgRejected),
     #[error("SVG canvas size {0}x{1} is out of range (1..={MAX_SIDE} px)")]
     Size(f32, f32),
     #[error("cannot parse scene JSON: {0}")]
@@ -83,6 +83,27 @@ pub enum SvgError {
         path: String,
         source: std::io::Error,
     },
+}
+
+/// Why SVG text could not be rendered to pixels.
+#[derive(Debug, thiserror::Error)]
+pub enum RenderError {
+    /// The text passed a bound of [`SvgLimits`] or does not parse.
+    #[error("{0}")]
+    Rejected(#[from] SvgRejected),
+    #[error("SVG has no size")]
+    NoSize,
+    #[error("SVG aspect ratio {width}x{height} is too extreme to render at {side} px")]
+    TooExtreme { width: f32, height: f32, side: u32 },
+    #[error("cannot allocate a {width}x{height} pixmap")]
+    Pixmap { width: u32, height: u32 },
+    #[error("cannot encode PNG: {0}")]
+    Png(String),
+}
+
+/// A blank `width × height` pixmap to render into.
+pub fn pixmap(width: u32, height: u32) -> Result<resvg::tiny_skia::Pixmap, RenderError> {
+    resvg::tiny_skia::Pixmap::new(width, height).ok_or(RenderError::Pixmap { width, height })
 }
 
 /// One subpath as cubic segments `[p1, p2, p3]` after a start point.
@@ -400,7 +421,7 @@ fn orient_even_odd(subs: &mut [SubPath]) {
 /// [`SvgLimits::DEFAULT`] before any geometry work ([`guard`]), never reads files and never decodes
 /// embedded images (`<image href="/dev/zero">` must not be followed), so every caller — HTTP
 /// submissions, previews, the worker, evaluation, tracing — is bounded on hostile input.
-pub fn parse_usvg(text: &str) -> Result<usvg::Tree, String> {
+pub fn parse_usvg(text: &str) -> Result<usvg::Tree, SvgRejected> {
     let opts = usvg::Options {
         image_href_resolver: usvg::ImageHrefResolver {
             resolve_data: Box::new(|_, _, _| None),

@@ -40,24 +40,57 @@ fn allowed(tag: &str, attr: &str) -> bool {
     }
 }
 
+/// The first way a written SVG leaves the profile (messages read after "the SVG …").
+#[derive(Debug, thiserror::Error)]
+pub enum ProfileViolation {
+    #[error("has a DTD")]
+    Dtd,
+    #[error("is not XML: {0}")]
+    NotXml(#[source] roxmltree::Error),
+    #[error("the root element is not <svg>")]
+    Root,
+    #[error("the root has no {0}")]
+    RootAttribute(&'static str),
+    #[error("has a processing instruction")]
+    ProcessingInstruction,
+    #[error("<{0}> is not in the SVG namespace")]
+    Namespace(String),
+    #[error("has the element <{0}>")]
+    Element(String),
+    #[error("<{0}> holds elements")]
+    Nested(String),
+    #[error("<{tag}> has the attribute {name}")]
+    Attribute { tag: String, name: String },
+    #[error("<{tag}> has the id {id:.80}")]
+    Id { tag: String, id: String },
+    #[error("<{tag} {name}> refers to another resource")]
+    Reference { tag: String, name: String },
+    #[error("<{tag} {name}> has a non-finite number: {value:.80}")]
+    NonFinite {
+        tag: String,
+        name: String,
+        value: String,
+    },
+}
+
 /// Checks `svg` against the profile; the error names the first violation.
-pub fn check_safe_output(svg: &str) -> Result<(), String> {
+pub fn check_safe_output(svg: &str) -> Result<(), ProfileViolation> {
     if svg.contains("<!DOCTYPE") || svg.contains("<!ENTITY") {
-        return Err("has a DTD".into());
+        return Err(ProfileViolation::Dtd);
     }
-    let doc = roxmltree::Document::parse(svg).map_err(|e| format!("is not XML: {e}"))?;
+    let doc = roxmltree::Document::parse(svg).map_err(ProfileViolation::NotXml)?;
     let root = doc.root_element();
     if root.tag_name().name() != "svg" {
-        return Err("the root element is not <svg>".into());
+        return Err(ProfileViolation::Root);
     }
     for a in ["viewBox", "width", "height"] {
         if root.attribute(a).is_none() {
-            return Err(format!("the root has no {a}"));
+            return Err(ProfileViolation::RootAttribute(a));
         }
     }
     for node in doc.descendants() {
         match node.node_type() {
-            NodeType::PI => return Err("has a processing instruction".into()),
+            NodeType::PI => return Err(ProfileViolation::ProcessingInstruction),
             NodeType::Element => check_element(node)?,
             _ => {}
         }
@@ -73,37 +106,41 @@ fn plain_id(v: &str) -> bool {
         && chars.all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
 }
 
-fn check_element(node: Node) -> Result<(), String> {
+fn check_element(node: Node) -> Result<(), ProfileViolation> {
     let tag = node.tag_name().name();
     if node.tag_name().namespace() != Some(SVG_NS) {
-        return Err(format!("<{tag}> is not in the SVG namespace"));
+        return Err(ProfileViolation::Namespace(tag.to_string()));
     }
     if !matches!(
         tag,
         "svg" | "g" | "path" | "rect" | "metadata" | "title" | "desc"
     ) {
-        return Err(format!("has the element <{tag}>"));
+        return Err(ProfileViolation::Element(tag.to_string()));
     }
     let text_only = matches!(tag, "metadata" | "title" | "desc");
     if text_only && node.children().any(|c| c.is_element()) {
-        return Err(format!("<{tag}> holds elements"));
+        return Err(ProfileViolation::Nested(tag.to_string()));
     }
+    let (tag, owned) = (tag.to_string(), |s: &str| s.to_string());
     for a in node.attributes() {
         let name = a.name();
-        if a.namespace().is_some() || !allowed(tag, name) {
-            return Err(format!("<{tag}> has the attribute {name}"));
+        if a.namespace().is_some() || !allowed(&tag, name) {
+            let name = owned(name);
+            return Err(ProfileViolation::Attribute { tag, name });
         }
         let v = a.value();
         if name == "id" && !plain_id(v) {
-            return Err(format!("<{tag}> has the id {v:.80}"));
+            let id = owned(v);
+            return Err(ProfileViolation::Id { tag, id });
         }
         if v.contains("url(") {
-            return Err(format!("<{tag} {name}> refers to another resource"));
+            let name = owned(name);
+            return Err(ProfileViolation::Reference { tag, name });
         }
         // Our number writer spells non-finite values as Rust does: NaN, inf, -inf.
-        let bad_number = v.contains("NaN") || v.contains("inf");
-        if bad_number {
-            return Err(format!("<{tag} {name}> has a non-finite number: {v:.80}"));
+        if v.contains("NaN") || v.contains("inf") {
+            let (name, value) = (owned(name), owned(v));
+            return Err(ProfileViolation::NonFinite { tag, name, value });
         }
     }
     Ok(())

@@ -202,7 +202,9 @@ pub fn sd_alphas_cumprod(num_train_timesteps: usize) -> Result<Vec<f32>, Teacher
         num_train_timesteps,
         ..crate::models::scheduler::SchedulerConfig::sd()
     };
-    let a = cfg.alphas_cumprod().map_err(TeacherError::Setup)?;
+    let a = cfg
+        .alphas_cumprod()
+        .map_err(|e| TeacherError::Setup(e.to_string()))?;
     Ok(a.into_iter().map(|v| v as f32).collect())
 }
 

@@ -66,7 +66,7 @@ impl SdTeacher {
     pub fn new(sd: StableDiffusion, image_size: u32) -> Result<Self, TeacherError> {
         let s = sd
             .latent_side(image_size as usize)
-            .map_err(TeacherError::Setup)?;
+            .map_err(|e| TeacherError::Setup(e.to_string()))?;
         let latent_shape = [sd.codec.latent_channels(), s, s];
         let alphas = sd.alphas_cumprod().iter().map(|&a| a as f32).collect();
         Ok(Self {

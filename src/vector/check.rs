@@ -99,7 +99,7 @@ struct Layer {
 
 /// The editability counts of any SVG text (see [`Editability`] for each count).
 pub fn check_svg(svg: &str) -> Result<Editability, CheckError> {
-    let tree = crate::svg::parse_usvg(svg).map_err(CheckError::Parse)?;
+    let tree = crate::svg::parse_usvg(svg).map_err(|e| CheckError::Parse(e.to_string()))?;
     let size = tree.size();
     let (fw, fh) = (size.width(), size.height());
     let (w, h) = (fw.ceil(), fh.ceil());

@@ -37,23 +37,30 @@ pub const MIN_BYTES: usize = 256;
 /// Largest `max_bytes` accepted (16 MiB).
 pub const MAX_BYTES: usize = 16 << 20;
 
+/// A stop rule outside its range (the message follows the option's name).
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+pub enum StopRuleError {
+    #[error("must be above 0 and at most 100 (dB), got {0}")]
+    TargetPsnr(f64),
+    #[error("must be between {MIN_BYTES} and {MAX_BYTES}, got {0}")]
+    MaxBytes(usize),
+}
+
 /// `target_psnr` is in `(0, 100]` dB.
-pub fn check_target_psnr(v: f64) -> Result<f64, String> {
+pub fn check_target_psnr(v: f64) -> Result<f64, StopRuleError> {
     if v.is_finite() && v > 0.0 && v <= 100.0 {
         Ok(v)
     } else {
-        Err(format!("must be above 0 and at most 100 (dB), got {v}"))
+        Err(StopRuleError::TargetPsnr(v))
     }
 }
 
 /// `max_bytes` is in `MIN_BYTES..=MAX_BYTES`.
-pub fn check_max_bytes(v: usize) -> Result<usize, String> {
+pub fn check_max_bytes(v: usize) -> Result<usize, StopRuleError> {
     if (MIN_BYTES..=MAX_BYTES).contains(&v) {
         Ok(v)
     } else {
-        Err(format!(
-            "must be between {MIN_BYTES} and {MAX_BYTES}, got {v}"
-        ))
+        Err(StopRuleError::MaxBytes(v))
     }
 }
 
@@ -64,10 +71,10 @@ impl VectorOptions {
             .validate()
             .map_err(|(f, e)| (f, e.to_string()))?;
         if let Some(v) = self.target_psnr {
-            check_target_psnr(v).map_err(|e| ("target_psnr", e))?;
+            check_target_psnr(v).map_err(|e| ("target_psnr", e.to_string()))?;
         }
         if let Some(v) = self.max_bytes {
-            check_max_bytes(v).map_err(|e| ("max_bytes", e))?;
+            check_max_bytes(v).map_err(|e| ("max_bytes", e.to_string()))?;
         }
         Ok(())
     }

@@ -1,5 +1,6 @@
 //! Process metrics, rendered in the Prometheus text exposition format by `GET /metrics`.
 
+use crate::store::FailureCode;
 use std::collections::BTreeMap;
 use std::fmt::Write;
 use std::sync::Mutex;
@@ -82,7 +83,7 @@ pub struct Metrics {
     pub jobs_cancelled: AtomicU64,
     pub jobs_retried: AtomicU64,
     pub leases_lost: AtomicU64,
-    failures: Mutex<BTreeMap<String, u64>>,
+    failures: Mutex<BTreeMap<FailureCode, u64>>,
     job_seconds: Mutex<Histogram>,
     stage_seconds: Mutex<BTreeMap<String, Histogram>>,
     http_responses: Mutex<BTreeMap<u16, u64>>,
@@ -107,8 +108,9 @@ impl Metrics {
         counter.fetch_add(1, Ordering::Relaxed);
     }
 
-    pub fn job_failed(&self, code: &str) {
-        *lock(&self.failures).entry(code.to_string()).or_default() += 1;
+    /// Counts a job that failed for good with `code`.
+    pub fn job_failed(&self, code: FailureCode) {
+        *lock(&self.failures).entry(code).or_default() += 1;
     }
 
     pub fn observe_job(&self, seconds: f64) {
@@ -211,8 +213,7 @@ impl Metrics {
         for (code, n) in lock(&self.failures).iter() {
             let _ = writeln!(
                 out,
-                "vectorfusion_job_failures_total{{code=\"{}\"}} {n}",
-                label_value(code)
+                "vectorfusion_job_failures_total{{code=\"{code}\"}} {n}"
             );
         }
         let _ = writeln!(

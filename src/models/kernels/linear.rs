@@ -5,7 +5,7 @@
 //!
 //! Weights are PyTorch's `[out, in]`.
 
-use super::gemm_strided;
+use super::{KernelError, KernelResult, check_len, gemm_strided};
 use gemm::Parallelism;
 use rayon::prelude::*;
 
@@ -25,12 +25,14 @@ impl<'a> View<'a> {
         cols: usize,
         rs: usize,
         cs: usize,
-    ) -> Result<Self, String> {
+    ) -> KernelResult<Self> {
         if rows > 0 && cols > 0 && (rows - 1) * rs + (cols - 1) * cs >= data.len() {
-            return Err(format!(
-                "matrix view {rows}x{cols} (strides {rs}, {cs}) exceeds {} values",
-                data.len()
-            ));
+            return Err(KernelError::Window {
+                op: "matrix view",
+                rows,
+                cols,
+                len: data.len(),
+            });
         }
         Ok(Self { data, rs, cs })
     }
@@ -45,15 +47,17 @@ pub(crate) fn gemm_acc(
     a: View,
     b: View,
     threads: Parallelism,
-) -> Result<(), String> {
+) -> KernelResult<()> {
     if m == 0 || n == 0 {
         return Ok(());
     }
     if (m - 1) * dst_rs + n > dst.len() {
-        return Err(format!(
-            "gemm: {m}x{n} output window does not fit {} values",
-            dst.len()
-        ));
+        return Err(KernelError::Window {
+            op: "gemm",
+            rows: m,
+            cols: n,
+            len: dst.len(),
+        });
     }
     if k == 0 {
         return Ok(());
@@ -77,12 +81,22 @@ fn all_threads() -> Parallelism {
     Parallelism::Rayon(rayon::current_num_threads())
 }
 
-fn check_weight(w: &[f32], o: usize, i: usize, bias: Option<&[f32]>) -> Result<(), String> {
+fn check_weight(w: &[f32], o: usize, i: usize, bias: Option<&[f32]>) -> KernelResult<()> {
     if w.len() != o * i {
-        return Err(format!("linear: {} weights for {o}x{i}", w.len()));
+        return Err(KernelError::Length {
+            op: "linear",
+            what: "weight",
+            got: w.len(),
+            want: o * i,
+        });
     }
-    if bias.is_some_and(|b| b.len() != o) {
-        return Err(format!("linear: bias for {o} outputs has the wrong length"));
+    if let Some(b) = bias.filter(|b| b.len() != o) {
+        return Err(KernelError::Length {
+            op: "linear",
+            what: "bias",
+            got: b.len(),
+            want: o,
+        });
     }
     Ok(())
 }
@@ -95,20 +109,25 @@ pub fn linear(
     o: usize,
     bias: Option<&[f32]>,
     residual: Option<&[f32]>,
-) -> Result<Vec<f32>, String> {
+) -> KernelResult<Vec<f32>> {
     check_weight(w, o, i, bias)?;
     if i == 0 || x.len() % i != 0 {
-        return Err(format!("linear: {} inputs are not rows of {i}", x.len()));
+        return Err(KernelError::Rows {
+            op: "linear",
+            len: x.len(),
+            row: i,
+        });
     }
     let rows = x.len() / i;
     let mut y = match residual {
         Some(r) if r.len() == rows * o => r.to_vec(),
         Some(r) => {
-            return Err(format!(
-                "linear: residual has {} values, expected {}",
-                r.len(),
-                rows * o
-            ));
+            return Err(KernelError::Length {
+                op: "linear",
+                what: "residual",
+                got: r.len(),
+                want: rows * o,
+            });
         }
         None => vec![0f32; rows * o],
     };
@@ -134,10 +153,15 @@ pub fn linear_from_channels(
     w: &[f32],
     o: usize,
     bias: Option<&[f32]>,
-) -> Result<Vec<f32>, String> {
+) -> KernelResult<Vec<f32>> {
     check_weight(w, o, i, bias)?;
     if x.len() != b * i * n {
-        return Err(format!("linear: {} inputs for [{b}, {i}, {n}]", x.len()));
+        return Err(KernelError::Length {
+            op: "linear",
+            what: "input",
+            got: x.len(),
+            want: b * i * n,
+        });
     }
     let mut y = vec![0f32; b * n * o];
     if let Some(bv) = bias {
@@ -169,15 +193,10 @@ pub fn linear_to_channels(
     o: usize,
     bias: Option<&[f32]>,
     residual: &[f32],
-) -> Result<Vec<f32>, String> {
+) -> KernelResult<Vec<f32>> {
     check_weight(w, o, i, bias)?;
-    if t.len() != b * n * i || residual.len() != b * o * n {
-        return Err(format!(
-            "linear: {} inputs / {} residual values for [{b}, {n}, {i}] -> [{b}, {o}, {n}]",
-            t.len(),
-            residual.len()
-        ));
-    }
+    check_len("linear", "input", t.len(), b * n * i)?;
+    check_len("linear", "residual", residual.len(), b * o * n)?;
     let mut y = residual.to_vec();
     if n == 0 {
         return Ok(y);

@@ -58,9 +58,65 @@ pub fn tensor(v: Vec<f32>, shape: &[usize]) -> candle_core::Result<Tensor> {
     Tensor::from_vec(v, shape, &Device::Cpu)
 }
 
-/// A kernel's error as a candle error.
-pub fn err(e: String) -> candle_core::Error {
-    candle_core::Error::Msg(e)
+/// Why a kernel refused its arguments: the buffers do not fit the geometry it was given (the
+/// layers in [`super::nn`] check shapes first, so this is a bug, never a user's input).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum KernelError {
+    /// A buffer holds `got` values where the geometry needs `want`.
+    #[error("{op}: {what} has {got} values, expected {want}")]
+    Length {
+        op: &'static str,
+        what: &'static str,
+        got: usize,
+        want: usize,
+    },
+    /// A buffer of `len` values is not a whole number of rows (or planes) of `row` values.
+    #[error("{op}: {len} values are not rows of {row}")]
+    Rows {
+        op: &'static str,
+        len: usize,
+        row: usize,
+    },
+    /// A `rows × cols` window (a matrix view, a GEMM output) reaches past its buffer's `len`
+    /// values.
+    #[error("{op}: a {rows}x{cols} window does not fit {len} values")]
+    Window {
+        op: &'static str,
+        rows: usize,
+        cols: usize,
+        len: usize,
+    },
+    /// A geometry the kernel cannot run: zero sizes, channels that do not divide into
+    /// groups or heads, a kernel larger than its padded input.
+    #[error("{op}: {reason}")]
+    Geometry { op: &'static str, reason: String },
+}
+
+/// What the kernels return.
+pub type KernelResult<T> = Result<T, KernelError>;
+
+/// `Err(Length)` unless `got == want`.
+pub(crate) fn check_len(
+    op: &'static str,
+    what: &'static str,
+    got: usize,
+    want: usize,
+) -> KernelResult<()> {
+    if got == want {
+        Ok(())
+    } else {
+        Err(KernelError::Length {
+            op,
+            what,
+            got,
+            want,
+        })
+    }
+}
+
+/// A kernel's error as a candle error (kept as its source).
+pub fn err(e: KernelError) -> candle_core::Error {
+    candle_core::Error::wrap(e)
 }
 
 /// A raw pointer that may cross threads. Users write disjoint parts of the buffer from

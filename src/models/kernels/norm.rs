@@ -7,6 +7,7 @@
 //! accumulate in f64.
 
 use super::math::{exp_fast, vectorised};
+use super::{KernelError, KernelResult, check_len};
 use rayon::prelude::*;
 
 /// Shape and parameters of one group norm. Invariant (checked by [`GroupNormGeom::new`]):
@@ -29,19 +30,15 @@ impl<'a> GroupNormGeom<'a> {
         eps: f64,
         gamma: &'a [f32],
         beta: &'a [f32],
-    ) -> Result<Self, String> {
+    ) -> KernelResult<Self> {
         if groups == 0 || c % groups != 0 {
-            return Err(format!(
-                "group norm: {c} channels not divisible by {groups} groups"
-            ));
+            return Err(KernelError::Geometry {
+                op: "group norm",
+                reason: format!("{c} channels not divisible by {groups} groups"),
+            });
         }
-        if gamma.len() != c || beta.len() != c {
-            return Err(format!(
-                "group norm: {} / {} affine values for {c} channels",
-                gamma.len(),
-                beta.len()
-            ));
-        }
+        check_len("group norm", "gamma", gamma.len(), c)?;
+        check_len("group norm", "beta", beta.len(), c)?;
         Ok(Self {
             b,
             c,
@@ -57,14 +54,8 @@ impl<'a> GroupNormGeom<'a> {
         self.c / self.groups * self.n
     }
 
-    fn check(&self, what: &str, len: usize) -> Result<(), String> {
-        if len != self.b * self.c * self.n {
-            return Err(format!(
-                "group norm: {what} has {len} values, expected {}",
-                self.b * self.c * self.n
-            ));
-        }
-        Ok(())
+    fn check(&self, what: &'static str, len: usize) -> KernelResult<()> {
+        check_len("group norm", what, len, self.b * self.c * self.n)
     }
 }
 
@@ -169,7 +160,7 @@ pub fn group_norm(
     x: &[f32],
     silu: bool,
     keep_xhat: bool,
-) -> Result<GroupNormOut, String> {
+) -> KernelResult<GroupNormOut> {
     g.check("input", x.len())?;
     let len = g.group_len();
     let mut y = vec![0f32; x.len()];
@@ -247,12 +238,15 @@ pub fn group_norm_input_grad(
     xhat: &[f32],
     inv_std: &[f32],
     silu: bool,
-) -> Result<Vec<f32>, String> {
+) -> KernelResult<Vec<f32>> {
     g.check("output gradient", dy.len())?;
     g.check("normalised input", xhat.len())?;
-    if inv_std.len() != g.b * g.groups {
-        return Err("group norm: wrong number of saved statistics".into());
-    }
+    check_len(
+        "group norm",
+        "saved statistics",
+        inv_std.len(),
+        g.b * g.groups,
+    )?;
     let len = g.group_len();
     let mut dx = vec![0f32; dy.len()];
     if len == 0 {
@@ -274,20 +268,16 @@ pub fn layer_norm(
     gamma: &[f32],
     beta: &[f32],
     eps: f64,
-) -> Result<Vec<f32>, String> {
+) -> KernelResult<Vec<f32>> {
     if c == 0 || x.len() % c != 0 {
-        return Err(format!(
-            "layer norm: {} values are not rows of {c}",
-            x.len()
-        ));
+        return Err(KernelError::Rows {
+            op: "layer norm",
+            len: x.len(),
+            row: c,
+        });
     }
-    if gamma.len() != c || beta.len() != c {
-        return Err(format!(
-            "layer norm: {} / {} affine values for {c} channels",
-            gamma.len(),
-            beta.len()
-        ));
-    }
+    check_len("layer norm", "gamma", gamma.len(), c)?;
+    check_len("layer norm", "beta", beta.len(), c)?;
     let mut y = vec![0f32; x.len()];
     let rows_per = (1 << 14) / c + 1;
     y.par_chunks_mut(rows_per * c)

@@ -1,7 +1,7 @@
 //! Element-wise pieces, in parallel chunks (candle's CPU element-wise ops run on one thread and
 //! allocate a tensor per step: `dy * (out > 0)` is three passes there).
 
-use super::math;
+use super::{KernelError, KernelResult, math};
 use rayon::prelude::*;
 
 const CHUNK: usize = 1 << 15;
@@ -19,12 +19,12 @@ pub fn map_inplace(v: &mut [f32], f: impl Fn(f32) -> f32 + Sync) {
 }
 
 /// `max(a + b, 0)`.
-pub fn add_relu(a: &[f32], b: &[f32]) -> Result<Vec<f32>, String> {
+pub fn add_relu(a: &[f32], b: &[f32]) -> KernelResult<Vec<f32>> {
     zip_map("add_relu", a, b, |a, b| (a + b).max(0.0))
 }
 
 /// Input gradient of a ReLU from its output: `dy · [out > 0]`.
-pub fn relu_backward(out: &[f32], dy: &[f32]) -> Result<Vec<f32>, String> {
+pub fn relu_backward(out: &[f32], dy: &[f32]) -> KernelResult<Vec<f32>> {
     zip_map(
         "relu_backward",
         out,
@@ -34,18 +34,19 @@ pub fn relu_backward(out: &[f32], dy: &[f32]) -> Result<Vec<f32>, String> {
 }
 
 /// `(a + b) · s`.
-pub fn add_scaled(a: &[f32], b: &[f32], s: f32) -> Result<Vec<f32>, String> {
+pub fn add_scaled(a: &[f32], b: &[f32], s: f32) -> KernelResult<Vec<f32>> {
     zip_map("add_scaled", a, b, |a, b| (a + b) * s)
 }
 
 /// `x[b, c, n] += v[b, c]` (a per-image, per-channel offset such as a time embedding).
-pub fn add_per_channel(x: &mut [f32], v: &[f32], n: usize) -> Result<(), String> {
+pub fn add_per_channel(x: &mut [f32], v: &[f32], n: usize) -> KernelResult<()> {
     if n == 0 || x.len() != v.len() * n {
-        return Err(format!(
-            "add_per_channel: {} values for {} channels of {n}",
-            x.len(),
-            v.len()
-        ));
+        return Err(KernelError::Length {
+            op: "add_per_channel",
+            what: "input",
+            got: x.len(),
+            want: v.len() * n,
+        });
     }
     x.par_chunks_mut(n)
         .zip(v.par_iter())
@@ -54,12 +55,13 @@ pub fn add_per_channel(x: &mut [f32], v: &[f32], n: usize) -> Result<(), String>
 }
 
 /// GEGLU: `h [rows, 2·inner] -> h[:, ..inner] · gelu(h[:, inner..])` (exact GELU).
-pub fn geglu(h: &[f32], inner: usize) -> Result<Vec<f32>, String> {
+pub fn geglu(h: &[f32], inner: usize) -> KernelResult<Vec<f32>> {
     if inner == 0 || h.len() % (2 * inner) != 0 {
-        return Err(format!(
-            "geglu: {} values are not rows of 2 x {inner}",
-            h.len()
-        ));
+        return Err(KernelError::Rows {
+            op: "geglu",
+            len: h.len(),
+            row: 2 * inner,
+        });
     }
     let rows = h.len() / (2 * inner);
     let mut out = vec![0f32; rows * inner];
@@ -87,12 +89,13 @@ pub fn upsample_nearest(
     w: usize,
     oh: usize,
     ow: usize,
-) -> Result<Vec<f32>, String> {
+) -> KernelResult<Vec<f32>> {
     if h == 0 || w == 0 || x.len() % (h * w) != 0 {
-        return Err(format!(
-            "upsample: {} values are not planes of {h}x{w}",
-            x.len()
-        ));
+        return Err(KernelError::Rows {
+            op: "upsample",
+            len: x.len(),
+            row: h * w,
+        });
     }
     let planes = x.len() / (h * w);
     let cols: Vec<usize> = (0..ow).map(|j| j * w / ow).collect();
@@ -115,13 +118,18 @@ pub fn upsample_nearest(
 
 /// `f(a[i], b[i])` for two equally long slices, in parallel chunks.
 fn zip_map(
-    name: &str,
+    name: &'static str,
     a: &[f32],
     b: &[f32],
     f: impl Fn(f32, f32) -> f32 + Sync,
-) -> Result<Vec<f32>, String> {
+) -> KernelResult<Vec<f32>> {
     if a.len() != b.len() {
-        return Err(format!("{name}: {} vs {} values", a.len(), b.len()));
+        return Err(KernelError::Length {
+            op: name,
+            what: "second operand",
+            got: b.len(),
+            want: a.len(),
+        });
     }
     let mut out = vec![0f32; a.len()];
     out.par_chunks_mut(CHUNK)

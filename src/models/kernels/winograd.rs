@@ -10,8 +10,8 @@
 //! input row into even and odd samples), runs the 16 GEMMs into `[16, co, T]`, and writes its
 //! output rows with the inverse transform.
 
-use super::conv::{ConvGeom, check_len, for_each_row_block};
-use super::{SyncPtr, gemm_strided};
+use super::conv::{ConvGeom, for_each_row_block};
+use super::{KernelError, KernelResult, SyncPtr, check_len, gemm_strided};
 use gemm::Parallelism;
 use std::cell::RefCell;
 
@@ -63,24 +63,20 @@ pub fn applies(g: &ConvGeom) -> bool {
 
 /// The convolution of [`super::conv::conv2d`] for 3×3 stride-1 geometries, given the transformed
 /// kernel `u` from [`transform_kernel`].
-pub fn conv2d(
-    g: &ConvGeom,
-    x: &[f32],
-    u: &[f32],
-    bias: Option<&[f32]>,
-) -> Result<Vec<f32>, String> {
+pub fn conv2d(g: &ConvGeom, x: &[f32], u: &[f32], bias: Option<&[f32]>) -> KernelResult<Vec<f32>> {
     let ConvGeom {
         b, ci, h, w, co, ..
     } = *g;
     if !applies(g) {
-        return Err(format!(
-            "Winograd F(2x2, 3x3) needs a 3x3 stride-1 convolution, got {g:?}"
-        ));
+        return Err(KernelError::Geometry {
+            op: "Winograd F(2x2, 3x3)",
+            reason: format!("needs a 3x3 stride-1 convolution, got {g:?}"),
+        });
     }
-    check_len("input", x.len(), b * ci * h * w)?;
-    check_len("Winograd kernel", u.len(), 16 * co * ci)?;
+    check_len("conv2d", "input", x.len(), b * ci * h * w)?;
+    check_len("conv2d", "Winograd kernel", u.len(), 16 * co * ci)?;
     if let Some(bias) = bias {
-        check_len("bias", bias.len(), co)?;
+        check_len("conv2d", "bias", bias.len(), co)?;
     }
     let (ho, wo) = g.out_hw();
     let (th, tw) = (ho.div_ceil(2), wo.div_ceil(2));

@@ -6,6 +6,7 @@
 use super::{ImageTextScorer, ScorerError};
 use crate::image::Image;
 use crate::image::ops::resize;
+use crate::models::ConfigIssue;
 use crate::models::bert::{BertTextEncoder, l2_normalize};
 use crate::models::clip::scorer::embed_in_batches;
 use candle_core::{DType, Device, Tensor};
@@ -34,18 +35,23 @@ impl IconClipConfig {
         Ok(cfg)
     }
 
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), ConfigIssue> {
         if self.model_type != MODEL_TYPE {
-            return Err(format!(
+            return Err(ConfigIssue::Inconsistent(format!(
                 "model_type {:?} is not {MODEL_TYPE:?}",
                 self.model_type
-            ));
+            )));
         }
         if !(8..=1024).contains(&self.image_size) {
-            return Err(format!("image_size {} outside 8..=1024", self.image_size));
+            return Err(ConfigIssue::Inconsistent(format!(
+                "image_size {} outside 8..=1024",
+                self.image_size
+            )));
         }
         if self.channels.is_empty() || self.channels.len() > 12 {
-            return Err("channels must list 1 to 12 widths".into());
+            return Err(ConfigIssue::Inconsistent(
+                "channels must list 1 to 12 widths".into(),
+            ));
         }
         if self.groups == 0
             || self
@@ -53,19 +59,21 @@ impl IconClipConfig {
                 .iter()
                 .any(|&c| c == 0 || c % self.groups != 0)
         {
-            return Err(format!(
+            return Err(ConfigIssue::Inconsistent(format!(
                 "every channel count {:?} must be a positive multiple of groups {}",
                 self.channels, self.groups
-            ));
+            )));
         }
         if self.embed_dim == 0 {
-            return Err("embed_dim must be positive".into());
+            return Err(ConfigIssue::Inconsistent(
+                "embed_dim must be positive".into(),
+            ));
         }
         if !(2..=512).contains(&self.text_max_length) {
-            return Err(format!(
+            return Err(ConfigIssue::Inconsistent(format!(
                 "text_max_length {} outside 2..=512",
                 self.text_max_length
-            ));
+            )));
         }
         Ok(())
     }

@@ -2,6 +2,7 @@
 //! change the computation and that the implementation does not cover is rejected with a clear
 //! error instead of being ignored.
 
+use crate::models::ConfigIssue;
 use crate::models::serde_defaults::{num, silu, yes};
 use serde::Deserialize;
 use serde_json::Value;
@@ -108,22 +109,27 @@ fn head_dim() -> Value {
 }
 
 /// An int or a per-block list of ints.
-fn per_block(v: &Value, n: usize, name: &str) -> std::result::Result<Vec<usize>, String> {
+fn per_block(v: &Value, n: usize, name: &str) -> std::result::Result<Vec<usize>, ConfigIssue> {
     match v {
         Value::Number(x) => x
             .as_u64()
             .map(|x| vec![x as usize; n])
-            .ok_or_else(|| format!("{name} must be a positive integer")),
+            .ok_or_else(|| ConfigIssue::Inconsistent(format!("{name} must be a positive integer"))),
         Value::Array(a) if a.len() == n => a
             .iter()
             .map(|x| {
-                x.as_u64()
-                    .map(|x| x as usize)
-                    .ok_or_else(|| format!("{name} entries must be integers"))
+                x.as_u64().map(|x| x as usize).ok_or_else(|| {
+                    ConfigIssue::Inconsistent(format!("{name} entries must be integers"))
+                })
             })
             .collect(),
-        Value::Array(a) => Err(format!("{name} has {} entries for {n} blocks", a.len())),
-        _ => Err(format!("{name} must be an integer or a list")),
+        Value::Array(a) => Err(ConfigIssue::Inconsistent(format!(
+            "{name} has {} entries for {n} blocks",
+            a.len()
+        ))),
+        _ => Err(ConfigIssue::Inconsistent(format!(
+            "{name} must be an integer or a list"
+        ))),
     }
 }
 
@@ -173,30 +179,34 @@ impl UnetArch {
 
 impl UnetConfig {
     /// Resolves the config into the architecture, or says why it cannot.
-    pub fn arch(&self) -> std::result::Result<UnetArch, String> {
+    pub fn arch(&self) -> std::result::Result<UnetArch, ConfigIssue> {
         let n = self.block_out_channels.len();
         if n == 0 {
-            return Err("block_out_channels is empty".into());
+            return Err(ConfigIssue::Inconsistent(
+                "block_out_channels is empty".into(),
+            ));
         }
         if self.down_block_types.len() != n || self.up_block_types.len() != n {
-            return Err(format!(
+            return Err(ConfigIssue::Inconsistent(format!(
                 "{} down / {} up block types for {n} block_out_channels",
                 self.down_block_types.len(),
                 self.up_block_types.len()
-            ));
+            )));
         }
-        let bad = |what: &str| Err(format!("{what} is not supported"));
+        let bad = |setting: &'static str, value: Option<String>| {
+            Err(ConfigIssue::Unsupported { setting, value })
+        };
         if self.act_fn != "silu" {
-            return bad(&format!("act_fn {:?}", self.act_fn));
+            return bad("act_fn", Some(format!("{:?}", self.act_fn)));
         }
         if self.dual_cross_attention {
-            return bad("dual_cross_attention");
+            return bad("dual_cross_attention", None);
         }
         if matches!(&self.only_cross_attention, Value::Bool(true))
             || matches!(&self.only_cross_attention, Value::Array(a) if a.iter().any(|x| x == &Value::Bool(true)))
             || self.mid_block_only_cross_attention == Some(true)
         {
-            return bad("only_cross_attention");
+            return bad("only_cross_attention", None);
         }
         for (name, v) in [
             ("class_embed_type", &self.class_embed_type),
@@ -206,31 +216,34 @@ impl UnetConfig {
             ("cross_attention_norm", &self.cross_attention_norm),
         ] {
             if v.is_some() {
-                return bad(name);
+                return bad(name, None);
             }
         }
         if self.num_class_embeds.is_some() || self.class_embeddings_concat {
-            return bad("class embeddings");
+            return bad("class embeddings", None);
         }
         if self.encoder_hid_dim.is_some() {
-            return bad("encoder_hid_dim");
+            return bad("encoder_hid_dim", None);
         }
         if self.time_cond_proj_dim.is_some() {
-            return bad("time_cond_proj_dim (LCM)");
+            return bad("time_cond_proj_dim (LCM)", None);
         }
         if self.resnet_skip_time_act {
-            return bad("resnet_skip_time_act");
+            return bad("resnet_skip_time_act", None);
         }
         if self.resnet_out_scale_factor.is_some_and(|f| f != 1.0) {
-            return bad("resnet_out_scale_factor other than 1");
+            return bad("resnet_out_scale_factor other than 1", None);
         }
         if !self.reverse_transformer_layers_per_block.is_null() {
-            return bad("reverse_transformer_layers_per_block");
+            return bad("reverse_transformer_layers_per_block", None);
         }
         if let Some(d) = self.time_embedding_dim
             && d != 4 * self.block_out_channels[0]
         {
-            return bad("time_embedding_dim other than 4 × block_out_channels[0]");
+            return bad(
+                "time_embedding_dim other than 4 × block_out_channels[0]",
+                None,
+            );
         }
         for (name, v, only) in [
             (
@@ -246,30 +259,35 @@ impl UnetConfig {
             ("attention_type", &self.attention_type, "default"),
         ] {
             if v.as_deref().is_some_and(|t| t != only) {
-                return bad(&format!("{name} other than {only}"));
+                return bad(name, Some(format!("other than {only}")));
             }
         }
         if self.conv_in_kernel.is_some_and(|k| k != 3)
             || self.conv_out_kernel.is_some_and(|k| k != 3)
         {
-            return bad("conv kernels other than 3");
+            return bad("conv kernels other than 3", None);
         }
         if self
             .mid_block_type
             .as_deref()
             .is_some_and(|t| t != "UNetMidBlock2DCrossAttn")
         {
-            return bad(&format!("mid_block_type {:?}", self.mid_block_type));
+            return bad("mid_block_type", Some(format!("{:?}", self.mid_block_type)));
         }
         if self.downsample_padding.fract() != 0.0 || !(0.0..=1.0).contains(&self.downsample_padding)
         {
-            return bad(&format!("downsample_padding {}", self.downsample_padding));
+            return bad(
+                "downsample_padding",
+                Some(self.downsample_padding.to_string()),
+            );
         }
         let cross = match &self.cross_attention_dim {
             Value::Number(x) => x.as_u64().map(|x| x as usize),
             _ => None,
         }
-        .ok_or("cross_attention_dim must be a single integer")?;
+        .ok_or_else(|| {
+            ConfigIssue::Inconsistent("cross_attention_dim must be a single integer".into())
+        })?;
         // diffusers: `num_attention_heads or attention_head_dim` is the head count (the legacy
         // naming of SD 1.x/2.x configs)
         let heads = if self.num_attention_heads.is_null() {
@@ -283,16 +301,16 @@ impl UnetConfig {
             "transformer_layers_per_block",
         )?;
         if self.norm_num_groups == 0 {
-            return Err("norm_num_groups is 0".into());
+            return Err(ConfigIssue::Inconsistent("norm_num_groups is 0".into()));
         }
         // the transformer of level i (its down and up blocks; the mid block uses the last)
-        let attn = |i: usize| -> std::result::Result<AttnArch, String> {
+        let attn = |i: usize| -> std::result::Result<AttnArch, ConfigIssue> {
             let c = self.block_out_channels[i];
             if heads[i] == 0 || c % heads[i] != 0 || layers[i] == 0 {
-                return Err(format!(
+                return Err(ConfigIssue::Inconsistent(format!(
                     "{c} channels, {} heads, {} transformer layers in block {i}",
                     heads[i], layers[i]
-                ));
+                )));
             }
             Ok(AttnArch {
                 heads: heads[i],
@@ -303,20 +321,20 @@ impl UnetConfig {
         for i in 0..n {
             let c = self.block_out_channels[i];
             if c % self.norm_num_groups != 0 {
-                return Err(format!(
+                return Err(ConfigIssue::Inconsistent(format!(
                     "{c} channels not divisible by norm_num_groups {}",
                     self.norm_num_groups
-                ));
+                )));
             }
             let down_attn = match self.down_block_types[i].as_str() {
                 "CrossAttnDownBlock2D" => Some(attn(i)?),
                 "DownBlock2D" => None,
-                t => return bad(&format!("down block type {t:?}")),
+                t => return bad("down_block_types", Some(format!("{t:?}"))),
             };
             let up_attn = match self.up_block_types[n - 1 - i].as_str() {
                 "CrossAttnUpBlock2D" => Some(attn(i)?),
                 "UpBlock2D" => None,
-                t => return bad(&format!("up block type {t:?}")),
+                t => return bad("up_block_types", Some(format!("{t:?}"))),
             };
             levels.push(LevelArch {
                 channels: c,
@@ -324,9 +342,9 @@ impl UnetConfig {
                 up_attn,
             });
         }
-        let mid = attn(n - 1).map_err(|e| format!("mid block: {e}"))?;
+        let mid = attn(n - 1).map_err(|e| ConfigIssue::Inconsistent(format!("mid block: {e}")))?;
         if self.layers_per_block == 0 {
-            return Err("layers_per_block is 0".into());
+            return Err(ConfigIssue::Inconsistent("layers_per_block is 0".into()));
         }
         Ok(UnetArch {
             in_channels: self.in_channels,

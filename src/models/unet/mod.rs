@@ -51,10 +51,10 @@ impl std::fmt::Debug for Unet {
 impl Unet {
     /// Builds the UNet (`path` is only used in error messages).
     pub fn new(vb: VarBuilder, config: UnetConfig, path: &std::path::Path) -> Result<Self> {
-        let arch = config.arch().map_err(|reason| ModelError::Unsupported {
+        let arch = config.arch().map_err(|e| ModelError::Unsupported {
             component: "unet",
             path: path.display().to_string(),
-            reason,
+            reason: e.to_string(),
         })?;
         Self::build(vb, config, arch).map_err(super::loader::mismatch("unet", path))
     }

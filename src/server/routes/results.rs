@@ -64,21 +64,22 @@ pub(in crate::server) async fn result_svg(
 const PREVIEW_MAX_SIDE: f32 = 1024.0;
 
 /// Renders `svg` to PNG with resvg, scaled so the longest side is at most [`PREVIEW_MAX_SIDE`].
-pub fn render_png(svg: &str) -> Result<Vec<u8>, String> {
+pub fn render_png(svg: &str) -> Result<Vec<u8>, crate::svg::RenderError> {
     use resvg::tiny_skia;
     let tree = crate::svg::parse_usvg(svg)?;
     let size = tree.size();
     let scale = (PREVIEW_MAX_SIDE / size.width().max(size.height())).min(1.0);
     let w = (size.width() * scale).ceil().max(1.0) as u32;
     let h = (size.height() * scale).ceil().max(1.0) as u32;
-    let mut pixmap =
-        tiny_skia::Pixmap::new(w, h).ok_or_else(|| format!("cannot allocate {w}x{h}"))?;
+    let mut pixmap = crate::svg::pixmap(w, h)?;
     resvg::render(
         &tree,
         tiny_skia::Transform::from_scale(scale, scale),
         &mut pixmap.as_mut(),
     );
-    pixmap.encode_png().map_err(|e| e.to_string())
+    pixmap
+        .encode_png()
+        .map_err(|e| crate::svg::RenderError::Png(e.to_string()))
 }
 
 pub(in crate::server) async fn result_png(

@@ -91,9 +91,9 @@ pub fn trace(image: &Image, setting: &TracerSetting) -> Result<Traced, String> {
 
 /// Renders SVG text with resvg at `width x height` (the SVG's own size is scaled to fit) into a
 /// premultiplied image.
-pub fn render_svg(svg: &str, width: u32, height: u32) -> Result<Image, String> {
+pub fn render_svg(svg: &str, width: u32, height: u32) -> Result<Image, crate::svg::RenderError> {
     let tree = crate::svg::parse_usvg(svg)?;
-    let mut pixmap = tiny_skia::Pixmap::new(width, height).ok_or("bad render size")?;
+    let mut pixmap = crate::svg::pixmap(width, height)?;
     let s = tree.size();
     let (kx, ky) = (width as f32 / s.width(), height as f32 / s.height());
     resvg::render(

@@ -76,17 +76,12 @@ pub fn run_stdio() -> i32 {
         start.resume,
     );
     let outcome = std::panic::catch_unwind(AssertUnwindSafe(|| executor.run(&start.spec, &ctx)))
-        .unwrap_or_else(|panic| {
-            let msg = crate::worker::panic_message(panic.as_ref());
-            Err(PipelineError::Crashed(format!(
-                "the executor panicked: {msg}"
-            )))
-        });
+        .unwrap_or_else(|panic| Err(PipelineError::panicked(panic.as_ref())));
     let msg = match outcome {
         Ok(out) => FromChild::Done(out),
         Err(e) => FromChild::Error {
-            code: e.code().to_string(),
-            detail: e.detail(),
+            code: e.code(),
+            message: e.to_string(),
         },
     };
     match send(&msg) {

@@ -141,8 +141,8 @@ impl Executor for ProcessExecutor {
                         }
                     }
                     Ok(FromChild::Done(out)) => outcome = Some(Ok(out)),
-                    Ok(FromChild::Error { code, detail }) => {
-                        outcome = Some(Err(PipelineError::from_parts(&code, detail)))
+                    Ok(FromChild::Error { code, message }) => {
+                        outcome = Some(Err(PipelineError::reported(code, message)))
                     }
                     Err(_) => tracing::info!(target: "job_child", "{line}"),
                 },

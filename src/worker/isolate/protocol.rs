@@ -2,7 +2,7 @@
 //! writes a [`Start`] and then, to stop the job, the line `cancel`; the job process writes
 //! [`FromChild`] messages and exits after `done` or `error`.
 
-use crate::pipeline::{JobOutput, JobSpec, ModelDirs};
+use crate::pipeline::{FailureCode, JobOutput, JobSpec, ModelDirs};
 use crate::progress::Progress;
 use serde::{Deserialize, Serialize};
 
@@ -32,11 +32,8 @@ pub enum FromChild {
     Progress(Progress),
     Checkpoint(serde_json::Value),
     Done(JobOutput),
-    /// A `PipelineError` as its code and detail.
-    Error {
-        code: String,
-        detail: String,
-    },
+    /// A `PipelineError` as its code and message (`PipelineError::reported` rebuilds it).
+    Error { code: FailureCode, message: String },
 }
 
 /// The line that asks the job to stop (it checkpoints and answers `cancelled`).

@@ -8,8 +8,10 @@
 //! gradient gathers `Σ_{taps of that phase} W_tapᵀ · dgrid` from shifted views of one buffer
 //! (`tap_gemm`), with no zero-dilated gradient.
 
-use super::{COL, ConvGeom, TILE_FLOATS, check_len, conv2d};
-use crate::models::kernels::{SyncPtr, gemm_strided, winograd};
+use super::{COL, ConvGeom, TILE_FLOATS, conv2d};
+use crate::models::kernels::{
+    KernelError, KernelResult, SyncPtr, check_len, gemm_strided, winograd,
+};
 use gemm::Parallelism;
 use rayon::prelude::*;
 
@@ -60,22 +62,33 @@ fn tap_gemm(
     taps: &[Tap],
     src: &[f32],
     src_rs: usize,
-) -> Result<(), String> {
+) -> KernelResult<()> {
     if m == 0 || n == 0 {
         return Ok(());
     }
     // Bounds of every access, checked once so the GEMMs below cannot go out of range.
     if (m - 1) * out_rs + n > out.len() {
-        return Err("conv2d: output buffer too small".into());
+        return Err(KernelError::Window {
+            op: "conv2d",
+            rows: m,
+            cols: n,
+            len: out.len(),
+        });
     }
     if kk == 0 {
-        return Err("conv2d: zero GEMM depth".into());
+        return Err(KernelError::Geometry {
+            op: "conv2d",
+            reason: "zero GEMM depth".into(),
+        });
     }
     for t in taps {
         let lhs_end = (m - 1) * t.lhs_rs + (kk - 1) * t.lhs_cs + 1;
         let src_end = t.src_off + (kk - 1) * src_rs + n;
         if lhs_end > t.lhs.len() || src_end > src.len() {
-            return Err("conv2d: tap view out of range".into());
+            return Err(KernelError::Geometry {
+                op: "conv2d",
+                reason: "tap view out of range".into(),
+            });
         }
     }
     let depth = taps.len() * kk;
@@ -157,7 +170,7 @@ fn tap_gemm(
 
 /// Gradient of [`conv2d`] with respect to its input: `dy [b, co, ho, wo]`, `weight
 /// [co, ci, k, k]`; returns `[b, ci, h, w]`. The weights' gradient is never formed.
-pub fn conv2d_input_grad(g: &ConvGeom, dy: &[f32], weight: &[f32]) -> Result<Vec<f32>, String> {
+pub fn conv2d_input_grad(g: &ConvGeom, dy: &[f32], weight: &[f32]) -> KernelResult<Vec<f32>> {
     conv2d_input_grad_prepared(g, dy, weight, None)
 }
 
@@ -184,7 +197,7 @@ pub fn conv2d_input_grad_prepared(
     dy: &[f32],
     weight: &[f32],
     wino_flipped: Option<&[f32]>,
-) -> Result<Vec<f32>, String> {
+) -> KernelResult<Vec<f32>> {
     let ConvGeom {
         b,
         ci,
@@ -196,8 +209,8 @@ pub fn conv2d_input_grad_prepared(
         pad,
     } = *g;
     let (ho, wo) = g.out_hw();
-    check_len("output gradient", dy.len(), b * co * ho * wo)?;
-    check_len("weight", weight.len(), co * ci * k * k)?;
+    check_len("conv2d", "output gradient", dy.len(), b * co * ho * wo)?;
+    check_len("conv2d", "weight", weight.len(), co * ci * k * k)?;
     if s == 1 && pad.iter().all(|&p| p < k) {
         // dx = correlation of dy with the flipped, transposed kernel, padded by k − 1 − p
         let gt = ConvGeom::new(b, co, ho, wo, ci, k, 1, pad.map(|p| k - 1 - p))?;
