@@ -238,22 +238,23 @@ fn retrieval_names_its_source_icons_when_the_index_is_installed() {
     assert_eq!(same[0].0.icon.caption, same[1].0.icon.caption, "{same:?}");
     assert_ne!(same[0].0.icon, same[1].0.icon);
     let out = common::runs::run(&m, &req).unwrap();
-    let starts = out.detail["retrieval"]["starts"].as_array().unwrap();
+    let detail = serde_json::to_value(&out.report).unwrap();
+    let starts = detail["retrieval"]["starts"].as_array().unwrap();
     // The model's `_retrieval_share` of the two samples start from icons (one or both).
-    let share = out.detail["retrieval"]["share"].as_f64().unwrap();
+    let share = detail["retrieval"]["share"].as_f64().unwrap();
     let n = vectorfusion::stages::sample::retrieved_count(2, share);
     assert!(n >= 1);
-    assert_eq!(starts.len(), n, "{}", out.detail);
+    assert_eq!(starts.len(), n, "{}", detail);
     // `_retrieval_per_caption` reaches the sampler: two drawings of one caption when it allows.
-    let per_caption = out.detail["retrieval"]["per_caption"].as_u64().unwrap();
+    let per_caption = detail["retrieval"]["per_caption"].as_u64().unwrap();
     if n == 2 {
         let same = starts[0]["caption"] == starts[1]["caption"];
-        assert_eq!(same, per_caption >= 2, "{}", out.detail);
+        assert_eq!(same, per_caption >= 2, "{}", detail);
     }
     for key in ["set", "name", "license", "caption"] {
-        assert!(starts[0][key].is_string(), "{key}: {}", out.detail);
+        assert!(starts[0][key].is_string(), "{key}: {}", detail);
     }
-    if out.detail["retrieval"]["chosen"].is_object() {
+    if detail["retrieval"]["chosen"].is_object() {
         assert!(
             out.svg.contains("<metadata>Started from the icon"),
             "{}",
@@ -270,11 +271,7 @@ fn retrieval_names_its_source_icons_when_the_index_is_installed() {
         },
     )
     .unwrap();
-    assert!(
-        off.detail["retrieval"]["starts"]
-            .as_array()
-            .unwrap()
-            .is_empty()
-    );
-    assert_eq!(off.detail["retrieval"]["unavailable"], "turned off");
+    let retrieval = off.report.retrieval.unwrap();
+    assert!(retrieval.starts.is_empty());
+    assert_eq!(retrieval.unavailable.as_deref(), Some("turned off"));
 }

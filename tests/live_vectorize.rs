@@ -3,10 +3,10 @@
 
 use std::sync::Mutex;
 use vectorfusion::image::{Image, psnr};
-use vectorfusion::progress::{CancelToken, NullSink, Progress};
+use vectorfusion::progress::{CancelToken, NullSink, Progress, Stage};
 use vectorfusion::raster;
 use vectorfusion::scene::{Point, Rgba, Scene, Shape};
-use vectorfusion::stages::live::{InitMode, LiveConfig, LiveError, PathBudget, Preset, vectorize};
+use vectorfusion::stages::live::{InitMode, LiveConfig, LiveError, PathBudget, vectorize};
 
 /// A flat 64 px "icon": background, a red disc, a blue square and a green triangle.
 fn target() -> Image {
@@ -38,7 +38,7 @@ fn small_cfg() -> LiveConfig {
         iters_per_stage: 60,
         final_iters: 30,
         snapshot_every: 25,
-        ..LiveConfig::preset(Preset::Fast)
+        ..LiveConfig::default()
     }
 }
 
@@ -121,7 +121,7 @@ fn progress_events_and_cancellation() {
     vectorize(&t, &cfg, &sink, &CancelToken::new()).unwrap();
     let ev = events.into_inner().unwrap();
     assert!(ev.len() >= 7);
-    assert!(ev.iter().all(|e| e.stage == "live"));
+    assert!(ev.iter().all(|e| e.stage == Stage::Live));
     assert!(ev.windows(2).all(|w| w[0].step <= w[1].step));
     assert!(ev.iter().filter(|e| e.svg.is_some()).count() >= 3);
     assert!(ev.iter().any(|e| e.loss.is_some()));

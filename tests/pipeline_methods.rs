@@ -16,7 +16,7 @@ use vectorfusion::pipeline::{
     DefaultExecutor, Executor, JobContext, JobKind, JobSpec, Method, ModelDirs, PlanRequest,
     Preset, RunInput, StartKind, Style, Tuning,
 };
-use vectorfusion::progress::{CancelToken, Progress};
+use vectorfusion::progress::{CancelToken, Progress, Stage};
 use vectorfusion::scene::Scene;
 
 fn fixture(name: &str) -> PathBuf {
@@ -56,7 +56,7 @@ fn run_from(
     r: &PlanRequest,
     image: Option<Image>,
     svg: Option<Scene>,
-) -> vectorfusion::pipeline::MethodOutput {
+) -> vectorfusion::pipeline::RunOutput {
     let input = RunInput {
         caption: r.caption.clone(),
         image,
@@ -78,22 +78,22 @@ fn every_method_and_style_runs_on_the_tiny_model_without_nan() {
             for s in &out.scene.shapes {
                 assert!(s.points.iter().all(|p| p.x.is_finite() && p.y.is_finite()));
             }
-            let d = &out.detail;
-            assert_eq!(d["paths_needed"], out.paths);
+            let d = &out.report;
+            assert_eq!(d.paths_needed, Some(out.paths));
+            let scores = d.rerank.as_ref().map(|r| r.scores.len());
+            let sds = d.sds.as_ref().map(|s| (s.stats.steps_done, s.augment));
             match method {
                 Method::Scratch => {
-                    assert!(d["rerank"].is_null());
-                    assert_eq!(d["sds"]["steps_done"], 4);
-                    assert_eq!(d["sds"]["augment"], true);
+                    assert_eq!(scores, None);
+                    assert_eq!(sds, Some((4, true)));
                 }
                 Method::SdLive => {
-                    assert_eq!(d["rerank"]["scores"].as_array().unwrap().len(), 2);
-                    assert!(d["sds"].is_null(), "sd_live has no SDS: {d}");
+                    assert_eq!(scores, Some(2));
+                    assert_eq!(sds, None, "sd_live has no SDS: {d:?}");
                 }
                 Method::SdLiveSds => {
-                    assert_eq!(d["rerank"]["scores"].as_array().unwrap().len(), 2);
-                    assert_eq!(d["sds"]["augment"], false);
-                    assert_eq!(d["sds"]["steps_done"], 4);
+                    assert_eq!(scores, Some(2));
+                    assert_eq!(sds, Some((4, false)));
                 }
             }
             if style == Style::PixelArt {
@@ -114,13 +114,8 @@ fn rerank_keeps_the_highest_clip_score() {
         },
     )
     .unwrap();
-    let scores: Vec<f64> = out.detail["rerank"]["scores"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_f64().unwrap())
-        .collect();
-    let best = out.detail["rerank"]["best"].as_u64().unwrap() as usize;
+    let rerank = out.report.rerank.unwrap();
+    let (scores, best) = (rerank.scores, rerank.chosen);
     assert_eq!(scores.len(), 3);
     assert!(scores.iter().all(|s| *s <= scores[best]), "{scores:?}");
 }
@@ -179,9 +174,9 @@ fn starts_from_a_user_image_or_svg() {
         None,
     );
     assert_finite_svg(&out.svg);
-    assert!(out.detail["live"]["psnr"].as_f64().unwrap() > 10.0);
-    assert!(out.detail["rerank"].is_null(), "no sampling from an image");
-    assert_eq!(out.detail["sds"]["steps_done"], 4);
+    assert!(out.report.live.as_ref().unwrap().psnr > 10.0);
+    assert!(out.report.rerank.is_none(), "no sampling from an image");
+    assert_eq!(out.report.sds.as_ref().unwrap().stats.steps_done, 4);
 
     let svg = r##"<svg xmlns="http://www.w3.org/2000/svg" width="64" height="64">
         <rect width="64" height="64" fill="#ffffff"/>
@@ -204,7 +199,7 @@ fn cancellation_stops_a_run() {
     let cancel = CancelToken::new();
     let c2 = cancel.clone();
     let sink = move |p: Progress| {
-        if p.stage == "sample" {
+        if p.stage == Stage::Sample {
             c2.cancel();
         }
     };
@@ -273,10 +268,10 @@ fn spec(kind: JobKind) -> JobSpec {
         svg: None,
         style: Style::Iconography,
         method: Method::SdLiveSds,
-        paths: 8,
-        steps: 4,
+        paths: Some(8),
+        steps: Some(4),
         seed: 3,
-        samples: 2,
+        samples: Some(2),
         preset: Preset::Draft,
         priority: 0,
         retrieval: true,
@@ -295,13 +290,14 @@ fn default_executor_vectorizes_an_image() {
         .unwrap();
     assert_finite_svg(&out.svg);
     assert!(out.paths >= 1 && out.paths <= 8, "{}", out.paths);
-    assert!(
-        out.detail["psnr"].as_f64().unwrap() > 15.0,
-        "{}",
-        out.detail
-    );
+    assert!(out.report.psnr.unwrap() > 15.0, "{:?}", out.report);
     // Text jobs are refused with a hint while no models are configured.
-    assert!(exec.text_ready().unwrap_err().contains("sd_dir"));
+    assert!(
+        exec.text_ready()
+            .unwrap_err()
+            .to_string()
+            .contains("sd_dir")
+    );
 }
 
 #[test]
@@ -316,7 +312,13 @@ fn default_executor_text_ready_follows_the_model_config() {
         sd_dir: Some(fixture("no-such-model")),
         ..ModelDirs::default()
     });
-    assert!(missing.text_ready().unwrap_err().contains("no-such-model"));
+    assert!(
+        missing
+            .text_ready()
+            .unwrap_err()
+            .to_string()
+            .contains("no-such-model")
+    );
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -473,18 +475,18 @@ fn a_stored_plan_runs_as_stored() {
     assert_eq!((text.size, text.sds.as_ref().unwrap().steps), (32, 3));
     // The spec's own fields say "fast" and 1000 steps now; the stored plan still decides.
     spec.preset = Preset::Fast;
-    spec.steps = 1000;
+    spec.steps = Some(1000);
     let out = exec
         .run(&spec, &JobContext::detached(CancelToken::new()))
         .unwrap();
-    assert_eq!(out.detail["sds"]["steps_done"], 3);
-    assert_eq!(out.detail["size"], 32);
+    assert_eq!(out.report.sds.as_ref().unwrap().stats.steps_done, 3);
+    assert_eq!(out.report.size, Some(32));
     // Without a stored plan (a job from before plans) the spec's fields are resolved.
     spec.plan = None;
-    spec.steps = 2;
+    spec.steps = Some(2);
     let out = exec
         .run(&spec, &JobContext::detached(CancelToken::new()))
         .unwrap();
-    assert_eq!(out.detail["sds"]["steps_done"], 2);
-    assert_eq!(out.detail["size"], 64, "the fast preset's size");
+    assert_eq!(out.report.sds.as_ref().unwrap().stats.steps_done, 2);
+    assert_eq!(out.report.size, Some(64), "the fast preset's size");
 }

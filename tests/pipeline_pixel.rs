@@ -52,7 +52,7 @@ fn every_method_runs_on_the_pixel_space_model() {
             assert_valid_svg(&out.svg);
             assert!(out.paths > 0, "{method:?} {style:?}: empty scene");
             assert_eq!(out.scene.width, 64);
-            let d = &out.detail;
+            let d = &serde_json::to_value(&out.report).unwrap();
             assert_eq!(d["encoder"], "pixel", "{d}");
             match method {
                 Method::Scratch => assert_eq!(d["sds"]["steps_done"], 3),
@@ -91,13 +91,10 @@ fn sd_live_sds_with_taesd_as_the_encoder() {
     );
     let out = runs::run(&m, &r).unwrap();
     assert_valid_svg(&out.svg);
-    assert_eq!(out.detail["encoder"], "taesd");
-    assert_eq!(out.detail["sds"]["steps_done"], 3);
-    assert!(
-        out.detail["teacher"].as_str().unwrap().contains("TAESD"),
-        "{}",
-        out.detail
-    );
+    let d = serde_json::to_value(&out.report).unwrap();
+    assert_eq!(d["encoder"], "taesd");
+    assert_eq!(d["sds"]["steps_done"], 3);
+    assert!(d["teacher"].as_str().unwrap().contains("TAESD"), "{d}");
 }
 
 #[test]
@@ -112,10 +109,10 @@ fn service_executor_runs_a_text_job_on_the_default_pixel_model() {
         svg: None,
         style: Style::Iconography,
         method: Method::SdLiveSds,
-        paths: 4,
-        steps: 2,
+        paths: Some(4),
+        steps: Some(2),
         seed: 1,
-        samples: 1,
+        samples: Some(1),
         preset: Preset::Draft,
         priority: 0,
         retrieval: true,
@@ -127,8 +124,9 @@ fn service_executor_runs_a_text_job_on_the_default_pixel_model() {
         .unwrap();
     assert_valid_svg(&out.svg);
     // the pixel draft preset's size, not the SD draft's 32 px
-    assert_eq!(out.detail["size"], Preset::Draft.settings_for(true).size);
-    assert_eq!(out.detail["encoder"], "pixel");
+    let d = serde_json::to_value(&out.report).unwrap();
+    assert_eq!(d["size"], Preset::Draft.settings_for(true).size);
+    assert_eq!(d["encoder"], "pixel");
 }
 
 fn tmpdir(name: &str) -> PathBuf {

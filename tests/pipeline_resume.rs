@@ -12,10 +12,10 @@ use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 use vectorfusion::pipeline::{
-    DefaultExecutor, Executor, JobContext, JobKind, JobOutput, JobSpec, Method, ModelDirs,
-    PipelineError, Preset, Style,
+    DefaultExecutor, Executor, JobContext, JobKind, JobSpec, Method, ModelDirs, PipelineError,
+    Preset, ResumePoint, RunOutput, Style,
 };
-use vectorfusion::progress::{CancelToken, Progress};
+use vectorfusion::progress::{CancelToken, Progress, Stage};
 
 fn fixture(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -39,10 +39,10 @@ fn spec(method: Method, style: Style) -> JobSpec {
         svg: None,
         style,
         method,
-        paths: 6,
-        steps: 8,
+        paths: Some(6),
+        steps: Some(8),
         seed: 11,
-        samples: 2,
+        samples: Some(2),
         preset: Preset::Draft,
         priority: 0,
         retrieval: true,
@@ -57,7 +57,7 @@ fn spec(method: Method, style: Style) -> JobSpec {
 struct Attempt {
     events: Vec<Progress>,
     checkpoints: Vec<Value>,
-    out: Result<JobOutput, PipelineError>,
+    out: Result<RunOutput, PipelineError>,
 }
 
 fn attempt(
@@ -65,7 +65,7 @@ fn attempt(
     spec: &JobSpec,
     every: u32,
     resume: Option<Value>,
-    cancel_at: Option<(&'static str, u32)>,
+    cancel_at: Option<(Stage, u32)>,
 ) -> Attempt {
     let events = Arc::new(Mutex::new(Vec::new()));
     let saved = Arc::new(Mutex::new(Vec::new()));
@@ -83,7 +83,7 @@ fn attempt(
         cancel,
         every,
         Box::new(move |v: Value| {
-            let text = serde_json::to_string(&v).map_err(|e| e.to_string())?;
+            let text = serde_json::to_string(&v)?;
             s2.lock()
                 .unwrap()
                 .push(serde_json::from_str(&text).unwrap());
@@ -118,12 +118,17 @@ fn sds_checkpoints_and_a_restart_resumes_to_the_same_svg() {
         ck["detail"]["rerank"]["scores"].as_array().unwrap().len(),
         2
     );
-    assert!(full_out.detail["resumed_from"].is_null());
+    assert!(full_out.report.resumed.is_none());
 
     // A restart from the step-3 checkpoint: no sampling/rerank/LIVE, SDS from step 4, same SVG.
     let resumed = attempt(&exec, &spec, 3, Some(ck.clone()), None);
     let out = resumed.out.unwrap();
-    assert_eq!(out.detail["resumed_from"], 3, "{}", out.detail);
+    assert_eq!(
+        out.report.resumed,
+        Some(ResumePoint::Step(3)),
+        "{:?}",
+        out.report
+    );
     assert!(
         resumed
             .events
@@ -132,10 +137,14 @@ fn sds_checkpoints_and_a_restart_resumes_to_the_same_svg() {
         "{:?}",
         resumed.events.iter().map(|p| &p.stage).collect::<Vec<_>>()
     );
-    let first_sds = resumed.events.iter().find(|p| p.stage == "sds").unwrap();
+    let first_sds = resumed
+        .events
+        .iter()
+        .find(|p| p.stage == Stage::Sds)
+        .unwrap();
     assert_eq!(first_sds.step, 4);
     // The rerank scores of the first attempt are kept in the result.
-    assert_eq!(out.detail["rerank"], full_out.detail["rerank"]);
+    assert_eq!(out.report.rerank, full_out.report.rerank);
     assert_eq!(
         out.svg, full_out.svg,
         "resumed run differs from the uninterrupted one"
@@ -160,13 +169,13 @@ fn cancellation_saves_a_checkpoint_that_resumes_exactly() {
         let spec = spec(method, style);
         let full = attempt(&exec, &spec, 100, None, None).out.unwrap();
         // Shutdown after step 5: the job stops with Cancelled and saves step 5.
-        let stopped = attempt(&exec, &spec, 100, None, Some(("sds", 5)));
+        let stopped = attempt(&exec, &spec, 100, None, Some((Stage::Sds, 5)));
         assert!(matches!(stopped.out, Err(PipelineError::Cancelled)));
         let last = stopped.checkpoints.last().expect("checkpoint on cancel");
         assert_eq!(step_of(last), 5);
         let resumed = attempt(&exec, &spec, 100, Some(last.clone()), None);
         let out = resumed.out.unwrap();
-        assert_eq!(out.detail["resumed_from"], 5);
+        assert_eq!(out.report.resumed, Some(ResumePoint::Step(5)));
         assert_eq!(out.svg, full.svg, "{method:?} {style:?}");
     }
 }
@@ -180,7 +189,7 @@ fn a_checkpoint_of_another_request_is_ignored() {
     spec_b.seed = 12;
     let fresh = attempt(&exec, &spec_b, 100, None, None).out.unwrap();
     let with_foreign = attempt(&exec, &spec_b, 100, Some(ck), None).out.unwrap();
-    assert!(with_foreign.detail["resumed_from"].is_null());
+    assert!(with_foreign.report.resumed.is_none());
     assert_eq!(with_foreign.svg, fresh.svg);
     // Garbage resume state is ignored too (runs from the start).
     let junk = attempt(
@@ -223,10 +232,10 @@ fn vectorize_jobs_checkpoint_each_live_stage_and_resume_exactly() {
         svg: None,
         style: Style::Iconography,
         method: Method::SdLive,
-        paths: 24,
-        steps: 1,
+        paths: Some(24),
+        steps: Some(1),
         seed: 5,
-        samples: 1,
+        samples: Some(1),
         preset: Preset::Draft,
         priority: 0,
         retrieval: true,
@@ -243,20 +252,29 @@ fn vectorize_jobs_checkpoint_each_live_stage_and_resume_exactly() {
         .collect();
     assert!(stages.len() >= 2, "{stages:?}");
     assert_eq!(stages, (1..=stages.len() as u64).collect::<Vec<_>>());
-    assert!(full_out.detail["resumed_from_stage"].is_null());
+    assert!(full_out.report.resumed.is_none());
 
     // Restart from the first stage's state: LIVE continues after it, same SVG.
     let first = &full.checkpoints[0];
     let done_steps = first["live"]["step"].as_u64().unwrap() as u32;
     let resumed = attempt(&exec, &spec, 100, Some(first.clone()), None);
     let out = resumed.out.unwrap();
-    assert_eq!(out.detail["resumed_from_stage"], 1, "{}", out.detail);
-    let first_live = resumed.events.iter().find(|p| p.stage == "live").unwrap();
+    assert_eq!(
+        out.report.resumed,
+        Some(ResumePoint::LiveStage(1)),
+        "{:?}",
+        out.report
+    );
+    let first_live = resumed
+        .events
+        .iter()
+        .find(|p| p.stage == Stage::Live)
+        .unwrap();
     assert!(first_live.step > done_steps, "{first_live:?}");
     assert_eq!(out.svg, full_out.svg, "resumed vectorize differs");
 
     // Cancelled mid-run (a shutdown): the last saved stage resumes to the same SVG.
-    let stopped = attempt(&exec, &spec, 100, None, Some(("live", done_steps + 3)));
+    let stopped = attempt(&exec, &spec, 100, None, Some((Stage::Live, done_steps + 3)));
     assert!(matches!(stopped.out, Err(PipelineError::Cancelled)));
     let last = stopped
         .checkpoints
@@ -273,7 +291,7 @@ fn vectorize_jobs_checkpoint_each_live_stage_and_resume_exactly() {
     let foreign = attempt(&exec, &other, 100, Some(first.clone()), None)
         .out
         .unwrap();
-    assert!(foreign.detail["resumed_from_stage"].is_null());
+    assert!(foreign.report.resumed.is_none());
     assert_eq!(foreign.svg, fresh.svg);
 }
 

@@ -12,9 +12,9 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::Duration;
 use vectorfusion::pipeline::{
-    DefaultExecutor, Executor, JobContext, JobOutput, JobSpec, PipelineError,
+    DefaultExecutor, Executor, JobContext, JobSpec, PipelineError, RunOutput, RunReport,
 };
-use vectorfusion::progress::Progress;
+use vectorfusion::progress::{Progress, Stage};
 use vectorfusion::worker::test_executor::{TestExecutor, scene_at, scene_svg};
 
 fn vectorize_body(paths: u32, steps: u32, seed: u64) -> Value {
@@ -1016,18 +1016,19 @@ struct FlakyExecutor {
 }
 
 impl Executor for FlakyExecutor {
-    fn run(&self, _spec: &JobSpec, ctx: &JobContext) -> Result<JobOutput, PipelineError> {
-        ctx.report(Progress::new("flaky", 1, 1));
+    fn run(&self, _spec: &JobSpec, ctx: &JobContext) -> Result<RunOutput, PipelineError> {
+        ctx.report(Progress::new(Stage::Test, 1, 1));
         if self.calls.fetch_add(1, Ordering::SeqCst) == 0 {
             return Err(PipelineError::Transient("simulated out-of-memory".into()));
         }
-        Ok(JobOutput {
-            svg: "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"4\" height=\"4\"/>".into(),
-            paths: 0,
-            detail: json!({}),
-        })
+        Ok(RunOutput::new(
+            vectorfusion::scene::Scene::new(4, 4, vectorfusion::scene::Rgba::TRANSPARENT)
+                .expect("a 4 px scene"),
+            "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"4\" height=\"4\"/>".into(),
+            RunReport::default(),
+        ))
     }
-    fn text_ready(&self) -> Result<(), String> {
+    fn text_ready(&self) -> Result<(), vectorfusion::pipeline::NotReady> {
         Ok(())
     }
 }

@@ -160,14 +160,15 @@ impl vectorfusion::pipeline::Executor for NoopExecutor {
         &self,
         _spec: &vectorfusion::pipeline::JobSpec,
         _ctx: &vectorfusion::pipeline::JobContext,
-    ) -> Result<vectorfusion::pipeline::JobOutput, vectorfusion::pipeline::PipelineError> {
-        Ok(vectorfusion::pipeline::JobOutput {
-            svg: r#"<svg xmlns="http://www.w3.org/2000/svg" width="4" height="4"/>"#.into(),
-            paths: 0,
-            detail: json!({}),
-        })
+    ) -> Result<vectorfusion::pipeline::RunOutput, vectorfusion::pipeline::PipelineError> {
+        Ok(vectorfusion::pipeline::RunOutput::new(
+            vectorfusion::scene::Scene::new(4, 4, vectorfusion::scene::Rgba::TRANSPARENT)
+                .expect("a 4 px scene"),
+            r#"<svg xmlns="http://www.w3.org/2000/svg" width="4" height="4"/>"#.into(),
+            vectorfusion::pipeline::RunReport::default(),
+        ))
     }
-    fn text_ready(&self) -> Result<(), String> {
+    fn text_ready(&self) -> Result<(), vectorfusion::pipeline::NotReady> {
         Ok(())
     }
 }
@@ -180,14 +181,18 @@ impl vectorfusion::pipeline::Executor for StuckExecutor {
         &self,
         _spec: &vectorfusion::pipeline::JobSpec,
         ctx: &vectorfusion::pipeline::JobContext,
-    ) -> Result<vectorfusion::pipeline::JobOutput, vectorfusion::pipeline::PipelineError> {
-        ctx.report(vectorfusion::progress::Progress::new("stuck", 0, 1));
+    ) -> Result<vectorfusion::pipeline::RunOutput, vectorfusion::pipeline::PipelineError> {
+        ctx.report(vectorfusion::progress::Progress::new(
+            vectorfusion::progress::Stage::Test,
+            0,
+            1,
+        ));
         std::thread::sleep(Duration::from_secs(12));
         Err(vectorfusion::pipeline::PipelineError::Transient(
             "woke up".into(),
         ))
     }
-    fn text_ready(&self) -> Result<(), String> {
+    fn text_ready(&self) -> Result<(), vectorfusion::pipeline::NotReady> {
         Ok(())
     }
 }

@@ -202,6 +202,12 @@ fn submit_request_fields_and_enums_match_the_code() {
         .into_iter()
         .collect();
     assert_eq!(statuses, serde_names(&JobStatus::ALL));
+    let stages: BTreeSet<String> = spec
+        .path(&["components", "schemas", "Stage", "enum"])
+        .flow_list()
+        .into_iter()
+        .collect();
+    assert_eq!(stages, serde_names(&vectorfusion::progress::Stage::ALL));
     let limits = vectorfusion::pipeline::Limits::default();
     for props in [text, vectorize] {
         // documented defaults and bounds are the code's

@@ -368,18 +368,19 @@ pub fn run(args: BenchStabilityArgs) -> Result<(), CliError> {
                         continue;
                     }
                 };
-                if let Some(t) = out.detail["teacher"].as_str() {
+                if let Some(t) = &out.report.teacher {
                     t.clone_into(&mut teacher);
                 }
                 let img = crate::raster::render(&out.scene);
                 let nan = out.svg.contains("NaN") || img.data.iter().any(|v| !v.is_finite());
                 let collapsed = out.paths == 0 || spread(&img) < COLLAPSED_SPREAD;
                 let over = chroma(&img) > OVERSATURATED_CHROMA;
-                let sds = &out.detail["sds"];
-                let diverged = !sds.is_null()
-                    && (sds["lr_halvings"].as_u64().unwrap_or(0) > 0
-                        || !sds["last_loss"].as_f64().is_some_and(f64::is_finite)
-                        || sds["skipped_nonfinite"].as_u64().unwrap_or(0) > (a.steps / 4) as u64);
+                let diverged = out.report.sds.as_ref().is_some_and(|sds| {
+                    let s = &sds.stats;
+                    s.lr_halvings > 0
+                        || !s.last_loss.is_finite()
+                        || u64::from(s.skipped_nonfinite) > (a.steps / 4) as u64
+                });
                 cell.nan += nan as u64;
                 cell.collapsed += collapsed as u64;
                 cell.oversaturated += over as u64;

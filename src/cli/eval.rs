@@ -239,8 +239,9 @@ fn generate_and_evaluate(
                 .run_plan(&plan, &input, &JobContext::detached(CancelToken::new()))
                 .map_err(pipeline_err)?;
             // The pipeline's own time (model loading excluded); wall time as a fallback.
-            let secs = out.detail["seconds"]
-                .as_f64()
+            let secs = out
+                .report
+                .seconds
                 .unwrap_or_else(|| t0.elapsed().as_secs_f64());
             seconds += secs;
             let path = dir.join(svg_name(line));

@@ -13,7 +13,7 @@ use crate::pipeline::{
     DefaultExecutor, EncoderChoice, Executor, JobContext, JobKind, Limits, Method, ModelDirs,
     PipelineError, PlanRequest, Preset, RunInput, SpecError, StartKind, Style, default_model_dir,
 };
-use crate::progress::{CancelToken, Progress};
+use crate::progress::{CancelToken, Progress, Stage};
 use crate::scene::MAX_PATHS;
 use anyhow::Context;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -170,23 +170,23 @@ fn progress_sink(snap_dir: Option<PathBuf>) -> (ProgressBar, impl Fn(Progress) +
             .unwrap_or_else(|_| ProgressStyle::default_bar())
             .progress_chars("=> "),
     );
-    let stage = Mutex::new(String::new());
+    let stage = Mutex::new(None);
     let b = bar.clone();
     let sink = move |p: Progress| {
         if let Ok(mut s) = stage.lock()
-            && *s != p.stage
+            && *s != Some(p.stage)
         {
-            s.clone_from(&p.stage);
+            *s = Some(p.stage);
             b.reset();
-            b.set_message(p.stage.clone());
+            b.set_message(p.stage.as_str());
         }
         b.set_length(u64::from(p.total));
         b.set_position(u64::from(p.step));
-        if let (Some(d), "rerank") = (&p.detail, p.stage.as_str()) {
+        if let (Some(d), Stage::Rerank) = (&p.detail, p.stage) {
             b.suspend(|| eprintln!("rerank: {d}"));
         }
         if let (Some(dir), Some(svg)) = (&snap_dir, &p.svg) {
-            let path = dir.join(format!("{}_{:05}.svg", p.stage, p.step));
+            let path = dir.join(format!("{}_{:05}.svg", p.stage.as_str(), p.step));
             if let Err(e) = std::fs::write(&path, svg) {
                 b.suspend(|| eprintln!("warning: could not write {}: {e}", path.display()));
             }
@@ -284,7 +284,7 @@ pub fn run(args: GenerateArgs) -> Result<(), CliError> {
         "output": args.output,
         "paths": out.paths,
         "plan": plan,
-        "detail": out.detail,
+        "detail": out.report,
     });
     println!("{summary}");
     Ok(())

@@ -261,11 +261,11 @@ pub fn run(a: VectorizeArgs) -> Result<(), CliError> {
          {} slivers, {:.1} s",
         a.output.display(),
         result.paths,
-        match result.detail["paths_pruned"].as_u64() {
+        match result.report.paths_pruned {
             Some(n) if n > 0 => format!(" ({n} pruned)"),
             _ => String::new(),
         },
-        result.detail["psnr"].as_f64().unwrap_or(f64::NAN),
+        result.report.psnr.unwrap_or(f64::NAN),
         svg.len(),
         e.colors,
         e.self_intersecting,
@@ -281,7 +281,7 @@ pub fn run(a: VectorizeArgs) -> Result<(), CliError> {
             "editability": e,
             "seconds": t0.elapsed().as_secs_f64(),
             "plan": plan,
-            "detail": result.detail,
+            "detail": result.report,
         });
         println!("{summary}");
     }

@@ -1,21 +1,12 @@
 //! The seam between the worker and the computation: an [`Executor`] runs a [`JobSpec`] and talks
 //! back only through its [`JobContext`] (progress, cancellation, checkpoints).
 
-use super::{JobSpec, Limits, PipelineError, PlanRequest, RunPlan, SpecError};
-use crate::progress::{CancelToken, NullSink, Progress, ProgressSink};
-use serde::{Deserialize, Serialize};
+use super::{JobSpec, Limits, NotReady, PipelineError, PlanRequest, RunOutput, RunPlan, SpecError};
+use crate::progress::{CancelToken, CheckpointError, NullSink, Progress, ProgressSink};
+use serde::Serialize;
 use std::sync::Arc;
 
-/// The result of a job.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct JobOutput {
-    pub svg: String,
-    pub paths: usize,
-    /// Stage-specific details (scores, timings, resume information).
-    pub detail: serde_json::Value,
-}
-
-type Checkpointer = dyn Fn(serde_json::Value) -> Result<(), String> + Send + Sync;
+type Checkpointer = dyn Fn(serde_json::Value) -> Result<(), CheckpointError> + Send + Sync;
 
 /// What an executor gets besides the spec: where to report, when to stop, how to checkpoint.
 pub struct JobContext {
@@ -93,10 +84,10 @@ impl JobContext {
         step > 0 && step % self.checkpoint_every == 0
     }
 
-    /// Saves resumable state (current SVG, step, optimiser state). A failure to save is
-    /// reported as [`PipelineError::Transient`].
-    pub fn checkpoint(&self, state: serde_json::Value) -> Result<(), PipelineError> {
-        (self.checkpointer)(state).map_err(PipelineError::Transient)
+    /// Saves resumable state (current SVG, step, optimiser state). A failure to save is a
+    /// transient failure of the job ([`PipelineError::Checkpoint`]).
+    pub fn checkpoint(&self, state: serde_json::Value) -> Result<(), CheckpointError> {
+        (self.checkpointer)(state)
     }
 
     /// State from the last checkpoint of an earlier, interrupted attempt.
@@ -107,12 +98,12 @@ impl JobContext {
 
 /// Runs jobs. Called on a dedicated worker thread, never on the async runtime.
 pub trait Executor: Send + Sync {
-    fn run(&self, spec: &JobSpec, ctx: &JobContext) -> Result<JobOutput, PipelineError>;
+    fn run(&self, spec: &JobSpec, ctx: &JobContext) -> Result<RunOutput, PipelineError>;
 
     /// `Ok` when `text` jobs can run (models configured and loadable); otherwise a message
     /// telling the operator how to configure them. Text jobs are refused at submit time while
     /// this is an error.
-    fn text_ready(&self) -> Result<(), String>;
+    fn text_ready(&self) -> Result<(), NotReady>;
 
     /// Resolves a request into the [`RunPlan`] this executor would run (presets, the model's
     /// hints and the limits applied once). The service calls it at submit time and stores the
@@ -129,9 +120,11 @@ pub trait Executor: Send + Sync {
 }
 
 /// Stores `state` as the job's checkpoint (JSON through `ctx`).
-pub(super) fn save_checkpoint(ctx: &JobContext, state: &impl Serialize) -> Result<(), String> {
-    let value = serde_json::to_value(state).map_err(|e| e.to_string())?;
-    ctx.checkpoint(value).map_err(|e| e.to_string())
+pub(super) fn save_checkpoint(
+    ctx: &JobContext,
+    state: &impl Serialize,
+) -> Result<(), CheckpointError> {
+    ctx.checkpoint(serde_json::to_value(state)?)
 }
 
 /// The state an interrupted attempt saved, when it is a `T`; none, garbage or a checkpoint of

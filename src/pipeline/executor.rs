@@ -3,12 +3,15 @@
 //! ([`DefaultExecutor::plan`]) and runs plans ([`DefaultExecutor::run_plan`]); models are
 //! loaded on first use and kept per teacher size and encoder.
 
-use super::context::{Executor, JobContext, JobOutput};
+use super::context::{Executor, JobContext};
 use super::models::Models;
 use super::plan::{self, PlanRequest, RunPlan, StartKind, Tuning};
-use super::text::{MethodOutput, Start, run_text};
+use super::text::{Start, run_text};
 use super::vectorize::run_vectorize;
-use super::{EncoderChoice, JobKind, JobSpec, Limits, ModelDirs, PipelineError, SpecError};
+use super::{
+    EncoderChoice, JobKind, JobSpec, Limits, ModelDirs, NotReady, PipelineError, RunOutput,
+    SpecError,
+};
 use crate::image::Image;
 use crate::scene::{MAX_PATHS, Scene};
 use std::collections::HashMap;
@@ -71,7 +74,7 @@ impl DefaultExecutor {
         if !self.downloads {
             self.models
                 .text_ready()
-                .map_err(PipelineError::ModelsNotConfigured)?;
+                .map_err(|e| PipelineError::ModelsNotConfigured(e.to_string()))?;
         }
         // A plan that chose TAESD when none is configured any more fails in `Models::load`.
         let encoder = plan.model.encoder;
@@ -94,7 +97,7 @@ impl DefaultExecutor {
         plan: &RunPlan,
         input: &RunInput,
         ctx: &JobContext,
-    ) -> Result<MethodOutput, PipelineError> {
+    ) -> Result<RunOutput, PipelineError> {
         ctx.check_cancelled()?;
         let key = plan.key();
         if let Some(text) = &plan.text {
@@ -123,7 +126,7 @@ impl DefaultExecutor {
                 ctx.cancel_token(),
                 Some(ctx),
             )?;
-            out.detail["preset"] = serde_json::json!(plan.preset);
+            out.report.preset = Some(plan.preset);
             return Ok(out);
         }
         let cfg = plan
@@ -135,7 +138,7 @@ impl DefaultExecutor {
             .as_ref()
             .ok_or_else(|| PipelineError::InvalidInput("image is required".into()))?;
         let mut out = run_vectorize(image, cfg, &key, ctx.sink(), ctx.cancel_token(), Some(ctx))?;
-        out.detail["preset"] = serde_json::json!(plan.preset);
+        out.report.preset = Some(plan.preset);
         Ok(out)
     }
 }
@@ -153,9 +156,9 @@ pub fn request_of(spec: &JobSpec) -> PlanRequest {
         style: spec.style,
         method: spec.method,
         preset: spec.preset,
-        paths: Some(spec.paths),
-        steps: Some(spec.steps),
-        samples: Some(spec.samples),
+        paths: spec.paths,
+        steps: spec.steps,
+        samples: spec.samples,
         seed: spec.seed,
         retrieval: spec.retrieval,
         vector: spec.vector.clone(),
@@ -164,7 +167,7 @@ pub fn request_of(spec: &JobSpec) -> PlanRequest {
 }
 
 impl Executor for DefaultExecutor {
-    fn run(&self, spec: &JobSpec, ctx: &JobContext) -> Result<JobOutput, PipelineError> {
+    fn run(&self, spec: &JobSpec, ctx: &JobContext) -> Result<RunOutput, PipelineError> {
         ctx.check_cancelled()?;
         let plan = match &spec.plan {
             Some(p) => p.clone(),
@@ -193,12 +196,7 @@ impl Executor for DefaultExecutor {
             image,
             svg,
         };
-        let out = self.run_plan(&plan, &input, ctx)?;
-        Ok(JobOutput {
-            svg: out.svg,
-            paths: out.paths,
-            detail: out.detail,
-        })
+        self.run_plan(&plan, &input, ctx)
     }
 
     fn plan(&self, request: &PlanRequest, limits: &Limits) -> Result<RunPlan, SpecError> {
@@ -221,11 +219,11 @@ impl Executor for DefaultExecutor {
         plan::resolve(request, facts.as_ref(), limits)
     }
 
-    fn text_ready(&self) -> Result<(), String> {
+    fn text_ready(&self) -> Result<(), NotReady> {
         if self.downloads {
             // The command line: only what loading cannot fix is an error here.
             return match (&self.models.sd_dir, &self.models.analytic_dir) {
-                (None, None) => Err("no model".into()),
+                (None, None) => Err(NotReady::NoModelGiven),
                 _ => Ok(()),
             };
         }

@@ -6,7 +6,8 @@
 //! - [`presets`](PresetSettings): the preset tables the plan reads;
 //! - [`models`](Models): finding and loading the models;
 //! - [`executor`](DefaultExecutor): runs plans for the service's workers and the commands;
-//! - `text` and `vectorize`: the two kinds of run, wired from the stages.
+//! - `text` and `vectorize`: the two kinds of run, wired from the stages;
+//! - [`report`](RunReport): what a run reports besides its SVG ([`RunOutput`]).
 //!
 //! The worker owns queueing, leases, storage and events; an [`Executor`] owns the computation
 //! and talks back only through its [`JobContext`] (progress, cancellation, checkpoints).
@@ -17,22 +18,27 @@ mod executor;
 mod models;
 pub mod plan;
 mod presets;
+mod report;
 mod spec;
 mod text;
 mod vectorize;
 
-pub use context::{Executor, JobContext, JobOutput};
+pub use context::{Executor, JobContext};
 pub use error::{FailureCode, PipelineError};
 pub use executor::{DefaultExecutor, RunInput, request_of};
 pub use models::{
-    DEFAULT_MODEL_ENV, EMBEDDED_MODEL, EncoderChoice, ModelDirs, Models, default_model_dir,
-    find_taesd, is_model_dir, is_pixel_model, is_small_model, resolve_default_model,
-    resolve_encoder,
+    DEFAULT_MODEL_ENV, EMBEDDED_MODEL, EncoderChoice, ModelDirs, Models, NotReady, UnknownEncoder,
+    default_model_dir, find_taesd, is_model_dir, is_pixel_model, is_small_model,
+    resolve_default_model, resolve_encoder,
 };
 pub use plan::{ModelFacts, PlanRequest, RunPlan, StartKind, TextPlan, Tuning};
 pub use presets::PresetSettings;
+pub use report::{
+    RerankReport, ResumePoint, RetrievalReport, RunMethod, RunOutput, RunReport, SdsReport,
+    TraceReport,
+};
 pub use spec::{JobKind, JobSpec, Limits, Method, PRIORITY_RANGE, Preset, SpecError, Style};
-pub use text::{MethodOutput, Start, TextCheckpoint, run_text, sample_ranked};
+pub use text::{Start, TextCheckpoint, run_text, sample_ranked};
 pub use vectorize::{VectorizeCheckpoint, run_vectorize};
 
 #[cfg(test)]

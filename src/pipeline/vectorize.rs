@@ -1,15 +1,13 @@
 //! Image → SVG with LIVE, as a vectorize plan's [`LiveConfig`] says. With a job context the LIVE
 //! state is checkpointed after every stage and a restarted job continues from the last one
-//! (`detail.resumed_from_stage`), ending with the SVG an uninterrupted run gives.
+//! ([`ResumePoint::LiveStage`]), ending with the SVG an uninterrupted run gives.
 
 use super::context::{resume_as, save_checkpoint};
-use super::text::MethodOutput;
-use super::{JobContext, PipelineError};
+use super::{JobContext, PipelineError, ResumePoint, RunOutput, RunReport};
 use crate::image::Image;
-use crate::progress::{CancelToken, ProgressSink};
+use crate::progress::{CancelToken, CheckpointError, ProgressSink};
 use crate::stages::live::{self, LiveConfig};
 use serde::{Deserialize, Serialize};
-use serde_json::json;
 
 /// A vectorize job's saved LIVE state, tagged with the run it belongs to.
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -41,7 +39,7 @@ struct VectorizeCheckpoints<'a> {
 }
 
 impl live::LiveCheckpoint for VectorizeCheckpoints<'_> {
-    fn save(&self, state: &live::LiveState) -> Result<(), String> {
+    fn save(&self, state: &live::LiveState) -> Result<(), CheckpointError> {
         save_checkpoint(
             self.ctx,
             &VectorizeCheckpoint {
@@ -60,7 +58,8 @@ pub fn run_vectorize(
     sink: &dyn ProgressSink,
     cancel: &CancelToken,
     ctx: Option<&JobContext>,
-) -> Result<MethodOutput, PipelineError> {
+) -> Result<RunOutput, PipelineError> {
+    let t0 = std::time::Instant::now();
     let key = checkpoint_key(plan_key, image);
     let resume = resume_as::<VectorizeCheckpoint>(ctx)
         .filter(|c| c.key == key)
@@ -76,22 +75,10 @@ pub fn run_vectorize(
         hook.as_ref().map(|h| h as &dyn live::LiveCheckpoint),
     )?;
     let svg = crate::vector::write_svg(&r.scene, &cfg.colors);
-    let mut detail = json!({
-        "method": "live",
-        "psnr": r.psnr,
-        "paths_needed": r.paths,
-        "paths_pruned": r.pruned,
-        "steps": r.steps,
-        "stages": r.stages,
-        "editability": r.editability,
-    });
-    if let Some(n) = resumed_from {
-        detail["resumed_from_stage"] = json!(n);
-    }
-    Ok(MethodOutput {
-        paths: r.scene.shapes.len(),
-        scene: r.scene,
-        svg,
-        detail,
-    })
+    let report = RunReport {
+        seconds: Some(t0.elapsed().as_secs_f64()),
+        resumed: resumed_from.map(ResumePoint::LiveStage),
+        ..RunReport::vectorized(&r)
+    };
+    Ok(RunOutput::new(r.scene, svg, report))
 }

@@ -19,7 +19,8 @@ use super::AppState;
 use super::error::ApiError;
 use super::routes::{job_id, load_job};
 use super::tenant::Caller;
-use super::types::JobView;
+use super::types::{JobView, ProgressView};
+use crate::progress::Stage;
 use crate::store::{Backend, JobRow, JobStatus, SnapshotRow};
 use crate::worker::events::JobEvent;
 use axum::extract::{Extension, Path, State};
@@ -78,27 +79,21 @@ fn state_event(row: &JobRow) -> Event {
     json_event("state", &JobView::from_row(row))
 }
 
-fn snapshot_event(n: i64, stage: &str, step: i64, svg: &str) -> Event {
-    json_event(
-        "snapshot",
-        &serde_json::json!({ "n": n, "stage": stage, "step": step, "svg": svg }),
-    )
-    .id(n.to_string())
+/// The data of a `snapshot` event.
+#[derive(serde::Serialize)]
+struct SnapshotView<'a> {
+    n: i64,
+    stage: &'a str,
+    step: i64,
+    svg: &'a str,
 }
 
-fn progress_event(
-    stage: Option<&str>,
-    step: i64,
-    total: i64,
-    loss: Option<f64>,
-    detail: Option<serde_json::Value>,
-) -> Event {
-    json_event(
-        "progress",
-        &serde_json::json!({
-            "stage": stage, "step": step, "total": total, "loss": loss, "detail": detail
-        }),
-    )
+fn snapshot_event(snapshot: &SnapshotView<'_>) -> Event {
+    json_event("snapshot", snapshot).id(snapshot.n.to_string())
+}
+
+fn progress_event(progress: &ProgressView) -> Event {
+    json_event("progress", progress)
 }
 
 fn terminal_event(row: &JobRow) -> Option<Event> {
@@ -118,7 +113,7 @@ struct Feed {
     sent_snapshot: i64,
     /// The status and (stage, step) last sent, so a re-read sends only what changed.
     sent_status: JobStatus,
-    sent_progress: (Option<String>, i64),
+    sent_progress: (Option<Stage>, i64),
 }
 
 impl Feed {
@@ -128,13 +123,29 @@ impl Feed {
 
     async fn send_snapshots(&mut self, rows: Vec<SnapshotRow>) -> Result<(), ()> {
         for s in rows {
-            if s.n > self.sent_snapshot {
-                self.send(snapshot_event(s.n, &s.stage, s.step, &s.svg))
-                    .await?;
-                self.sent_snapshot = s.n;
-            }
+            self.send_snapshot(&SnapshotView {
+                n: s.n,
+                stage: &s.stage,
+                step: s.step,
+                svg: &s.svg,
+            })
+            .await?;
         }
         Ok(())
+    }
+
+    /// Sends `snapshot` unless the client has it already.
+    async fn send_snapshot(&mut self, snapshot: &SnapshotView<'_>) -> Result<(), ()> {
+        if snapshot.n > self.sent_snapshot {
+            self.send(snapshot_event(snapshot)).await?;
+            self.sent_snapshot = snapshot.n;
+        }
+        Ok(())
+    }
+
+    /// The (stage, step) of a stored row, as `sent_progress` keeps them.
+    fn progress_of(row: &JobRow) -> (Option<Stage>, i64) {
+        (row.stage.as_deref().and_then(Stage::from_name), row.step)
     }
 
     /// Reloads the job and sends what a lagging client missed. `Ok(true)` when the job is
@@ -144,7 +155,7 @@ impl Feed {
             return Err(());
         };
         self.sent_status = row.status;
-        self.sent_progress = (row.stage.clone(), row.step);
+        self.sent_progress = Feed::progress_of(&row);
         self.send(state_event(&row)).await?;
         self.snapshots_and_end(&row).await
     }
@@ -161,19 +172,11 @@ impl Feed {
         if row.status != self.sent_status {
             self.sent_status = row.status;
             self.send(state_event(&row)).await?;
-        } else if (&row.stage, row.step) != (&self.sent_progress.0, self.sent_progress.1)
-            && row.status == JobStatus::Running
+        } else if Feed::progress_of(&row) != self.sent_progress && row.status == JobStatus::Running
         {
-            self.send(progress_event(
-                row.stage.as_deref(),
-                row.step,
-                row.total,
-                row.loss,
-                None,
-            ))
-            .await?;
+            self.send(progress_event(&ProgressView::from(&row))).await?;
         }
-        self.sent_progress = (row.stage.clone(), row.step);
+        self.sent_progress = Feed::progress_of(&row);
         self.snapshots_and_end(&row).await
     }
 
@@ -193,6 +196,71 @@ impl Feed {
     }
 }
 
+/// The stream's start: the stored state, then the snapshots the client has not seen (all after
+/// `last_seen`, else the latest), then the terminal event of a finished job. `Ok(true)` when
+/// the job is finished.
+async fn replay(f: &mut Feed, row: &JobRow, last_seen: Option<i64>) -> Result<bool, ()> {
+    f.send(state_event(row)).await?;
+    let stored = match last_seen {
+        Some(n) => f.state.store.snapshots_after(&f.id, n, REPLAY_LIMIT).await,
+        None => f
+            .state
+            .store
+            .latest_snapshot(&f.id)
+            .await
+            .map(|s| s.into_iter().collect()),
+    }
+    .map_err(|_| ())?;
+    f.send_snapshots(stored).await?;
+    match terminal_event(row) {
+        Some(t) => f.send(t).await.map(|()| true),
+        None => Ok(false),
+    }
+}
+
+/// Handles one live event (or the lack of one). `Ok(true)` when the stream is over.
+async fn on_event(
+    f: &mut Feed,
+    ev: Result<JobEvent, broadcast::error::RecvError>,
+    rx: &mut broadcast::Receiver<JobEvent>,
+) -> Result<bool, ()> {
+    match ev {
+        Ok(JobEvent::Progress(p)) => {
+            f.sent_progress = (Some(p.stage), i64::from(p.step));
+            f.send(progress_event(&ProgressView::from(&p))).await?;
+            Ok(false)
+        }
+        Ok(JobEvent::Snapshot {
+            n,
+            stage,
+            step,
+            svg,
+        }) => {
+            let snapshot = SnapshotView {
+                n,
+                stage: stage.as_str(),
+                step: i64::from(step),
+                svg: &svg,
+            };
+            f.send_snapshot(&snapshot).await?;
+            Ok(false)
+        }
+        Ok(JobEvent::Changed) => f.refresh().await,
+        Ok(JobEvent::Status(_)) | Ok(JobEvent::Finished(_)) => f.resync().await,
+        Err(broadcast::error::RecvError::Lagged(_)) => f.resync().await,
+        Err(broadcast::error::RecvError::Closed) => {
+            // The final snapshot may have been stored just before: resync sends it, then the
+            // terminal event.
+            let done = f.resync().await?;
+            if !done {
+                // Channel gone without a terminal status: resubscribe.
+                *rx = f.state.hub.subscribe(&f.id);
+            }
+            Ok(done)
+        }
+    }
+}
+
 async fn feed(
     state: AppState,
     row: JobRow,
@@ -208,22 +276,10 @@ async fn feed(
         tx,
         sent_snapshot: last_seen.unwrap_or(0),
         sent_status: row.status,
-        sent_progress: (row.stage.clone(), row.step),
+        sent_progress: Feed::progress_of(&row),
     };
-    f.send(state_event(&row)).await?;
-    let replay = match last_seen {
-        Some(n) => f.state.store.snapshots_after(&f.id, n, REPLAY_LIMIT).await,
-        None => f
-            .state
-            .store
-            .latest_snapshot(&f.id)
-            .await
-            .map(|s| s.into_iter().collect()),
-    }
-    .map_err(|_| ())?;
-    f.send_snapshots(replay).await?;
-    if let Some(t) = terminal_event(&row) {
-        return f.send(t).await;
+    if replay(&mut f, &row, last_seen).await? {
+        return Ok(());
     }
     let mut poll = tokio::time::interval(Duration::from_secs(1));
     poll.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
@@ -234,61 +290,8 @@ async fn feed(
             _ = shutdown.changed() => return Ok(()),
             _ = f.tx.closed() => return Ok(()),
         };
-        match ev {
-            Ok(JobEvent::Progress {
-                stage,
-                step,
-                total,
-                loss,
-                detail,
-            }) => {
-                f.sent_progress = (Some(stage.clone()), i64::from(step));
-                f.send(progress_event(
-                    Some(&stage),
-                    i64::from(step),
-                    i64::from(total),
-                    loss,
-                    detail,
-                ))
-                .await?;
-            }
-            Ok(JobEvent::Snapshot {
-                n,
-                stage,
-                step,
-                svg,
-            }) => {
-                if n > f.sent_snapshot {
-                    f.send(snapshot_event(n, &stage, step as i64, &svg)).await?;
-                    f.sent_snapshot = n;
-                }
-            }
-            Ok(JobEvent::Status(_)) => {
-                if f.resync().await? {
-                    return Ok(());
-                }
-            }
-            Ok(JobEvent::Changed) => {
-                if f.refresh().await? {
-                    return Ok(());
-                }
-            }
-            Ok(JobEvent::Finished(_)) | Err(broadcast::error::RecvError::Closed) => {
-                // The final snapshot may have been stored just before: resync sends it, then
-                // the terminal event.
-                if f.resync().await? {
-                    return Ok(());
-                }
-                if matches!(ev, Err(broadcast::error::RecvError::Closed)) {
-                    // Channel gone without a terminal status: resubscribe.
-                    rx = f.state.hub.subscribe(&f.id);
-                }
-            }
-            Err(broadcast::error::RecvError::Lagged(_)) => {
-                if f.resync().await? {
-                    return Ok(());
-                }
-            }
+        if on_event(&mut f, ev, &mut rx).await? {
+            return Ok(());
         }
     }
 }

@@ -2,14 +2,16 @@
 
 use super::error::ApiError;
 use crate::pipeline::{
-    Executor, JobKind, JobSpec, Limits, Method, PlanRequest, Preset, RunPlan, Style, request_of,
+    Executor, JobKind, JobSpec, Limits, Method, Preset, RunPlan, SpecError, Style, request_of,
 };
+use crate::pipeline::{RerankReport, RunReport};
+use crate::progress::{Progress, Stage};
 use crate::store::{AttemptRow, JobRow, JobStatus};
 use crate::vector::VectorOptions;
 use crate::vector::palette::ColorPlan;
 use base64::Engine;
-use serde::Serialize;
 use serde::de::DeserializeOwned;
+use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value};
 
 /// Fields accepted by `POST /jobs` (anything else is rejected as unknown).
@@ -35,8 +37,8 @@ pub const SUBMIT_FIELDS: &[&str] = &[
     "max_bytes",
 ];
 
-/// Fields whose omission means "the preset decides" (the job's [`crate::pipeline::RunPlan`]);
-/// the resolved values are stored in the job.
+/// Fields whose omission means "the preset decides": the job's [`crate::pipeline::RunPlan`]
+/// holds the resolved values, the stored request only what was given.
 pub const PRESET_FIELDS: &[&str] = &["paths", "steps", "samples"];
 
 fn field<T: DeserializeOwned>(obj: &Map<String, Value>, name: &str) -> Result<Option<T>, ApiError> {
@@ -64,15 +66,36 @@ fn whole_numbers_as_integers(obj: &mut Map<String, Value>) {
     }
 }
 
-/// Parses and validates a `POST /jobs` body into a [`JobSpec`]. `job_id_seed` seeds jobs that
-/// give no seed (so every job is reproducible from its stored spec). Image decoding is checked
-/// separately ([`check_image`]) because it is CPU work.
+/// Parses and validates a `POST /jobs` body into a [`JobSpec`]: the request as given and the
+/// plan resolved from it. `default_seed` seeds jobs that give no seed (so every job is
+/// reproducible from its stored spec). Image decoding is checked separately ([`check_image`])
+/// because it is CPU work.
 pub fn parse_submit(
     body: &[u8],
     limits: &Limits,
     default_seed: u64,
     executor: &dyn Executor,
 ) -> Result<JobSpec, ApiError> {
+    let obj = submit_object(body)?;
+    let mut spec = request_from(&obj, default_seed)?;
+    // The request's own fields first ...
+    spec.validate(limits)
+        .map_err(|e| ApiError::invalid(e.field, e.reason))?;
+    // ... then the plan: omitted paths/steps/samples are the preset's, resolved once, exactly
+    // as the CLI resolves them, and checked against the limits. A text job the executor cannot
+    // run yet is refused by the caller with the configuration hint, not here.
+    if spec.kind == JobKind::Text && executor.text_ready().is_err() {
+        return Ok(spec);
+    }
+    let plan = executor
+        .plan(&request_of(&spec), limits)
+        .map_err(|e| plan_error(e, &obj, spec.preset))?;
+    spec.plan = Some(plan);
+    Ok(spec)
+}
+
+/// The body as a JSON object of known fields, whole-number floats made integers.
+fn submit_object(body: &[u8]) -> Result<Map<String, Value>, ApiError> {
     let value: Value =
         serde_json::from_slice(body).map_err(|e| ApiError::MalformedJson(e.to_string()))?;
     let Value::Object(mut obj) = value else {
@@ -81,123 +104,99 @@ pub fn parse_submit(
         ));
     };
     whole_numbers_as_integers(&mut obj);
-    for key in obj.keys() {
-        if !SUBMIT_FIELDS.contains(&key.as_str()) {
-            return Err(ApiError::invalid(
-                key.clone(),
-                format!(
-                    "unknown field; expected one of {}",
-                    SUBMIT_FIELDS.join(", ")
-                ),
-            ));
-        }
+    if let Some(key) = obj.keys().find(|k| !SUBMIT_FIELDS.contains(&k.as_str())) {
+        return Err(ApiError::invalid(
+            key.clone(),
+            format!(
+                "unknown field; expected one of {}",
+                SUBMIT_FIELDS.join(", ")
+            ),
+        ));
     }
-    let kind: JobKind = field(&obj, "kind")?
-        .ok_or_else(|| ApiError::invalid("kind", "is required: \"text\" or \"vectorize\""))?;
-    let image_b64: Option<String> = field(&obj, "image")?;
-    let image = match image_b64 {
-        Some(s) => {
-            let trimmed = s.trim();
-            let data = trimmed
-                .strip_prefix("data:")
-                .and_then(|rest| rest.split_once(";base64,").map(|(_, d)| d))
-                .unwrap_or(trimmed);
-            let bytes = base64::engine::general_purpose::STANDARD
-                .decode(data)
-                .map_err(|e| ApiError::invalid("image", format!("is not valid base64: {e}")))?;
-            if bytes.is_empty() {
-                return Err(ApiError::invalid("image", "is empty"));
-            }
-            Some(bytes)
-        }
-        None => None,
+    Ok(obj)
+}
+
+/// The `image` field's bytes: base64, optionally as a `data:` URL; not empty.
+fn image_bytes(obj: &Map<String, Value>) -> Result<Option<Vec<u8>>, ApiError> {
+    let Some(s) = field::<String>(obj, "image")? else {
+        return Ok(None);
     };
-    let method: Option<Method> = field(&obj, "method")?;
+    let trimmed = s.trim();
+    let data = trimmed
+        .strip_prefix("data:")
+        .and_then(|rest| rest.split_once(";base64,").map(|(_, d)| d))
+        .unwrap_or(trimmed);
+    let bytes = base64::engine::general_purpose::STANDARD
+        .decode(data)
+        .map_err(|e| ApiError::invalid("image", format!("is not valid base64: {e}")))?;
+    if bytes.is_empty() {
+        return Err(ApiError::invalid("image", "is empty"));
+    }
+    Ok(Some(bytes))
+}
+
+/// The request of a submit body as a spec without a plan (fields typed, not yet validated).
+fn request_from(obj: &Map<String, Value>, default_seed: u64) -> Result<JobSpec, ApiError> {
+    let kind: JobKind = field(obj, "kind")?
+        .ok_or_else(|| ApiError::invalid("kind", "is required: \"text\" or \"vectorize\""))?;
+    let image = image_bytes(obj)?;
+    let method: Option<Method> = field(obj, "method")?;
     if kind == JobKind::Vectorize && method.is_some() {
         return Err(ApiError::invalid("method", "only applies to kind \"text\""));
     }
-    let style = field::<Style>(&obj, "style")?.unwrap_or_default();
-    let preset = field::<Preset>(&obj, "preset")?.unwrap_or_default();
-    let paths: Option<u32> = field(&obj, "paths")?;
-    let steps: Option<u32> = field(&obj, "steps")?;
-    let samples: Option<u32> = field(&obj, "samples")?;
-    let mut spec = JobSpec {
+    let style = field::<Style>(obj, "style")?.unwrap_or_default();
+    let preset = field::<Preset>(obj, "preset")?.unwrap_or_default();
+    let (paths, steps, samples) = (
+        field(obj, "paths")?,
+        field(obj, "steps")?,
+        field(obj, "samples")?,
+    );
+    Ok(JobSpec {
         kind,
-        caption: field(&obj, "caption")?,
+        caption: field(obj, "caption")?,
         image,
-        svg: field(&obj, "svg")?,
+        svg: field(obj, "svg")?,
         style,
         method: method.unwrap_or_default(),
-        paths: paths.unwrap_or(1),
-        steps: steps.unwrap_or(1),
-        seed: field(&obj, "seed")?.unwrap_or(default_seed),
-        samples: samples.unwrap_or(1),
-        preset,
-        priority: field(&obj, "priority")?.unwrap_or(0),
-        retrieval: field(&obj, "retrieval")?.unwrap_or(true),
-        vector: VectorOptions {
-            colors: ColorPlan {
-                colors: field(&obj, "colors")?,
-                palette: field(&obj, "palette")?.map(crate::vector::palette::dedup_palette),
-                background: field(&obj, "background")?.unwrap_or_default(),
-                group: field(&obj, "group")?.unwrap_or_default(),
-            },
-            target_psnr: field(&obj, "target_psnr")?,
-            max_bytes: field(&obj, "max_bytes")?,
-        },
-        plan: None,
-    };
-    // The request's own fields first (omitted numbers stand in as 1) ...
-    spec.validate(limits)
-        .map_err(|e| ApiError::invalid(e.field, e.reason))?;
-    // ... then the plan: omitted paths/steps/samples are the preset's, resolved once, exactly
-    // as the CLI resolves them, and checked against the limits. A text job the executor cannot
-    // run yet is refused by the caller with the configuration hint, not here.
-    if kind == JobKind::Text && executor.text_ready().is_err() {
-        return Ok(spec);
-    }
-    let request = PlanRequest {
         paths,
         steps,
+        seed: field(obj, "seed")?.unwrap_or(default_seed),
         samples,
-        ..request_of(&spec)
-    };
-    let plan = executor.plan(&request, limits).map_err(|e| {
-        let from_preset =
-            PRESET_FIELDS.contains(&e.field) && obj.get(e.field).is_none_or(Value::is_null);
-        let reason = if from_preset {
-            format!(
-                "{} (the value of preset {}; pass {} explicitly or choose a smaller preset)",
-                e.reason,
-                serde_json::to_value(preset)
-                    .ok()
-                    .and_then(|v| v.as_str().map(str::to_string))
-                    .unwrap_or_default(),
-                e.field
-            )
-        } else {
-            e.reason
-        };
-        ApiError::invalid(e.field, reason)
-    })?;
-    // The stored fields show the resolved numbers.
-    let ps = preset.settings_for(plan.text.as_ref().is_some_and(|t| t.model.small_prior));
-    spec.paths = match (&plan.text, &plan.vectorize) {
-        (Some(t), _) => t.paths,
-        (None, Some(v)) => u32::try_from(v.budget.max_paths()).unwrap_or(u32::MAX),
-        (None, None) => spec.paths,
-    };
-    let text = plan.text.as_ref();
-    spec.steps = text
-        .and_then(|t| t.sds.as_ref().map(|s| s.steps))
-        .or(steps)
-        .unwrap_or(ps.steps);
-    spec.samples = text
-        .and_then(|t| t.sample.as_ref().map(|s| s.samples))
-        .or(samples)
-        .unwrap_or(ps.samples);
-    spec.plan = Some(plan);
-    Ok(spec)
+        preset,
+        priority: field(obj, "priority")?.unwrap_or(0),
+        retrieval: field(obj, "retrieval")?.unwrap_or(true),
+        vector: VectorOptions {
+            colors: ColorPlan {
+                colors: field(obj, "colors")?,
+                palette: field(obj, "palette")?.map(crate::vector::palette::dedup_palette),
+                background: field(obj, "background")?.unwrap_or_default(),
+                group: field(obj, "group")?.unwrap_or_default(),
+            },
+            target_psnr: field(obj, "target_psnr")?,
+            max_bytes: field(obj, "max_bytes")?,
+        },
+        plan: None,
+    })
+}
+
+/// A plan error as a 400; a number the request left to `preset` says so.
+fn plan_error(e: SpecError, obj: &Map<String, Value>, preset: Preset) -> ApiError {
+    let from_preset =
+        PRESET_FIELDS.contains(&e.field) && obj.get(e.field).is_none_or(Value::is_null);
+    if !from_preset {
+        return ApiError::invalid(e.field, e.reason);
+    }
+    let name = serde_json::to_value(preset)
+        .ok()
+        .and_then(|v| v.as_str().map(str::to_string))
+        .unwrap_or_default();
+    ApiError::invalid(
+        e.field,
+        format!(
+            "{} (the value of preset {name}; pass {} explicitly or choose a smaller preset)",
+            e.reason, e.field
+        ),
+    )
 }
 
 /// Checks that `bytes` is a PNG or JPEG within the size limit (decodes it fully).
@@ -243,13 +242,57 @@ fn rfc3339(ms: Option<i64>) -> Option<String> {
         .map(|t| t.to_rfc3339_opts(chrono::SecondsFormat::Millis, true))
 }
 
+/// A job's progress as the API shows it: the job's `progress` and the `progress` event.
 #[derive(Serialize)]
 pub struct ProgressView {
-    pub stage: Option<String>,
+    pub stage: Option<Stage>,
     pub step: i64,
     pub total: i64,
+    /// `step / total` in `0..=1` (0 while the total is unknown, 1 for a succeeded job).
     pub fraction: f64,
     pub loss: Option<f64>,
+    /// The stage's details (the rerank's scores), on live events only.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub detail: Option<Value>,
+}
+
+impl ProgressView {
+    fn new(stage: Option<Stage>, step: i64, total: i64, loss: Option<f64>) -> Self {
+        let fraction = if total > 0 {
+            (step as f64 / total as f64).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        ProgressView {
+            stage,
+            step,
+            total,
+            fraction,
+            loss,
+            detail: None,
+        }
+    }
+}
+
+impl From<&Progress> for ProgressView {
+    fn from(p: &Progress) -> Self {
+        ProgressView {
+            detail: p.detail.clone(),
+            ..ProgressView::new(Some(p.stage), i64::from(p.step), i64::from(p.total), p.loss)
+        }
+    }
+}
+
+/// The progress stored in the job's row.
+impl From<&JobRow> for ProgressView {
+    fn from(row: &JobRow) -> Self {
+        let stage = row.stage.as_deref().and_then(Stage::from_name);
+        let mut view = ProgressView::new(stage, row.step, row.total, row.loss);
+        if row.total <= 0 && row.status == JobStatus::Succeeded {
+            view.fraction = 1.0;
+        }
+        view
+    }
 }
 
 #[derive(Serialize)]
@@ -263,10 +306,15 @@ pub struct ParamsView {
     pub caption: Option<String>,
     pub style: Style,
     pub method: Option<Method>,
-    pub paths: u32,
-    pub steps: u32,
+    /// The run's paths, SDS steps and samples: the plan's where the run has such a stage,
+    /// otherwise as given (absent when not given).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub paths: Option<u32>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub steps: Option<u32>,
     pub seed: u64,
-    pub samples: u32,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub samples: Option<u32>,
     pub preset: Preset,
     pub has_image: bool,
     pub has_svg: bool,
@@ -294,7 +342,7 @@ pub struct JobView {
     pub id: String,
     pub kind: String,
     pub status: String,
-    pub stage: Option<String>,
+    pub stage: Option<Stage>,
     pub progress: ProgressView,
     pub priority: i64,
     pub attempts: i64,
@@ -328,15 +376,33 @@ pub struct RerankView {
     /// Cosine similarity of each sample with the caption (empty without a scorer).
     pub scores: Vec<f64>,
     /// Index of the kept sample.
-    pub chosen: u64,
-    pub samples: u64,
+    pub chosen: usize,
+    pub samples: u32,
+}
+
+impl From<&RerankReport> for RerankView {
+    fn from(r: &RerankReport) -> Self {
+        RerankView {
+            scorer: r.scorer.clone(),
+            scores: r.scores.clone(),
+            chosen: r.chosen,
+            samples: r.samples,
+        }
+    }
+}
+
+/// The part of a text job's checkpoint the job view reads: the run's report so far.
+#[derive(Deserialize)]
+struct CheckpointReport {
+    #[serde(default)]
+    detail: Option<RunReport>,
 }
 
 /// What a succeeded job produced besides the SVG.
 #[derive(Serialize)]
 pub struct ResultView {
     pub paths: i64,
-    /// The executor's details (method, preset, timings, per-stage statistics).
+    /// The run's [`RunReport`] as stored (results stored before a field existed lack it).
     pub detail: Value,
 }
 
@@ -344,7 +410,9 @@ impl JobView {
     /// Adds the stored result (paths, detail, rerank scores) of a succeeded job.
     pub fn with_result(mut self, result: &crate::store::ResultRow) -> JobView {
         let detail: Value = serde_json::from_str(&result.detail).unwrap_or(Value::Null);
-        self.rerank = detail.get("rerank").and_then(RerankView::from_detail);
+        self.rerank = RunReport::deserialize(&detail)
+            .ok()
+            .and_then(|r| r.rerank.as_ref().map(RerankView::from));
         self.result = Some(ResultView {
             paths: result.paths,
             detail,
@@ -355,57 +423,23 @@ impl JobView {
     /// Adds the rerank scores of an unfinished job from its last checkpoint (text jobs save
     /// them with their SDS state).
     pub fn with_checkpoint(mut self, checkpoint: &str) -> JobView {
-        self.rerank = serde_json::from_str::<Value>(checkpoint)
+        self.rerank = serde_json::from_str::<CheckpointReport>(checkpoint)
             .ok()
-            .and_then(|c| {
-                c.get("detail")?
-                    .get("rerank")
-                    .and_then(RerankView::from_detail)
-            });
+            .and_then(|c| c.detail?.rerank.as_ref().map(RerankView::from));
         self
-    }
-}
-
-impl RerankView {
-    /// From the `rerank` object of a run's detail.
-    fn from_detail(r: &Value) -> Option<RerankView> {
-        Some(RerankView {
-            scorer: r.get("scorer")?.as_str().map(str::to_string),
-            scores: r
-                .get("scores")?
-                .as_array()?
-                .iter()
-                .filter_map(Value::as_f64)
-                .collect(),
-            chosen: r.get("best")?.as_u64()?,
-            samples: r.get("samples")?.as_u64()?,
-        })
     }
 }
 
 impl JobView {
     pub fn from_row(row: &JobRow) -> JobView {
         let spec: Option<JobSpec> = serde_json::from_str(&row.spec).ok();
-        let fraction = if row.total > 0 {
-            (row.step as f64 / row.total as f64).clamp(0.0, 1.0)
-        } else if row.status == JobStatus::Succeeded {
-            1.0
-        } else {
-            0.0
-        };
         let base = format!("/jobs/{}", row.id);
         JobView {
             id: row.id.clone(),
             kind: row.kind.as_str().to_string(),
             status: row.status.as_str().to_string(),
-            stage: row.stage.clone(),
-            progress: ProgressView {
-                stage: row.stage.clone(),
-                step: row.step,
-                total: row.total,
-                fraction,
-                loss: row.loss,
-            },
+            stage: row.stage.as_deref().and_then(Stage::from_name),
+            progress: ProgressView::from(row),
             priority: row.priority,
             attempts: row.attempts,
             max_attempts: row.max_attempts,
@@ -424,10 +458,10 @@ impl JobView {
                 caption: s.caption,
                 style: s.style,
                 method: (s.kind == JobKind::Text).then_some(s.method),
-                paths: s.paths,
-                steps: s.steps,
+                paths: s.plan.as_ref().and_then(RunPlan::paths).or(s.paths),
+                steps: s.plan.as_ref().and_then(RunPlan::sds_steps).or(s.steps),
                 seed: s.seed,
-                samples: s.samples,
+                samples: s.plan.as_ref().and_then(RunPlan::samples).or(s.samples),
                 preset: s.preset,
                 has_image: s.image.is_some(),
                 has_svg: s.svg.is_some(),

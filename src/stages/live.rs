@@ -21,7 +21,7 @@ pub mod tracer;
 
 mod config;
 
-pub use config::{InitMode, LiveConfig, LiveError, PathBudget, Preset};
+pub use config::{CANVAS_SIDES, InitMode, LiveConfig, LiveError, MIN_OPACITY, PathBudget};
 
 pub use crate::scene::MAX_PATHS;
 
@@ -31,7 +31,7 @@ use crate::image::Image;
 use crate::image::ops::resize;
 use crate::losses::{outline, udf_weights, weighted_l2, xing_loss};
 use crate::optim::{Adam, AdamConfig, GroupSchedules, LrSchedule};
-use crate::progress::{CancelToken, Progress, ProgressSink};
+use crate::progress::{CancelToken, CheckpointError, Progress, ProgressSink, Stage};
 use crate::scene::{ParamGroup, Params, Rgba, Scene, Trainable};
 use crate::vector::check::Editability;
 use crate::vector::lobes;
@@ -52,8 +52,10 @@ pub struct StageReport {
     /// Paths re-initialised after the stage.
     pub reinitialised: usize,
     /// PSNR at the working size after the stage.
+    #[serde(deserialize_with = "null_as_nan")]
     pub psnr: f64,
     /// Loss at the last step.
+    #[serde(deserialize_with = "null_as_nan")]
     pub loss: f64,
 }
 
@@ -83,6 +85,7 @@ struct Run<'a> {
     step: u32,
     total: u32,
     out_width: u32,
+    out_height: u32,
     /// The palette fills are chosen from (`--palette`, or k-means of the target for
     /// `--colors`); `None`: fills are optimised freely.
     palette: Option<Vec<Rgba>>,
@@ -132,8 +135,6 @@ impl Run<'_> {
             self.schedules(iters),
             trainable,
         );
-        let n = self.target.len_pixels();
-        let uniform = 1.0 / (3.0 * n as f32);
         let mut last = f64::NAN;
         // Which paths the UDF term focuses on (kept through untwisting, which moves indices).
         let mut in_focus: Vec<bool> = (0..scene.shapes.len())
@@ -146,21 +147,7 @@ impl Run<'_> {
                 return Err(LiveError::Cancelled);
             }
             let (img, tape) = crate::raster::render_tape(scene);
-            let mut weights = vec![uniform; n];
-            if self.cfg.udf_weight > 0.0 && in_focus.contains(&true) {
-                let outlines: Vec<Vec<(f32, f32)>> = scene
-                    .shapes
-                    .iter()
-                    .zip(&in_focus)
-                    .filter(|(_, f)| **f)
-                    .map(|(s, _)| outline(s, 8))
-                    .collect();
-                let udf = udf_weights(scene.width, scene.height, &outlines, self.cfg.udf_tau);
-                let k = self.cfg.udf_weight / 3.0;
-                for (w, u) in weights.iter_mut().zip(&udf) {
-                    *w += k * u;
-                }
-            }
+            let weights = self.loss_weights(scene, &in_focus);
             let (loss, d_image) = weighted_l2(&img, &self.target, &weights)?;
             let mut grad = crate::raster::backward(scene, &tape, &d_image);
             let xing = if self.cfg.xing_weight > 0.0 {
@@ -174,21 +161,7 @@ impl Run<'_> {
                 0.0
             };
             adam.step(&mut params, &grad);
-            if self.cfg.opaque {
-                for a in params
-                    .get_mut(ParamGroup::Fill)
-                    .iter_mut()
-                    .skip(3)
-                    .step_by(4)
-                {
-                    *a = 1.0;
-                }
-            }
-            if self.background_free
-                && let Some(a) = params.get_mut(ParamGroup::Background).get_mut(3)
-            {
-                *a = 1.0;
-            }
+            self.pin_opacity(&mut params);
             params.write_to(scene)?;
             if (it + 1) % UNTWIST_EVERY == 0 && untwist(scene, &mut in_focus) {
                 adam.relayout(&Params::from_scene(scene));
@@ -206,6 +179,48 @@ impl Run<'_> {
             }
         }
         Ok(last)
+    }
+
+    /// Per-pixel weights of the L2 loss: uniform, plus LIVE's unsigned-distance term around
+    /// the outlines of the paths `in_focus` (when `udf_weight` is on).
+    fn loss_weights(&self, scene: &Scene, in_focus: &[bool]) -> Vec<f32> {
+        let n = self.target.len_pixels();
+        let uniform = 1.0 / (3.0 * n as f32);
+        let mut weights = vec![uniform; n];
+        if self.cfg.udf_weight > 0.0 && in_focus.contains(&true) {
+            let outlines: Vec<Vec<(f32, f32)>> = scene
+                .shapes
+                .iter()
+                .zip(in_focus)
+                .filter(|(_, f)| **f)
+                .map(|(s, _)| outline(s, 8))
+                .collect();
+            let udf = udf_weights(scene.width, scene.height, &outlines, self.cfg.udf_tau);
+            let k = self.cfg.udf_weight / 3.0;
+            for (w, u) in weights.iter_mut().zip(&udf) {
+                *w += k * u;
+            }
+        }
+        weights
+    }
+
+    /// Keeps fills opaque (`opaque`) and an optimised background opaque after a step.
+    fn pin_opacity(&self, params: &mut Params) {
+        if self.cfg.opaque {
+            for a in params
+                .get_mut(ParamGroup::Fill)
+                .iter_mut()
+                .skip(3)
+                .step_by(4)
+            {
+                *a = 1.0;
+            }
+        }
+        if self.background_free
+            && let Some(a) = params.get_mut(ParamGroup::Background).get_mut(3)
+        {
+            *a = 1.0;
+        }
     }
 
     /// The early stop: after every [`CONVERGE_WINDOW`] steps, whether the window's mean loss
@@ -228,7 +243,7 @@ impl Run<'_> {
         if !(snapshot || self.step % 10 == 0) {
             return;
         }
-        let mut ev = Progress::new("live", self.step, self.total);
+        let mut ev = Progress::new(Stage::Live, self.step, self.total);
         ev.loss = Some(loss);
         ev.detail = Some(serde_json::json!({"live_stage": stage, "paths": scene.shapes.len()}));
         if snapshot {
@@ -236,6 +251,15 @@ impl Run<'_> {
             ev.svg = Some(crate::svg::to_svg(&out, &crate::svg::SvgOptions::default()));
         }
         self.sink.report(ev);
+    }
+
+    /// The last progress event: the traced scene `out` (at the output size) and its `psnr`.
+    fn report_done(&self, out: &Scene, psnr: f64) {
+        let mut done = Progress::new(Stage::Live, self.total, self.total);
+        done.svg = Some(crate::svg::to_svg(out, &crate::svg::SvgOptions::default()));
+        done.detail =
+            Some(serde_json::json!({"paths": out.shapes.len(), "psnr": psnr, "done": true}));
+        self.sink.report(done);
     }
 
     /// Replaces faint or tiny paths by circles at the current high-error regions.
@@ -378,6 +402,12 @@ pub struct LiveState {
     pub rng_word_pos: u64,
 }
 
+/// Reads a JSON `null` (what serde_json writes for NaN and infinities) as NaN, so a report or
+/// checkpoint with a non-finite number reads back.
+pub fn null_as_nan<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+    Option::<f64>::deserialize(d).map(|v| v.unwrap_or(f64::NAN))
+}
+
 mod f64_bits {
     use serde::{Deserialize, Deserializer, Serializer};
 
@@ -390,9 +420,24 @@ mod f64_bits {
     }
 }
 
+impl LiveState {
+    /// The state before the first stage: `scene` (the background alone), no PSNR yet.
+    fn start(scene: Scene) -> Self {
+        LiveState {
+            next_stage: 0,
+            stages_done: false,
+            scene,
+            reports: Vec::new(),
+            prev_psnr: f64::NAN,
+            step: 0,
+            rng_word_pos: 0,
+        }
+    }
+}
+
 /// Receives the state after every completed stage.
 pub trait LiveCheckpoint {
-    fn save(&self, state: &LiveState) -> Result<(), String>;
+    fn save(&self, state: &LiveState) -> Result<(), CheckpointError>;
 }
 
 /// Traces `target` into closed cubic paths (see the module docs). Emits progress events with
@@ -407,18 +452,8 @@ pub fn vectorize(
     vectorize_resumable(target, cfg, sink, cancel, None, None)
 }
 
-/// Traces `target`, saving a [`LiveState`] through `checkpoint` after each stage, and continuing
-/// from `resume` when given. A state that does not fit this run (another working size or stage
-/// plan) is ignored and the run starts over.
-pub fn vectorize_resumable(
-    target: &Image,
-    cfg: &LiveConfig,
-    sink: &dyn ProgressSink,
-    cancel: &CancelToken,
-    resume: Option<LiveState>,
-    checkpoint: Option<&dyn LiveCheckpoint>,
-) -> Result<LiveResult, LiveError> {
-    cfg.validate()?;
+/// Rejects an empty, malformed, oversized or non-finite target.
+fn check_target(target: &Image) -> Result<(), LiveError> {
     let (tw, th) = (target.width, target.height);
     if tw == 0 || th == 0 || target.data.len() != 4 * target.len_pixels() {
         return Err(LiveError::Target("empty or malformed image".into()));
@@ -432,34 +467,255 @@ pub fn vectorize_resumable(
     if target.data.iter().any(|v| !v.is_finite()) {
         return Err(LiveError::Target("image has non-finite values".into()));
     }
-    // Never upsample: small inputs are optimised at their own size.
-    let k = (cfg.size as f32 / tw.max(th) as f32).min(1.0);
-    let (ww, wh) = (
+    Ok(())
+}
+
+/// The working size for a `tw`×`th` target and a working side of `size`: never upsampled,
+/// small inputs are optimised at their own size.
+fn working_size(size: u32, tw: u32, th: u32) -> (u32, u32) {
+    let k = (size as f32 / tw.max(th) as f32).min(1.0);
+    (
         ((tw as f32 * k).round() as u32).max(1),
         ((th as f32 * k).round() as u32).max(1),
-    );
-    let work = resize(&target.over([1.0, 1.0, 1.0]), ww, wh);
-    let palette = cfg.colors.resolve(|k| palette::palette_of_image(&work, k));
-    let (background, background_free) = match cfg.colors.background {
+    )
+}
+
+/// The starting background of a trace of `target` (`work` at the working size) and whether
+/// it is optimised with the paths (`auto` with an opaque border and no palette).
+fn start_background(cfg: &LiveConfig, target: &Image, work: &Image, palette: bool) -> (Rgba, bool) {
+    match cfg.colors.background {
         Background::Transparent => (Rgba::TRANSPARENT, false),
         Background::Color(c) => (c.to_rgba(), false),
         Background::Auto if border_alpha(target) < 0.5 => (Rgba::TRANSPARENT, false),
-        Background::Auto => (border_colour(&work), palette.is_none()),
-    };
+        Background::Auto => (border_colour(work), !palette),
+    }
+}
+
+/// The paths each stage adds, and the most paths the budget allows in all.
+fn stage_plan(budget: &PathBudget) -> (Vec<usize>, usize) {
+    match budget {
+        PathBudget::Schedule { stages } => (stages.clone(), stages.iter().sum()),
+        PathBudget::Auto {
+            stage, max_paths, ..
+        } => (vec![*stage; max_paths.div_ceil(*stage)], *max_paths),
+    }
+}
+
+impl Run<'_> {
+    /// Saves `state` through `checkpoint` (if any), with the step and the position of `rng`.
+    fn save(
+        &self,
+        state: &mut LiveState,
+        rng: &ChaCha8Rng,
+        checkpoint: Option<&dyn LiveCheckpoint>,
+    ) -> Result<(), LiveError> {
+        let Some(c) = checkpoint else { return Ok(()) };
+        state.step = self.step;
+        state.rng_word_pos = u64::try_from(rng.get_word_pos())
+            .map_err(|_| LiveError::Checkpoint("random stream position overflow".into()))?;
+        Ok(c.save(state)?)
+    }
+
+    /// Stage 0 of `--init vtracer`: the vtracer crate's trace of `target` (at most `max_total`
+    /// paths), optimised for one stage.
+    fn vtracer_start(
+        &mut self,
+        st: &mut LiveState,
+        rng: &mut ChaCha8Rng,
+        target: &Image,
+        max_total: usize,
+    ) -> Result<(), LiveError> {
+        let (ww, wh) = (st.scene.width, st.scene.height);
+        let small = resize(target, ww, wh);
+        let traced =
+            tracer::trace(&small, &tracer::TracerSetting::default()).map_err(LiveError::Tracer)?;
+        let start = tracer::traced_to_scene(&traced, ww, wh, max_total, 12)?;
+        let scene = &mut st.scene;
+        scene.shapes = start.shapes;
+        if self.background_free {
+            scene.background = start.background;
+        }
+        self.choose_colours(scene);
+        let n = scene.shapes.len();
+        let loss = self.optimise(scene, 0..n, self.cfg.iters_per_stage, 0, true)?;
+        let reinit = self.reinit_weak(scene, rng);
+        self.make_simple(scene);
+        self.choose_colours(scene);
+        let psnr = self.psnr(scene);
+        st.reports.push(StageReport {
+            stage: 0,
+            added: n,
+            paths: n,
+            reinitialised: reinit,
+            psnr,
+            loss,
+        });
+        st.prev_psnr = psnr;
+        Ok(())
+    }
+
+    /// Whether the stage that took the PSNR from `prev_psnr` to `psnr` by adding `added`
+    /// paths ends the stages: the `auto` budget's gain per path, `target_psnr` or `max_bytes`.
+    fn should_stop(&self, scene: &Scene, prev_psnr: f64, psnr: f64, added: usize) -> bool {
+        let cfg = self.cfg;
+        let budget_stop = match cfg.budget {
+            PathBudget::Auto {
+                min_gain_db_per_path,
+                ..
+            } => !schedule::auto_should_continue(prev_psnr, psnr, added, min_gain_db_per_path),
+            PathBudget::Schedule { .. } => false,
+        };
+        budget_stop
+            || cfg.target_psnr.is_some_and(|t| psnr >= t)
+            || cfg.max_bytes.is_some_and(|max| {
+                svg_bytes(scene, self.out_width, self.out_height, &cfg.colors) >= max
+            })
+    }
+
+    /// Stage `si`: up to `want` new paths (within `max_total` added in all) at the regions of
+    /// highest error, then all paths optimised. `None` when no path could be added; else
+    /// whether a stop rule ends the stages. `st` then names the next stage.
+    fn add_stage(
+        &mut self,
+        st: &mut LiveState,
+        rng: &mut ChaCha8Rng,
+        si: usize,
+        want: usize,
+        max_total: usize,
+    ) -> Result<Option<bool>, LiveError> {
+        // The budget counts paths added: a looping path split into simple pieces is one.
+        let added_so_far: usize = st.reports.iter().map(|r| r.added).sum();
+        let want = want.min(max_total.saturating_sub(added_so_far));
+        if want == 0 {
+            return Ok(None);
+        }
+        let current = crate::raster::render(&st.scene);
+        let fresh = init::init_paths(&current, &self.target, want, &self.init_cfg(), rng);
+        let added = fresh.len();
+        if added == 0 {
+            return Ok(None);
+        }
+        let scene = &mut st.scene;
+        let start = scene.shapes.len();
+        scene.shapes.extend(fresh);
+        let end = scene.shapes.len();
+        self.choose_colours(scene);
+        let loss = self.optimise(scene, start..end, self.cfg.iters_per_stage, si + 1, true)?;
+        let reinit = self.reinit_weak(scene, rng);
+        self.make_simple(scene);
+        self.choose_colours(scene);
+        let psnr = self.psnr(scene);
+        st.reports.push(StageReport {
+            stage: si + 1,
+            added,
+            paths: end,
+            reinitialised: reinit,
+            psnr,
+            loss,
+        });
+        let stop = self.should_stop(&st.scene, st.prev_psnr, psnr, added);
+        st.next_stage = si + 1;
+        st.stages_done = stop;
+        st.prev_psnr = psnr;
+        Ok(Some(stop))
+    }
+
+    /// Runs the stages of `plan` from `st.next_stage` on, saving after each, until the plan,
+    /// the budget or a stop rule ends them.
+    fn add_stages(
+        &mut self,
+        st: &mut LiveState,
+        rng: &mut ChaCha8Rng,
+        plan: &[usize],
+        max_total: usize,
+        checkpoint: Option<&dyn LiveCheckpoint>,
+    ) -> Result<(), LiveError> {
+        if st.stages_done {
+            return Ok(());
+        }
+        for (si, &want) in plan.iter().enumerate().skip(st.next_stage) {
+            match self.add_stage(st, rng, si, want, max_total)? {
+                None => break,
+                Some(stop) => {
+                    self.save(st, rng, checkpoint)?;
+                    if stop {
+                        break;
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The end of a trace after `stages` stages: colours settled, the final pass, then faint,
+    /// unseen, over-budget and hidden paths dropped and outlines made simple. Returns the scene
+    /// at the target's size and the number of paths pruned.
+    fn finish(&mut self, mut scene: Scene, stages: usize) -> Result<(Scene, usize), LiveError> {
+        let cfg = self.cfg;
+        // Colours settle before the last pass, which then fits the geometry to them.
+        if self.palette.is_some() {
+            self.choose_colours(&mut scene);
+        } else {
+            palette::merge_similar(&mut scene, palette::MERGE_DISTANCE);
+        }
+        if cfg.final_iters > 0 && !scene.shapes.is_empty() {
+            let n = scene.shapes.len();
+            self.optimise(&mut scene, n..n, cfg.final_iters, stages + 1, false)?;
+        }
+        // Drop paths that stayed faint or tiny after the last re-initialisation.
+        let weak = prune::weak_paths(&scene, cfg.reinit_min_opacity, 1.0);
+        for &i in weak.iter().rev() {
+            scene.shapes.remove(i);
+        }
+        // Clean geometry: the last pass may have folded outlines again; splitting keeps the
+        // pixels.
+        self.make_simple(&mut scene);
+        let (tw, th) = (self.out_width, self.out_height);
+        let scale = tw as f32 / self.target.width as f32;
+        let mut pruned = crate::vector::drop_unseen(&mut scene, scale);
+        if let PathBudget::Auto {
+            prune_tolerance, ..
+        } = cfg.budget
+        {
+            pruned += prune::prune_paths(&mut scene, prune_tolerance, crate::raster::render).len();
+        }
+        if let Some(max) = cfg.max_bytes {
+            pruned += prune::trim_to_bytes(&mut scene, &self.target, max, |s| {
+                svg_bytes(s, tw, th, &cfg.colors)
+            });
+        }
+        // At the output size: flattening is finer there, and hidden paths are judged there.
+        let mut out = output_scene(&scene, tw, th);
+        crate::vector::make_simple(&mut out, crate::vector::SIMPLE_MIN_AREA);
+        pruned += crate::vector::drop_hidden(&mut out);
+        out.validate()?;
+        Ok((out, pruned))
+    }
+}
+
+/// Traces `target`, saving a [`LiveState`] through `checkpoint` after each stage, and continuing
+/// from `resume` when given. A state that does not fit this run (another working size or stage
+/// plan) is ignored and the run starts over.
+pub fn vectorize_resumable(
+    target: &Image,
+    cfg: &LiveConfig,
+    sink: &dyn ProgressSink,
+    cancel: &CancelToken,
+    resume: Option<LiveState>,
+    checkpoint: Option<&dyn LiveCheckpoint>,
+) -> Result<LiveResult, LiveError> {
+    cfg.validate()?;
+    check_target(target)?;
+    let (tw, th) = (target.width, target.height);
+    let (ww, wh) = working_size(cfg.size, tw, th);
+    let work = resize(&target.over([1.0, 1.0, 1.0]), ww, wh);
+    let palette = cfg.colors.resolve(|k| palette::palette_of_image(&work, k));
+    let (background, background_free) = start_background(cfg, target, &work, palette.is_some());
     let mut scene = Scene::new(ww, wh, background)?;
     if let (Some(p), Background::Auto) = (&palette, cfg.colors.background) {
         palette::snap_background(&mut scene, p);
     }
-    let stages_plan: Vec<usize> = match &cfg.budget {
-        PathBudget::Schedule { stages } => stages.clone(),
-        PathBudget::Auto {
-            stage, max_paths, ..
-        } => vec![*stage; max_paths.div_ceil(*stage)],
-    };
-    let max_total = match &cfg.budget {
-        PathBudget::Schedule { stages } => stages.iter().sum(),
-        PathBudget::Auto { max_paths, .. } => *max_paths,
-    };
+    let (stages_plan, max_total) = stage_plan(&cfg.budget);
     let vtracer_stage = cfg.init == InitMode::Vtracer;
     let total =
         cfg.iters_per_stage * (stages_plan.len() as u32 + vtracer_stage as u32) + cfg.final_iters;
@@ -471,179 +727,45 @@ pub fn vectorize_resumable(
         step: 0,
         total,
         out_width: tw,
+        out_height: th,
         palette,
         background_free,
     };
     let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);
-    let mut reports = Vec::new();
-    let save = |scene: &Scene,
-                reports: &[StageReport],
-                next_stage: usize,
-                stages_done: bool,
-                prev_psnr: f64,
-                step: u32,
-                rng: &ChaCha8Rng|
-     -> Result<(), LiveError> {
-        let Some(c) = checkpoint else { return Ok(()) };
-        let state = LiveState {
-            next_stage,
-            stages_done,
-            scene: scene.clone(),
-            reports: reports.to_vec(),
-            prev_psnr,
-            step,
-            rng_word_pos: u64::try_from(rng.get_word_pos())
-                .map_err(|_| LiveError::Checkpoint("random stream position overflow".into()))?,
-        };
-        c.save(&state).map_err(LiveError::Checkpoint)
-    };
     let resume = resume.filter(|r| {
         r.scene.width == ww
             && r.scene.height == wh
             && r.next_stage <= stages_plan.len()
             && r.scene.validate().is_ok()
     });
-    let mut first_stage = 0;
-    let mut stages_done = false;
-    let mut prev_psnr = f64::NAN;
-    if let Some(r) = resume {
-        scene = r.scene;
-        reports = r.reports;
-        first_stage = r.next_stage;
-        stages_done = r.stages_done;
-        prev_psnr = r.prev_psnr;
-        run.step = r.step;
-        rng.set_word_pos(u128::from(r.rng_word_pos));
-    } else if vtracer_stage {
-        let small = resize(target, ww, wh);
-        let traced =
-            tracer::trace(&small, &tracer::TracerSetting::default()).map_err(LiveError::Tracer)?;
-        let start = tracer::traced_to_scene(&traced, ww, wh, max_total, 12)?;
-        scene.shapes = start.shapes;
-        if run.background_free {
-            scene.background = start.background;
+    let mut st = match resume {
+        Some(r) => {
+            run.step = r.step;
+            rng.set_word_pos(u128::from(r.rng_word_pos));
+            r
         }
-        run.choose_colours(&mut scene);
-        let n = scene.shapes.len();
-        let loss = run.optimise(&mut scene, 0..n, cfg.iters_per_stage, 0, true)?;
-        let reinit = run.reinit_weak(&mut scene, &mut rng);
-        run.make_simple(&mut scene);
-        run.choose_colours(&mut scene);
-        reports.push(StageReport {
-            stage: 0,
-            added: n,
-            paths: n,
-            reinitialised: reinit,
-            psnr: run.psnr(&scene),
-            loss,
-        });
-        prev_psnr = run.psnr(&scene);
-        save(&scene, &reports, 0, false, prev_psnr, run.step, &rng)?;
-    }
-    if prev_psnr.is_nan() {
-        prev_psnr = run.psnr(&scene);
-    }
-    let plan = if stages_done {
-        &stages_plan[..0]
-    } else {
-        &stages_plan[first_stage..]
+        None => {
+            let mut st = LiveState::start(scene);
+            if vtracer_stage {
+                run.vtracer_start(&mut st, &mut rng, target, max_total)?;
+                run.save(&mut st, &rng, checkpoint)?;
+            }
+            st
+        }
     };
-    for (si, &want) in plan.iter().enumerate() {
-        let si = si + first_stage;
-        // The budget counts paths added: a looping path split into simple pieces is one.
-        let added_so_far: usize = reports.iter().map(|r| r.added).sum();
-        let room = max_total.saturating_sub(added_so_far);
-        let want = want.min(room);
-        if want == 0 {
-            break;
-        }
-        let current = crate::raster::render(&scene);
-        let fresh = init::init_paths(&current, &run.target, want, &run.init_cfg(), &mut rng);
-        let added = fresh.len();
-        if added == 0 {
-            break;
-        }
-        let start = scene.shapes.len();
-        scene.shapes.extend(fresh);
-        let end = scene.shapes.len();
-        run.choose_colours(&mut scene);
-        let loss = run.optimise(&mut scene, start..end, cfg.iters_per_stage, si + 1, true)?;
-        let reinit = run.reinit_weak(&mut scene, &mut rng);
-        run.make_simple(&mut scene);
-        run.choose_colours(&mut scene);
-        let psnr = run.psnr(&scene);
-        reports.push(StageReport {
-            stage: si + 1,
-            added,
-            paths: end,
-            reinitialised: reinit,
-            psnr,
-            loss,
-        });
-        let budget_stop = match cfg.budget {
-            PathBudget::Auto {
-                min_gain_db_per_path,
-                ..
-            } => !schedule::auto_should_continue(prev_psnr, psnr, added, min_gain_db_per_path),
-            PathBudget::Schedule { .. } => false,
-        };
-        let stop = budget_stop
-            || cfg.target_psnr.is_some_and(|t| psnr >= t)
-            || cfg
-                .max_bytes
-                .is_some_and(|max| svg_bytes(&scene, tw, th, &cfg.colors) >= max);
-        save(&scene, &reports, si + 1, stop, psnr, run.step, &rng)?;
-        if stop {
-            break;
-        }
-        prev_psnr = psnr;
+    if st.prev_psnr.is_nan() {
+        st.prev_psnr = run.psnr(&st.scene);
     }
-    // Colours settle before the last pass, which then fits the geometry to them.
-    if run.palette.is_some() {
-        run.choose_colours(&mut scene);
-    } else {
-        palette::merge_similar(&mut scene, palette::MERGE_DISTANCE);
-    }
-    if cfg.final_iters > 0 && !scene.shapes.is_empty() {
-        let n = scene.shapes.len();
-        run.optimise(&mut scene, n..n, cfg.final_iters, reports.len() + 1, false)?;
-    }
-    // Drop paths that stayed faint or tiny after the last re-initialisation.
-    let weak = prune::weak_paths(&scene, cfg.reinit_min_opacity, 1.0);
-    for &i in weak.iter().rev() {
-        scene.shapes.remove(i);
-    }
-    // Clean geometry: the last pass may have folded outlines again; splitting keeps the pixels.
-    run.make_simple(&mut scene);
-    let scale = tw as f32 / ww as f32;
-    let mut pruned = crate::vector::drop_unseen(&mut scene, scale);
-    if let PathBudget::Auto {
-        prune_tolerance, ..
-    } = cfg.budget
-    {
-        pruned += prune::prune_paths(&mut scene, prune_tolerance, crate::raster::render).len();
-    }
-    if let Some(max) = cfg.max_bytes {
-        pruned += prune::trim_to_bytes(&mut scene, &run.target, max, |s| {
-            svg_bytes(s, tw, th, &cfg.colors)
-        });
-    }
-    // At the output size: flattening is finer there, and hidden paths are judged there.
-    let mut out = output_scene(&scene, tw, th);
-    crate::vector::make_simple(&mut out, crate::vector::SIMPLE_MIN_AREA);
-    pruned += crate::vector::drop_hidden(&mut out);
-    out.validate()?;
+    run.add_stages(&mut st, &mut rng, &stages_plan, max_total, checkpoint)?;
+    let (out, pruned) = run.finish(st.scene, st.reports.len())?;
     let psnr = crate::image::psnr(&crate::raster::render(&out), target);
-    let mut done = Progress::new("live", run.total, run.total);
-    done.svg = Some(crate::svg::to_svg(&out, &crate::svg::SvgOptions::default()));
-    done.detail = Some(serde_json::json!({"paths": out.shapes.len(), "psnr": psnr, "done": true}));
-    sink.report(done);
+    run.report_done(&out, psnr);
     Ok(LiveResult {
         paths: out.shapes.len(),
         editability: crate::vector::check::check(&out),
         scene: out,
         psnr,
-        stages: reports,
+        stages: st.reports,
         pruned,
         steps: run.step,
     })

@@ -25,7 +25,7 @@ use super::styles::random_circle;
 use crate::augment::Warp;
 use crate::image::Image;
 use crate::optim::{Adam, StepOutcome};
-use crate::progress::{CancelToken, Progress, ProgressSink};
+use crate::progress::{CancelToken, CheckpointError, Progress, ProgressSink, Stage};
 use crate::scene::{ParamGroup, Params, Scene};
 use crate::teacher::{Conditioning, Latent, Teacher, TeacherError};
 use rand::{Rng, RngExt, SeedableRng};
@@ -83,6 +83,7 @@ pub struct SdsStats {
     pub clipped: u32,
     pub cancelled: bool,
     /// Mean `w(t)·|ε̂ − ε|²` per latent element at the last step.
+    #[serde(deserialize_with = "crate::stages::live::null_as_nan")]
     pub last_loss: f64,
 }
 
@@ -135,7 +136,7 @@ pub trait SdsCheckpoint {
     /// Whether a checkpoint is due after `step` (1-based) completed steps.
     fn due(&self, step: u32) -> bool;
     /// Saves the state; called when due and once more when the run is cancelled.
-    fn save(&self, state: &SdsState) -> Result<(), String>;
+    fn save(&self, state: &SdsState) -> Result<(), CheckpointError>;
 }
 
 pub use crate::teacher::gaussian;
@@ -312,6 +313,177 @@ pub fn run_sds<B: Backend>(
     run_sds_resumable(backend, teacher, start, cfg, sink, cancel, None)
 }
 
+/// What every step of one SDS run shares.
+struct Fixed<'a, B: Backend> {
+    backend: &'a B,
+    teacher: &'a dyn Teacher,
+    cfg: &'a SdsConfig,
+    cond: Conditioning,
+    /// The deterministic resize to the teacher's size when not augmenting.
+    resize: Option<Warp>,
+    /// Re-initialisation stops at this step.
+    reinit_until: u32,
+    latent_len: usize,
+}
+
+/// The loop's moving parts: an [`SdsState`] with live parameters and random stream.
+struct Moving {
+    scene: Scene,
+    params: Params,
+    adam: Adam,
+    rng: ChaCha8Rng,
+    lr_scale: f32,
+    stats: SdsStats,
+}
+
+impl Moving {
+    /// The state after `step` steps, to save.
+    fn snapshot(&self, step: u32) -> Result<SdsState, SdsError> {
+        Ok(SdsState {
+            step,
+            scene: self.scene.clone(),
+            adam: self.adam.clone(),
+            rng_word_pos: u64::try_from(self.rng.get_word_pos())
+                .map_err(|_| SdsError::Checkpoint("random stream position overflow".into()))?,
+            lr_scale: self.lr_scale,
+            stats: self.stats.clone(),
+        })
+    }
+
+    /// An Adam step on `grad`, clipped as `cfg` says; a step that makes the parameters
+    /// non-finite is rolled back and the learning rate halved.
+    fn apply(&mut self, cfg: &SdsConfig, mut grad: Params) -> Result<(), SdsError> {
+        if let Some(c) = cfg.grad_clip
+            && grad.all_finite()
+            && clip_groups(&mut grad, c)
+        {
+            self.stats.clipped += 1;
+        }
+        let before = self.params.clone();
+        match self.adam.step(&mut self.params, &grad) {
+            StepOutcome::SkippedNonFinite => self.stats.skipped_nonfinite += 1,
+            StepOutcome::Applied => {
+                if self.params.all_finite() {
+                    self.params.write_to(&mut self.scene)?;
+                    // Keep params consistent with the clamped scene.
+                    self.params = Params::from_scene(&self.scene);
+                } else {
+                    self.params = before;
+                    self.lr_scale *= 0.5;
+                    self.adam.schedules = cfg.schedules.scaled(self.lr_scale);
+                    self.stats.lr_halvings += 1;
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The deterministic resize of a `scene`-sized render to the teacher's `size` when `cfg`
+/// does not augment and the sizes differ.
+fn fixed_resize(cfg: &SdsConfig, scene: &Scene, size: u32) -> Option<Warp> {
+    let identity = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
+    (cfg.augment.is_none() && (scene.width != size || scene.height != size)).then(|| {
+        Warp::build(
+            scene.width,
+            scene.height,
+            size,
+            size,
+            &identity,
+            0.0,
+            0.0,
+            scene.width as f64,
+            scene.height as f64,
+            [1.0; 4],
+            false,
+        )
+    })
+}
+
+/// The largest timestep at `step`: `t_max`, annealed linearly to `t_max_end` when set, and
+/// never below `t_min`.
+fn t_max_at(cfg: &SdsConfig, step: u32) -> usize {
+    match cfg.t_max_end {
+        Some(end) if cfg.steps > 1 => {
+            let f = step as f32 / (cfg.steps - 1) as f32;
+            (cfg.t_max as f32 + (end as f32 - cfg.t_max as f32) * f).round() as usize
+        }
+        _ => cfg.t_max,
+    }
+    .max(cfg.t_min)
+}
+
+impl<B: Backend> Fixed<'_, B> {
+    /// The gradient of step `step` with respect to the scene's parameters (augmented or
+    /// resized render → SDS → back through the warp and the rasteriser, plus the Xing loss),
+    /// masked to what `cfg` trains; and the step's SDS loss.
+    fn gradient(&self, m: &mut Moving, step: u32) -> Result<(Params, f64), SdsError> {
+        let cfg = self.cfg;
+        let (render, tape) = self.backend.render_tape(&m.scene);
+        let warp = match &cfg.augment {
+            Some(a) => Some(Warp::sample(a, render.width, render.height, &mut m.rng)?),
+            None => self.resize.clone(),
+        };
+        let input = match &warp {
+            Some(w) => w.apply(&render)?,
+            None => render.clone(),
+        };
+        let t = m.rng.random_range(cfg.t_min..=t_max_at(cfg, step));
+        let noise: Vec<f32> = (0..self.latent_len).map(|_| gaussian(&mut m.rng)).collect();
+        let (d_input, loss) = sds_image_grad(
+            self.teacher,
+            &input,
+            t,
+            &noise,
+            &self.cond,
+            cfg.guidance,
+            cfg.weighting,
+        )?;
+        let mut d_render = match &warp {
+            Some(w) => w.vjp(&d_input)?,
+            None => d_input,
+        };
+        if cfg.saturation_penalty > 0.0 {
+            saturation_penalty(&render, cfg.saturation_penalty, &mut d_render);
+        }
+        let scene = &m.scene;
+        let mut grad = self.backend.backward(scene, &tape, &d_render);
+        if cfg.xing_weight > 0.0 {
+            // LIVE's Xing loss on closed cubic paths keeps them free of self-intersections.
+            for (i, sh) in scene.shapes.iter().enumerate() {
+                if sh.kind == crate::scene::ShapeKind::ClosedCubic {
+                    crate::losses::xing_loss(scene, i..i + 1, cfg.xing_weight, &mut grad);
+                }
+            }
+        }
+        grad.mask(&cfg.trainable);
+        if cfg.opaque_fills {
+            for rgba in grad.get_mut(ParamGroup::Fill).chunks_exact_mut(4) {
+                rgba[3] = 0.0;
+            }
+        }
+        Ok((grad, loss))
+    }
+
+    /// The progress event after step `step` (0-based) with its `loss`: a snapshot when one
+    /// is due, the counts of skipped and rolled-back steps once there are any.
+    fn report(&self, m: &Moving, step: u32, loss: f64, sink: &dyn ProgressSink) {
+        let cfg = self.cfg;
+        let mut ev = Progress::new(Stage::Sds, step + 1, cfg.steps);
+        ev.loss = Some(loss);
+        if cfg.snapshot_every > 0 && (step + 1) % cfg.snapshot_every == 0 {
+            ev.svg = Some(self.backend.svg(&m.scene));
+        }
+        if m.stats.skipped_nonfinite + m.stats.lr_halvings > 0 {
+            ev.detail = Some(serde_json::json!({
+                "skipped_nonfinite": m.stats.skipped_nonfinite,
+                "lr_halvings": m.stats.lr_halvings,
+            }));
+        }
+        sink.report(ev);
+    }
+}
+
 /// [`run_sds`] from a saved [`SdsState`] (or [`SdsState::start`]), saving the state through
 /// `checkpoint` when it is due and when cancelled. Resuming a state saved by a run of the same
 /// `cfg` gives exactly the scene an uninterrupted run gives.
@@ -324,18 +496,69 @@ pub fn run_sds_resumable<B: Backend>(
     cancel: &CancelToken,
     checkpoint: Option<&dyn SdsCheckpoint>,
 ) -> Result<SdsOutcome, SdsError> {
+    let first_step = state.step;
+    let (f, mut m) = prepare(backend, teacher, state, cfg)?;
+    for step in first_step..cfg.steps {
+        if cancel.is_cancelled() {
+            // Save the work done so far (a shutdown resumes from here). A failed save only
+            // means a later attempt resumes from the previous checkpoint.
+            if let Some(c) = checkpoint
+                && step > first_step
+                && let Ok(st) = m.snapshot(step)
+            {
+                let _ = c.save(&st);
+            }
+            m.stats.cancelled = true;
+            break;
+        }
+        let (grad, loss) = f.gradient(&mut m, step)?;
+        m.apply(cfg, grad)?;
+        m.stats.last_loss = loss;
+        m.stats.steps_done = step + 1;
+        if let Some(r) = &cfg.reinit
+            && r.every > 0
+            && (step + 1) % r.every == 0
+            && step + 1 < f.reinit_until
+        {
+            let n = reinit_faint(&mut m.scene, &mut m.params, &mut m.adam, r, &mut m.rng)?;
+            m.stats.reinits += n;
+        }
+        f.report(&m, step, loss, sink);
+        if let Some(c) = checkpoint
+            && step + 1 < cfg.steps
+            && c.due(step + 1)
+        {
+            c.save(&m.snapshot(step + 1)?)?;
+        }
+    }
+    let Moving { scene, stats, .. } = m;
+    scene.validate()?;
+    let mut ev = Progress::new(Stage::Sds, stats.steps_done, cfg.steps);
+    ev.loss = Some(stats.last_loss);
+    ev.svg = Some(backend.svg(&scene));
+    ev.detail = Some(serde_json::to_value(&stats).unwrap_or_default());
+    sink.report(ev);
+    Ok(SdsOutcome { scene, stats })
+}
+
+/// Checks `state` against `cfg` and the teacher and sets the run up from it.
+fn prepare<'a, B: Backend>(
+    backend: &'a B,
+    teacher: &'a dyn Teacher,
+    state: SdsState,
+    cfg: &'a SdsConfig,
+) -> Result<(Fixed<'a, B>, Moving), SdsError> {
     let SdsState {
         step: first_step,
-        mut scene,
-        mut adam,
+        scene,
+        adam,
         rng_word_pos,
-        mut lr_scale,
-        mut stats,
+        lr_scale,
+        stats,
     } = state;
     scene.validate()?;
-    let alphas = teacher.alphas_cumprod().to_vec();
-    cfg.validate(alphas.len())?;
-    let mut params = Params::from_scene(&scene);
+    cfg.validate(teacher.alphas_cumprod().len())?;
+    let params = Params::from_scene(&scene);
     if first_step > cfg.steps || !adam.fits(&params) || !(lr_scale > 0.0 && lr_scale <= 1.0) {
         return Err(SdsError::Resume(format!(
             "the saved state (step {first_step} of {}) does not fit this run",
@@ -343,172 +566,29 @@ pub fn run_sds_resumable<B: Backend>(
         )));
     }
     let cond = teacher.condition(&cfg.prompt, &cfg.negative_prompt)?;
-    let size = teacher.image_size();
     let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);
     rng.set_word_pos(u128::from(rng_word_pos));
-    let snapshot_state = |step: u32,
-                          scene: &Scene,
-                          adam: &Adam,
-                          rng: &ChaCha8Rng,
-                          lr_scale: f32,
-                          stats: &SdsStats|
-     -> Result<SdsState, SdsError> {
-        Ok(SdsState {
-            step,
-            scene: scene.clone(),
-            adam: adam.clone(),
-            rng_word_pos: u64::try_from(rng.get_word_pos())
-                .map_err(|_| SdsError::Checkpoint("random stream position overflow".into()))?,
-            lr_scale,
-            stats: stats.clone(),
-        })
+    let fixed = Fixed {
+        backend,
+        teacher,
+        cfg,
+        cond,
+        resize: fixed_resize(cfg, &scene, teacher.image_size()),
+        reinit_until: cfg
+            .reinit
+            .as_ref()
+            .map_or(0, |r| (r.until_fraction * cfg.steps as f32) as u32),
+        latent_len: teacher.latent_shape().iter().product(),
     };
-    // Deterministic resize when not augmenting and the render is not the teacher's size.
-    let identity = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
-    let resize =
-        (cfg.augment.is_none() && (scene.width != size || scene.height != size)).then(|| {
-            Warp::build(
-                scene.width,
-                scene.height,
-                size,
-                size,
-                &identity,
-                0.0,
-                0.0,
-                scene.width as f64,
-                scene.height as f64,
-                [1.0; 4],
-                false,
-            )
-        });
-    let reinit_until = cfg
-        .reinit
-        .as_ref()
-        .map_or(0, |r| (r.until_fraction * cfg.steps as f32) as u32);
-    let latent_len: usize = teacher.latent_shape().iter().product();
-
-    for step in first_step..cfg.steps {
-        if cancel.is_cancelled() {
-            // Save the work done so far (a shutdown resumes from here). A failed save only
-            // means a later attempt resumes from the previous checkpoint.
-            if let Some(c) = checkpoint
-                && step > first_step
-                && let Ok(st) = snapshot_state(step, &scene, &adam, &rng, lr_scale, &stats)
-            {
-                let _ = c.save(&st);
-            }
-            stats.cancelled = true;
-            break;
-        }
-        let (render, tape) = backend.render_tape(&scene);
-        let warp = match &cfg.augment {
-            Some(a) => Some(Warp::sample(a, render.width, render.height, &mut rng)?),
-            None => resize.clone(),
-        };
-        let input = match &warp {
-            Some(w) => w.apply(&render)?,
-            None => render.clone(),
-        };
-        let t_max = match cfg.t_max_end {
-            Some(end) if cfg.steps > 1 => {
-                let f = step as f32 / (cfg.steps - 1) as f32;
-                (cfg.t_max as f32 + (end as f32 - cfg.t_max as f32) * f).round() as usize
-            }
-            _ => cfg.t_max,
-        }
-        .max(cfg.t_min);
-        let t = rng.random_range(cfg.t_min..=t_max);
-        let noise: Vec<f32> = (0..latent_len).map(|_| gaussian(&mut rng)).collect();
-        let (d_input, loss) = sds_image_grad(
-            teacher,
-            &input,
-            t,
-            &noise,
-            &cond,
-            cfg.guidance,
-            cfg.weighting,
-        )?;
-        let mut d_render = match &warp {
-            Some(w) => w.vjp(&d_input)?,
-            None => d_input,
-        };
-        if cfg.saturation_penalty > 0.0 {
-            saturation_penalty(&render, cfg.saturation_penalty, &mut d_render);
-        }
-        let mut grad = backend.backward(&scene, &tape, &d_render);
-        if cfg.xing_weight > 0.0 {
-            // LIVE's Xing loss on closed cubic paths keeps them free of self-intersections.
-            for (i, sh) in scene.shapes.iter().enumerate() {
-                if sh.kind == crate::scene::ShapeKind::ClosedCubic {
-                    crate::losses::xing_loss(&scene, i..i + 1, cfg.xing_weight, &mut grad);
-                }
-            }
-        }
-        grad.mask(&cfg.trainable);
-        if cfg.opaque_fills {
-            for rgba in grad.get_mut(ParamGroup::Fill).chunks_exact_mut(4) {
-                rgba[3] = 0.0;
-            }
-        }
-        if let Some(c) = cfg.grad_clip
-            && grad.all_finite()
-            && clip_groups(&mut grad, c)
-        {
-            stats.clipped += 1;
-        }
-        let before = params.clone();
-        match adam.step(&mut params, &grad) {
-            StepOutcome::SkippedNonFinite => stats.skipped_nonfinite += 1,
-            StepOutcome::Applied => {
-                if params.all_finite() {
-                    params.write_to(&mut scene)?;
-                    // Keep params consistent with the clamped scene.
-                    params = Params::from_scene(&scene);
-                } else {
-                    params = before;
-                    lr_scale *= 0.5;
-                    adam.schedules = cfg.schedules.scaled(lr_scale);
-                    stats.lr_halvings += 1;
-                }
-            }
-        }
-        stats.last_loss = loss;
-        stats.steps_done = step + 1;
-        if let Some(r) = &cfg.reinit
-            && r.every > 0
-            && (step + 1) % r.every == 0
-            && step + 1 < reinit_until
-        {
-            let n = reinit_faint(&mut scene, &mut params, &mut adam, r, &mut rng)?;
-            stats.reinits += n;
-        }
-        let mut ev = Progress::new("sds", step + 1, cfg.steps);
-        ev.loss = Some(loss);
-        if cfg.snapshot_every > 0 && (step + 1) % cfg.snapshot_every == 0 {
-            ev.svg = Some(backend.svg(&scene));
-        }
-        if stats.skipped_nonfinite + stats.lr_halvings > 0 {
-            ev.detail = Some(serde_json::json!({
-                "skipped_nonfinite": stats.skipped_nonfinite,
-                "lr_halvings": stats.lr_halvings,
-            }));
-        }
-        sink.report(ev);
-        if let Some(c) = checkpoint
-            && step + 1 < cfg.steps
-            && c.due(step + 1)
-        {
-            let st = snapshot_state(step + 1, &scene, &adam, &rng, lr_scale, &stats)?;
-            c.save(&st).map_err(SdsError::Checkpoint)?;
-        }
-    }
-    scene.validate()?;
-    let mut ev = Progress::new("sds", stats.steps_done, cfg.steps);
-    ev.loss = Some(stats.last_loss);
-    ev.svg = Some(backend.svg(&scene));
-    ev.detail = Some(serde_json::to_value(&stats).unwrap_or_default());
-    sink.report(ev);
-    Ok(SdsOutcome { scene, stats })
+    let moving = Moving {
+        scene,
+        params,
+        adam,
+        rng,
+        lr_scale,
+        stats,
+    };
+    Ok((fixed, moving))
 }
 
 #[cfg(test)]

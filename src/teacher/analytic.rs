@@ -267,7 +267,7 @@ impl Teacher for AnalyticTeacher {
         for i in 0..cfg.k {
             let j = rng.random_range(0..self.targets.len());
             out.push(self.targets[j].clone());
-            sink.report(Progress::new("sample", i + 1, cfg.k));
+            sink.report(Progress::new(crate::progress::Stage::Sample, i + 1, cfg.k));
         }
         Ok(out)
     }

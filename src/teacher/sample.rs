@@ -139,7 +139,7 @@ pub fn draw(
             .ok_or_else(|| failed("sampling", "no sampler steps"))?;
         let img = sd.decode(z).map_err(|e| failed("decode", e))?;
         out.push(tensor_image(&img)?);
-        sink.report(Progress::new("sample", i as u32 + 1, cfg.k));
+        sink.report(Progress::new(crate::progress::Stage::Sample, i as u32 + 1, cfg.k));
     }
     Ok(out)
 }

@@ -2,6 +2,7 @@
 //! watched job. Publishing never blocks (a slow subscriber lags and resynchronises from the
 //! database instead), so workers are never held up by clients.
 
+use crate::progress::{Progress, Stage};
 use crate::store::JobStatus;
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
@@ -13,18 +14,13 @@ const CHANNEL_CAPACITY: usize = 256;
 /// A live event about one job.
 #[derive(Clone, Debug)]
 pub enum JobEvent {
-    /// The job's latest progress (rate-limited by the worker).
-    Progress {
-        stage: String,
-        step: u32,
-        total: u32,
-        loss: Option<f64>,
-        detail: Option<serde_json::Value>,
-    },
+    /// The job's latest progress (rate-limited by the worker; without its SVG, which goes to
+    /// snapshots).
+    Progress(Progress),
     /// A stored snapshot, numbered as in the database.
     Snapshot {
         n: i64,
-        stage: String,
+        stage: Stage,
         step: u32,
         svg: Arc<str>,
     },

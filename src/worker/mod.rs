@@ -17,7 +17,7 @@ pub mod test_executor;
 mod upload;
 
 use crate::pipeline::{Executor, FailureCode, JobContext, JobSpec, PipelineError};
-use crate::progress::CancelToken;
+use crate::progress::{CancelToken, CheckpointError};
 use crate::store::{Heartbeat, JobRow, JobStatus, Lease, Store, now_ms};
 use events::{Hub, JobEvent};
 use metrics::Metrics;
@@ -340,11 +340,11 @@ fn run_job(s: &Shared, row: JobRow, lease: Lease) {
     let ckpt_lease = lease.clone();
     let rt = s.runtime.clone();
     let checkpointer = Box::new(move |state: serde_json::Value| {
-        let text = serde_json::to_string(&state).map_err(|e| e.to_string())?;
+        let text = serde_json::to_string(&state)?;
         match rt.block_on(ckpt_store.save_checkpoint(&ckpt_lease, &text, now_ms())) {
             Ok(true) => Ok(()),
-            Ok(false) => Err("the job's lease was lost; checkpoint refused".to_string()),
-            Err(e) => Err(e.to_string()),
+            Ok(false) => Err(CheckpointError::LeaseLost),
+            Err(e) => Err(CheckpointError::Store(Box::new(e))),
         }
     });
     let ctx = JobContext::new(
@@ -368,7 +368,8 @@ fn run_job(s: &Shared, row: JobRow, lease: Lease) {
     let now = now_ms();
     match outcome {
         Ok(Ok(out)) => {
-            let detail = out.detail.to_string();
+            // A report always serialises; `{}` only guards the impossible.
+            let detail = serde_json::to_string(&out.report).unwrap_or_else(|_| "{}".into());
             match s.runtime.block_on(s.store.complete(
                 &lease,
                 &out.svg,

@@ -3,7 +3,7 @@
 use super::Shared;
 use super::events::{Hub, JobEvent};
 use super::metrics::Metrics;
-use crate::progress::{Progress, ProgressSink};
+use crate::progress::{Progress, ProgressSink, Stage};
 use crate::store::{Lease, Store, now_ms};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -14,9 +14,9 @@ use tracing::warn;
 struct SinkState {
     last_progress: Option<Instant>,
     last_snapshot: Option<Instant>,
-    pending_snapshot: Option<(String, u32, String)>,
+    pending_snapshot: Option<(Stage, u32, String)>,
     pending_progress: Option<Progress>,
-    stage: Option<(String, Instant)>,
+    stage: Option<(Stage, Instant)>,
 }
 
 /// The progress sink handed to executors: rate-limits progress and snapshots, stores them and
@@ -58,7 +58,7 @@ impl WorkerSink {
     fn emit_progress(&self, p: &Progress) {
         let r = self.runtime.block_on(self.store.update_progress(
             &self.lease,
-            &p.stage,
+            p.stage.as_str(),
             p.step,
             p.total,
             p.loss,
@@ -69,20 +69,18 @@ impl WorkerSink {
         }
         self.hub.publish(
             &self.lease.job_id,
-            JobEvent::Progress {
-                stage: p.stage.clone(),
-                step: p.step,
-                total: p.total,
+            JobEvent::Progress(Progress {
                 loss: p.loss.filter(|l| l.is_finite()),
-                detail: p.detail.clone(),
-            },
+                svg: None,
+                ..p.clone()
+            }),
         );
     }
 
-    fn emit_snapshot(&self, stage: &str, step: u32, svg: String) {
+    fn emit_snapshot(&self, stage: Stage, step: u32, svg: String) {
         match self.runtime.block_on(self.store.add_snapshot(
             &self.lease,
-            stage,
+            stage.as_str(),
             step,
             &svg,
             now_ms(),
@@ -92,7 +90,7 @@ impl WorkerSink {
                 &self.lease.job_id,
                 JobEvent::Snapshot {
                     n,
-                    stage: stage.to_string(),
+                    stage,
                     step,
                     svg: svg.into(),
                 },
@@ -108,7 +106,7 @@ impl WorkerSink {
             let mut st = self.lock();
             if let Some((stage, t0)) = st.stage.take() {
                 self.metrics
-                    .observe_stage(&stage, t0.elapsed().as_secs_f64());
+                    .observe_stage(stage.as_str(), t0.elapsed().as_secs_f64());
             }
             (st.pending_progress.take(), st.pending_snapshot.take())
         };
@@ -116,7 +114,7 @@ impl WorkerSink {
             self.emit_progress(&p);
         }
         if let Some((stage, step, svg)) = snap {
-            self.emit_snapshot(&stage, step, svg);
+            self.emit_snapshot(stage, step, svg);
         }
     }
 }
@@ -130,9 +128,10 @@ impl ProgressSink for WorkerSink {
             let stage_changed = st.stage.as_ref().is_none_or(|(s, _)| *s != event.stage);
             if stage_changed {
                 if let Some((old, t0)) = st.stage.take() {
-                    self.metrics.observe_stage(&old, t0.elapsed().as_secs_f64());
+                    self.metrics
+                        .observe_stage(old.as_str(), t0.elapsed().as_secs_f64());
                 }
-                st.stage = Some((event.stage.clone(), now));
+                st.stage = Some((event.stage, now));
             }
             let last = event.total > 0 && event.step >= event.total;
             let due = |t: Option<Instant>, every: Duration| {
@@ -153,7 +152,7 @@ impl ProgressSink for WorkerSink {
                     st.pending_snapshot = None;
                     do_snapshot = Some(svg);
                 } else {
-                    st.pending_snapshot = Some((event.stage.clone(), event.step, svg));
+                    st.pending_snapshot = Some((event.stage, event.step, svg));
                 }
             }
             (do_progress, do_snapshot)
@@ -162,7 +161,7 @@ impl ProgressSink for WorkerSink {
             self.emit_progress(&event);
         }
         if let Some(svg) = do_snapshot {
-            self.emit_snapshot(&event.stage, event.step, svg);
+            self.emit_snapshot(event.stage, event.step, svg);
         }
     }
 }

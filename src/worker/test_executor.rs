@@ -7,8 +7,11 @@
 //! of) the real pipeline. The server binary enables it only through the hidden
 //! `serve --test-executor STEP_MS` flag.
 
-use crate::pipeline::{Executor, JobContext, JobKind, JobOutput, JobSpec, PipelineError};
-use crate::progress::Progress;
+use crate::pipeline::{
+    Executor, JobContext, JobKind, JobSpec, PipelineError, ResumePoint, RunOutput, RunPlan,
+    RunReport,
+};
+use crate::progress::{Progress, Stage};
 use crate::scene::{Rgba, Scene, Shape, ShapeKind};
 use std::fmt::Write;
 use std::time::Duration;
@@ -122,8 +125,21 @@ pub fn scene_svg(scene: &Scene) -> String {
     s
 }
 
+/// The steps and paths a job pretends to run: its plan's, or as given, or (the steps of a
+/// vectorize job, the paths of a job without a plan) the preset's.
+fn steps_and_paths(spec: &JobSpec) -> (u32, u32) {
+    let plan = spec.plan.as_ref();
+    let preset = spec.preset.settings();
+    let steps = plan.and_then(RunPlan::sds_steps).or(spec.steps);
+    let paths = plan.and_then(RunPlan::paths).or(spec.paths);
+    (
+        steps.unwrap_or(preset.steps),
+        paths.unwrap_or(u32::try_from(preset.paths).unwrap_or(u32::MAX)),
+    )
+}
+
 impl Executor for TestExecutor {
-    fn run(&self, spec: &JobSpec, ctx: &JobContext) -> Result<JobOutput, PipelineError> {
+    fn run(&self, spec: &JobSpec, ctx: &JobContext) -> Result<RunOutput, PipelineError> {
         if spec.kind == JobKind::Vectorize {
             let bytes = spec
                 .image
@@ -132,11 +148,12 @@ impl Executor for TestExecutor {
             crate::image::Image::decode(bytes)
                 .map_err(|e| PipelineError::InvalidInput(e.to_string()))?;
         }
+        let (steps, paths) = steps_and_paths(spec);
         let resumed_from = ctx
             .resume_state()
             .and_then(|v| v.get("step").and_then(|s| s.as_u64()))
-            .map_or(0, |s| s.min(spec.steps as u64) as u32);
-        for step in resumed_from + 1..=spec.steps {
+            .map_or(0, |s| s.min(steps as u64) as u32);
+        for step in resumed_from + 1..=steps {
             if ctx.is_cancelled() {
                 // Save the work done so far, so a shutdown loses nothing (a failed save only
                 // means the next attempt resumes from the previous checkpoint).
@@ -146,35 +163,30 @@ impl Executor for TestExecutor {
                 return Err(PipelineError::Cancelled);
             }
             std::thread::sleep(Duration::from_millis(self.step_ms));
-            let mut p = Progress::new("test", step, spec.steps);
+            let mut p = Progress::new(Stage::Test, step, steps);
             p.loss = Some(1.0 / step as f64);
-            if step % SNAPSHOT_EVERY == 0 || step == spec.steps {
-                p.svg = Some(scene_svg(&scene_at(
-                    spec.seed, spec.paths, step, spec.steps,
-                )?));
+            if step % SNAPSHOT_EVERY == 0 || step == steps {
+                p.svg = Some(scene_svg(&scene_at(spec.seed, paths, step, steps)?));
             }
             ctx.report(p);
-            if ctx.checkpoint_due(step) && step < spec.steps {
+            if ctx.checkpoint_due(step) && step < steps {
                 ctx.checkpoint(serde_json::json!({ "step": step }))?;
             }
         }
-        let scene = scene_at(spec.seed, spec.paths, spec.steps, spec.steps)?;
-        Ok(JobOutput {
-            svg: scene_svg(&scene),
-            paths: scene.shapes.len(),
-            detail: serde_json::json!({
-                "executor": "test",
-                "resumed_from": resumed_from,
-                "steps_run": spec.steps - resumed_from,
-            }),
-        })
+        let scene = scene_at(spec.seed, paths, steps, steps)?;
+        let report = RunReport {
+            resumed: Some(ResumePoint::Step(resumed_from)),
+            ..RunReport::default()
+        };
+        let svg = scene_svg(&scene);
+        Ok(RunOutput::new(scene, svg, report))
     }
 
-    fn text_ready(&self) -> Result<(), String> {
+    fn text_ready(&self) -> Result<(), crate::pipeline::NotReady> {
         if self.text_ready {
             Ok(())
         } else {
-            Err("test executor configured without text models".into())
+            Err(crate::pipeline::NotReady::Disabled)
         }
     }
 }

@@ -3,8 +3,8 @@
 
 use std::sync::Arc;
 use vectorfusion::pipeline::{
-    DefaultExecutor, Executor, JobContext, Limits, MethodOutput, ModelDirs, PipelineError,
-    PlanRequest, RunInput, RunPlan,
+    DefaultExecutor, Executor, JobContext, Limits, ModelDirs, PipelineError, PlanRequest, RunInput,
+    RunOutput, RunPlan,
 };
 use vectorfusion::progress::{CancelToken, Progress};
 
@@ -33,14 +33,14 @@ pub fn run_with(
     input: &RunInput,
     sink: impl Fn(Progress) + Send + Sync + 'static,
     cancel: CancelToken,
-) -> Result<MethodOutput, PipelineError> {
+) -> Result<RunOutput, PipelineError> {
     let plan = plan(exec, req);
     let ctx = JobContext::new(Arc::new(sink), cancel, u32::MAX, Box::new(|_| Ok(())), None);
     exec.run_plan(&plan, input, &ctx)
 }
 
 /// Resolves and runs a caption request.
-pub fn run(exec: &DefaultExecutor, req: &PlanRequest) -> Result<MethodOutput, PipelineError> {
+pub fn run(exec: &DefaultExecutor, req: &PlanRequest) -> Result<RunOutput, PipelineError> {
     let input = RunInput {
         caption: req.caption.clone(),
         ..RunInput::default()

@@ -490,11 +490,11 @@
     });
   }
 
-  // The K samples' rerank: the progress event of stage rerank ({scorer, scores, best, samples,
-  // sources}) or GET /jobs/{id} ({scorer, scores, chosen, samples}). Scores only: the API does
-  // not send the sampled images.
+  // The K samples' rerank: the progress event of stage rerank ({scorer, scores, chosen,
+  // samples, sources}) or GET /jobs/{id} ({scorer, scores, chosen, samples}). Scores only: the
+  // API does not send the sampled images.
   function renderRerank(r) {
-    const chosen = r.chosen ?? r.best;
+    const chosen = r.chosen;
     const scores = Array.isArray(r.scores) ? r.scores : [];
     const lo = Math.min(...scores), hi = Math.max(...scores);
     el.samplesView.hidden = false;
@@ -520,7 +520,7 @@
     const rows = [['Kind', job.kind]];
     if (p) {
       rows.push(['Caption', p.caption ?? '—'], ['Style', p.style], ['Method', p.method ?? '—'],
-        ['Preset', p.preset], ['Paths', p.paths], ['Steps', p.steps], ['Samples', p.samples], ['Seed', p.seed],
+        ['Preset', p.preset], ['Paths', p.paths ?? '—'], ['Steps', p.steps ?? '—'], ['Samples', p.samples ?? '—'], ['Seed', p.seed],
         ['Started from', p.has_image ? 'an image' : p.has_svg ? 'an SVG' : 'noise']);
       // The run plan the job runs with (every number, resolved when it was accepted).
       const t = p.plan && p.plan.text, v = p.plan && p.plan.vectorize;
@@ -613,7 +613,7 @@
     try {
       if (ev.type === 'state') applyJob(v, parseJson(ev.data));
       else if (ev.type === 'progress') {
-        const p = JSON.parse(ev.data), d = p.detail; // {stage, step, total, loss, detail}
+        const p = JSON.parse(ev.data), d = p.detail; // {stage, step, total, fraction, loss, detail}
         setProgress(p.stage, p.step, p.total, p.loss);
         if (d && typeof d.paths === 'number') el.pathCount.textContent = fmtInt(d.paths); // LIVE
         if (d && p.stage === 'rerank' && Array.isArray(d.scores)) renderRerank(d);

@@ -5,7 +5,7 @@
 
 use super::protocol::{CANCEL, ChildExecutor, FromChild, Start};
 use crate::pipeline::{DefaultExecutor, Executor, JobContext, PipelineError};
-use crate::progress::CancelToken;
+use crate::progress::{CancelToken, CheckpointError};
 use crate::worker::test_executor::TestExecutor;
 use std::io::{BufRead, Write};
 use std::panic::AssertUnwindSafe;
@@ -33,13 +33,13 @@ pub fn run_stdio() -> i32 {
     let out = Arc::new(Mutex::new(std::io::stdout()));
     let send = {
         let out = out.clone();
-        move |msg: &FromChild| -> Result<(), String> {
-            let mut line = serde_json::to_vec(msg).map_err(|e| e.to_string())?;
+        move |msg: &FromChild| -> std::io::Result<()> {
+            let mut line = serde_json::to_vec(msg).map_err(std::io::Error::other)?;
             line.push(b'\n');
-            let mut o = out.lock().map_err(|_| "stdout lock poisoned".to_string())?;
-            o.write_all(&line)
-                .and_then(|()| o.flush())
-                .map_err(|e| format!("the server stopped reading: {e}"))
+            let mut o = out
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner);
+            o.write_all(&line).and_then(|()| o.flush())
         }
     };
     let cancel = CancelToken::new();
@@ -66,7 +66,7 @@ pub fn run_stdio() -> i32 {
     };
     let checkpoint = {
         let send = send.clone();
-        move |v| send(&FromChild::Checkpoint(v))
+        move |v| send(&FromChild::Checkpoint(v)).map_err(|e| CheckpointError::Store(Box::new(e)))
     };
     let ctx = JobContext::new(
         Arc::new(progress),
@@ -78,7 +78,7 @@ pub fn run_stdio() -> i32 {
     let outcome = std::panic::catch_unwind(AssertUnwindSafe(|| executor.run(&start.spec, &ctx)))
         .unwrap_or_else(|panic| Err(PipelineError::panicked(panic.as_ref())));
     let msg = match outcome {
-        Ok(out) => FromChild::Done(out),
+        Ok(out) => FromChild::Done(Box::new(out)),
         Err(e) => FromChild::Error {
             code: e.code(),
             message: e.to_string(),
@@ -87,7 +87,7 @@ pub fn run_stdio() -> i32 {
     match send(&msg) {
         Ok(()) => 0,
         Err(e) => {
-            eprintln!("job-child: {e}");
+            eprintln!("job-child: the server stopped reading: {e}");
             ORPHANED
         }
     }

@@ -19,7 +19,7 @@ pub use child::run_stdio;
 pub use protocol::ChildExecutor;
 
 use crate::pipeline::{
-    Executor, JobContext, JobOutput, JobSpec, Limits, PipelineError, PlanRequest, RunPlan,
+    Executor, JobContext, JobSpec, Limits, PipelineError, PlanRequest, RunOutput, RunPlan,
     SpecError,
 };
 use protocol::{CANCEL, FromChild, Start};
@@ -83,7 +83,7 @@ impl Drop for Reaped {
 }
 
 impl Executor for ProcessExecutor {
-    fn run(&self, spec: &JobSpec, ctx: &JobContext) -> Result<JobOutput, PipelineError> {
+    fn run(&self, spec: &JobSpec, ctx: &JobContext) -> Result<RunOutput, PipelineError> {
         let start = Start {
             executor: self.child.clone(),
             spec: spec.clone(),
@@ -127,7 +127,7 @@ impl Executor for ProcessExecutor {
 
         let began = Instant::now();
         let mut last_check = began;
-        let mut outcome: Option<Result<JobOutput, PipelineError>> = None;
+        let mut outcome: Option<Result<RunOutput, PipelineError>> = None;
         let mut stopped: Option<PipelineError> = None;
         let mut cancel_sent = false;
         loop {
@@ -137,10 +137,10 @@ impl Executor for ProcessExecutor {
                     Ok(FromChild::Checkpoint(v)) => {
                         if let Err(e) = ctx.checkpoint(v) {
                             let _ = child.0.kill();
-                            stopped.get_or_insert(e);
+                            stopped.get_or_insert(e.into());
                         }
                     }
-                    Ok(FromChild::Done(out)) => outcome = Some(Ok(out)),
+                    Ok(FromChild::Done(out)) => outcome = Some(Ok(*out)),
                     Ok(FromChild::Error { code, message }) => {
                         outcome = Some(Err(PipelineError::reported(code, message)))
                     }
@@ -195,7 +195,7 @@ impl Executor for ProcessExecutor {
         })
     }
 
-    fn text_ready(&self) -> Result<(), String> {
+    fn text_ready(&self) -> Result<(), crate::pipeline::NotReady> {
         self.inner.text_ready()
     }
 

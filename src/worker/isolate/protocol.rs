@@ -2,7 +2,7 @@
 //! writes a [`Start`] and then, to stop the job, the line `cancel`; the job process writes
 //! [`FromChild`] messages and exits after `done` or `error`.
 
-use crate::pipeline::{FailureCode, JobOutput, JobSpec, ModelDirs};
+use crate::pipeline::{FailureCode, JobSpec, ModelDirs, RunOutput};
 use crate::progress::Progress;
 use serde::{Deserialize, Serialize};
 
@@ -31,9 +31,12 @@ pub struct Start {
 pub enum FromChild {
     Progress(Progress),
     Checkpoint(serde_json::Value),
-    Done(JobOutput),
+    Done(Box<RunOutput>),
     /// A `PipelineError` as its code and message (`PipelineError::reported` rebuilds it).
-    Error { code: FailureCode, message: String },
+    Error {
+        code: FailureCode,
+        message: String,
+    },
 }
 
 /// The line that asks the job to stop (it checkpoints and answers `cancelled`).
