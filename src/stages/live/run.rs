@@ -1,0 +1,519 @@
+//! One LIVE run's state and steps ([`Run`]): the optimiser loop of a stage, the stages that add
+//! paths, the vtracer start, clean geometry between steps (looping outlines cut into lobes) and
+//! the finish at the output size. [`super::vectorize_resumable`] sets a run up and drives it.
+
+use super::{
+    LiveCheckpoint, LiveConfig, LiveError, LiveState, PathBudget, StageReport, init, prune,
+    schedule, tracer,
+};
+use crate::image::Image;
+use crate::image::ops::resize;
+use crate::losses::{outline, udf_weights, weighted_l2, xing_loss};
+use crate::optim::{Adam, AdamConfig, GroupSchedules, LrSchedule};
+use crate::progress::{CancelToken, Progress, ProgressSink, Stage};
+use crate::scene::{ParamGroup, Params, Rgba, Scene, Trainable};
+use crate::vector::lobes;
+use crate::vector::palette::{self, ColorPlan};
+use rand_chacha::ChaCha8Rng;
+use std::ops::Range;
+
+pub(super) struct Run<'a> {
+    pub(super) cfg: &'a LiveConfig,
+    pub(super) target: Image,
+    pub(super) sink: &'a dyn ProgressSink,
+    pub(super) cancel: &'a CancelToken,
+    pub(super) step: u32,
+    pub(super) total: u32,
+    pub(super) out_width: u32,
+    pub(super) out_height: u32,
+    /// The palette fills are chosen from (`--palette`, or k-means of the target for
+    /// `--colors`); `None`: fills are optimised freely.
+    pub(super) palette: Option<Vec<Rgba>>,
+    /// The background is optimised with the paths (`auto` with an opaque border).
+    pub(super) background_free: bool,
+}
+
+impl Run<'_> {
+    fn schedules(&self, iters: u32) -> GroupSchedules {
+        let sched = |lr: f32| LrSchedule::WarmupCosine {
+            start: 0.2 * lr,
+            peak: lr,
+            warmup: (iters / 10).max(1),
+            end: 0.1 * lr,
+            total: iters,
+        };
+        GroupSchedules {
+            points: sched(self.cfg.lr_points),
+            fill: sched(self.cfg.lr_fill),
+            stroke: LrSchedule::Constant { lr: 0.0 },
+            width: LrSchedule::Constant { lr: 0.0 },
+            background: sched(self.cfg.lr_background),
+        }
+    }
+
+    /// Optimises every path of `scene` for `iters` steps; the UDF term focuses on `focus`.
+    /// Fills are optimised only when `fills` is set and no palette is in force.
+    fn optimise(
+        &mut self,
+        scene: &mut Scene,
+        focus: Range<usize>,
+        iters: u32,
+        stage: usize,
+        fills: bool,
+    ) -> Result<f64, LiveError> {
+        let mut params = Params::from_scene(scene);
+        let trainable = Trainable {
+            points: true,
+            fill: fills && self.palette.is_none(),
+            stroke: false,
+            width: false,
+            background: self.background_free,
+        };
+        let mut adam = Adam::new(
+            &params,
+            AdamConfig::default(),
+            self.schedules(iters),
+            trainable,
+        );
+        let mut last = f64::NAN;
+        // Which paths the UDF term focuses on (kept through untwisting, which moves indices).
+        let mut in_focus: Vec<bool> = (0..scene.shapes.len())
+            .map(|i| focus.contains(&i))
+            .collect();
+        let mut window: Vec<f64> = Vec::with_capacity(CONVERGE_WINDOW);
+        let mut previous: Option<f64> = None;
+        for it in 0..iters {
+            if self.cancel.is_cancelled() {
+                return Err(LiveError::Cancelled);
+            }
+            let (img, tape) = crate::raster::render_tape(scene);
+            let weights = self.loss_weights(scene, &in_focus);
+            let (loss, d_image) = weighted_l2(&img, &self.target, &weights)?;
+            let mut grad = crate::raster::backward(scene, &tape, &d_image);
+            let xing = if self.cfg.xing_weight > 0.0 {
+                xing_loss(
+                    scene,
+                    0..scene.shapes.len(),
+                    self.cfg.xing_weight,
+                    &mut grad,
+                )
+            } else {
+                0.0
+            };
+            adam.step(&mut params, &grad);
+            self.pin_opacity(&mut params);
+            params.write_to(scene)?;
+            if (it + 1) % UNTWIST_EVERY == 0 && untwist(scene, &mut in_focus) {
+                adam.relayout(&Params::from_scene(scene));
+            }
+            // Keep the optimiser's copy inside the valid (clamped) range.
+            params = Params::from_scene(scene);
+            last = loss + xing;
+            self.step += 1;
+            self.report(scene, stage, last);
+            window.push(last);
+            if self.converged(&mut window, &mut previous) {
+                // The rest of the stage's steps are not taken: progress counts them as done.
+                self.step += iters - it - 1;
+                break;
+            }
+        }
+        Ok(last)
+    }
+
+    /// Per-pixel weights of the L2 loss: uniform, plus LIVE's unsigned-distance term around
+    /// the outlines of the paths `in_focus` (when `udf_weight` is on).
+    fn loss_weights(&self, scene: &Scene, in_focus: &[bool]) -> Vec<f32> {
+        let n = self.target.len_pixels();
+        let uniform = 1.0 / (3.0 * n as f32);
+        let mut weights = vec![uniform; n];
+        if self.cfg.udf_weight > 0.0 && in_focus.contains(&true) {
+            let outlines: Vec<Vec<(f32, f32)>> = scene
+                .shapes
+                .iter()
+                .zip(in_focus)
+                .filter(|(_, f)| **f)
+                .map(|(s, _)| outline(s, 8))
+                .collect();
+            let udf = udf_weights(scene.width, scene.height, &outlines, self.cfg.udf_tau);
+            let k = self.cfg.udf_weight / 3.0;
+            for (w, u) in weights.iter_mut().zip(&udf) {
+                *w += k * u;
+            }
+        }
+        weights
+    }
+
+    /// Keeps fills opaque (`opaque`) and an optimised background opaque after a step.
+    fn pin_opacity(&self, params: &mut Params) {
+        if self.cfg.opaque {
+            for a in params
+                .get_mut(ParamGroup::Fill)
+                .iter_mut()
+                .skip(3)
+                .step_by(4)
+            {
+                *a = 1.0;
+            }
+        }
+        if self.background_free
+            && let Some(a) = params.get_mut(ParamGroup::Background).get_mut(3)
+        {
+            *a = 1.0;
+        }
+    }
+
+    /// The early stop: after every [`CONVERGE_WINDOW`] steps, whether the window's mean loss
+    /// improved on the previous window's by less than `converge_tol` (relative). Off at 0.
+    fn converged(&self, window: &mut Vec<f64>, previous: &mut Option<f64>) -> bool {
+        if self.cfg.converge_tol <= 0.0 || window.len() < CONVERGE_WINDOW {
+            return false;
+        }
+        let mean = window.iter().sum::<f64>() / window.len() as f64;
+        window.clear();
+        let done =
+            previous.is_some_and(|p| p > 0.0 && (p - mean) / p < self.cfg.converge_tol as f64);
+        *previous = Some(mean);
+        done
+    }
+
+    fn report(&self, scene: &Scene, stage: usize, loss: f64) {
+        let every = self.cfg.snapshot_every;
+        let snapshot = every > 0 && (self.step % every == 0 || self.step == self.total);
+        if !(snapshot || self.step % 10 == 0) {
+            return;
+        }
+        let mut ev = Progress::new(Stage::Live, self.step, self.total);
+        ev.loss = Some(loss);
+        ev.detail = Some(serde_json::json!({"live_stage": stage, "paths": scene.shapes.len()}));
+        if snapshot {
+            let out = scene.scaled_to_width(self.out_width);
+            ev.svg = Some(crate::svg::to_svg(&out, &crate::svg::SvgOptions::default()));
+        }
+        self.sink.report(ev);
+    }
+
+    /// The last progress event: the traced scene `out` (at the output size) and its `psnr`.
+    pub(super) fn report_done(&self, out: &Scene, psnr: f64) {
+        let mut done = Progress::new(Stage::Live, self.total, self.total);
+        done.svg = Some(crate::svg::to_svg(out, &crate::svg::SvgOptions::default()));
+        done.detail =
+            Some(serde_json::json!({"paths": out.shapes.len(), "psnr": psnr, "done": true}));
+        self.sink.report(done);
+    }
+
+    /// Replaces faint or tiny paths by circles at the current high-error regions.
+    fn reinit_weak(&self, scene: &mut Scene, rng: &mut ChaCha8Rng) -> usize {
+        let weak = prune::weak_paths(scene, self.cfg.reinit_min_opacity, self.cfg.reinit_min_area);
+        if weak.is_empty() {
+            return 0;
+        }
+        let current = crate::raster::render(scene);
+        let fresh = init::init_paths(&current, &self.target, weak.len(), &self.init_cfg(), rng);
+        let count = fresh.len();
+        for (i, shape) in weak.into_iter().zip(fresh) {
+            scene.shapes[i] = shape;
+        }
+        count
+    }
+
+    fn init_cfg(&self) -> init::InitConfig {
+        init::InitConfig {
+            radius: self.cfg.init_radius,
+            segments: self.cfg.init_segments,
+            fit_region: self.cfg.init_fit_region,
+            ..init::InitConfig::default()
+        }
+    }
+
+    pub(super) fn psnr(&self, scene: &Scene) -> f64 {
+        crate::image::psnr(&crate::raster::render(scene), &self.target)
+    }
+
+    /// Gives the paths their palette colours (when a palette is in force).
+    fn choose_colours(&self, scene: &mut Scene) {
+        if let Some(p) = &self.palette {
+            palette::choose_fills(scene, Some(&self.target), p);
+        }
+    }
+
+    /// Splits every path whose outline crosses itself or folds into a spike into simple pieces
+    /// that cover the same pixels (see [`crate::vector::simple`]). Returns how many were split.
+    fn make_simple(&self, scene: &mut Scene) -> usize {
+        crate::vector::make_simple(scene, crate::vector::SIMPLE_MIN_AREA)
+    }
+}
+
+/// Steps per window of the early stop ([`LiveConfig::converge_tol`]).
+const CONVERGE_WINDOW: usize = 20;
+
+/// Steps between two checks for paths that meet themselves during optimisation.
+const UNTWIST_EVERY: u32 = 10;
+/// Lobes below this area (px² at the working size) are dropped when a path is untwisted.
+const UNTWIST_MIN_AREA: f32 = 4.0;
+
+/// Cuts every closed path that meets itself (the quick check) into its lobes, dropping lobes
+/// under [`UNTWIST_MIN_AREA`]: the optimisation goes on from simple outlines instead of
+/// folding further. `in_focus` follows the paths. Returns whether the scene changed.
+fn untwist(scene: &mut Scene, in_focus: &mut Vec<bool>) -> bool {
+    if !scene.shapes.iter().any(lobes::meets_itself) {
+        return false;
+    }
+    let old = std::mem::take(&mut scene.shapes);
+    let mut focus = Vec::with_capacity(old.len());
+    for (sh, f) in old.into_iter().zip(in_focus.iter().copied()) {
+        if scene.shapes.len() >= crate::scene::MAX_PATHS {
+            break;
+        }
+        let pieces = if lobes::meets_itself(&sh) {
+            lobes::split_lobes(&sh, UNTWIST_MIN_AREA)
+        } else {
+            vec![sh]
+        };
+        focus.extend(std::iter::repeat_n(f, pieces.len()));
+        scene.shapes.extend(pieces);
+    }
+    scene.shapes.truncate(crate::scene::MAX_PATHS);
+    focus.truncate(scene.shapes.len());
+    *in_focus = focus;
+    true
+}
+
+/// `scene` (at the working size) scaled to the target's `tw`×`th` canvas.
+fn output_scene(scene: &Scene, tw: u32, th: u32) -> Scene {
+    let mut out = scene.scaled_to_width(tw);
+    out.height = th;
+    out
+}
+
+/// Bytes of the SVG the run would write now.
+fn svg_bytes(scene: &Scene, tw: u32, th: u32, colors: &ColorPlan) -> usize {
+    crate::vector::write_svg(&output_scene(scene, tw, th), colors).len()
+}
+
+/// Mean over the image border of each pixel's RGB over white and its opacity.
+fn border_mean(img: &Image) -> [f64; 4] {
+    let (w, h) = (img.width, img.height);
+    let mut s = [0.0f64; 4];
+    let mut n = 0.0f64;
+    for y in 0..h {
+        for x in 0..w {
+            if x == 0 || y == 0 || x + 1 == w || y + 1 == h {
+                let p = img.pixel(x, y);
+                for c in 0..3 {
+                    s[c] += (p[c] + 1.0 - p[3]) as f64;
+                }
+                s[3] += p[3] as f64;
+                n += 1.0;
+            }
+        }
+    }
+    s.map(|v| v / n.max(1.0))
+}
+
+/// Mean opacity of the image border: a transparent border means a transparent background.
+pub(super) fn border_alpha(img: &Image) -> f32 {
+    border_mean(img)[3] as f32
+}
+
+/// Mean colour of the image border (over white): the starting background.
+pub(super) fn border_colour(img: &Image) -> Rgba {
+    let m = border_mean(img);
+    Rgba::new(m[0] as f32, m[1] as f32, m[2] as f32, 1.0).clamped()
+}
+
+impl Run<'_> {
+    /// Saves `state` through `checkpoint` (if any), with the step and the position of `rng`.
+    pub(super) fn save(
+        &self,
+        state: &mut LiveState,
+        rng: &ChaCha8Rng,
+        checkpoint: Option<&dyn LiveCheckpoint>,
+    ) -> Result<(), LiveError> {
+        let Some(c) = checkpoint else { return Ok(()) };
+        state.step = self.step;
+        state.rng_word_pos = u64::try_from(rng.get_word_pos())
+            .map_err(|_| LiveError::Checkpoint("random stream position overflow".into()))?;
+        Ok(c.save(state)?)
+    }
+
+    /// Stage 0 of `--init vtracer`: the vtracer crate's trace of `target` (at most `max_total`
+    /// paths), optimised for one stage.
+    pub(super) fn vtracer_start(
+        &mut self,
+        st: &mut LiveState,
+        rng: &mut ChaCha8Rng,
+        target: &Image,
+        max_total: usize,
+    ) -> Result<(), LiveError> {
+        let (ww, wh) = (st.scene.width, st.scene.height);
+        let small = resize(target, ww, wh);
+        let traced =
+            tracer::trace(&small, &tracer::TracerSetting::default()).map_err(LiveError::Tracer)?;
+        let start = tracer::traced_to_scene(&traced, ww, wh, max_total, 12)?;
+        let scene = &mut st.scene;
+        scene.shapes = start.shapes;
+        if self.background_free {
+            scene.background = start.background;
+        }
+        self.choose_colours(scene);
+        let n = scene.shapes.len();
+        let loss = self.optimise(scene, 0..n, self.cfg.iters_per_stage, 0, true)?;
+        let reinit = self.reinit_weak(scene, rng);
+        self.make_simple(scene);
+        self.choose_colours(scene);
+        let psnr = self.psnr(scene);
+        st.reports.push(StageReport {
+            stage: 0,
+            added: n,
+            paths: n,
+            reinitialised: reinit,
+            psnr,
+            loss,
+        });
+        st.prev_psnr = psnr;
+        Ok(())
+    }
+
+    /// Whether the stage that took the PSNR from `prev_psnr` to `psnr` by adding `added`
+    /// paths ends the stages: the `auto` budget's gain per path, `target_psnr` or `max_bytes`.
+    fn should_stop(&self, scene: &Scene, prev_psnr: f64, psnr: f64, added: usize) -> bool {
+        let cfg = self.cfg;
+        let budget_stop = match cfg.budget {
+            PathBudget::Auto {
+                min_gain_db_per_path,
+                ..
+            } => !schedule::auto_should_continue(prev_psnr, psnr, added, min_gain_db_per_path),
+            PathBudget::Schedule { .. } => false,
+        };
+        budget_stop
+            || cfg.target_psnr.is_some_and(|t| psnr >= t)
+            || cfg.max_bytes.is_some_and(|max| {
+                svg_bytes(scene, self.out_width, self.out_height, &cfg.colors) >= max
+            })
+    }
+
+    /// Stage `si`: up to `want` new paths (within `max_total` added in all) at the regions of
+    /// highest error, then all paths optimised. `None` when no path could be added; else
+    /// whether a stop rule ends the stages. `st` then names the next stage.
+    fn add_stage(
+        &mut self,
+        st: &mut LiveState,
+        rng: &mut ChaCha8Rng,
+        si: usize,
+        want: usize,
+        max_total: usize,
+    ) -> Result<Option<bool>, LiveError> {
+        // The budget counts paths added: a looping path split into simple pieces is one.
+        let added_so_far: usize = st.reports.iter().map(|r| r.added).sum();
+        let want = want.min(max_total.saturating_sub(added_so_far));
+        if want == 0 {
+            return Ok(None);
+        }
+        let current = crate::raster::render(&st.scene);
+        let fresh = init::init_paths(&current, &self.target, want, &self.init_cfg(), rng);
+        let added = fresh.len();
+        if added == 0 {
+            return Ok(None);
+        }
+        let scene = &mut st.scene;
+        let start = scene.shapes.len();
+        scene.shapes.extend(fresh);
+        let end = scene.shapes.len();
+        self.choose_colours(scene);
+        let loss = self.optimise(scene, start..end, self.cfg.iters_per_stage, si + 1, true)?;
+        let reinit = self.reinit_weak(scene, rng);
+        self.make_simple(scene);
+        self.choose_colours(scene);
+        let psnr = self.psnr(scene);
+        st.reports.push(StageReport {
+            stage: si + 1,
+            added,
+            paths: end,
+            reinitialised: reinit,
+            psnr,
+            loss,
+        });
+        let stop = self.should_stop(&st.scene, st.prev_psnr, psnr, added);
+        st.next_stage = si + 1;
+        st.stages_done = stop;
+        st.prev_psnr = psnr;
+        Ok(Some(stop))
+    }
+
+    /// Runs the stages of `plan` from `st.next_stage` on, saving after each, until the plan,
+    /// the budget or a stop rule ends them.
+    pub(super) fn add_stages(
+        &mut self,
+        st: &mut LiveState,
+        rng: &mut ChaCha8Rng,
+        plan: &[usize],
+        max_total: usize,
+        checkpoint: Option<&dyn LiveCheckpoint>,
+    ) -> Result<(), LiveError> {
+        if st.stages_done {
+            return Ok(());
+        }
+        for (si, &want) in plan.iter().enumerate().skip(st.next_stage) {
+            match self.add_stage(st, rng, si, want, max_total)? {
+                None => break,
+                Some(stop) => {
+                    self.save(st, rng, checkpoint)?;
+                    if stop {
+                        break;
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The end of a trace after `stages` stages: colours settled, the final pass, then faint,
+    /// unseen, over-budget and hidden paths dropped and outlines made simple. Returns the scene
+    /// at the target's size and the number of paths pruned.
+    pub(super) fn finish(
+        &mut self,
+        mut scene: Scene,
+        stages: usize,
+    ) -> Result<(Scene, usize), LiveError> {
+        let cfg = self.cfg;
+        // Colours settle before the last pass, which then fits the geometry to them.
+        if self.palette.is_some() {
+            self.choose_colours(&mut scene);
+        } else {
+            palette::merge_similar(&mut scene, palette::MERGE_DISTANCE);
+        }
+        if cfg.final_iters > 0 && !scene.shapes.is_empty() {
+            let n = scene.shapes.len();
+            self.optimise(&mut scene, n..n, cfg.final_iters, stages + 1, false)?;
+        }
+        // Drop paths that stayed faint or tiny after the last re-initialisation.
+        let weak = prune::weak_paths(&scene, cfg.reinit_min_opacity, 1.0);
+        for &i in weak.iter().rev() {
+            scene.shapes.remove(i);
+        }
+        // Clean geometry: the last pass may have folded outlines again; splitting keeps the
+        // pixels.
+        self.make_simple(&mut scene);
+        let (tw, th) = (self.out_width, self.out_height);
+        let scale = tw as f32 / self.target.width as f32;
+        let mut pruned = crate::vector::drop_unseen(&mut scene, scale);
+        if let PathBudget::Auto {
+            prune_tolerance, ..
+        } = cfg.budget
+        {
+            pruned += prune::prune_paths(&mut scene, prune_tolerance, crate::raster::render).len();
+        }
+        if let Some(max) = cfg.max_bytes {
+            pruned += prune::trim_to_bytes(&mut scene, &self.target, max, |s| {
+                svg_bytes(s, tw, th, &cfg.colors)
+            });
+        }
+        // At the output size: flattening is finer there, and hidden paths are judged there.
+        let mut out = output_scene(&scene, tw, th);
+        crate::vector::make_simple(&mut out, crate::vector::SIMPLE_MIN_AREA);
+        pruned += crate::vector::drop_hidden(&mut out);
+        out.validate()?;
+        Ok((out, pruned))
+    }
+}
