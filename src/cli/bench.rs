@@ -19,7 +19,7 @@ pub enum BenchCommand {
     /// Stable Diffusion / TAESD components (random weights, full size): median ms each.
     Models(super::bench_models::BenchModelsArgs),
     /// LIVE vs vtracer fidelity (PSNR, seconds, SVG bytes) on a folder of PNGs.
-    Vectorize(super::bench_vectorize::BenchVectorizeArgs),
+    Vectorize(Box<super::bench_vectorize::BenchVectorizeArgs>),
     /// Failure rate, quality spread and time of every method x style over seeds.
     Stability(super::bench_stability::BenchStabilityArgs),
 }
@@ -44,7 +44,7 @@ pub fn run(cmd: BenchCommand) -> Result<(), CliError> {
     match cmd {
         BenchCommand::Raster(a) => raster_bench(a),
         BenchCommand::Models(a) => super::bench_models::run(a),
-        BenchCommand::Vectorize(a) => super::bench_vectorize::run(a),
+        BenchCommand::Vectorize(a) => super::bench_vectorize::run(*a),
         BenchCommand::Stability(a) => super::bench_stability::run(a),
     }
 }

@@ -1,14 +1,15 @@
 //! `vectorfusion bench models`: full-size Stable Diffusion / TAESD architectures with random
 //! weights (compute does not depend on weight values), median wall time per component.
 
-use super::CliError;
+use super::request_args::parse_device;
+use super::{CliError, ResultExt};
 use crate::models::clip::{ClipTextConfig, ClipTextModel};
 use crate::models::codec::Codec;
 use crate::models::loader::random_var_builder;
 use crate::models::taesd::{Taesd, TaesdConfig};
 use crate::models::unet::{Unet, UnetConfig};
 use crate::models::vae::{AutoencoderKl, VaeConfig};
-use crate::models::{ModelError, Precision};
+use crate::models::{ComputeDevice, ModelError, Precision};
 use candle_core::{DType, Device, Tensor};
 use std::time::Instant;
 
@@ -52,15 +53,8 @@ pub struct BenchModelsArgs {
     pub candle_kernels: bool,
     /// Where the models run: cpu, cuda or cuda:N (CUDA needs a build with the `cuda` feature;
     /// each timed run ends with a device synchronisation).
-    #[arg(long, default_value = "cpu")]
-    pub device: String,
-}
-
-impl std::str::FromStr for Arch {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        <Self as clap::ValueEnum>::from_str(s, true)
-    }
+    #[arg(long, default_value = "cpu", value_parser = parse_device)]
+    pub device: ComputeDevice,
 }
 
 fn model_err(e: ModelError) -> CliError {
@@ -176,66 +170,224 @@ struct Report {
 }
 
 impl Report {
-    fn cpu(&mut self, key: &str, cpu: Option<f64>) {
-        if let Some(c) = cpu {
-            self.cpu_ms.insert(key.to_string(), c);
+    /// The report's header of a run with `args`, no component timed yet.
+    fn new(args: &BenchModelsArgs) -> Self {
+        Report {
+            arch: format!("{:?}", args.arch).to_lowercase(),
+            size: args.size,
+            unet_precision: format!("{:?}", args.unet_precision).to_lowercase(),
+            device: args.device.to_string(),
+            kernels: if args.candle_kernels {
+                "candle"
+            } else {
+                "ours"
+            }
+            .into(),
+            reps: args.reps,
+            unet_reps: args.unet_reps,
+            threads: candle_core::utils::get_num_threads(),
+            ..Report::default()
         }
     }
 
+    /// Records `key`'s CPU time; its median wall ms, to be stored in its field.
     fn put(&mut self, key: &str, t: Timing) -> Option<f64> {
-        self.cpu(key, t.cpu);
+        if let Some(c) = t.cpu {
+            self.cpu_ms.insert(key.to_string(), c);
+        }
         Some(t.ms)
+    }
+
+    /// The text report.
+    fn print(&self) {
+        let f = |v: Option<f64>| v.map_or("-".to_string(), |x| format!("{x:.0}"));
+        println!(
+            "bench models  arch={} size={} unet={} kernels={} threads={} (median of {} / unet {})",
+            self.arch,
+            self.size,
+            self.unet_precision,
+            self.kernels,
+            self.threads,
+            self.reps,
+            self.unet_reps
+        );
+        println!("  unet_cfg_ms     {}", f(self.unet_cfg_ms));
+        println!("  encoder_fwd_ms  {}", f(self.encoder_fwd_ms));
+        println!("  encoder_vjp_ms  {}", f(self.encoder_vjp_ms));
+        println!("  encoder_bwd_ms  {}", f(self.encoder_bwd_ms));
+        println!("  decoder_ms      {}", f(self.decoder_ms));
+        println!("  text_ms         {}", f(self.text_ms));
+        println!("  cpu ms per run  {:?}", self.cpu_ms);
+        println!(
+            "  peak RSS MiB    encoder fwd {} / vjp {}",
+            f(self.encoder_fwd_peak_rss_mb),
+            f(self.encoder_vjp_peak_rss_mb)
+        );
     }
 }
 
-/// Times one autoencoder's (VAE or TAESD) encoder forward, encoder VJP from scratch (taped
-/// forward + pullback), the pullback alone and the decoder, each when selected by `--only`, on
-/// `(image, latents)`, and records them (with CPU time and peak RSS) in `r`.
-fn time_autoencoder(
-    r: &mut Report,
-    args: &BenchModelsArgs,
-    want: &dyn Fn(&str) -> bool,
-    say: &dyn Fn(&str),
-    dev: &Device,
-    codec: &Codec,
-    (image, lat): (&Tensor, &Tensor),
-) -> Result<(), CliError> {
-    if want("encoder") {
-        say("encoder forward");
-        let Timing { ms, peak, cpu } = time_it(dev, args.warmup, args.reps, || {
-            codec.encode(image).map(|_| ()).map_err(model_err)
-        })?;
-        r.encoder_fwd_ms = Some(ms);
-        r.cpu("encoder_fwd", cpu);
-        r.encoder_fwd_peak_rss_mb = peak;
+/// What a benchmark run shares: its flags and the opened device.
+struct Bench<'a> {
+    args: &'a BenchModelsArgs,
+    dev: Device,
+}
+
+impl Bench<'_> {
+    /// Whether `--only` selects `component` (everything without `--only`).
+    fn want(&self, component: &str) -> bool {
+        self.args.only.is_empty() || self.args.only.iter().any(|o| o == component)
     }
-    if want("vjp") {
-        say("encoder VJP");
-        let Timing { ms, peak, cpu } = time_it(dev, args.warmup, args.reps, || {
-            codec.encode_vjp(image, lat).map(|_| ()).map_err(model_err)
-        })?;
-        r.encoder_vjp_ms = Some(ms);
-        r.cpu("encoder_vjp", cpu);
-        r.encoder_vjp_peak_rss_mb = peak;
-        say("encoder VJP backward (pullback of a recorded tape)");
-        let tm = time_part(args.warmup, args.reps, || {
-            let (_, tape) = codec.encode_t(image).map_err(model_err)?;
-            sync(dev)?;
-            let t0 = Instant::now();
-            codec.encode_pullback(tape, lat).map_err(model_err)?;
-            sync(dev)?;
-            Ok(t0.elapsed().as_secs_f64() * 1e3)
-        })?;
-        r.encoder_bwd_ms = Some(tm.ms);
+
+    /// Says on stderr what runs next (not with `--json`).
+    fn say(&self, what: &str) {
+        if !self.args.json {
+            eprintln!("running {what} ...");
+        }
     }
-    if want("decoder") {
-        say("decoder");
-        let tm = time_it(dev, args.warmup, args.reps, || {
-            codec.decode(lat).map(|_| ()).map_err(model_err)
-        })?;
-        r.decoder_ms = r.put("decoder", tm);
+
+    /// [`time_it`] on this device with `--warmup` and `reps` timed runs.
+    fn time<F>(&self, reps: usize, f: F) -> Result<Timing, CliError>
+    where
+        F: FnMut() -> Result<(), CliError>,
+    {
+        time_it(&self.dev, self.args.warmup, reps, f)
     }
-    Ok(())
+
+    /// Times one autoencoder's (VAE or TAESD) encoder forward, encoder VJP from scratch
+    /// (taped forward + pullback), the pullback alone and the decoder, each when selected by
+    /// `--only`, on `(image, latents)`, and records them (with CPU time and peak RSS) in `r`.
+    fn autoencoder(
+        &self,
+        r: &mut Report,
+        codec: &Codec,
+        (image, lat): (&Tensor, &Tensor),
+    ) -> Result<(), CliError> {
+        let reps = self.args.reps;
+        if self.want("encoder") {
+            self.say("encoder forward");
+            let tm = self.time(reps, || codec.encode(image).map(|_| ()).map_err(model_err))?;
+            r.encoder_fwd_peak_rss_mb = tm.peak;
+            r.encoder_fwd_ms = r.put("encoder_fwd", tm);
+        }
+        if self.want("vjp") {
+            self.say("encoder VJP");
+            let tm = self.time(reps, || {
+                codec.encode_vjp(image, lat).map(|_| ()).map_err(model_err)
+            })?;
+            r.encoder_vjp_peak_rss_mb = tm.peak;
+            r.encoder_vjp_ms = r.put("encoder_vjp", tm);
+            self.say("encoder VJP backward (pullback of a recorded tape)");
+            let tm = time_part(self.args.warmup, reps, || {
+                let (_, tape) = codec.encode_t(image).map_err(model_err)?;
+                sync(&self.dev)?;
+                let t0 = Instant::now();
+                codec.encode_pullback(tape, lat).map_err(model_err)?;
+                sync(&self.dev)?;
+                Ok(t0.elapsed().as_secs_f64() * 1e3)
+            })?;
+            r.encoder_bwd_ms = Some(tm.ms);
+        }
+        if self.want("decoder") {
+            self.say("decoder");
+            let tm = self.time(reps, || codec.decode(lat).map(|_| ()).map_err(model_err))?;
+            r.decoder_ms = r.put("decoder", tm);
+        }
+        Ok(())
+    }
+
+    /// Stable Diffusion 1.5 or 2.1: its VAE, CLIP text encoder and a guided UNet step.
+    fn stable_diffusion(
+        &self,
+        r: &mut Report,
+        image: &Tensor,
+        lat: &Tensor,
+    ) -> Result<(), CliError> {
+        let sd21 = self.args.arch == Arch::Sd21;
+        if self.want("encoder") || self.want("vjp") || self.want("decoder") {
+            let vae =
+                AutoencoderKl::new(random_var_builder(DType::F32, &self.dev), VaeConfig::sd())
+                    .map_err(candle_err)?;
+            self.autoencoder(r, &Codec::from(vae), (image, lat))?;
+        }
+        let text_cfg = text_config(sd21)?;
+        if self.want("text") {
+            self.say("text encoder");
+            r.text_ms = self.text_encoder(r, &text_cfg)?;
+        }
+        if self.want("unet") {
+            self.say("guided UNet step (batch 2)");
+            let cfg = if sd21 {
+                UnetConfig::sd21()
+            } else {
+                UnetConfig::sd15()
+            };
+            r.unet_cfg_ms = self.guided_unet(r, cfg, text_cfg.hidden_size, lat)?;
+        }
+        Ok(())
+    }
+
+    /// The CLIP text encoder on one 77-token caption.
+    fn text_encoder(&self, r: &mut Report, cfg: &ClipTextConfig) -> Result<Option<f64>, CliError> {
+        let text = ClipTextModel::new(random_var_builder(DType::F32, &self.dev), cfg)
+            .map_err(candle_err)?;
+        let mut ids = vec![49407u32; 77];
+        ids[0] = 49406;
+        for (i, id) in ids.iter_mut().enumerate().take(9).skip(1) {
+            *id = 320 + i as u32;
+        }
+        let ids = Tensor::from_vec(ids, (1, 77), &self.dev).map_err(candle_err)?;
+        let tm = self.time(self.args.reps, || {
+            text.forward(&ids).map(|_| ()).map_err(candle_err)
+        })?;
+        Ok(r.put("text", tm))
+    }
+
+    /// One classifier-free-guided UNet step: a batch of 2 at `--unet-precision`, then the
+    /// guidance combination.
+    fn guided_unet(
+        &self,
+        r: &mut Report,
+        cfg: UnetConfig,
+        cross: usize,
+        lat: &Tensor,
+    ) -> Result<Option<f64>, CliError> {
+        let unet = Unet::new(
+            random_var_builder(self.args.unet_precision.dtype(), &self.dev),
+            cfg,
+            std::path::Path::new("<random weights>"),
+        )
+        .map_err(model_err)?;
+        let ctx = Tensor::randn(0f32, 1f32, (2, 77, cross), &self.dev).map_err(candle_err)?;
+        let z2 = Tensor::cat(&[lat, lat], 0).map_err(candle_err)?;
+        let tm = self.time(self.args.unet_reps, || {
+            let out = unet.forward(&z2, 500.0, &ctx).map_err(model_err)?;
+            // the guidance combination itself
+            let u = out.narrow(0, 0, 1).map_err(candle_err)?;
+            let c = out.narrow(0, 1, 1).map_err(candle_err)?;
+            let _ = (&u + ((c - &u).map_err(candle_err)? * 7.5).map_err(candle_err)?)
+                .map_err(candle_err)?;
+            Ok(())
+        })?;
+        Ok(r.put("unet_cfg", tm))
+    }
+}
+
+/// The CLIP text encoder of Stable Diffusion 2.1 (OpenCLIP ViT-H) or 1.5 (ViT-L).
+fn text_config(sd21: bool) -> Result<ClipTextConfig, CliError> {
+    let json = if sd21 {
+        serde_json::json!({
+            "vocab_size": 49408, "hidden_size": 1024, "intermediate_size": 4096,
+            "num_hidden_layers": 23, "num_attention_heads": 16, "hidden_act": "gelu",
+            "projection_dim": 512
+        })
+    } else {
+        serde_json::json!({
+            "vocab_size": 49408, "hidden_size": 768, "intermediate_size": 3072,
+            "num_hidden_layers": 12, "num_attention_heads": 12, "hidden_act": "quick_gelu",
+            "projection_dim": 768
+        })
+    };
+    serde_json::from_value(json).failed(|| "text encoder configuration".into())
 }
 
 pub fn run(args: BenchModelsArgs) -> Result<(), CliError> {
@@ -245,132 +397,31 @@ pub fn run(args: BenchModelsArgs) -> Result<(), CliError> {
             args.size
         )));
     }
-    let want = |c: &str| args.only.is_empty() || args.only.iter().any(|o| o == c);
     crate::models::kernels::set_enabled(!args.candle_kernels);
-    let device = super::parse_device(&args.device)?;
-    let dev = device.open().map_err(model_err)?;
+    let bench = Bench {
+        args: &args,
+        dev: args.device.open().map_err(model_err)?,
+    };
+    let mut r = Report::new(&args);
     let s = args.size;
-    let mut r = Report {
-        arch: format!("{:?}", args.arch).to_lowercase(),
-        size: s,
-        unet_precision: format!("{:?}", args.unet_precision).to_lowercase(),
-        device: device.to_string(),
-        kernels: if args.candle_kernels {
-            "candle"
-        } else {
-            "ours"
-        }
-        .into(),
-        reps: args.reps,
-        unet_reps: args.unet_reps,
-        threads: candle_core::utils::get_num_threads(),
-        ..Report::default()
-    };
-    let image = Tensor::rand(0f32, 1f32, (1, 3, s, s), &dev).map_err(candle_err)?;
-    let lat = Tensor::randn(0f32, 1f32, (1, 4, s / 8, s / 8), &dev).map_err(candle_err)?;
-    let say = |what: &str| {
-        if !args.json {
-            eprintln!("running {what} ...");
-        }
-    };
-
+    let image = Tensor::rand(0f32, 1f32, (1, 3, s, s), &bench.dev).map_err(candle_err)?;
+    let lat = Tensor::randn(0f32, 1f32, (1, 4, s / 8, s / 8), &bench.dev).map_err(candle_err)?;
     match args.arch {
         Arch::Taesd => {
-            let t = Taesd::new(random_var_builder(DType::F32, &dev), TaesdConfig::taesd())
-                .map_err(candle_err)?;
-            let codec = Codec::from(t);
-            time_autoencoder(&mut r, &args, &want, &say, &dev, &codec, (&image, &lat))?;
+            let t = Taesd::new(
+                random_var_builder(DType::F32, &bench.dev),
+                TaesdConfig::taesd(),
+            )
+            .map_err(candle_err)?;
+            bench.autoencoder(&mut r, &Codec::from(t), (&image, &lat))?;
         }
-        Arch::Sd15 | Arch::Sd21 => {
-            let sd21 = args.arch == Arch::Sd21;
-            if want("encoder") || want("vjp") || want("decoder") {
-                let vae = AutoencoderKl::new(random_var_builder(DType::F32, &dev), VaeConfig::sd())
-                    .map_err(candle_err)?;
-                let codec = Codec::from(vae);
-                time_autoencoder(&mut r, &args, &want, &say, &dev, &codec, (&image, &lat))?;
-            }
-            let text_cfg: ClipTextConfig = if sd21 {
-                serde_json::from_value(serde_json::json!({
-                    "vocab_size": 49408, "hidden_size": 1024, "intermediate_size": 4096,
-                    "num_hidden_layers": 23, "num_attention_heads": 16, "hidden_act": "gelu",
-                    "projection_dim": 512
-                }))
-            } else {
-                serde_json::from_value(serde_json::json!({
-                    "vocab_size": 49408, "hidden_size": 768, "intermediate_size": 3072,
-                    "num_hidden_layers": 12, "num_attention_heads": 12, "hidden_act": "quick_gelu",
-                    "projection_dim": 768
-                }))
-            }
-            .map_err(|e| CliError::Other(anyhow::anyhow!(e)))?;
-            if want("text") {
-                say("text encoder");
-                let text = ClipTextModel::new(random_var_builder(DType::F32, &dev), &text_cfg)
-                    .map_err(candle_err)?;
-                let mut ids = vec![49407u32; 77];
-                ids[0] = 49406;
-                for (i, id) in ids.iter_mut().enumerate().take(9).skip(1) {
-                    *id = 320 + i as u32;
-                }
-                let ids = Tensor::from_vec(ids, (1, 77), &dev).map_err(candle_err)?;
-                let tm = time_it(&dev, args.warmup, args.reps, || {
-                    text.forward(&ids).map(|_| ()).map_err(candle_err)
-                })?;
-                r.text_ms = r.put("text", tm);
-            }
-            if want("unet") {
-                say("guided UNet step (batch 2)");
-                let cfg = if sd21 {
-                    UnetConfig::sd21()
-                } else {
-                    UnetConfig::sd15()
-                };
-                let cross = text_cfg.hidden_size;
-                let unet = Unet::new(
-                    random_var_builder(args.unet_precision.dtype(), &dev),
-                    cfg,
-                    std::path::Path::new("<random weights>"),
-                )
-                .map_err(model_err)?;
-                let ctx = Tensor::randn(0f32, 1f32, (2, 77, cross), &dev).map_err(candle_err)?;
-                let z2 = Tensor::cat(&[&lat, &lat], 0).map_err(candle_err)?;
-                let tm = time_it(&dev, args.warmup, args.unet_reps, || {
-                    let out = unet.forward(&z2, 500.0, &ctx).map_err(model_err)?;
-                    // the guidance combination itself
-                    let u = out.narrow(0, 0, 1).map_err(candle_err)?;
-                    let c = out.narrow(0, 1, 1).map_err(candle_err)?;
-                    let _ = (&u + ((c - &u).map_err(candle_err)? * 7.5).map_err(candle_err)?)
-                        .map_err(candle_err)?;
-                    Ok(())
-                })?;
-                r.unet_cfg_ms = r.put("unet_cfg", tm);
-            }
-        }
+        Arch::Sd15 | Arch::Sd21 => bench.stable_diffusion(&mut r, &image, &lat)?,
     }
-
     if args.json {
-        println!(
-            "{}",
-            serde_json::to_string(&r).map_err(|e| CliError::Other(anyhow::anyhow!(e)))?
-        );
+        let text = serde_json::to_string(&r).failed(|| "encoding the report".into())?;
+        println!("{text}");
     } else {
-        let f = |v: Option<f64>| v.map_or("-".to_string(), |x| format!("{x:.0}"));
-        println!(
-            "bench models  arch={} size={} unet={} kernels={} threads={} (median of {} / unet {})",
-            r.arch, r.size, r.unet_precision, r.kernels, r.threads, r.reps, r.unet_reps
-        );
-        println!("  unet_cfg_ms     {}", f(r.unet_cfg_ms));
-        println!("  encoder_fwd_ms  {}", f(r.encoder_fwd_ms));
-        println!("  encoder_vjp_ms  {}", f(r.encoder_vjp_ms));
-        println!("  encoder_bwd_ms  {}", f(r.encoder_bwd_ms));
-        println!("  decoder_ms      {}", f(r.decoder_ms));
-        println!("  text_ms         {}", f(r.text_ms));
-        println!("  cpu ms per run  {:?}", r.cpu_ms);
-        println!(
-            "  peak RSS MiB    encoder fwd {} / vjp {}",
-            f(r.encoder_fwd_peak_rss_mb),
-            f(r.encoder_vjp_peak_rss_mb)
-        );
+        r.print();
     }
     Ok(())
 }

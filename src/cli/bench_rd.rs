@@ -31,19 +31,28 @@
 //! read between points by linear interpolation, flat after its largest point and undefined below
 //! its smallest. "live − peer" at each `--kb` is the difference of the two envelopes there.
 
-use super::CliError;
-use super::bench_vectorize::BenchVectorizeArgs;
+mod peers;
+mod summary;
+
+pub use peers::PeerError;
+pub use summary::{Delta, Envelope, RdMean, RdSummary, envelope, envelope_at, means};
+
+use super::bench_vectorize::{
+    BenchVectorizeArgs, image_name, live_base, parse_budgets, with_budget,
+};
 use super::vectorize::load_input;
+use super::{CliError, ResultExt};
 use crate::image::ssim::ssim_over_white;
 use crate::image::{Image, psnr};
 use crate::progress::{CancelToken, NullSink};
 use crate::stages::live::tracer::{TracerSetting, render_svg, trace};
 use crate::stages::live::{self, LiveConfig, PathBudget};
+use peers::{ImageTracer, imagetracer_grid, potrace_grid, probe_potrace, run_potrace, to_pbm};
 use serde::Serialize;
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
 use std::time::Instant;
+use summary::{print_tables, summarise};
 
 /// The peer tools `--peers` accepts.
 const PEERS: [&str; 3] = ["vtracer", "imagetracer", "potrace"];
@@ -145,57 +154,6 @@ pub struct RdSample {
     pub editability: Option<EditCounts>,
 }
 
-/// Means of one tool and setting over one set's images.
-#[derive(Clone, Debug, Serialize)]
-pub struct RdMean {
-    pub set: String,
-    pub tool: String,
-    pub setting: String,
-    pub images: usize,
-    pub paths: f64,
-    pub psnr: f64,
-    pub ssim: f64,
-    pub svg_bytes: f64,
-    pub svg_gz_bytes: f64,
-    pub seconds: f64,
-    /// Means of the editability counts over the images that have them.
-    pub self_intersecting: Option<f64>,
-    pub hidden: Option<f64>,
-    pub slivers: Option<f64>,
-    pub colors: Option<f64>,
-}
-
-/// One tool's envelope on one set and basis: `(KB, PSNR)` points, KB ascending.
-#[derive(Clone, Debug, Serialize)]
-pub struct Envelope {
-    pub tool: String,
-    pub points: Vec<(f64, f64)>,
-    /// The setting of each point.
-    pub settings: Vec<String>,
-}
-
-/// `live − peer` at one size.
-#[derive(Clone, Debug, Serialize)]
-pub struct Delta {
-    pub peer: String,
-    pub kb: f64,
-    pub live: Option<f64>,
-    pub peer_psnr: Option<f64>,
-    pub delta_db: Option<f64>,
-    /// `kb` lies past the largest point of either envelope (read flat there).
-    pub beyond: bool,
-}
-
-/// The R–D summary of one set on one basis.
-#[derive(Clone, Debug, Serialize)]
-pub struct RdSummary {
-    pub set: String,
-    /// `raw` or `gzip`.
-    pub basis: String,
-    pub envelopes: Vec<Envelope>,
-    pub deltas: Vec<Delta>,
-}
-
 /// Comma-separated numbers, each checked by `ok`.
 fn parse_list<T: std::str::FromStr>(
     flag: &str,
@@ -288,265 +246,133 @@ fn gzip_len(text: &str) -> usize {
     enc.finish().map(|v| v.len()).unwrap_or(0)
 }
 
-/// Scores one SVG against its target.
-fn score(
-    set: &str,
-    image: &str,
-    tool: &str,
-    setting: &str,
-    target: &Image,
-    svg: &str,
-    seconds: f64,
-) -> Result<RdSample, CliError> {
-    let back = render_svg(svg, target.width, target.height).map_err(|e| {
-        CliError::Other(anyhow::anyhow!(
-            "{image}: {tool} {setting}: cannot render: {e}"
-        ))
-    })?;
-    Ok(RdSample {
-        set: set.to_string(),
-        image: image.to_string(),
-        tool: tool.to_string(),
-        setting: setting.to_string(),
-        paths: svg.matches("<path").count(),
-        psnr: psnr(target, &back),
-        ssim: ssim_over_white(target, &back),
-        svg_bytes: svg.len(),
-        svg_gz_bytes: gzip_len(svg),
-        seconds,
-        editability: editability(svg),
-    })
-}
-
-/// Where the imagetracer peer runs from, or why it cannot.
-struct ImageTracer {
-    node: String,
-    script: PathBuf,
-    node_path: PathBuf,
-    scratch: PathBuf,
-}
-
-fn probe_imagetracer(a: &RdArgs, images: &Path) -> Result<ImageTracer, String> {
-    let tools = a.tools.clone().unwrap_or_else(|| images.join("_tools"));
-    let node_path = tools.join("node_modules");
-    for pkg in ["imagetracerjs", "pngjs"] {
-        if !node_path.join(pkg).is_dir() {
-            return Err(format!(
-                "{} has no {pkg} (scripts/prepare_rd_set.sh installs it; or --tools DIR)",
-                node_path.display()
-            ));
-        }
-    }
-    if !a.imagetracer_script.is_file() {
-        return Err(format!(
-            "no driver script at {} (--imagetracer-script)",
-            a.imagetracer_script.display()
-        ));
-    }
-    let ok = Command::new(&a.node)
-        .arg("--version")
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .status()
-        .map(|s| s.success())
-        .unwrap_or(false);
-    if !ok {
-        return Err(format!("cannot run `{} --version`", a.node));
-    }
-    let scratch = std::env::temp_dir().join(format!("vf-rd-{}", std::process::id()));
-    std::fs::create_dir_all(&scratch)
-        .map_err(|e| format!("cannot create {}: {e}", scratch.display()))?;
-    Ok(ImageTracer {
-        node: a.node.clone(),
-        script: a.imagetracer_script.clone(),
-        node_path,
-        scratch,
-    })
-}
-
-/// The imagetracer grid: `(label, options JSON)`.
-fn imagetracer_grid(colors: &[usize]) -> Vec<(String, String)> {
-    let mut out = Vec::new();
-    for &n in colors {
-        out.push((
-            format!("n{n}"),
-            format!(r#"{{"numberofcolors":{n},"over_white":true}}"#),
-        ));
-        out.push((
-            format!("n{n} coarse"),
-            format!(
-                r#"{{"numberofcolors":{n},"ltres":2,"qtres":2,"pathomit":16,"roundcoords":0,"over_white":true}}"#
-            ),
-        ));
-    }
-    out
-}
-
-/// Runs the imagetracer driver: `(svg, seconds)`.
-fn run_imagetracer(t: &ImageTracer, png: &Path, options: &str) -> Result<(String, f64), String> {
-    let out_svg = t.scratch.join("imagetracer.svg");
-    let out = Command::new(&t.node)
-        .env("NODE_PATH", &t.node_path)
-        .arg(&t.script)
-        .arg(png)
-        .arg(&out_svg)
-        .arg(options)
-        .output()
-        .map_err(|e| format!("cannot run {}: {e}", t.node))?;
-    if !out.status.success() {
-        return Err(format!(
-            "imagetracer failed: {}",
-            String::from_utf8_lossy(&out.stderr).trim()
-        ));
-    }
-    let report: serde_json::Value = serde_json::from_slice(&out.stdout)
-        .map_err(|e| format!("imagetracer printed no JSON report: {e}"))?;
-    let seconds = report["seconds"].as_f64().unwrap_or(f64::NAN);
-    let svg = std::fs::read_to_string(&out_svg)
-        .map_err(|e| format!("cannot read {}: {e}", out_svg.display()))?;
-    Ok((svg, seconds))
-}
-
-fn probe_potrace(bin: &str) -> Result<(), String> {
-    let ok = Command::new(bin)
-        .arg("--version")
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .status()
-        .map(|s| s.success())
-        .unwrap_or(false);
-    if ok {
-        Ok(())
-    } else {
-        Err(format!(
-            "cannot run `{bin} --version` (Debian: apt-get install potrace)"
-        ))
-    }
-}
-
-/// The potrace grid: `(label, arguments)`.
-fn potrace_grid() -> Vec<(String, Vec<String>)> {
-    let mut out = Vec::new();
-    for t in [2, 8] {
-        let mut push = |label: String, extra: &[&str]| {
-            let mut args = vec!["-t".to_string(), t.to_string()];
-            args.extend(extra.iter().map(|s| s.to_string()));
-            out.push((label, args));
-        };
-        push(format!("t{t} a0"), &["-a", "0"]);
-        push(format!("t{t} a1 O0.2"), &["-a", "1", "-O", "0.2"]);
-        push(format!("t{t} a1 O1"), &["-a", "1", "-O", "1"]);
-    }
-    out
-}
-
-/// The image over white thresholded at luma (Rec. 601) 0.5, as binary PBM (1 = black).
-fn to_pbm(im: &Image) -> Vec<u8> {
-    let (w, h) = (im.width as usize, im.height as usize);
-    let mut out = format!("P4\n{w} {h}\n").into_bytes();
-    let row_bytes = w.div_ceil(8);
-    for y in 0..h {
-        let mut row = vec![0u8; row_bytes];
-        for x in 0..w {
-            let i = 4 * (y * w + x);
-            let p = &im.data[i..i + 4];
-            let white = 1.0 - p[3];
-            let luma = 0.299 * (p[0] + white) + 0.587 * (p[1] + white) + 0.114 * (p[2] + white);
-            if luma < 0.5 {
-                row[x / 8] |= 0x80 >> (x % 8);
-            }
-        }
-        out.extend_from_slice(&row);
-    }
-    out
-}
-
-/// Runs potrace on PBM bytes: `(svg, seconds)`.
-fn run_potrace(bin: &str, pbm: &[u8], args: &[String]) -> Result<(String, f64), String> {
-    let t0 = Instant::now();
-    let mut child = Command::new(bin)
-        .args(["-s", "-o", "-"])
-        .args(args)
-        .arg("-")
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .map_err(|e| format!("cannot run {bin}: {e}"))?;
-    if let Some(mut stdin) = child.stdin.take() {
-        stdin
-            .write_all(pbm)
-            .map_err(|e| format!("cannot write to {bin}: {e}"))?;
-    }
-    let out = child
-        .wait_with_output()
-        .map_err(|e| format!("{bin} failed: {e}"))?;
-    let seconds = t0.elapsed().as_secs_f64();
-    if !out.status.success() {
-        return Err(format!(
-            "{bin} failed: {}",
-            String::from_utf8_lossy(&out.stderr).trim()
-        ));
-    }
-    let svg = String::from_utf8(out.stdout).map_err(|e| format!("{bin}: not UTF-8: {e}"))?;
-    Ok((svg, seconds))
-}
-
 /// Entry point of `bench vectorize --rd`.
 pub fn run(a: &BenchVectorizeArgs) -> Result<(), CliError> {
-    let r = &a.rd;
-    let budgets = live::schedule::parse_schedule(&a.paths, usize::MAX)
-        .map_err(|e| CliError::Usage(format!("--paths: {e}")))?;
-    if let Some(b) = budgets.iter().find(|&&b| b > live::MAX_PATHS) {
-        return Err(CliError::Usage(format!(
-            "--paths: budget {b} exceeds the limit of {} paths",
-            live::MAX_PATHS
-        )));
-    }
-    let speckles = parse_list::<usize>("--vt-speckle", &r.vt_speckle, |&v| v <= 256, "0..=256")?;
-    let precisions = parse_list::<i32>(
-        "--vt-precision",
-        &r.vt_precision,
-        |v| (1..=8).contains(v),
-        "a colour precision in 1..=8",
-    )?;
-    let it_colors = parse_list::<usize>(
-        "--it-colors",
-        &r.it_colors,
-        |v| (2..=256).contains(v),
-        "a colour count in 2..=256",
-    )?;
-    let kbs = parse_list::<f64>(
-        "--kb",
-        &r.kb,
-        |v| v.is_finite() && *v > 0.0,
-        "a positive size in KB",
-    )?;
-    let mut peers = names(&r.peers);
-    if peers == ["none"] {
-        peers.clear();
-    }
-    if let Some(p) = peers.iter().find(|p| !PEERS.contains(&p.as_str())) {
-        return Err(CliError::Usage(format!(
-            "--peers: unknown peer {p:?} (known: {}, or none)",
-            PEERS.join(", ")
-        )));
-    }
+    let budgets = parse_budgets(&a.paths)?;
+    let grid = Grid::parse(&a.rd)?;
     if a.limit == Some(0) {
         return Err(CliError::Usage("--limit: must be at least 1".into()));
     }
-    let bw_sets = names(&r.bw_sets);
+    let sets = select_sets(a)?;
+    let tools = Tools::probe(a, &grid, &sets, &budgets);
+    let mut samples: Vec<RdSample> = Vec::new();
+    let mut set_sizes: Vec<(String, usize)> = Vec::new();
+    for (set, files) in sets {
+        let files = spread(files, a.limit);
+        set_sizes.push((set.clone(), files.len()));
+        for file in &files {
+            samples.extend(tools.trace_image(&grid, &set, file)?);
+        }
+    }
+    if let Some(t) = &tools.imagetracer {
+        t.remove_scratch();
+    }
+    let means = means(&samples);
+    let summaries = summarise(&means, &set_sizes, &grid.kbs);
+    let tables = || {
+        print_tables(
+            &set_sizes,
+            &means,
+            &summaries,
+            &tools.skipped,
+            a.rd.all_rows,
+        )
+    };
+    let json_out = serde_json::json!({
+        "images": set_sizes.iter().map(|(_, n)| n).sum::<usize>(),
+        "sets": set_sizes.iter().map(|(s, n)| serde_json::json!({"set": s, "images": n})).collect::<Vec<_>>(),
+        "preset": format!("{:?}", a.preset).to_lowercase(),
+        "precision": "auto (vector::write_svg)",
+        "seed": a.seed,
+        "skipped": tools.skipped.iter().map(|(t, w)| serde_json::json!({"tool": t, "why": w})).collect::<Vec<_>>(),
+        "editability_checker": editability("<svg xmlns=\"http://www.w3.org/2000/svg\"/>").is_some(),
+        "means": means,
+        "rd": summaries,
+        "samples": samples,
+    });
+    match &a.json {
+        Some(Some(path)) => {
+            let text =
+                serde_json::to_string_pretty(&json_out).failed(|| "cannot encode JSON".into())?;
+            std::fs::write(path, text + "\n")
+                .failed(|| format!("cannot write {}", path.display()))?;
+            tables();
+            eprintln!("wrote {}", path.display());
+        }
+        Some(None) => println!("{json_out}"),
+        None => tables(),
+    }
+    Ok(())
+}
+
+/// The peers' settings grid and the summary's sizes, parsed from the flags.
+struct Grid {
+    speckles: Vec<usize>,
+    precisions: Vec<i32>,
+    it_colors: Vec<usize>,
+    kbs: Vec<f64>,
+    /// The peers asked for (checked names; empty for `none`).
+    peers: Vec<String>,
+    bw_sets: Vec<String>,
+    vt_input: VtInput,
+    potrace: String,
+}
+
+impl Grid {
+    fn parse(r: &RdArgs) -> Result<Self, CliError> {
+        let mut peers = names(&r.peers);
+        if peers == ["none"] {
+            peers.clear();
+        }
+        if let Some(p) = peers.iter().find(|p| !PEERS.contains(&p.as_str())) {
+            return Err(CliError::Usage(format!(
+                "--peers: unknown peer {p:?} (known: {}, or none)",
+                PEERS.join(", ")
+            )));
+        }
+        Ok(Grid {
+            speckles: parse_list("--vt-speckle", &r.vt_speckle, |&v| v <= 256, "0..=256")?,
+            precisions: parse_list(
+                "--vt-precision",
+                &r.vt_precision,
+                |v| (1..=8).contains(v),
+                "a colour precision in 1..=8",
+            )?,
+            it_colors: parse_list(
+                "--it-colors",
+                &r.it_colors,
+                |v| (2..=256).contains(v),
+                "a colour count in 2..=256",
+            )?,
+            kbs: parse_list(
+                "--kb",
+                &r.kb,
+                |v: &f64| v.is_finite() && *v > 0.0,
+                "a positive size in KB",
+            )?,
+            peers,
+            bw_sets: names(&r.bw_sets),
+            vt_input: r.vt_input,
+            potrace: r.potrace.clone(),
+        })
+    }
+
+    fn wants(&self, peer: &str) -> bool {
+        self.peers.iter().any(|p| p == peer)
+    }
+}
+
+/// The image sets of `--images`, only those of `--sets` when given; none is a usage error.
+fn select_sets(a: &BenchVectorizeArgs) -> Result<Vec<(String, Vec<PathBuf>)>, CliError> {
     let mut sets = discover_sets(&a.images)?;
-    if let Some(only) = &r.sets {
+    if let Some(only) = &a.rd.sets {
         let only = names(only);
         if let Some(missing) = only.iter().find(|s| !sets.iter().any(|(n, _)| n == *s)) {
+            let found: Vec<&str> = sets.iter().map(|(n, _)| n.as_str()).collect();
             return Err(CliError::Usage(format!(
                 "--sets: no image set {missing:?} in {} (found: {})",
                 a.images.display(),
-                sets.iter()
-                    .map(|(n, _)| n.as_str())
-                    .collect::<Vec<_>>()
-                    .join(", ")
+                found.join(", ")
             )));
         }
         sets.retain(|(n, _)| only.contains(n));
@@ -558,512 +384,230 @@ pub fn run(a: &BenchVectorizeArgs) -> Result<(), CliError> {
             a.images.display()
         )));
     }
+    Ok(sets)
+}
 
-    // Peers that cannot run here are skipped, loudly.
-    let mut skipped: Vec<(String, String)> = Vec::new();
-    let imagetracer = if peers.iter().any(|p| p == "imagetracer") {
-        match probe_imagetracer(r, &a.images) {
-            Ok(t) => Some(t),
-            Err(why) => {
-                skipped.push(("imagetracer".into(), why));
-                None
-            }
+/// The tools that run here: the peers that were asked for and answer, and our LIVE runs.
+struct Tools {
+    vtracer: bool,
+    imagetracer: Option<ImageTracer>,
+    potrace: bool,
+    /// Peers asked for that cannot run here: `(tool, why)`.
+    skipped: Vec<(String, String)>,
+    live_runs: Vec<(String, LiveConfig)>,
+}
+
+impl Tools {
+    /// Probes the peers of `grid` (a peer that cannot run is skipped, loudly) and lists the
+    /// LIVE runs (each budget, `auto` with `--auto`; none with `--no-live`).
+    fn probe(
+        a: &BenchVectorizeArgs,
+        grid: &Grid,
+        sets: &[(String, Vec<PathBuf>)],
+        budgets: &[usize],
+    ) -> Self {
+        let mut skipped: Vec<(String, String)> = Vec::new();
+        let imagetracer = grid
+            .wants("imagetracer")
+            .then(|| ImageTracer::probe(&a.rd, &a.images))
+            .and_then(|probe| {
+                probe
+                    .map_err(|why| skipped.push(("imagetracer".into(), why.to_string())))
+                    .ok()
+            });
+        let potrace = grid.wants("potrace")
+            && probe_potrace(&grid.potrace)
+                .map_err(|why| skipped.push(("potrace".into(), why.to_string())))
+                .is_ok();
+        if potrace && !sets.iter().any(|(n, _)| grid.bw_sets.contains(n)) {
+            let why = format!(
+                "no image set named in --bw-sets ({})",
+                grid.bw_sets.join(",")
+            );
+            skipped.push(("potrace".into(), why));
         }
-    } else {
-        None
-    };
-    let potrace = peers.iter().any(|p| p == "potrace")
-        && match probe_potrace(&r.potrace) {
-            Ok(()) => true,
-            Err(why) => {
-                skipped.push(("potrace".into(), why));
-                false
-            }
+        for (tool, why) in &skipped {
+            eprintln!("SKIP {tool}: {why}");
+        }
+        let base = live_base(a);
+        let mut live_runs: Vec<(String, LiveConfig)> = budgets
+            .iter()
+            .map(|&b| {
+                (
+                    format!("paths {b}"),
+                    with_budget(&base, PathBudget::fixed(b)),
+                )
+            })
+            .collect();
+        if a.auto {
+            live_runs.push(("auto".into(), with_budget(&base, PathBudget::auto())));
+        }
+        if a.no_live {
+            live_runs.clear();
+        }
+        Tools {
+            vtracer: grid.wants("vtracer"),
+            imagetracer,
+            potrace,
+            skipped,
+            live_runs,
+        }
+    }
+
+    /// Every tool's samples on one image of `set`: the peers' grids, then our budgets.
+    fn trace_image(&self, grid: &Grid, set: &str, file: &Path) -> Result<Vec<RdSample>, CliError> {
+        let target = load_input(file)?;
+        let t = Target {
+            set,
+            image: image_name(file),
+            target: &target,
         };
-    if potrace && !sets.iter().any(|(n, _)| bw_sets.contains(n)) {
-        skipped.push((
-            "potrace".into(),
-            format!("no image set named in --bw-sets ({})", bw_sets.join(",")),
-        ));
+        let mut samples = Vec::new();
+        if self.vtracer {
+            samples.extend(t.vtracer(grid)?);
+        }
+        if let Some(tracer) = &self.imagetracer {
+            samples.extend(t.imagetracer(tracer, file, &grid.it_colors)?);
+        }
+        if self.potrace && grid.bw_sets.iter().any(|s| s == set) {
+            samples.extend(t.potrace(&grid.potrace)?);
+        }
+        if !samples.is_empty() {
+            let best = samples
+                .iter()
+                .map(|s| s.psnr.min(100.0))
+                .fold(f64::NEG_INFINITY, f64::max);
+            eprintln!(
+                "{set}/{}: {} peer settings, best PSNR {best:.2} dB",
+                t.image,
+                samples.len()
+            );
+        }
+        for (label, cfg) in &self.live_runs {
+            samples.push(t.live(label, cfg)?);
+        }
+        Ok(samples)
     }
-    for (tool, why) in &skipped {
-        eprintln!("SKIP {tool}: {why}");
-    }
-    let vtracer = peers.iter().any(|p| p == "vtracer");
+}
 
-    let base = LiveConfig {
-        seed: a.seed,
-        snapshot_every: 0,
-        ..LiveConfig::preset(a.preset)
-    };
-    let mut live_runs: Vec<(String, LiveConfig)> = budgets
-        .iter()
-        .map(|&b| {
-            (
-                format!("paths {b}"),
-                LiveConfig {
-                    budget: PathBudget::fixed(b),
-                    ..base.clone()
-                },
-            )
-        })
-        .collect();
-    if a.auto {
-        live_runs.push((
-            "auto".into(),
-            LiveConfig {
-                budget: PathBudget::auto(),
-                ..base.clone()
-            },
-        ));
-    }
-    if a.no_live {
-        live_runs.clear();
-    }
+/// One image of a set, the target every tool's SVG is scored against.
+struct Target<'a> {
+    set: &'a str,
+    image: String,
+    target: &'a Image,
+}
 
-    let mut samples: Vec<RdSample> = Vec::new();
-    let mut set_sizes: Vec<(String, usize)> = Vec::new();
-    for (set, files) in sets {
-        let files = spread(files, a.limit);
-        set_sizes.push((set.clone(), files.len()));
-        for file in &files {
-            let image = file
-                .file_stem()
-                .and_then(|s| s.to_str())
-                .unwrap_or("?")
-                .to_string();
-            let target = load_input(file)?;
-            let first = samples.len();
-            if vtracer {
-                let white = target.over([1.0, 1.0, 1.0]);
-                let mut inputs: Vec<(&Image, &str)> = Vec::new();
-                if r.vt_input != VtInput::White {
-                    inputs.push((&target, ""));
-                }
-                if r.vt_input != VtInput::Rgba {
-                    inputs.push((&white, " white"));
-                }
-                for (input, suffix) in inputs {
-                    for polygon in [false, true] {
-                        for &filter_speckle in &speckles {
-                            for &color_precision in &precisions {
-                                let s = TracerSetting {
-                                    polygon,
-                                    filter_speckle,
-                                    color_precision,
-                                    ..TracerSetting::default()
-                                };
-                                let t0 = Instant::now();
-                                let svg = trace(input, &s)
-                                    .map_err(|e| {
-                                        CliError::Other(anyhow::anyhow!("{image}: vtracer: {e}"))
-                                    })?
-                                    .svg;
-                                let secs = t0.elapsed().as_secs_f64();
-                                let label = format!("{}{suffix}", s.label());
-                                samples.push(score(
-                                    &set, &image, "vtracer", &label, &target, &svg, secs,
-                                )?);
-                            }
-                        }
+impl Target<'_> {
+    /// vtracer: spline and polygon × speckle × precision on each input of `--vt-input`.
+    fn vtracer(&self, grid: &Grid) -> Result<Vec<RdSample>, CliError> {
+        let white = self.target.over([1.0, 1.0, 1.0]);
+        let mut inputs: Vec<(&Image, &str)> = Vec::new();
+        if grid.vt_input != VtInput::White {
+            inputs.push((self.target, ""));
+        }
+        if grid.vt_input != VtInput::Rgba {
+            inputs.push((&white, " white"));
+        }
+        let mut out = Vec::new();
+        for (input, suffix) in inputs {
+            for polygon in [false, true] {
+                for &filter_speckle in &grid.speckles {
+                    for &color_precision in &grid.precisions {
+                        let s = TracerSetting {
+                            polygon,
+                            filter_speckle,
+                            color_precision,
+                            ..TracerSetting::default()
+                        };
+                        let t0 = Instant::now();
+                        let svg = trace(input, &s)
+                            .map_err(anyhow::Error::msg)
+                            .failed(|| format!("{}: vtracer", self.image))?
+                            .svg;
+                        let secs = t0.elapsed().as_secs_f64();
+                        let label = format!("{}{suffix}", s.label());
+                        out.push(self.score("vtracer", &label, &svg, secs)?);
                     }
                 }
             }
-            if let Some(t) = &imagetracer {
-                for (label, options) in imagetracer_grid(&it_colors) {
-                    let (svg, secs) = run_imagetracer(t, file, &options)
-                        .map_err(|e| CliError::Other(anyhow::anyhow!("{image}: {label}: {e}")))?;
-                    samples.push(score(
-                        &set,
-                        &image,
-                        "imagetracer",
-                        &label,
-                        &target,
-                        &svg,
-                        secs,
-                    )?);
-                }
-            }
-            if potrace && bw_sets.contains(&set) {
-                let pbm = to_pbm(&target);
-                for (label, args) in potrace_grid() {
-                    let (svg, secs) = run_potrace(&r.potrace, &pbm, &args).map_err(|e| {
-                        CliError::Other(anyhow::anyhow!("{image}: potrace {label}: {e}"))
-                    })?;
-                    samples.push(score(&set, &image, "potrace", &label, &target, &svg, secs)?);
-                }
-            }
-            if first < samples.len() {
-                eprintln!(
-                    "{set}/{image}: {} peer settings, best PSNR {:.2} dB",
-                    samples.len() - first,
-                    samples[first..]
-                        .iter()
-                        .map(|s| s.psnr.min(100.0))
-                        .fold(f64::NEG_INFINITY, f64::max)
-                );
-            }
-            for (label, cfg) in &live_runs {
-                let t0 = Instant::now();
-                let res = live::vectorize(&target, cfg, &NullSink, &CancelToken::new())
-                    .map_err(|e| CliError::Other(anyhow::anyhow!("{image}: live {label}: {e}")))?;
-                // Our output as every run writes it (fewest decimals within the render
-                // tolerance, simple outlines), timed with the tracing.
-                let svg = crate::vector::write_svg(&res.scene, &cfg.colors);
-                let secs = t0.elapsed().as_secs_f64();
-                let s = score(&set, &image, "live", label, &target, &svg, secs)?;
-                eprintln!(
-                    "{set}/{image}: live {label:9} paths {:3} psnr {:6.2} ssim {:.4} bytes {:6} gz {:5} {:.2} s",
-                    s.paths, s.psnr, s.ssim, s.svg_bytes, s.svg_gz_bytes, s.seconds
-                );
-                samples.push(s);
-            }
         }
-    }
-    if let Some(t) = &imagetracer {
-        let _ = std::fs::remove_dir_all(&t.scratch);
+        Ok(out)
     }
 
-    let means = means(&samples);
-    let mut summaries = Vec::new();
-    for (set, _) in &set_sizes {
-        for basis in ["raw", "gzip"] {
-            summaries.push(summarise_set(&means, set, basis, &kbs));
+    /// imagetracer's grid on the PNG file itself (the driver composes it over white).
+    fn imagetracer(
+        &self,
+        tracer: &ImageTracer,
+        file: &Path,
+        colors: &[usize],
+    ) -> Result<Vec<RdSample>, CliError> {
+        let mut out = Vec::new();
+        for (label, options) in imagetracer_grid(colors) {
+            let (svg, secs) = tracer
+                .run(file, &options)
+                .failed(|| format!("{}: {label}", self.image))?;
+            out.push(self.score("imagetracer", &label, &svg, secs)?);
         }
+        Ok(out)
     }
 
-    let json_out = serde_json::json!({
-        "images": set_sizes.iter().map(|(_, n)| n).sum::<usize>(),
-        "sets": set_sizes.iter().map(|(s, n)| serde_json::json!({"set": s, "images": n})).collect::<Vec<_>>(),
-        "preset": format!("{:?}", a.preset).to_lowercase(),
-        "precision": "auto (vector::write_svg)",
-        "seed": a.seed,
-        "skipped": skipped.iter().map(|(t, w)| serde_json::json!({"tool": t, "why": w})).collect::<Vec<_>>(),
-        "editability_checker": editability("<svg xmlns=\"http://www.w3.org/2000/svg\"/>").is_some(),
-        "means": means,
-        "rd": summaries,
-        "samples": samples,
-    });
-    match &a.json {
-        Some(Some(path)) => {
-            let text = serde_json::to_string_pretty(&json_out)
-                .map_err(|e| CliError::Other(anyhow::anyhow!("cannot encode JSON: {e}")))?;
-            std::fs::write(path, text + "\n").map_err(|e| {
-                CliError::Other(anyhow::anyhow!("cannot write {}: {e}", path.display()))
-            })?;
-            print_tables(&set_sizes, &means, &summaries, &skipped, r.all_rows);
-            eprintln!("wrote {}", path.display());
+    /// potrace's grid on the image thresholded to black and white.
+    fn potrace(&self, bin: &str) -> Result<Vec<RdSample>, CliError> {
+        let pbm = to_pbm(self.target);
+        let mut out = Vec::new();
+        for (label, args) in potrace_grid() {
+            let (svg, secs) = run_potrace(bin, &pbm, &args)
+                .failed(|| format!("{}: potrace {label}", self.image))?;
+            out.push(self.score("potrace", &label, &svg, secs)?);
         }
-        Some(None) => println!("{json_out}"),
-        None => print_tables(&set_sizes, &means, &summaries, &skipped, r.all_rows),
+        Ok(out)
     }
-    Ok(())
-}
 
-/// Means per (set, tool, setting), in first-seen order.
-pub fn means(samples: &[RdSample]) -> Vec<RdMean> {
-    let mut keys: Vec<(&str, &str, &str)> = Vec::new();
-    for s in samples {
-        let k = (s.set.as_str(), s.tool.as_str(), s.setting.as_str());
-        if !keys.contains(&k) {
-            keys.push(k);
-        }
-    }
-    keys.into_iter()
-        .map(|(set, tool, setting)| {
-            let g: Vec<&RdSample> = samples
-                .iter()
-                .filter(|s| s.set == set && s.tool == tool && s.setting == setting)
-                .collect();
-            let n = g.len().max(1) as f64;
-            let mean = |f: &dyn Fn(&RdSample) -> f64| g.iter().map(|s| f(s)).sum::<f64>() / n;
-            let edits: Vec<EditCounts> = g.iter().filter_map(|s| s.editability).collect();
-            let emean = |f: &dyn Fn(&EditCounts) -> usize| {
-                (!edits.is_empty())
-                    .then(|| edits.iter().map(|e| f(e) as f64).sum::<f64>() / edits.len() as f64)
-            };
-            RdMean {
-                set: set.to_string(),
-                tool: tool.to_string(),
-                setting: setting.to_string(),
-                images: g.len(),
-                paths: mean(&|s| s.paths as f64),
-                // Identical renders (infinite PSNR) count as 100 dB.
-                psnr: mean(&|s| s.psnr.min(100.0)),
-                ssim: mean(&|s| s.ssim),
-                svg_bytes: mean(&|s| s.svg_bytes as f64),
-                svg_gz_bytes: mean(&|s| s.svg_gz_bytes as f64),
-                seconds: mean(&|s| s.seconds),
-                self_intersecting: emean(&|e| e.self_intersecting),
-                hidden: emean(&|e| e.hidden),
-                slivers: emean(&|e| e.slivers),
-                colors: emean(&|e| e.colors),
-            }
-        })
-        .collect()
-}
-
-/// The upper Pareto frontier of `(x, y)` points: x ascending, y strictly increasing.
-pub fn envelope(pts: Vec<(f64, f64)>) -> Vec<(f64, f64)> {
-    envelope_indices(&pts).into_iter().map(|i| pts[i]).collect()
-}
-
-/// Indices of the points of [`envelope`], in its order.
-fn envelope_indices(pts: &[(f64, f64)]) -> Vec<usize> {
-    let mut idx: Vec<usize> = (0..pts.len())
-        .filter(|&i| pts[i].0.is_finite() && pts[i].1.is_finite())
-        .collect();
-    // By x, and at equal x the best y first.
-    idx.sort_by(|&a, &b| {
-        pts[a]
-            .0
-            .total_cmp(&pts[b].0)
-            .then(pts[b].1.total_cmp(&pts[a].1))
-    });
-    let mut out: Vec<usize> = Vec::new();
-    for i in idx {
-        if out.last().is_none_or(|&l| pts[i].1 > pts[l].1) {
-            out.push(i);
-        }
-    }
-    out
-}
-
-/// The envelope at `x`: linear between its points, its best value after the last, `None`
-/// before the first.
-pub fn envelope_at(env: &[(f64, f64)], x: f64) -> Option<f64> {
-    let first = env.first()?;
-    if x < first.0 {
-        return None;
-    }
-    for w in env.windows(2) {
-        let ((x0, y0), (x1, y1)) = (w[0], w[1]);
-        if x <= x1 {
-            return Some(if x1 > x0 {
-                y0 + (y1 - y0) * (x - x0) / (x1 - x0)
-            } else {
-                y1
-            });
-        }
-    }
-    env.last().map(|p| p.1)
-}
-
-/// Envelopes of every tool on one set and basis, and `live − peer` at each size.
-fn summarise_set(means: &[RdMean], set: &str, basis: &str, kbs: &[f64]) -> RdSummary {
-    let mut tools: Vec<&str> = Vec::new();
-    for m in means.iter().filter(|m| m.set == set) {
-        if !tools.contains(&m.tool.as_str()) {
-            tools.push(&m.tool);
-        }
-    }
-    let envelopes: Vec<Envelope> = tools
-        .iter()
-        .map(|&tool| {
-            let rows: Vec<&RdMean> = means
-                .iter()
-                .filter(|m| m.set == set && m.tool == tool)
-                .collect();
-            let pts: Vec<(f64, f64)> = rows
-                .iter()
-                .map(|m| {
-                    let bytes = if basis == "gzip" {
-                        m.svg_gz_bytes
-                    } else {
-                        m.svg_bytes
-                    };
-                    (bytes / 1000.0, m.psnr)
-                })
-                .collect();
-            let idx = envelope_indices(&pts);
-            Envelope {
-                tool: tool.to_string(),
-                points: idx.iter().map(|&i| pts[i]).collect(),
-                settings: idx.iter().map(|&i| rows[i].setting.clone()).collect(),
-            }
-        })
-        .collect();
-    let live = envelopes.iter().find(|e| e.tool == "live");
-    let mut deltas = Vec::new();
-    if let Some(live) = live {
-        for peer in envelopes.iter().filter(|e| e.tool != "live") {
-            for &kb in kbs {
-                let l = envelope_at(&live.points, kb);
-                let p = envelope_at(&peer.points, kb);
-                let past = |e: &Envelope| e.points.last().is_some_and(|p| kb > p.0);
-                deltas.push(Delta {
-                    peer: peer.tool.clone(),
-                    kb,
-                    live: l,
-                    peer_psnr: p,
-                    delta_db: l.zip(p).map(|(l, p)| l - p),
-                    beyond: past(live) || past(peer),
-                });
-            }
-        }
-    }
-    RdSummary {
-        set: set.to_string(),
-        basis: basis.to_string(),
-        envelopes,
-        deltas,
-    }
-}
-
-fn opt(v: Option<f64>, width: usize, prec: usize) -> String {
-    match v {
-        Some(v) => format!("{v:>width$.prec$}"),
-        None => format!("{:>width$}", "—"),
-    }
-}
-
-fn print_tables(
-    sets: &[(String, usize)],
-    means: &[RdMean],
-    summaries: &[RdSummary],
-    skipped: &[(String, String)],
-    all_rows: bool,
-) {
-    for (tool, why) in skipped {
-        println!("SKIP {tool}: {why}");
-    }
-    for (set, n) in sets {
-        let on_envelope = |m: &RdMean| {
-            summaries.iter().filter(|s| &s.set == set).any(|s| {
-                s.envelopes
-                    .iter()
-                    .any(|e| e.tool == m.tool && e.settings.contains(&m.setting))
-            })
-        };
-        let rows: Vec<&RdMean> = means
-            .iter()
-            .filter(|m| &m.set == set && (all_rows || m.tool == "live" || on_envelope(m)))
-            .collect();
-        let hidden = means.iter().filter(|m| &m.set == set).count() - rows.len();
-        println!("\n== set {set}: {n} images, means ==");
-        if hidden > 0 {
-            println!("({hidden} peer settings on no envelope left out; --all-rows shows them)");
-        }
-        println!(
-            "{:12} {:24} {:>6} {:>7} {:>6} {:>8} {:>7} {:>6} {:>6} {:>6} {:>6} {:>7}",
-            "tool",
-            "setting",
-            "paths",
-            "PSNR",
-            "SSIM",
-            "bytes",
-            "gz",
-            "colors",
-            "selfx",
-            "hidden",
-            "sliver",
-            "seconds"
+    /// Our LIVE run `label`, written as every run writes it (fewest decimals within the render
+    /// tolerance, simple outlines) and timed with the tracing.
+    fn live(&self, label: &str, cfg: &LiveConfig) -> Result<RdSample, CliError> {
+        let t0 = Instant::now();
+        let res = live::vectorize(self.target, cfg, &NullSink, &CancelToken::new())
+            .failed(|| format!("{}: live {label}", self.image))?;
+        let svg = crate::vector::write_svg(&res.scene, &cfg.colors);
+        let secs = t0.elapsed().as_secs_f64();
+        let s = self.score("live", label, &svg, secs)?;
+        eprintln!(
+            "{}/{}: live {label:9} paths {:3} psnr {:6.2} ssim {:.4} bytes {:6} gz {:5} {:.2} s",
+            self.set, self.image, s.paths, s.psnr, s.ssim, s.svg_bytes, s.svg_gz_bytes, s.seconds
         );
-        for m in rows {
-            println!(
-                "{:12} {:24} {:>6.1} {:>7.2} {:>6.4} {:>8.0} {:>7.0} {} {} {} {} {:>7.3}",
-                m.tool,
-                m.setting,
-                m.paths,
-                m.psnr,
-                m.ssim,
-                m.svg_bytes,
-                m.svg_gz_bytes,
-                opt(m.colors, 6, 1),
-                opt(m.self_intersecting, 6, 1),
-                opt(m.hidden, 6, 1),
-                opt(m.slivers, 6, 1),
-                m.seconds
-            );
-        }
-        for s in summaries.iter().filter(|s| &s.set == set) {
-            println!("-- R–D envelopes, {} KB: (KB, PSNR dB) --", s.basis);
-            for e in &s.envelopes {
-                let pts: Vec<String> = e
-                    .points
-                    .iter()
-                    .map(|(x, y)| format!("({x:.2}, {y:.2})"))
-                    .collect();
-                println!("{:12} {}", e.tool, pts.join(" "));
-            }
-            let mut kbs: Vec<f64> = Vec::new();
-            let mut peers: Vec<&str> = Vec::new();
-            for d in &s.deltas {
-                if !kbs.contains(&d.kb) {
-                    kbs.push(d.kb);
-                }
-                if !peers.contains(&d.peer.as_str()) {
-                    peers.push(&d.peer);
-                }
-            }
-            if peers.is_empty() {
-                continue;
-            }
-            let head: Vec<String> = kbs
-                .iter()
-                .map(|k| format!("{:>8}", format!("{k}KB")))
-                .collect();
-            println!(
-                "{:18} {}",
-                format!("live − peer, {}", s.basis),
-                head.join(" ")
-            );
-            for p in peers {
-                let row: Vec<String> = s
-                    .deltas
-                    .iter()
-                    .filter(|d| d.peer == p)
-                    .map(|d| match d.delta_db {
-                        Some(v) => format!(
-                            "{:>8}",
-                            format!("{v:+.2}{}", if d.beyond { "*" } else { " " })
-                        ),
-                        None => format!("{:>8}", "— "),
-                    })
-                    .collect();
-                println!("{:18} {}", p, row.join(" "));
-            }
-        }
+        Ok(s)
     }
-    println!(
-        "\n(dB; —: a curve does not reach that size; *: past the largest point of a curve, read flat)"
-    );
+
+    /// Scores one SVG against the target.
+    fn score(
+        &self,
+        tool: &str,
+        setting: &str,
+        svg: &str,
+        seconds: f64,
+    ) -> Result<RdSample, CliError> {
+        let back = render_svg(svg, self.target.width, self.target.height)
+            .failed(|| format!("{}: {tool} {setting}: cannot render", self.image))?;
+        Ok(RdSample {
+            set: self.set.to_string(),
+            image: self.image.clone(),
+            tool: tool.to_string(),
+            setting: setting.to_string(),
+            paths: svg.matches("<path").count(),
+            psnr: psnr(self.target, &back),
+            ssim: ssim_over_white(self.target, &back),
+            svg_bytes: svg.len(),
+            svg_gz_bytes: gzip_len(svg),
+            seconds,
+            editability: editability(svg),
+        })
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn envelope_keeps_the_pareto_frontier() {
-        let env = envelope(vec![
-            (4.0, 25.0),
-            (2.0, 20.0),
-            (3.0, 19.0), // beaten by (2, 20)
-            (8.0, 30.0),
-            (6.0, 24.0), // beaten by (4, 25)
-            (2.0, 21.0),
-        ]);
-        assert_eq!(env, vec![(2.0, 21.0), (4.0, 25.0), (8.0, 30.0)]);
-        assert_eq!(envelope_at(&env, 1.0), None);
-        assert_eq!(envelope_at(&env, 2.0), Some(21.0));
-        assert_eq!(envelope_at(&env, 3.0), Some(23.0));
-        assert_eq!(envelope_at(&env, 6.0), Some(27.5));
-        assert_eq!(envelope_at(&env, 20.0), Some(30.0));
-        assert_eq!(envelope_at(&[], 2.0), None);
-    }
-
-    #[test]
-    fn pbm_marks_dark_pixels_over_white() {
-        let mut im = Image::filled(10, 2, [0.0, 0.0, 0.0, 1.0]);
-        // Pixel 1: transparent (white over white); pixel 9: light grey.
-        im.data[4..8].copy_from_slice(&[0.0, 0.0, 0.0, 0.0]);
-        im.data[36..40].copy_from_slice(&[0.8, 0.8, 0.8, 1.0]);
-        let pbm = to_pbm(&im);
-        let head = b"P4\n10 2\n";
-        assert_eq!(&pbm[..head.len()], head);
-        assert_eq!(&pbm[head.len()..], &[0b1011_1111, 0b1000_0000, 0xff, 0xc0]);
-    }
 
     #[test]
     fn lists_are_checked() {

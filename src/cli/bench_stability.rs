@@ -5,11 +5,13 @@
 //! loss), final quality spread (PSNR of the render against the nearest teacher target, analytic
 //! teacher only) and seconds per run.
 
-use super::CliError;
-use super::generate::{cli_limits, spec_err};
+use super::generate::cli_limits;
+use super::request_args::{BudgetArgs, ModelArgs, parse_word};
+use super::{CliError, ResultExt};
 use crate::image::{Image, psnr};
 use crate::pipeline::{
-    DefaultExecutor, Executor, JobContext, Method, ModelDirs, PlanRequest, Preset, RunInput, Tuning,
+    DefaultExecutor, Executor, JobContext, Method, ModelDirs, PlanRequest, Preset, RunInput,
+    RunOutput, Tuning,
 };
 use crate::progress::CancelToken;
 use crate::scene::{Rgba, Scene, Shape};
@@ -25,27 +27,17 @@ pub struct BenchStabilityArgs {
     #[arg(long, default_value_t = 4)]
     pub seeds: u64,
     /// Preset (draft, fast, balanced, paper): sampler and LIVE settings, and the defaults of
-    /// the four options below.
-    #[arg(long, default_value = "draft")]
-    pub preset: String,
-    /// SDS steps per run [default: 30 for draft, else the preset's].
-    #[arg(long)]
-    pub steps: Option<u32>,
+    /// the budget and `--size` (draft runs 30 SDS steps unless `--steps` says otherwise).
+    #[arg(long, default_value = "draft", value_parser = parse_word::<Preset>)]
+    pub preset: Preset,
+    #[command(flatten)]
+    pub budget: BudgetArgs,
     /// Teacher input size (px) [default: the preset's].
     #[arg(long)]
     pub size: Option<u32>,
-    /// Samples K for sd_live* [default: the preset's].
-    #[arg(long)]
-    pub samples: Option<u32>,
-    /// Paths (iconography) / strokes (sketch) [default: the preset's].
-    #[arg(long)]
-    pub paths: Option<usize>,
-    /// `analytic:DIR` (PNG targets); default: built-in synthetic targets.
-    #[arg(long, conflicts_with = "model")]
-    pub teacher: Option<String>,
-    /// Stable Diffusion directory (real weights) instead of the analytic teacher.
-    #[arg(long)]
-    pub model: Option<PathBuf>,
+    /// The teacher (default: the analytic teacher over built-in synthetic targets).
+    #[command(flatten)]
+    pub model: ModelArgs,
     /// CLIP scorer directory for reranking.
     #[arg(long)]
     pub scorer: Option<PathBuf>,
@@ -109,17 +101,81 @@ pub struct StabilityReport {
     pub runs: Vec<StabilityRun>,
 }
 
+/// The benchmark's settings, the preset's filled in and checked.
 struct Resolved {
+    preset: Preset,
     seeds: u64,
     steps: u32,
     size: u32,
     samples: u32,
-    paths: usize,
-    teacher: Option<String>,
-    model: Option<PathBuf>,
+    paths: u32,
+    model: ModelArgs,
     scorer: Option<PathBuf>,
     json: bool,
     save: Option<PathBuf>,
+}
+
+/// The caption of every run (the analytic teacher ignores it).
+const CAPTION: &str = "an icon";
+
+impl Resolved {
+    /// `args` with the preset's budget where a flag is omitted; zero counts and sizes outside
+    /// 8..=512 are usage errors.
+    fn new(args: BenchStabilityArgs) -> Result<Self, CliError> {
+        let preset = args.preset;
+        // Small priors (the embedded model) have their own presets.
+        let small = args
+            .model
+            .model
+            .as_deref()
+            .is_some_and(crate::pipeline::is_small_model);
+        let ps = preset.settings_for(small);
+        let draft_steps = if preset == Preset::Draft {
+            30
+        } else {
+            ps.steps
+        };
+        let a = Resolved {
+            preset,
+            seeds: args.seeds,
+            steps: args.budget.steps.unwrap_or(draft_steps),
+            size: args.size.unwrap_or(ps.size),
+            samples: args.budget.samples.unwrap_or(ps.samples),
+            paths: args.budget.paths.unwrap_or(ps.paths as u32),
+            model: args.model,
+            scorer: args.scorer,
+            json: args.json,
+            save: args.save,
+        };
+        if a.seeds == 0 || a.steps == 0 || a.samples == 0 || a.paths == 0 {
+            return Err(CliError::Usage(
+                "--seeds, --steps, --samples and --paths must be positive".into(),
+            ));
+        }
+        if !(8..=512).contains(&a.size) {
+            return Err(CliError::Usage("--size must be in 8..=512".into()));
+        }
+        Ok(a)
+    }
+
+    /// The request of one run (no retrieval: every sample starts from noise).
+    fn request(&self, method: Method, style: Style, seed: u64) -> PlanRequest {
+        PlanRequest {
+            style,
+            method,
+            preset: self.preset,
+            paths: Some(self.paths),
+            steps: Some(self.steps),
+            samples: Some(self.samples),
+            seed,
+            retrieval: false,
+            tuning: Tuning {
+                size: Some(self.size),
+                ..Tuning::default()
+            },
+            ..PlanRequest::text(CAPTION)
+        }
+    }
 }
 
 /// Two flat icons on white (a red disc, a blue square) as analytic-teacher targets.
@@ -210,8 +266,7 @@ struct TempDir(PathBuf);
 impl TempDir {
     fn new(prefix: &str) -> Result<Self, CliError> {
         let dir = std::env::temp_dir().join(format!("{prefix}-{}", std::process::id()));
-        std::fs::create_dir_all(&dir)
-            .map_err(|e| CliError::Other(anyhow::anyhow!("{}: {e}", dir.display())))?;
+        std::fs::create_dir_all(&dir).failed(|| dir.display().to_string())?;
         Ok(TempDir(dir))
     }
 }
@@ -223,242 +278,241 @@ impl Drop for TempDir {
 }
 
 pub fn run(args: BenchStabilityArgs) -> Result<(), CliError> {
-    let preset: Preset = args.preset.parse().map_err(CliError::Usage)?;
-    // Small priors (the embedded model) have their own presets.
-    let small = args
-        .model
-        .as_deref()
-        .is_some_and(crate::pipeline::is_small_model);
-    let ps = preset.settings_for(small);
-    let a = Resolved {
-        seeds: args.seeds,
-        steps: args.steps.unwrap_or(if preset == Preset::Draft {
-            30
-        } else {
-            ps.steps
-        }),
-        size: args.size.unwrap_or(ps.size),
-        samples: args.samples.unwrap_or(ps.samples),
-        paths: args.paths.unwrap_or(ps.paths),
-        teacher: args.teacher,
-        model: args.model,
-        scorer: args.scorer,
-        json: args.json,
-        save: args.save,
-    };
-    if a.seeds == 0 || a.steps == 0 || a.samples == 0 || a.paths == 0 {
-        return Err(CliError::Usage(
-            "--seeds, --steps, --samples and --paths must be positive".into(),
-        ));
-    }
-    if !(8..=512).contains(&a.size) {
-        return Err(CliError::Usage("--size must be in 8..=512".into()));
-    }
-    // The built-in targets reach the executor as the analytic teacher's PNG directory.
-    let builtin_dir;
-    let (analytic_dir, targets) = match (&a.model, &a.teacher) {
-        (Some(_), _) => (None, Vec::new()),
-        (None, Some(spec)) => {
-            let dir = super::analytic_teacher_dir(spec)?.to_path_buf();
-            let t = AnalyticTeacher::from_dir(
-                &dir,
-                AnalyticTeacherConfig {
-                    image_size: a.size,
-                    pool: 1,
-                    num_train_timesteps: 1000,
-                },
-            )
-            .map_err(|e| CliError::Usage(e.to_string()))?;
-            (Some(dir), t.targets().to_vec())
-        }
-        (None, None) => {
-            builtin_dir = TempDir::new("vf-stability-targets")?;
-            let mut targets = Vec::new();
-            for (name, t) in builtin_targets(a.size)? {
-                // Scored against what the teacher reads back (8-bit PNG), not the f32 original.
-                let path = builtin_dir.0.join(format!("{name}.png"));
-                t.save_png(&path)
-                    .and_then(|()| Image::open(&path))
-                    .map(|t| targets.push(t))
-                    .map_err(|e| CliError::Other(anyhow::anyhow!("built-in targets: {e}")))?;
-            }
-            (Some(builtin_dir.0.clone()), targets)
-        }
-    };
+    let a = Resolved::new(args)?;
+    let teacher = Teacher::new(&a)?;
     let exec = DefaultExecutor::with_downloads(ModelDirs {
-        sd_dir: a.model.clone(),
-        clip_dir: a.scorer.clone(),
-        analytic_dir,
-        ..ModelDirs::default()
+        analytic_dir: teacher.analytic_dir.clone(),
+        ..a.model.model_dirs(a.scorer.clone())
     });
     if let Some(dir) = &a.save {
-        std::fs::create_dir_all(dir)
-            .map_err(|e| CliError::Usage(format!("--save {}: {e}", dir.display())))?;
+        std::fs::create_dir_all(dir).bad_input(|| format!("--save {}", dir.display()))?;
     }
-    let mut teacher = String::new();
-    let mut cells = Vec::new();
-    let mut runs = Vec::new();
-    for method in Method::ALL {
-        for style in Style::ALL {
-            let mut cell = StabilityCell {
-                method: *method,
-                style,
-                runs: a.seeds,
-                errors: 0,
-                nan: 0,
-                collapsed: 0,
-                oversaturated: 0,
-                diverged: 0,
-                failed: 0,
-                failure_rate: 0.0,
-                psnr_min: None,
-                psnr_median: None,
-                psnr_max: None,
-                seconds_median: 0.0,
-                paths_needed_median: 0.0,
-            };
-            let (mut psnrs, mut secs, mut paths) = (Vec::new(), Vec::new(), Vec::new());
-            for seed in 0..a.seeds {
-                let req = PlanRequest {
-                    style,
-                    method: *method,
-                    preset,
-                    paths: Some(a.paths as u32),
-                    steps: Some(a.steps),
-                    samples: Some(a.samples),
-                    seed,
-                    retrieval: false,
-                    tuning: Tuning {
-                        size: Some(a.size),
-                        ..Tuning::default()
-                    },
-                    ..PlanRequest::text("an icon")
-                };
-                let plan = exec.plan(&req, &cli_limits()).map_err(spec_err)?;
-                let t0 = Instant::now();
-                let input = RunInput {
-                    caption: Some("an icon".into()),
-                    ..RunInput::default()
-                };
-                let r = exec.run_plan(&plan, &input, &JobContext::detached(CancelToken::new()));
-                let seconds = t0.elapsed().as_secs_f64();
-                secs.push(seconds);
-                let mut run = StabilityRun {
-                    method: *method,
-                    style,
-                    seed,
-                    seconds,
-                    paths: 0,
-                    psnr: None,
-                    failures: Vec::new(),
-                    file: None,
-                    error: None,
-                };
-                let out = match r {
-                    Ok(o) => o,
-                    Err(e) => {
-                        eprintln!("{method:?} {style} seed {seed}: error: {e}");
-                        cell.errors += 1;
-                        cell.failed += 1;
-                        if a.save.is_some() {
-                            run.failures.push("error");
-                            run.error = Some(e.to_string());
-                            runs.push(run);
-                        }
-                        continue;
-                    }
-                };
-                if let Some(t) = &out.report.teacher {
-                    t.clone_into(&mut teacher);
-                }
-                let img = crate::raster::render(&out.scene);
-                let nan = out.svg.contains("NaN") || img.data.iter().any(|v| !v.is_finite());
-                let collapsed = out.paths == 0 || spread(&img) < COLLAPSED_SPREAD;
-                let over = chroma(&img) > OVERSATURATED_CHROMA;
-                let diverged = out.report.sds.as_ref().is_some_and(|sds| {
-                    let s = &sds.stats;
-                    s.lr_halvings > 0
-                        || !s.last_loss.is_finite()
-                        || u64::from(s.skipped_nonfinite) > (a.steps / 4) as u64
-                });
-                cell.nan += nan as u64;
-                cell.collapsed += collapsed as u64;
-                cell.oversaturated += over as u64;
-                cell.diverged += diverged as u64;
-                cell.failed += (nan || collapsed || over || diverged) as u64;
-                paths.push(out.paths as f64);
-                let best = targets
-                    .iter()
-                    .filter(|t| t.width == img.width && t.height == img.height)
-                    .map(|t| psnr(&img, t).min(PSNR_CAP))
-                    .max_by(f64::total_cmp);
-                psnrs.extend(best);
-                if let Some(dir) = &a.save {
-                    let stem = format!("{}-{style}-s{seed}", method.as_str());
-                    let io = |e: std::io::Error| CliError::Other(e.into());
-                    std::fs::write(dir.join(format!("{stem}.svg")), &out.svg).map_err(io)?;
-                    img.save_png(&dir.join(format!("{stem}.png")))
-                        .map_err(|e| CliError::Other(e.into()))?;
-                    for (hit, kind) in [
-                        (nan, "nan"),
-                        (collapsed, "collapsed"),
-                        (over, "oversaturated"),
-                        (diverged, "diverged"),
-                    ] {
-                        if hit {
-                            run.failures.push(kind);
-                        }
-                    }
-                    run.paths = out.paths;
-                    run.psnr = best;
-                    run.file = Some(stem);
-                    runs.push(run);
-                }
-            }
-            cell.failure_rate = cell.failed as f64 / a.seeds as f64;
-            cell.psnr_min = psnrs.iter().copied().min_by(f64::total_cmp);
-            cell.psnr_max = psnrs.iter().copied().max_by(f64::total_cmp);
-            cell.psnr_median = median(psnrs);
-            cell.seconds_median = median(secs).unwrap_or(f64::NAN);
-            cell.paths_needed_median = median(paths).unwrap_or(0.0);
-            if !a.json {
-                println!(
-                    "{:<12} {:<12} fail {}/{} (err {} nan {} collapsed {} oversat {} diverged {})  psnr {} / {} / {}  {:.2}s  paths {}",
-                    format!("{method:?}"),
-                    style.to_string(),
-                    cell.failed,
-                    cell.runs,
-                    cell.errors,
-                    cell.nan,
-                    cell.collapsed,
-                    cell.oversaturated,
-                    cell.diverged,
-                    fmt_opt(cell.psnr_min),
-                    fmt_opt(cell.psnr_median),
-                    fmt_opt(cell.psnr_max),
-                    cell.seconds_median,
-                    cell.paths_needed_median
-                );
-            }
-            cells.push(cell);
-        }
-    }
-    let report = StabilityReport {
-        teacher,
-        preset,
+    let mut report = StabilityReport {
+        teacher: String::new(),
+        preset: a.preset,
         seeds: a.seeds,
         steps: a.steps,
         size: a.size,
-        cells,
-        runs,
+        cells: Vec::new(),
+        runs: Vec::new(),
     };
+    for method in Method::ALL {
+        for style in Style::ALL {
+            let cell = run_cell(&exec, &a, &teacher.targets, *method, style, &mut report)?;
+            if !a.json {
+                print_cell(&cell);
+            }
+            report.cells.push(cell);
+        }
+    }
     if a.json {
-        println!(
-            "{}",
-            serde_json::to_string_pretty(&report).map_err(|e| CliError::Other(e.into()))?
-        );
+        let text = serde_json::to_string_pretty(&report).failed(|| "encoding the report".into())?;
+        println!("{text}");
     }
     Ok(())
+}
+
+/// The analytic teacher's targets (none with `--model`): a `--teacher` directory's PNGs, or
+/// the built-in targets written to a temporary directory the executor reads them from.
+struct Teacher {
+    analytic_dir: Option<PathBuf>,
+    /// What a render is scored against.
+    targets: Vec<Image>,
+    /// Holds the built-in targets' directory until the benchmark ends.
+    _builtin: Option<TempDir>,
+}
+
+impl Teacher {
+    fn new(a: &Resolved) -> Result<Self, CliError> {
+        if a.model.model.is_some() {
+            return Ok(Teacher {
+                analytic_dir: None,
+                targets: Vec::new(),
+                _builtin: None,
+            });
+        }
+        if let Some(dir) = &a.model.teacher {
+            let config = AnalyticTeacherConfig {
+                image_size: a.size,
+                pool: 1,
+                num_train_timesteps: 1000,
+            };
+            let t = AnalyticTeacher::from_dir(dir, config)
+                .bad_input(|| format!("--teacher analytic:{}", dir.display()))?;
+            return Ok(Teacher {
+                analytic_dir: Some(dir.clone()),
+                targets: t.targets().to_vec(),
+                _builtin: None,
+            });
+        }
+        let builtin = TempDir::new("vf-stability-targets")?;
+        let mut targets = Vec::new();
+        for (name, t) in builtin_targets(a.size)? {
+            // Scored against what the teacher reads back (8-bit PNG), not the f32 original.
+            let path = builtin.0.join(format!("{name}.png"));
+            let back = t.save_png(&path).and_then(|()| Image::open(&path));
+            targets.push(back.failed(|| "built-in targets".into())?);
+        }
+        Ok(Teacher {
+            analytic_dir: Some(builtin.0.clone()),
+            targets,
+            _builtin: Some(builtin),
+        })
+    }
+}
+
+/// Every seed of one method × style; the runs are added to `report` with `--save`, and the
+/// teacher's name as the runs report it.
+fn run_cell(
+    exec: &DefaultExecutor,
+    a: &Resolved,
+    targets: &[Image],
+    method: Method,
+    style: Style,
+    report: &mut StabilityReport,
+) -> Result<StabilityCell, CliError> {
+    let mut runs = Vec::new();
+    for seed in 0..a.seeds {
+        let (run, teacher) = run_seed(exec, a, targets, method, style, seed)?;
+        if let Some(t) = teacher {
+            report.teacher = t;
+        }
+        runs.push(run);
+    }
+    let cell = StabilityCell::of(method, style, &runs);
+    if a.save.is_some() {
+        report.runs.extend(runs);
+    }
+    Ok(cell)
+}
+
+impl StabilityCell {
+    /// The counts and medians of one method × style's runs.
+    fn of(method: Method, style: Style, runs: &[StabilityRun]) -> Self {
+        let count = |kind: &str| runs.iter().filter(|r| r.failures.contains(&kind)).count() as u64;
+        let failed = runs.iter().filter(|r| !r.failures.is_empty()).count() as u64;
+        let ran: Vec<&StabilityRun> = runs.iter().filter(|r| r.error.is_none()).collect();
+        let psnrs: Vec<f64> = ran.iter().filter_map(|r| r.psnr).collect();
+        StabilityCell {
+            method,
+            style,
+            runs: runs.len() as u64,
+            errors: count("error"),
+            nan: count("nan"),
+            collapsed: count("collapsed"),
+            oversaturated: count("oversaturated"),
+            diverged: count("diverged"),
+            failed,
+            failure_rate: failed as f64 / runs.len() as f64,
+            psnr_min: psnrs.iter().copied().min_by(f64::total_cmp),
+            psnr_max: psnrs.iter().copied().max_by(f64::total_cmp),
+            psnr_median: median(psnrs),
+            seconds_median: median(runs.iter().map(|r| r.seconds).collect()).unwrap_or(f64::NAN),
+            paths_needed_median: median(ran.iter().map(|r| r.paths as f64).collect())
+                .unwrap_or(0.0),
+        }
+    }
+}
+
+/// One seed's run with its failure kinds and quality; the teacher's name when it ran. A run
+/// that fails is an `error` run, not an error of the benchmark.
+fn run_seed(
+    exec: &DefaultExecutor,
+    a: &Resolved,
+    targets: &[Image],
+    method: Method,
+    style: Style,
+    seed: u64,
+) -> Result<(StabilityRun, Option<String>), CliError> {
+    let plan = exec.plan(&a.request(method, style, seed), &cli_limits())?;
+    let t0 = Instant::now();
+    let input = RunInput {
+        caption: Some(CAPTION.into()),
+        ..RunInput::default()
+    };
+    let result = exec.run_plan(&plan, &input, &JobContext::detached(CancelToken::new()));
+    let mut run = StabilityRun {
+        method,
+        style,
+        seed,
+        seconds: t0.elapsed().as_secs_f64(),
+        paths: 0,
+        psnr: None,
+        failures: Vec::new(),
+        file: None,
+        error: None,
+    };
+    let out = match result {
+        Ok(out) => out,
+        Err(e) => {
+            eprintln!("{method:?} {style} seed {seed}: error: {e}");
+            run.failures.push("error");
+            run.error = Some(e.to_string());
+            return Ok((run, None));
+        }
+    };
+    let img = crate::raster::render(&out.scene);
+    run.failures = failures(&out, &img, a.steps);
+    run.paths = out.paths;
+    run.psnr = targets
+        .iter()
+        .filter(|t| t.width == img.width && t.height == img.height)
+        .map(|t| psnr(&img, t).min(PSNR_CAP))
+        .max_by(f64::total_cmp);
+    if let Some(dir) = &a.save {
+        let stem = format!("{}-{style}-s{seed}", method.as_str());
+        let svg = dir.join(format!("{stem}.svg"));
+        std::fs::write(&svg, &out.svg).failed(|| format!("cannot write {}", svg.display()))?;
+        let png = dir.join(format!("{stem}.png"));
+        img.save_png(&png)
+            .failed(|| format!("cannot write {}", png.display()))?;
+        run.file = Some(stem);
+    }
+    Ok((run, out.report.teacher))
+}
+
+/// The failure kinds of a finished run (`nan`, `collapsed`, `oversaturated`, `diverged`) from
+/// its output, its render and the SDS steps it was given.
+fn failures(out: &RunOutput, img: &Image, steps: u32) -> Vec<&'static str> {
+    let nan = out.svg.contains("NaN") || img.data.iter().any(|v| !v.is_finite());
+    let collapsed = out.paths == 0 || spread(img) < COLLAPSED_SPREAD;
+    let over = chroma(img) > OVERSATURATED_CHROMA;
+    let diverged = out.report.sds.as_ref().is_some_and(|sds| {
+        let s = &sds.stats;
+        s.lr_halvings > 0
+            || !s.last_loss.is_finite()
+            || u64::from(s.skipped_nonfinite) > u64::from(steps / 4)
+    });
+    [
+        (nan, "nan"),
+        (collapsed, "collapsed"),
+        (over, "oversaturated"),
+        (diverged, "diverged"),
+    ]
+    .into_iter()
+    .filter_map(|(hit, kind)| hit.then_some(kind))
+    .collect()
+}
+
+/// One line of the text report.
+fn print_cell(cell: &StabilityCell) {
+    println!(
+        "{:<12} {:<12} fail {}/{} (err {} nan {} collapsed {} oversat {} diverged {})  psnr {} / {} / {}  {:.2}s  paths {}",
+        format!("{:?}", cell.method),
+        cell.style.to_string(),
+        cell.failed,
+        cell.runs,
+        cell.errors,
+        cell.nan,
+        cell.collapsed,
+        cell.oversaturated,
+        cell.diverged,
+        fmt_opt(cell.psnr_min),
+        fmt_opt(cell.psnr_median),
+        fmt_opt(cell.psnr_max),
+        cell.seconds_median,
+        cell.paths_needed_median
+    );
 }
 
 fn fmt_opt(v: Option<f64>) -> String {

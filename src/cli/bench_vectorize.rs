@@ -6,14 +6,15 @@
 //! With `--rd`, a rate–distortion run over image sets against several peers instead
 //! ([`super::bench_rd`]).
 
-use super::CliError;
 use super::vectorize::load_input;
+use super::{CliError, ResultExt};
 use crate::image::{Image, psnr};
+use crate::pipeline::Preset;
 use crate::progress::{CancelToken, NullSink};
 use crate::stages::live::tracer::{TracerSetting, render_svg, trace};
-use crate::stages::live::{self, InitMode, LiveConfig, PathBudget, Preset};
+use crate::stages::live::{self, InitMode, LiveConfig, PathBudget};
 use serde::Serialize;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 #[derive(clap::Args, Debug, Clone)]
@@ -24,6 +25,7 @@ pub struct BenchVectorizeArgs {
     /// Path budgets for LIVE and the tuned vtracer setting.
     #[arg(long, default_value = "16,32,64")]
     pub paths: String,
+    /// LIVE settings of this preset (draft, fast, balanced or paper; `quality` is paper).
     #[arg(long, value_enum, default_value = "balanced")]
     pub preset: Preset,
     /// Also run `--paths auto`.
@@ -77,18 +79,19 @@ pub struct Row {
     pub svg_bytes_mean: f64,
 }
 
-fn measure(
+/// Times `run` (an SVG and its path count) and scores its SVG against `target`.
+fn measure<E: Into<anyhow::Error>>(
     name: &str,
     method: &str,
     budget: usize,
     target: &Image,
-    run: impl FnOnce() -> Result<(String, usize), String>,
+    run: impl FnOnce() -> Result<(String, usize), E>,
 ) -> Result<Sample, CliError> {
     let t0 = Instant::now();
-    let (svg, paths) = run().map_err(|e| CliError::Other(anyhow::anyhow!("{name}: {e}")))?;
+    let (svg, paths) = run().failed(|| name.to_string())?;
     let seconds = t0.elapsed().as_secs_f64();
-    let back = render_svg(&svg, target.width, target.height)
-        .map_err(|e| CliError::Other(anyhow::anyhow!("{name}: {method}: {e}")))?;
+    let back =
+        render_svg(&svg, target.width, target.height).failed(|| format!("{name}: {method}"))?;
     Ok(Sample {
         image: name.to_string(),
         method: method.to_string(),
@@ -122,9 +125,30 @@ pub fn run(a: BenchVectorizeArgs) -> Result<(), CliError> {
     if a.rd.rd {
         return super::bench_rd::run(&a);
     }
-    let json = a.json.is_some();
-    // A list of independent budgets, each at most the per-run path limit.
-    let budgets = live::schedule::parse_schedule(&a.paths, usize::MAX)
+    let budgets = parse_budgets(&a.paths)?;
+    let files = list_images(&a)?;
+    let mut samples = Vec::new();
+    for file in &files {
+        let name = image_name(file);
+        let target = load_input(file)?;
+        samples.extend(vtracer_samples(&name, &target, &budgets)?);
+        if !a.no_live {
+            samples.extend(live_samples(&a, &name, &target, &budgets)?);
+        }
+    }
+    let rows = summarise(&samples);
+    match &a.json {
+        Some(out) => write_json(out.as_deref(), files.len(), &rows, &samples),
+        None => {
+            print_rows(files.len(), &rows);
+            Ok(())
+        }
+    }
+}
+
+/// `--paths`: a list of independent budgets, each at most the per-run path limit.
+pub(super) fn parse_budgets(paths: &str) -> Result<Vec<usize>, CliError> {
+    let budgets = live::schedule::parse_schedule(paths, usize::MAX)
         .map_err(|e| CliError::Usage(format!("--paths: {e}")))?;
     if let Some(b) = budgets.iter().find(|&&b| b > live::MAX_PATHS) {
         return Err(CliError::Usage(format!(
@@ -132,6 +156,36 @@ pub fn run(a: BenchVectorizeArgs) -> Result<(), CliError> {
             live::MAX_PATHS
         )));
     }
+    Ok(budgets)
+}
+
+/// An image's name in the reports: its file stem.
+pub(super) fn image_name(file: &Path) -> String {
+    file.file_stem()
+        .and_then(|s| s.to_str())
+        .unwrap_or("?")
+        .to_string()
+}
+
+/// LIVE's settings of `--preset` and `--seed`, without snapshots.
+pub(super) fn live_base(a: &BenchVectorizeArgs) -> LiveConfig {
+    LiveConfig {
+        seed: a.seed,
+        snapshot_every: 0,
+        ..a.preset.live_config()
+    }
+}
+
+/// `base` with the path budget `budget`.
+pub(super) fn with_budget(base: &LiveConfig, budget: PathBudget) -> LiveConfig {
+    LiveConfig {
+        budget,
+        ..base.clone()
+    }
+}
+
+/// The PNGs of `--images` in name order (the first `--limit`); none is a usage error.
+fn list_images(a: &BenchVectorizeArgs) -> Result<Vec<PathBuf>, CliError> {
     let mut files: Vec<PathBuf> = std::fs::read_dir(&a.images)
         .map_err(|e| CliError::Usage(format!("cannot read {}: {e}", a.images.display())))?
         .filter_map(|e| e.ok().map(|e| e.path()))
@@ -147,152 +201,143 @@ pub fn run(a: BenchVectorizeArgs) -> Result<(), CliError> {
             a.images.display()
         )));
     }
-    let mut samples = Vec::new();
+    Ok(files)
+}
+
+/// vtracer's defaults, its polygon mode, and the grid setting tuned per budget.
+fn vtracer_samples(name: &str, target: &Image, budgets: &[usize]) -> Result<Vec<Sample>, CliError> {
+    let vt = |s: TracerSetting| {
+        move || {
+            trace(target, &s)
+                .map(|t| (t.path_count(), t.svg))
+                .map(|(n, s)| (s, n))
+                .map_err(anyhow::Error::msg)
+        }
+    };
+    let polygon = TracerSetting {
+        polygon: true,
+        ..TracerSetting::default()
+    };
+    let mut out = vec![
+        measure(
+            name,
+            "vtracer-default",
+            0,
+            target,
+            vt(TracerSetting::default()),
+        )?,
+        measure(name, "vtracer-polygon", 0, target, vt(polygon))?,
+    ];
+    // Tuned: per image and budget, the grid setting with the best PSNR among those with at
+    // most `budget` paths (or the fewest paths if none fits). Seconds are for that single
+    // trace, not the search.
+    let grid: Vec<Sample> = tuning_grid()
+        .into_iter()
+        .map(|s| measure(name, &s.label(), 0, target, vt(s)))
+        .collect::<Result<_, _>>()?;
+    for &b in budgets {
+        let best = grid
+            .iter()
+            .filter(|s| s.paths <= b)
+            .max_by(|x, y| x.psnr.total_cmp(&y.psnr))
+            .or_else(|| grid.iter().min_by_key(|s| s.paths));
+        if let Some(best) = best {
+            out.push(Sample {
+                method: "vtracer-tuned".into(),
+                budget: b,
+                ..best.clone()
+            });
+        }
+    }
+    Ok(out)
+}
+
+/// LIVE at each budget (and from vtracer's trace with `--vtracer-init`, `auto` with `--auto`).
+fn live_samples(
+    a: &BenchVectorizeArgs,
+    name: &str,
+    target: &Image,
+    budgets: &[usize],
+) -> Result<Vec<Sample>, CliError> {
+    let base = live_base(a);
+    let mut runs: Vec<(&str, usize, LiveConfig)> = Vec::new();
+    for &b in budgets {
+        let fixed = with_budget(&base, PathBudget::fixed(b));
+        runs.push(("live", b, fixed.clone()));
+        if a.vtracer_init {
+            let init = LiveConfig {
+                init: InitMode::Vtracer,
+                ..fixed
+            };
+            runs.push(("live-vtracer-init", b, init));
+        }
+    }
+    if a.auto {
+        runs.push(("live-auto", 0, with_budget(&base, PathBudget::auto())));
+    }
     let svg_opts = crate::svg::SvgOptions {
         precision: a.precision,
         ..Default::default()
     };
-    for file in &files {
-        let name = file
-            .file_stem()
-            .and_then(|s| s.to_str())
-            .unwrap_or("?")
-            .to_string();
-        let target = load_input(file)?;
-        let tref = &target;
-        let vt = |s: TracerSetting| {
-            move || {
-                trace(tref, &s)
-                    .map(|t| (t.path_count(), t.svg))
-                    .map(|(n, s)| (s, n))
-            }
-        };
-        samples.push(measure(
-            &name,
-            "vtracer-default",
-            0,
-            &target,
-            vt(TracerSetting::default()),
-        )?);
-        samples.push(measure(
-            &name,
-            "vtracer-polygon",
-            0,
-            &target,
-            vt(TracerSetting {
-                polygon: true,
-                ..TracerSetting::default()
-            }),
-        )?);
-        // Tuned: per image and budget, the grid setting with the best PSNR among those with at
-        // most `budget` paths (or the fewest paths if none fits). Seconds are for that single
-        // trace, not the search.
-        let grid: Vec<Sample> = tuning_grid()
-            .into_iter()
-            .map(|s| measure(&name, &s.label(), 0, &target, vt(s)))
-            .collect::<Result<_, _>>()?;
-        for &b in &budgets {
-            let best = grid
-                .iter()
-                .filter(|s| s.paths <= b)
-                .max_by(|x, y| x.psnr.total_cmp(&y.psnr))
-                .or_else(|| grid.iter().min_by_key(|s| s.paths));
-            if let Some(best) = best {
-                let mut s = best.clone();
-                s.method = "vtracer-tuned".into();
-                s.budget = b;
-                samples.push(s);
-            }
-        }
-        if a.no_live {
-            continue;
-        }
-        let mut live_runs: Vec<(String, usize, LiveConfig)> = Vec::new();
-        let base = LiveConfig {
-            seed: a.seed,
-            snapshot_every: 0,
-            ..LiveConfig::preset(a.preset)
-        };
-        for &b in &budgets {
-            live_runs.push((
-                "live".into(),
-                b,
-                LiveConfig {
-                    budget: PathBudget::fixed(b),
-                    ..base.clone()
-                },
-            ));
-            if a.vtracer_init {
-                live_runs.push((
-                    "live-vtracer-init".into(),
-                    b,
-                    LiveConfig {
-                        budget: PathBudget::fixed(b),
-                        init: InitMode::Vtracer,
-                        ..base.clone()
-                    },
-                ));
-            }
-        }
-        if a.auto {
-            live_runs.push((
-                "live-auto".into(),
-                0,
-                LiveConfig {
-                    budget: PathBudget::auto(),
-                    ..base.clone()
-                },
-            ));
-        }
-        for (method, b, cfg) in live_runs {
-            let s = measure(&name, &method, b, &target, || {
-                let r = live::vectorize(&target, &cfg, &NullSink, &CancelToken::new())
-                    .map_err(|e| e.to_string())?;
-                Ok((crate::svg::to_svg(&r.scene, &svg_opts), r.paths))
-            })?;
-            if !json {
-                eprintln!(
-                    "{name:50} {method:18} budget {b:3} paths {:3} psnr {:6.2} bytes {:6} {:.2} s",
-                    s.paths, s.psnr, s.svg_bytes, s.seconds
-                );
-            }
-            samples.push(s);
-        }
-    }
-    let rows = summarise(&samples);
-    if json {
-        let out = serde_json::json!({
-            "images": files.len(),
-            "rows": rows.iter().map(|r| serde_json::json!({
-                "method": r.method,
-                "paths": if r.budget > 0 { r.budget } else { r.paths.round() as usize },
-                "paths_mean": r.paths,
-                "psnr_mean": r.psnr_mean,
-                "seconds_mean": r.seconds_mean,
-                "svg_bytes_mean": r.svg_bytes_mean,
-            })).collect::<Vec<_>>(),
-            "per_image": samples,
-        });
-        match &a.json {
-            Some(Some(path)) => std::fs::write(path, format!("{out}\n")).map_err(|e| {
-                CliError::Other(anyhow::anyhow!("cannot write {}: {e}", path.display()))
-            })?,
-            _ => println!("{out}"),
-        }
-    } else {
-        println!("{} images", files.len());
-        println!(
-            "{:20} {:>6} {:>10} {:>9} {:>10} {:>12}",
-            "method", "budget", "paths_mean", "psnr_dB", "seconds", "svg_bytes"
-        );
-        for r in &rows {
-            println!(
-                "{:20} {:>6} {:>10.1} {:>9.2} {:>10.3} {:>12.0}",
-                r.method, r.budget, r.paths, r.psnr_mean, r.seconds_mean, r.svg_bytes_mean
+    let mut out = Vec::new();
+    for (method, b, cfg) in runs {
+        let s = measure(name, method, b, target, || {
+            live::vectorize(target, &cfg, &NullSink, &CancelToken::new())
+                .map(|r| (crate::svg::to_svg(&r.scene, &svg_opts), r.paths))
+        })?;
+        if a.json.is_none() {
+            eprintln!(
+                "{name:50} {method:18} budget {b:3} paths {:3} psnr {:6.2} bytes {:6} {:.2} s",
+                s.paths, s.psnr, s.svg_bytes, s.seconds
             );
         }
+        out.push(s);
     }
-    Ok(())
+    Ok(out)
+}
+
+/// The JSON report, on stdout or written to `path`.
+fn write_json(
+    path: Option<&Path>,
+    images: usize,
+    rows: &[Row],
+    samples: &[Sample],
+) -> Result<(), CliError> {
+    let out = serde_json::json!({
+        "images": images,
+        "rows": rows.iter().map(|r| serde_json::json!({
+            "method": r.method,
+            "paths": if r.budget > 0 { r.budget } else { r.paths.round() as usize },
+            "paths_mean": r.paths,
+            "psnr_mean": r.psnr_mean,
+            "seconds_mean": r.seconds_mean,
+            "svg_bytes_mean": r.svg_bytes_mean,
+        })).collect::<Vec<_>>(),
+        "per_image": samples,
+    });
+    match path {
+        Some(path) => std::fs::write(path, format!("{out}\n"))
+            .failed(|| format!("cannot write {}", path.display())),
+        None => {
+            println!("{out}");
+            Ok(())
+        }
+    }
+}
+
+/// The text table: one row per method and budget.
+fn print_rows(images: usize, rows: &[Row]) {
+    println!("{images} images");
+    println!(
+        "{:20} {:>6} {:>10} {:>9} {:>10} {:>12}",
+        "method", "budget", "paths_mean", "psnr_dB", "seconds", "svg_bytes"
+    );
+    for r in rows {
+        println!(
+            "{:20} {:>6} {:>10.1} {:>9.2} {:>10.3} {:>12.0}",
+            r.method, r.budget, r.paths, r.psnr_mean, r.seconds_mean, r.svg_bytes_mean
+        );
+    }
 }
 
 /// Groups samples by (method, budget) in first-seen order and averages them.

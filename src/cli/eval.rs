@@ -7,15 +7,15 @@
 //! samples themselves (K per caption, the rerank scorer's pick kept, saved as `NNNN.png`): the
 //! raster row of the paper's Table 1, the ceiling the vector methods are measured against.
 
-use super::CliError;
-use super::tuning::SdsTuningArgs;
+use super::request_args::{ModelArgs, RequestArgs};
+use super::{CliError, ResultExt};
 use crate::eval::clip::{
     EvalError, EvalReport, evaluate, evaluate_svg_dir, format_table, read_prompts, svg_name,
 };
 use crate::models::scorer::Scorer;
 use crate::pipeline::{
-    DefaultExecutor, Executor, JobContext, Limits, Method, ModelDirs, PipelineError, PlanRequest,
-    Preset, RunInput, Style,
+    DefaultExecutor, Executor, JobContext, Limits, Method, PlanRequest, Preset, RunInput, RunPlan,
+    Style,
 };
 use crate::progress::{CancelToken, NullSink};
 use serde::Serialize;
@@ -33,9 +33,10 @@ pub struct EvalArgs {
     #[arg(
         long = "method",
         conflicts_with = "svgs",
-        required_unless_present = "svgs"
+        required_unless_present = "svgs",
+        value_parser = EvalMethod::parse
     )]
-    pub methods: Vec<String>,
+    pub methods: Vec<EvalMethod>,
     /// Evaluate already generated SVGs `0001.svg`, `0002.svg`, ... in this directory.
     #[arg(long)]
     pub svgs: Option<PathBuf>,
@@ -57,44 +58,17 @@ pub struct EvalArgs {
     /// --method: where the SVGs go (OUT_DIR/METHOD/0001.svg, ...).
     #[arg(long, default_value = "eval-out")]
     pub out_dir: PathBuf,
-    /// --method: style (iconography, pixel-art, sketch).
-    #[arg(long, default_value = "iconography")]
-    pub style: String,
-    /// --method: preset (draft, fast, balanced, paper); omitted steps/paths/samples are its.
-    #[arg(long, default_value = "balanced")]
-    pub preset: String,
-    /// --method: Stable Diffusion model directory (diffusers layout).
-    #[arg(long, conflicts_with = "teacher")]
-    pub model: Option<PathBuf>,
-    /// --method: where the diffusion model runs (cpu, cuda, cuda:N; CUDA needs the `cuda`
-    /// feature).
-    #[arg(long, default_value = "cpu")]
-    pub device: String,
-    /// --method: `analytic:DIR`, the analytic TEST teacher over the PNG targets in DIR.
-    #[arg(long)]
-    pub teacher: Option<String>,
+    /// --method: the teacher (without --model or --teacher, the embedded default model).
+    #[command(flatten)]
+    pub model: ModelArgs,
     /// --method: CLIP directory used to keep the best of the K samples (sd_live*); without it
     /// the first sample is kept. (Not one of the evaluation scorers, to keep the metric fair.)
     #[arg(long)]
     pub rerank_scorer: Option<PathBuf>,
-    /// --method: SDS steps [default: the preset's].
-    #[arg(long)]
-    pub steps: Option<u32>,
-    /// --method: paths [default: the preset's].
-    #[arg(long)]
-    pub paths: Option<u32>,
-    /// --method: samples K [default: the preset's].
-    #[arg(long)]
-    pub samples: Option<u32>,
-    /// --method: seed of caption line N is SEED + N - 1.
-    #[arg(long, default_value_t = 0)]
-    pub seed: u64,
-    /// --method: sample from noise only (no retrieved icons as starting points).
-    #[arg(long)]
-    pub no_retrieval: bool,
-    /// --method: the SDS stage's settings (a sweep over guidance, timesteps, render size).
+    /// --method: the request (style, preset, budget, seed, SDS settings); the seed of caption
+    /// line N is SEED + N - 1.
     #[command(flatten)]
-    pub tuning: SdsTuningArgs,
+    pub request: RequestArgs,
 }
 
 fn map_err(e: EvalError) -> CliError {
@@ -102,15 +76,6 @@ fn map_err(e: EvalError) -> CliError {
         EvalError::Clip(c) => CliError::Other(anyhow::Error::new(c)),
         EvalError::Scorer(c) => CliError::Other(anyhow::Error::new(c)),
         other => CliError::Usage(other.to_string()),
-    }
-}
-
-fn pipeline_err(e: PipelineError) -> CliError {
-    match e {
-        PipelineError::InvalidInput(m) | PipelineError::ModelsNotConfigured(m) => {
-            CliError::Usage(m)
-        }
-        other => CliError::Other(anyhow::Error::new(other)),
     }
 }
 
@@ -159,14 +124,7 @@ pub fn run(args: EvalArgs) -> Result<(), CliError> {
 }
 
 fn to_json<T: Serialize>(v: &T) -> Result<String, CliError> {
-    serde_json::to_string_pretty(v).map_err(|e| CliError::Other(e.into()))
-}
-
-fn parse_enum<T: serde::de::DeserializeOwned>(what: &str, s: &str) -> Result<T, CliError> {
-    serde_json::from_value(serde_json::Value::String(
-        s.to_ascii_lowercase().replace('-', "_"),
-    ))
-    .map_err(|_| CliError::Usage(format!("unknown {what} {s:?}")))
+    serde_json::to_string_pretty(v).failed(|| "encoding the report".into())
 }
 
 /// Generates `dir/0001.svg`… for every method with the shared pipeline, then scores each
@@ -176,27 +134,40 @@ fn generate_and_evaluate(
     captions: &[String],
     scorers: &[Scorer],
 ) -> Result<MethodsReport, CliError> {
-    let methods: Vec<EvalMethod> = args
-        .methods
-        .iter()
-        .map(|m| EvalMethod::parse(m))
-        .collect::<Result<_, _>>()?;
-    let style: Style = parse_enum("style", &args.style)?;
-    let preset: Preset = args.preset.parse().map_err(CliError::Usage)?;
-    let analytic_dir = match &args.teacher {
-        None => None,
-        Some(t) => Some(super::analytic_teacher_dir(t)?.to_path_buf()),
-    };
-    // Without --model / --teacher: the embedded default model (and its scorer for reranking).
-    let dirs = ModelDirs {
-        sd_dir: args.model.clone(),
-        clip_dir: args.rerank_scorer.clone(),
-        taesd_dir: None,
-        encoder: Default::default(),
-        device: super::parse_device(&args.device)?,
-        analytic_dir,
+    let exec = executor(args)?;
+    let mut reports = Vec::with_capacity(args.methods.len());
+    for method in &args.methods {
+        let dir = args.out_dir.join(method.as_str());
+        std::fs::create_dir_all(&dir).failed(|| dir.display().to_string())?;
+        let run = MethodRun {
+            args,
+            exec: &exec,
+            captions,
+            scorers,
+            dir: &dir,
+        };
+        reports.push(match *method {
+            EvalMethod::Samples => run.samples()?,
+            EvalMethod::Pipeline(m) => run.pipeline(m)?,
+        });
     }
-    .or_default_model(crate::pipeline::default_model_dir().map_err(CliError::Usage)?);
+    Ok(MethodsReport {
+        prompts: captions.len(),
+        style: args.request.style,
+        preset: args.request.preset,
+        methods: reports,
+    })
+}
+
+/// The executor of `--method`: `--model`, `--teacher`, else the embedded default model (and
+/// its scorer for reranking), checked ready for text runs.
+fn executor(args: &EvalArgs) -> Result<DefaultExecutor, CliError> {
+    let default_model =
+        crate::pipeline::default_model_dir().map_err(|e| CliError::Usage(e.to_string()))?;
+    let dirs = args
+        .model
+        .model_dirs(args.rerank_scorer.clone())
+        .or_default_model(default_model);
     if dirs.sd_dir.is_none() && dirs.analytic_dir.is_none() {
         return Err(CliError::Usage(
             "--method generates SVGs: give --model DIR (Stable Diffusion) or --teacher analytic:DIR \
@@ -205,82 +176,133 @@ fn generate_and_evaluate(
         ));
     }
     let exec = DefaultExecutor::new(dirs);
-    exec.text_ready().map_err(CliError::Usage)?;
-    let mut reports = Vec::with_capacity(methods.len());
-    for method in &methods {
-        let name = method.as_str().to_string();
-        let dir = args.out_dir.join(&name);
-        std::fs::create_dir_all(&dir)
-            .map_err(|e| CliError::Other(anyhow::anyhow!("{}: {e}", dir.display())))?;
-        let method = match method {
-            EvalMethod::Samples => {
-                reports.push(sample_and_evaluate(
-                    args, &exec, style, preset, captions, scorers, &dir,
-                )?);
-                continue;
-            }
-            EvalMethod::Pipeline(m) => m,
-        };
+    exec.text_ready()
+        .map_err(|e| CliError::Usage(e.to_string()))?;
+    Ok(exec)
+}
+
+/// One method's row of `--method`: every caption generated into `dir`, then scored.
+struct MethodRun<'a> {
+    args: &'a EvalArgs,
+    exec: &'a DefaultExecutor,
+    captions: &'a [String],
+    scorers: &'a [Scorer],
+    dir: &'a Path,
+}
+
+impl MethodRun<'_> {
+    /// `dir/NNNN.svg` for every caption by `method`, scored like `--svgs`, with the mean
+    /// generation seconds.
+    fn pipeline(&self, method: Method) -> Result<EvalReport, CliError> {
+        let name = method.as_str();
         let mut seconds = 0.0;
-        for (i, caption) in captions.iter().enumerate() {
+        for (i, caption) in self.captions.iter().enumerate() {
             let line = i + 1;
-            let plan = exec
-                .plan(
-                    &request(args, *method, style, preset, caption, line),
-                    &Limits::default(),
-                )
-                .map_err(|e| CliError::Usage(format!("line {line}: {e}")))?;
+            let plan = self.plan(method, caption, line)?;
             let t0 = std::time::Instant::now();
             let input = RunInput {
                 caption: Some(caption.clone()),
                 ..RunInput::default()
             };
-            let out = exec
-                .run_plan(&plan, &input, &JobContext::detached(CancelToken::new()))
-                .map_err(pipeline_err)?;
+            let out =
+                self.exec
+                    .run_plan(&plan, &input, &JobContext::detached(CancelToken::new()))?;
             // The pipeline's own time (model loading excluded); wall time as a fallback.
             let secs = out
                 .report
                 .seconds
                 .unwrap_or_else(|| t0.elapsed().as_secs_f64());
             seconds += secs;
-            let path = dir.join(svg_name(line));
+            let path = self.dir.join(svg_name(line));
             write(&path, &out.svg)?;
+            let n = self.captions.len();
             eprintln!(
-                "{name} {line}/{}: {} paths, {secs:.1} s -> {}",
-                captions.len(),
+                "{name} {line}/{n}: {} paths, {secs:.1} s -> {}",
                 out.paths,
                 path.display()
             );
         }
-        let mut report = evaluate_svg_dir(captions, &dir, scorers).map_err(map_err)?;
-        report.method = name;
-        report.mean_seconds = Some(seconds / captions.len().max(1) as f64);
-        reports.push(report);
+        let mut report =
+            evaluate_svg_dir(self.captions, self.dir, self.scorers).map_err(map_err)?;
+        report.method = name.to_string();
+        report.mean_seconds = Some(seconds / self.captions.len().max(1) as f64);
+        Ok(report)
     }
-    Ok(MethodsReport {
-        prompts: captions.len(),
-        style,
-        preset,
-        methods: reports,
-    })
+
+    /// `--method samples`: K raster samples per caption from the same model and preset as
+    /// `sd_live*`, the rerank scorer's pick kept (`dir/NNNN.png`) and scored as an image.
+    fn samples(&self) -> Result<EvalReport, CliError> {
+        let cancel = CancelToken::new();
+        let mut images = Vec::with_capacity(self.captions.len());
+        let mut seconds = 0.0;
+        for (i, caption) in self.captions.iter().enumerate() {
+            let line = i + 1;
+            let plan = self
+                .plan(Method::SdLive, caption, line)?
+                .text
+                .ok_or_else(|| CliError::Usage("samples need a text model".into()))?;
+            let k = plan.sample.as_ref().map_or(1, |s| s.samples);
+            let models = self.exec.load_models(&plan)?;
+            let t0 = std::time::Instant::now();
+            let (ranked, _) =
+                crate::pipeline::sample_ranked(&models, &plan, caption, &NullSink, &cancel)?;
+            let secs = t0.elapsed().as_secs_f64();
+            seconds += secs;
+            let path = self.dir.join(format!("{line:04}.png"));
+            let best = ranked.best_image();
+            best.save_png(&path).failed(|| path.display().to_string())?;
+            let n = self.captions.len();
+            eprintln!(
+                "samples {line}/{n}: best of {k}, {secs:.1} s -> {}",
+                path.display()
+            );
+            images.push(best.clone());
+        }
+        let mut results = Vec::with_capacity(self.scorers.len());
+        for s in self.scorers {
+            results.push(evaluate(s, self.captions, &images).map_err(map_err)?);
+        }
+        Ok(EvalReport {
+            method: "samples".into(),
+            prompts: self.captions.len(),
+            mean_paths: 0.0,
+            mean_seconds: Some(seconds / self.captions.len().max(1) as f64),
+            scorers: results,
+        })
+    }
+
+    /// The plan of caption `line` by `method`; a refused request names its line.
+    fn plan(&self, method: Method, caption: &str, line: usize) -> Result<RunPlan, CliError> {
+        self.exec
+            .plan(
+                &request(self.args, method, caption, line),
+                &Limits::default(),
+            )
+            .map_err(|e| CliError::Usage(format!("line {line}: {e}")))
+    }
 }
 
 /// A row of the evaluation table: a pipeline method, or the raster samples it starts from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum EvalMethod {
+pub enum EvalMethod {
     Pipeline(Method),
     Samples,
 }
 
+/// A `--method` that is neither a pipeline method nor `samples`.
+#[derive(Debug, thiserror::Error)]
+#[error("{0} (or `samples`)")]
+pub struct UnknownEvalMethod(String);
+
 impl EvalMethod {
-    fn parse(s: &str) -> Result<Self, CliError> {
+    /// `samples` (any case), else a pipeline method.
+    pub fn parse(s: &str) -> Result<Self, UnknownEvalMethod> {
         if s.eq_ignore_ascii_case("samples") {
             return Ok(Self::Samples);
         }
-        s.parse()
+        s.parse::<Method>()
             .map(Self::Pipeline)
-            .map_err(|e: String| CliError::Usage(format!("{e} (or `samples`)")))
+            .map_err(|e| UnknownEvalMethod(e.to_string()))
     }
 
     fn as_str(self) -> &'static str {
@@ -291,92 +313,17 @@ impl EvalMethod {
     }
 }
 
-/// `--method samples`: K raster samples per caption from the same model and preset as
-/// `sd_live*`, the rerank scorer's pick kept (`dir/NNNN.png`) and scored as an image.
-#[allow(clippy::too_many_arguments)]
-fn sample_and_evaluate(
-    args: &EvalArgs,
-    exec: &DefaultExecutor,
-    style: Style,
-    preset: Preset,
-    captions: &[String],
-    scorers: &[Scorer],
-    dir: &Path,
-) -> Result<EvalReport, CliError> {
-    let cancel = CancelToken::new();
-    let plan_of = |caption: &str, line: usize| {
-        exec.plan(
-            &request(args, Method::SdLive, style, preset, caption, line),
-            &Limits::default(),
-        )
-        .map_err(|e| CliError::Usage(format!("line {line}: {e}")))?
-        .text
-        .ok_or_else(|| CliError::Usage("samples need a text model".into()))
-    };
-    let mut images = Vec::with_capacity(captions.len());
-    let mut seconds = 0.0;
-    for (i, caption) in captions.iter().enumerate() {
-        let line = i + 1;
-        let plan = plan_of(caption, line)?;
-        let k = plan.sample.as_ref().map_or(1, |s| s.samples);
-        let models = exec.load_models(&plan).map_err(pipeline_err)?;
-        let t0 = std::time::Instant::now();
-        let (ranked, _) =
-            crate::pipeline::sample_ranked(&models, &plan, caption, &NullSink, &cancel)
-                .map_err(pipeline_err)?;
-        let secs = t0.elapsed().as_secs_f64();
-        seconds += secs;
-        let path = dir.join(format!("{line:04}.png"));
-        ranked
-            .best_image()
-            .save_png(&path)
-            .map_err(|e| CliError::Other(anyhow::anyhow!("{}: {e}", path.display())))?;
-        eprintln!(
-            "samples {line}/{}: best of {k}, {secs:.1} s -> {}",
-            captions.len(),
-            path.display()
-        );
-        images.push(ranked.best_image().clone());
-    }
-    let mut results = Vec::with_capacity(scorers.len());
-    for s in scorers {
-        results.push(evaluate(s, captions, &images).map_err(map_err)?);
-    }
-    Ok(EvalReport {
-        method: "samples".into(),
-        prompts: captions.len(),
-        mean_paths: 0.0,
-        mean_seconds: Some(seconds / captions.len().max(1) as f64),
-        scorers: results,
-    })
-}
-
 /// The request `eval --method` makes for caption `line` (seeds advance by line).
-fn request(
-    args: &EvalArgs,
-    method: Method,
-    style: Style,
-    preset: Preset,
-    caption: &str,
-    line: usize,
-) -> PlanRequest {
+fn request(args: &EvalArgs, method: Method, caption: &str, line: usize) -> PlanRequest {
+    let r = args.request.plan_request(caption, method);
     PlanRequest {
-        method,
-        style,
-        preset,
-        paths: args.paths,
-        steps: args.steps,
-        samples: args.samples,
-        seed: args.seed.wrapping_add(line as u64 - 1),
-        retrieval: !args.no_retrieval,
-        tuning: args.tuning.tuning(None),
-        ..PlanRequest::text(caption)
+        seed: r.seed.wrapping_add(line as u64 - 1),
+        ..r
     }
 }
 
 fn write(path: &Path, text: &str) -> Result<(), CliError> {
-    std::fs::write(path, text)
-        .map_err(|e| CliError::Other(anyhow::anyhow!("{}: {e}", path.display())))
+    std::fs::write(path, text).failed(|| path.display().to_string())
 }
 
 /// Table 1: one row per method (paths and seconds per SVG, then R-Precision and similarity per
@@ -464,27 +411,13 @@ mod tests {
             "96",
             "--no-augment",
         ]);
-        let r = request(
-            &a,
-            Method::SdLiveSds,
-            Style::Iconography,
-            Preset::Balanced,
-            "a cat",
-            3,
-        );
+        let r = request(&a, Method::SdLiveSds, "a cat", 3);
         assert_eq!(r.tuning.guidance, Some(30.0));
         assert_eq!((r.tuning.t_min, r.tuning.t_max), (Some(200), Some(800)));
         assert_eq!(r.tuning.size, Some(96));
         assert_eq!(r.tuning.augment, Some(false));
         assert_eq!(r.seed, 2, "line 3 of seed 0");
-        let plain = request(
-            &args(&[]),
-            Method::SdLiveSds,
-            Style::Iconography,
-            Preset::Balanced,
-            "a cat",
-            1,
-        );
+        let plain = request(&args(&[]), Method::SdLiveSds, "a cat", 1);
         assert_eq!(plain.tuning, Default::default());
         assert!(
             Cli::try_parse_from([

@@ -7,11 +7,11 @@
 //! `VECTORFUSION_MODELS_SD_DIR`), the embedded default model is used ([`default_model_dir`]:
 //! `VF_DEFAULT_MODEL`, else `models/vf-icon`), with its `scorer/` as the default scorer.
 
-use super::CliError;
-use super::tuning::SdsTuningArgs;
+use super::request_args::{ModelArgs, RequestArgs, parse_word};
+use super::{CliError, ResultExt};
 use crate::pipeline::{
-    DefaultExecutor, EncoderChoice, Executor, JobContext, JobKind, Limits, Method, ModelDirs,
-    PipelineError, PlanRequest, Preset, RunInput, SpecError, StartKind, Style, default_model_dir,
+    DefaultExecutor, EncoderChoice, Executor, JobContext, Limits, Method, ModelDirs, PlanRequest,
+    RunInput, StartKind, default_model_dir,
 };
 use crate::progress::{CancelToken, Progress, Stage};
 use crate::scene::MAX_PATHS;
@@ -26,62 +26,29 @@ pub struct GenerateArgs {
     pub caption: String,
     /// Generation method: scratch, sd_live or sd_live_sds [default: sd_live_sds with a
     /// diffusion model (the paper's full pipeline), scratch with `--teacher`].
-    #[arg(long)]
-    pub method: Option<String>,
-    /// Preset: draft, fast, balanced or paper (resolution, steps, paths, samples, sampler
-    /// steps, LIVE iterations; `default` and `quality` are older names of balanced and paper)
-    /// [default: balanced].
-    #[arg(long)]
-    pub preset: Option<String>,
+    #[arg(long, value_parser = parse_word::<Method>)]
+    pub method: Option<Method>,
     /// CLIP scorer directory used to keep the best of the sampled images.
     #[arg(long)]
     pub scorer: Option<PathBuf>,
-    /// Images sampled for sd_live / sd_live_sds (K).
-    #[arg(long)]
-    pub samples: Option<u32>,
     /// Start from this PNG/JPEG: trace it with LIVE, then fine-tune it to the caption with SDS.
     #[arg(long, conflicts_with = "svg")]
     pub image: Option<PathBuf>,
     /// Start from this SVG: import it, then fine-tune it to the caption with SDS.
     #[arg(long)]
     pub svg: Option<PathBuf>,
-    /// Style: iconography, pixel_art, sketch, low_poly or painting (`pixel-art`, `low-poly`,
-    /// `icon`, `line` are accepted too).
-    #[arg(long, default_value = "iconography")]
-    pub style: String,
-    /// Stable Diffusion model directory (diffusers layout).
-    #[arg(long, conflicts_with = "teacher")]
-    pub model: Option<PathBuf>,
-    /// `analytic:DIR`: the analytic TEST teacher built from the PNG targets in DIR.
-    #[arg(long)]
-    pub teacher: Option<String>,
+    #[command(flatten)]
+    pub model: ModelArgs,
     /// SDS encoder of Stable Diffusion models: vae, taesd or auto (TAESD when --taesd or a
     /// taesd/ folder in or beside the model exists and the preset is not paper). Pixel-space
     /// models ignore it.
-    #[arg(long, default_value = "auto")]
-    pub encoder: String,
+    #[arg(long, default_value = "auto", value_parser = parse_word::<EncoderChoice>)]
+    pub encoder: EncoderChoice,
     /// TAESD directory (`madebyollin/taesd` diffusers layout) for `--encoder taesd|auto`.
     #[arg(long)]
     pub taesd: Option<PathBuf>,
-    /// Where the diffusion model runs: cpu, cuda or cuda:N (CUDA needs a build with the `cuda`
-    /// feature).
-    #[arg(long, default_value = "cpu")]
-    pub device: String,
-    /// SDS steps [default: the preset's].
-    #[arg(long)]
-    pub steps: Option<u32>,
-    /// Number of paths or strokes (pixel art is always a 32x32 grid) [default: the preset's].
-    #[arg(long)]
-    pub paths: Option<u32>,
-    #[arg(long, default_value_t = 0)]
-    pub seed: u64,
-    /// Sample from noise only: no retrieved training icons as starting points (the embedded
-    /// model starts a share of its K samples, `_retrieval_share`, from the icons nearest to the
-    /// caption).
-    #[arg(long)]
-    pub no_retrieval: bool,
     #[command(flatten)]
-    pub tuning: SdsTuningArgs,
+    pub request: RequestArgs,
     #[command(flatten)]
     pub vector: super::vector_args::VectorArgs,
     /// Output SVG path.
@@ -99,13 +66,14 @@ pub struct GenerateArgs {
 /// embedded default model (with its `scorer/`), unless `--teacher` is given. Returns the model
 /// directory and the default scorer that goes with it.
 fn model_and_scorer(args: &GenerateArgs) -> Result<(Option<PathBuf>, Option<PathBuf>), CliError> {
-    if args.model.is_some() || args.teacher.is_some() {
-        return Ok((args.model.clone(), None));
+    if args.model.model.is_some() || args.model.teacher.is_some() {
+        return Ok((args.model.model.clone(), None));
     }
     let cfg = crate::config::Config::load(None).map_err(|e| CliError::Usage(e.to_string()))?;
     let mut dirs = cfg.model_dirs();
     if dirs.sd_dir.is_none() {
-        dirs = dirs.or_default_model(default_model_dir().map_err(CliError::Usage)?);
+        let default = default_model_dir().map_err(|e| CliError::Usage(e.to_string()))?;
+        dirs = dirs.or_default_model(default);
     }
     Ok((dirs.sd_dir, dirs.clip_dir))
 }
@@ -117,19 +85,6 @@ fn no_model() -> CliError {
         crate::pipeline::EMBEDDED_MODEL,
         crate::pipeline::DEFAULT_MODEL_ENV
     ))
-}
-
-pub(crate) fn pipeline_err(e: PipelineError) -> CliError {
-    match e {
-        PipelineError::InvalidInput(m) | PipelineError::ModelsNotConfigured(m) => {
-            CliError::Usage(m)
-        }
-        other => CliError::Other(anyhow::Error::new(other)),
-    }
-}
-
-pub(crate) fn spec_err(e: SpecError) -> CliError {
-    CliError::Usage(format!("--{}: {}", e.field.replace('_', "-"), e.reason))
 }
 
 /// Limits of a command-line run: only what the stages themselves cap.
@@ -145,20 +100,22 @@ pub(crate) fn cli_limits() -> Limits {
 /// The model directories of a command-line run (`--model`/`--teacher`, `--scorer`, `--taesd`,
 /// `--encoder`, `--device`, else the configured or embedded model).
 fn model_dirs(args: &GenerateArgs) -> Result<ModelDirs, CliError> {
-    let encoder: EncoderChoice = args.encoder.parse().map_err(CliError::Usage)?;
     let (model, default_scorer) = model_and_scorer(args)?;
-    let analytic_dir = match (&model, &args.teacher) {
-        (Some(_), _) => None,
-        (None, Some(spec)) => Some(super::analytic_teacher_dir(spec)?.to_path_buf()),
-        (None, None) => return Err(no_model()),
-    };
+    if model.is_none() && args.model.teacher.is_none() {
+        return Err(no_model());
+    }
     Ok(ModelDirs {
-        sd_dir: model,
-        clip_dir: args.scorer.clone().or(default_scorer),
+        sd_dir: model.clone(),
         taesd_dir: args.taesd.clone(),
-        encoder,
-        device: super::parse_device(&args.device)?,
-        analytic_dir,
+        encoder: args.encoder,
+        // A model (given or configured) is the teacher; the test teacher only without one.
+        analytic_dir: model
+            .is_none()
+            .then(|| args.model.teacher.clone())
+            .flatten(),
+        ..args
+            .model
+            .model_dirs(args.scorer.clone().or(default_scorer))
     })
 }
 
@@ -196,67 +153,23 @@ fn progress_sink(snap_dir: Option<PathBuf>) -> (ProgressBar, impl Fn(Progress) +
 }
 
 pub fn run(args: GenerateArgs) -> Result<(), CliError> {
-    let method: Method = match &args.method {
-        Some(m) => m.parse().map_err(CliError::Usage)?,
-        None if args.teacher.is_some() => Method::Scratch,
-        None => Method::SdLiveSds,
-    };
-    let style: Style = args.style.parse().map_err(CliError::Usage)?;
-    let preset: Preset = match &args.preset {
-        Some(p) => p.parse().map_err(CliError::Usage)?,
-        None => Preset::default(),
-    };
-    let dirs = model_dirs(&args)?;
-    // The retrieval index is installed on first use, as the MiniLM weights are (the service
-    // never downloads; `vectorfusion setup` does both up front).
-    if let Some(dir) = &dirs.sd_dir {
-        let rloc = crate::retrieval::RetrievalLocations::from_env();
-        if !args.no_retrieval
-            && method != Method::Scratch
-            && matches!(crate::retrieval::pinned_packages(dir), Ok(Some(_)))
-            && rloc.load(dir).is_err()
-            && !rloc.offline
-            && let Err(e) = super::setup::install_retrieval(dir, &rloc)
-        {
-            eprintln!("warning: no retrieval index ({e}); sampling from noise only");
-        }
-    }
-    let (start, image, svg) = if let Some(p) = &args.image {
-        let im = crate::image::Image::open(p)
-            .map_err(|e| CliError::Usage(format!("{}: {e}", p.display())))?;
-        (StartKind::Image, Some(im), None)
-    } else if let Some(p) = &args.svg {
-        let sc = crate::svg::load_scene(p)
-            .map_err(|e| CliError::Usage(format!("{}: {e}", p.display())))?;
-        (StartKind::Svg, None, Some(sc))
+    let method = args.method.unwrap_or(if args.model.teacher.is_some() {
+        Method::Scratch
     } else {
-        (StartKind::Method, None, None)
-    };
-    let request = PlanRequest {
-        kind: JobKind::Text,
-        caption: Some(args.caption.clone()),
-        start,
-        style,
-        method,
-        preset,
-        paths: args.paths,
-        steps: args.steps,
-        samples: args.samples,
-        seed: args.seed,
-        retrieval: !args.no_retrieval,
-        vector: crate::vector::VectorOptions {
-            colors: args.vector.color_plan()?,
-            ..Default::default()
-        },
-        tuning: args.tuning.tuning(args.snapshot_every),
-    };
+        Method::SdLiveSds
+    });
+    let dirs = model_dirs(&args)?;
+    if !args.request.no_retrieval && method != Method::Scratch {
+        install_retrieval(&dirs);
+    }
+    let (request, input) = request_and_input(&args, method)?;
     let exec = DefaultExecutor::with_downloads(dirs);
-    let plan = exec.plan(&request, &cli_limits()).map_err(spec_err)?;
+    let plan = exec.plan(&request, &cli_limits())?;
     let text = plan
         .text
         .as_ref()
         .ok_or_else(|| CliError::Usage("the request resolved to no text run".into()))?;
-    let models = exec.load_models(text).map_err(pipeline_err)?;
+    let models = exec.load_models(text)?;
     eprintln!("teacher: {}", models.teacher().name());
     if let Some(d) = &args.snapshots {
         std::fs::create_dir_all(d)
@@ -270,12 +183,7 @@ pub fn run(args: GenerateArgs) -> Result<(), CliError> {
         Box::new(|_| Ok(())),
         None,
     );
-    let input = RunInput {
-        caption: Some(args.caption.clone()),
-        image,
-        svg,
-    };
-    let out = exec.run_plan(&plan, &input, &ctx).map_err(pipeline_err)?;
+    let out = exec.run_plan(&plan, &input, &ctx)?;
     bar.finish_and_clear();
     std::fs::write(&args.output, &out.svg)
         .with_context(|| format!("cannot write {}", args.output.display()))?;
@@ -288,4 +196,52 @@ pub fn run(args: GenerateArgs) -> Result<(), CliError> {
     });
     println!("{summary}");
     Ok(())
+}
+
+/// Installs the retrieval index of a model that pins one and has none yet, on first use as
+/// the MiniLM weights are (the service never downloads; `vectorfusion setup` does both up
+/// front). Without it the run samples from noise only.
+fn install_retrieval(dirs: &ModelDirs) {
+    let Some(dir) = &dirs.sd_dir else {
+        return;
+    };
+    let rloc = crate::retrieval::RetrievalLocations::from_env();
+    if matches!(crate::retrieval::pinned_packages(dir), Ok(Some(_)))
+        && rloc.load(dir).is_err()
+        && !rloc.offline
+        && let Err(e) = super::setup::install_retrieval(dir, &rloc)
+    {
+        eprintln!("warning: no retrieval index ({e}); sampling from noise only");
+    }
+}
+
+/// The request of a run by `method` and its input: the caption, and the `--image` or `--svg`
+/// it starts from (a file that cannot be read is bad input).
+fn request_and_input(
+    args: &GenerateArgs,
+    method: Method,
+) -> Result<(PlanRequest, RunInput), CliError> {
+    let mut input = RunInput {
+        caption: Some(args.caption.clone()),
+        ..RunInput::default()
+    };
+    let start = if let Some(p) = &args.image {
+        input.image = Some(crate::image::Image::open(p).bad_input(|| p.display().to_string())?);
+        StartKind::Image
+    } else if let Some(p) = &args.svg {
+        input.svg = Some(crate::svg::load_scene(p).bad_input(|| p.display().to_string())?);
+        StartKind::Svg
+    } else {
+        StartKind::Method
+    };
+    let request = PlanRequest {
+        start,
+        vector: crate::vector::VectorOptions {
+            colors: args.vector.color_plan()?,
+            ..Default::default()
+        },
+        tuning: args.request.tuning.tuning(args.snapshot_every),
+        ..args.request.plan_request(&args.caption, method)
+    };
+    Ok((request, input))
 }

@@ -9,6 +9,7 @@ pub mod bench_vectorize;
 pub mod eval;
 pub mod generate;
 pub mod render;
+pub mod request_args;
 pub mod serve;
 pub mod setup;
 pub mod tuning;
@@ -51,48 +52,79 @@ pub enum Command {
     JobChild,
 }
 
-/// Placeholder arguments for commands that are not implemented yet.
-#[derive(clap::Args, Debug)]
-pub struct NotYet {
-    #[arg(trailing_var_arg = true, allow_hyphen_values = true, hide = true)]
-    rest: Vec<String>,
-}
-
-/// Error from a CLI command: a message for the user and an exit code.
+/// Error from a CLI command: a message for the user and an exit code ([`CliError::exit_code`]).
 #[derive(Debug, thiserror::Error)]
 pub enum CliError {
+    /// A bad flag or flag value (exit code 2).
     #[error("{0}")]
     Usage(String),
-    #[error("not implemented yet: {0}")]
-    NotImplemented(&'static str),
+    /// Input the command cannot use: a file it cannot read, a directory that is not what the
+    /// flag needs (exit code 2). `context` names the input; the cause stays the source.
+    #[error("{context}")]
+    Input {
+        context: String,
+        #[source]
+        source: anyhow::Error,
+    },
+    /// The command failed on good input (exit code 1).
     #[error(transparent)]
     Other(#[from] anyhow::Error),
 }
 
 impl CliError {
+    /// The process exit code: 2 for bad input (flags, values, files), 1 for a failure.
     fn exit_code(&self) -> u8 {
         match self {
-            CliError::Usage(_) => 2,
-            CliError::NotImplemented(_) => 3,
+            CliError::Usage(_) | CliError::Input { .. } => 2,
             CliError::Other(_) => 1,
         }
     }
 }
 
-/// `--device` (cpu, cuda, cuda:N), refused up front when this build cannot open it.
-pub(crate) fn parse_device(s: &str) -> Result<crate::models::ComputeDevice, CliError> {
-    crate::models::ComputeDevice::parse_built(s).map_err(|e| CliError::Usage(e.to_string()))
+/// Results as bad input or failures of a command, with what was being done as context.
+pub(crate) trait ResultExt<T> {
+    /// The error as bad input ([`CliError::Input`], exit code 2) about `context`.
+    fn bad_input(self, context: impl FnOnce() -> String) -> Result<T, CliError>;
+    /// The error as a failure ([`CliError::Other`], exit code 1) while doing `context`.
+    fn failed(self, context: impl FnOnce() -> String) -> Result<T, CliError>;
 }
 
-/// The directory of a `--teacher analytic:DIR` spec (the only test teacher).
-pub(crate) fn analytic_teacher_dir(spec: &str) -> Result<&std::path::Path, CliError> {
-    spec.strip_prefix("analytic:")
-        .map(std::path::Path::new)
-        .ok_or_else(|| {
-            CliError::Usage(format!(
-                "unknown teacher {spec:?}: the only test teacher is analytic:DIR"
-            ))
+impl<T, E: Into<anyhow::Error>> ResultExt<T> for Result<T, E> {
+    fn bad_input(self, context: impl FnOnce() -> String) -> Result<T, CliError> {
+        self.map_err(|e| CliError::Input {
+            context: context(),
+            source: e.into(),
         })
+    }
+
+    fn failed(self, context: impl FnOnce() -> String) -> Result<T, CliError> {
+        self.map_err(|e| CliError::Other(e.into().context(context())))
+    }
+}
+
+/// A run's error: bad input and missing models are usage errors (exit code 2) said as the
+/// stage said them, anything else a failure that keeps the error as its source.
+impl From<crate::pipeline::PipelineError> for CliError {
+    fn from(e: crate::pipeline::PipelineError) -> Self {
+        use crate::pipeline::PipelineError;
+        match e {
+            PipelineError::InvalidInput(m) | PipelineError::ModelsNotConfigured(m) => {
+                CliError::Usage(m)
+            }
+            // A stage's error that is the input's fault (a bad image, SVG or setting).
+            e if e.code() == crate::pipeline::FailureCode::InvalidInput => {
+                CliError::Usage(e.to_string())
+            }
+            other => CliError::Other(anyhow::Error::new(other)),
+        }
+    }
+}
+
+/// A request the plan refuses: a usage error naming the flag of the refused field.
+impl From<crate::pipeline::SpecError> for CliError {
+    fn from(e: crate::pipeline::SpecError) -> Self {
+        CliError::Usage(format!("--{}: {}", e.field.replace('_', "-"), e.reason))
+    }
 }
 
 pub fn run(cli: Cli) -> Result<(), CliError> {

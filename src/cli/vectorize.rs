@@ -1,7 +1,7 @@
 //! `vectorfusion vectorize INPUT.png -o OUT.svg`: trace a raster image into closed cubic paths
 //! with LIVE.
 
-use super::CliError;
+use super::{CliError, ResultExt};
 use crate::image::Image;
 use crate::pipeline::{
     DefaultExecutor, Executor, JobContext, JobKind, PlanRequest, RunInput, Tuning,
@@ -170,90 +170,28 @@ pub fn config_from_args(a: &VectorizeArgs) -> Result<LiveConfig, CliError> {
 
 pub fn run(a: VectorizeArgs) -> Result<(), CliError> {
     let cfg = config_from_args(&a)?;
-    let cfg_colors = cfg.colors.clone();
+    let grouped = cfg.colors.group == crate::vector::palette::Grouping::Color;
     let target = load_input(&a.input)?;
-    let bar = if a.quiet {
-        indicatif::ProgressBar::hidden()
-    } else {
-        indicatif::ProgressBar::new(1)
-    };
-    bar.set_style(
-        indicatif::ProgressStyle::with_template(
-            "{spinner} [{elapsed_precise}] {bar:40} {pos}/{len} {msg}",
-        )
-        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-    );
-    let sink = {
-        let bar = bar.clone();
-        move |p: Progress| {
-            bar.set_length(p.total as u64);
-            bar.set_position(p.step as u64);
-            let paths = p
-                .detail
-                .as_ref()
-                .and_then(|d| d.get("paths"))
-                .and_then(|v| v.as_u64())
-                .unwrap_or(0);
-            if let Some(l) = p.loss {
-                bar.set_message(format!("paths {paths} loss {l:.5}"));
-            }
-        }
-    };
     let t0 = std::time::Instant::now();
-    // The same executor and plan as the service's vectorize jobs, with this command's LIVE
-    // configuration as the plan.
-    let exec = DefaultExecutor::default();
-    let request = PlanRequest {
-        kind: JobKind::Vectorize,
-        caption: None,
-        seed: a.seed,
-        tuning: Tuning {
-            live: Some(cfg),
-            ..Tuning::default()
-        },
-        ..PlanRequest::text("")
-    };
-    let plan = exec
-        .plan(&request, &super::generate::cli_limits())
-        .map_err(super::generate::spec_err)?;
-    let ctx = JobContext::new(
-        std::sync::Arc::new(sink),
-        CancelToken::new(),
-        u32::MAX,
-        Box::new(|_| Ok(())),
-        None,
-    );
-    let input = RunInput {
-        image: Some(target),
-        ..RunInput::default()
-    };
-    let result = exec
-        .run_plan(&plan, &input, &ctx)
-        .map_err(|e| CliError::Other(anyhow::anyhow!("vectorize failed: {e}")))?;
-    bar.finish_and_clear();
+    let (plan, result) = trace(&a, cfg, target)?;
     // The run's SVG (the fewest decimals that keep the picture and simple outlines), or the
     // scene at the decimals asked for.
     let svg = match a.precision {
         None => result.svg.clone(),
-        Some(precision) => {
-            let grouped = cfg_colors.group == crate::vector::palette::Grouping::Color;
-            crate::svg::to_svg(
-                &result.scene,
-                &crate::svg::SvgOptions {
-                    precision,
-                    group_by_color: grouped,
-                    ids: grouped,
-                },
-            )
-        }
+        Some(precision) => crate::svg::to_svg(
+            &result.scene,
+            &crate::svg::SvgOptions {
+                precision,
+                group_by_color: grouped,
+                ids: grouped,
+            },
+        ),
     };
-    std::fs::write(&a.output, &svg).map_err(|e| {
-        CliError::Other(anyhow::anyhow!("cannot write {}: {e}", a.output.display()))
-    })?;
+    std::fs::write(&a.output, &svg).failed(|| format!("cannot write {}", a.output.display()))?;
     if let Some(p) = &a.preview {
         crate::raster::render(&result.scene)
             .save_png(p)
-            .map_err(|e| CliError::Other(anyhow::anyhow!("preview: {e}")))?;
+            .failed(|| "preview".into())?;
     }
     let e = crate::vector::check::check_svg(&svg).unwrap_or_default();
     eprintln!(
@@ -288,9 +226,76 @@ pub fn run(a: VectorizeArgs) -> Result<(), CliError> {
     Ok(())
 }
 
+/// Traces `target` with `cfg` through the executor and plan the service's vectorize jobs use
+/// (this command's LIVE configuration as the plan), with a progress bar unless `--quiet`.
+fn trace(
+    a: &VectorizeArgs,
+    cfg: LiveConfig,
+    target: Image,
+) -> Result<(crate::pipeline::RunPlan, crate::pipeline::RunOutput), CliError> {
+    let bar = if a.quiet {
+        indicatif::ProgressBar::hidden()
+    } else {
+        indicatif::ProgressBar::new(1)
+    };
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{spinner} [{elapsed_precise}] {bar:40} {pos}/{len} {msg}",
+        )
+        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    let sink = {
+        let bar = bar.clone();
+        move |p: Progress| {
+            bar.set_length(p.total as u64);
+            bar.set_position(p.step as u64);
+            let paths = p
+                .detail
+                .as_ref()
+                .and_then(|d| d.get("paths"))
+                .and_then(|v| v.as_u64())
+                .unwrap_or(0);
+            if let Some(l) = p.loss {
+                bar.set_message(format!("paths {paths} loss {l:.5}"));
+            }
+        }
+    };
+    // The same executor and plan as the service's vectorize jobs, with this command's LIVE
+    // configuration as the plan.
+    let exec = DefaultExecutor::default();
+    let request = PlanRequest {
+        kind: JobKind::Vectorize,
+        caption: None,
+        seed: a.seed,
+        tuning: Tuning {
+            live: Some(cfg),
+            ..Tuning::default()
+        },
+        ..PlanRequest::text("")
+    };
+    let plan = exec.plan(&request, &super::generate::cli_limits())?;
+    let ctx = JobContext::new(
+        std::sync::Arc::new(sink),
+        CancelToken::new(),
+        u32::MAX,
+        Box::new(|_| Ok(())),
+        None,
+    );
+    let input = RunInput {
+        image: Some(target),
+        ..RunInput::default()
+    };
+    let result = exec
+        .run_plan(&plan, &input, &ctx)
+        .failed(|| "vectorize failed".into())?;
+    bar.finish_and_clear();
+    Ok((plan, result))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::pipeline::Preset;
     use clap::Parser;
 
     fn parse(extra: &[&str]) -> VectorizeArgs {
@@ -305,10 +310,10 @@ mod tests {
     #[test]
     fn options_map_to_config() {
         let c = config_from_args(&parse(&[])).unwrap();
-        assert_eq!(c, LiveConfig::preset(live::Preset::Balanced));
+        assert_eq!(c, Preset::Balanced.live_config());
         // One preset vocabulary: `quality` is paper's older name, draft cuts the work.
         let q = config_from_args(&parse(&["--preset", "quality"])).unwrap();
-        assert_eq!(q.size, LiveConfig::preset(live::Preset::Quality).size);
+        assert_eq!(q.size, Preset::Paper.live_config().size);
         let d = config_from_args(&parse(&["--preset", "draft"])).unwrap();
         assert_eq!((d.size, d.iters_per_stage), (64, 20));
         assert!(config_from_args(&parse(&["--preset", "best"])).is_err());
