@@ -32,7 +32,9 @@
 //! its smallest. "live − peer" at each `--kb` is the difference of the two envelopes there.
 
 mod peers;
+mod sets;
 mod summary;
+mod trace;
 
 pub use peers::PeerError;
 pub use summary::{Delta, Envelope, RdMean, RdSummary, envelope, envelope_at, means};
@@ -42,17 +44,13 @@ use super::bench_vectorize::{
 };
 use super::vectorize::load_input;
 use super::{CliError, ResultExt};
-use crate::image::ssim::ssim_over_white;
-use crate::image::{Image, psnr};
-use crate::progress::{CancelToken, NullSink};
-use crate::stages::live::tracer::{TracerSetting, render_svg, trace};
-use crate::stages::live::{self, LiveConfig, PathBudget};
-use peers::{ImageTracer, imagetracer_grid, potrace_grid, probe_potrace, run_potrace, to_pbm};
+use crate::stages::live::{LiveConfig, PathBudget};
+use peers::{ImageTracer, probe_potrace};
 use serde::Serialize;
-use std::io::Write;
+use sets::{select_sets, spread};
 use std::path::{Path, PathBuf};
-use std::time::Instant;
 use summary::{print_tables, summarise};
+use trace::Target;
 
 /// The peer tools `--peers` accepts.
 const PEERS: [&str; 3] = ["vtracer", "imagetracer", "potrace"];
@@ -186,66 +184,6 @@ fn names(text: &str) -> Vec<String> {
         .collect()
 }
 
-/// The image sets under `dir`: `(name, PNG files in name order)`.
-fn discover_sets(dir: &Path) -> Result<Vec<(String, Vec<PathBuf>)>, CliError> {
-    let pngs = |d: &Path| -> Result<Vec<PathBuf>, CliError> {
-        let mut v: Vec<PathBuf> = std::fs::read_dir(d)
-            .map_err(|e| CliError::Usage(format!("cannot read {}: {e}", d.display())))?
-            .filter_map(|e| e.ok().map(|e| e.path()))
-            .filter(|p| p.is_file() && p.extension().is_some_and(|x| x.eq_ignore_ascii_case("png")))
-            .collect();
-        v.sort();
-        Ok(v)
-    };
-    let mut sets = Vec::new();
-    let top = pngs(dir)?;
-    if !top.is_empty() {
-        let name = dir
-            .file_name()
-            .and_then(|s| s.to_str())
-            .unwrap_or("images")
-            .to_string();
-        sets.push((name, top));
-    }
-    let mut subs: Vec<PathBuf> = std::fs::read_dir(dir)
-        .map_err(|e| CliError::Usage(format!("cannot read {}: {e}", dir.display())))?
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.is_dir())
-        .collect();
-    subs.sort();
-    for sub in subs {
-        let Some(name) = sub.file_name().and_then(|s| s.to_str()) else {
-            continue;
-        };
-        if name.starts_with('_') || name.starts_with('.') {
-            continue;
-        }
-        let files = pngs(&sub)?;
-        if !files.is_empty() {
-            sets.push((name.to_string(), files));
-        }
-    }
-    Ok(sets)
-}
-
-/// `n` files evenly spaced in name order (all of them when `n` is at least their number).
-fn spread(files: Vec<PathBuf>, n: Option<usize>) -> Vec<PathBuf> {
-    match n {
-        Some(n) if n < files.len() => {
-            let len = files.len();
-            (0..n).map(|i| files[i * len / n].clone()).collect()
-        }
-        _ => files,
-    }
-}
-
-fn gzip_len(text: &str) -> usize {
-    let mut enc = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
-    // Writing to a Vec cannot fail.
-    let _ = enc.write_all(text.as_bytes());
-    enc.finish().map(|v| v.len()).unwrap_or(0)
-}
-
 /// Entry point of `bench vectorize --rd`.
 pub fn run(a: &BenchVectorizeArgs) -> Result<(), CliError> {
     let budgets = parse_budgets(&a.paths)?;
@@ -362,31 +300,6 @@ impl Grid {
     }
 }
 
-/// The image sets of `--images`, only those of `--sets` when given; none is a usage error.
-fn select_sets(a: &BenchVectorizeArgs) -> Result<Vec<(String, Vec<PathBuf>)>, CliError> {
-    let mut sets = discover_sets(&a.images)?;
-    if let Some(only) = &a.rd.sets {
-        let only = names(only);
-        if let Some(missing) = only.iter().find(|s| !sets.iter().any(|(n, _)| n == *s)) {
-            let found: Vec<&str> = sets.iter().map(|(n, _)| n.as_str()).collect();
-            return Err(CliError::Usage(format!(
-                "--sets: no image set {missing:?} in {} (found: {})",
-                a.images.display(),
-                found.join(", ")
-            )));
-        }
-        sets.retain(|(n, _)| only.contains(n));
-    }
-    if sets.is_empty() {
-        return Err(CliError::Usage(format!(
-            "no PNG files in {} or its sub-folders (run scripts/prepare_rd_set.sh {})",
-            a.images.display(),
-            a.images.display()
-        )));
-    }
-    Ok(sets)
-}
-
 /// The tools that run here: the peers that were asked for and answer, and our LIVE runs.
 struct Tools {
     vtracer: bool,
@@ -490,121 +403,6 @@ impl Tools {
     }
 }
 
-/// One image of a set, the target every tool's SVG is scored against.
-struct Target<'a> {
-    set: &'a str,
-    image: String,
-    target: &'a Image,
-}
-
-impl Target<'_> {
-    /// vtracer: spline and polygon × speckle × precision on each input of `--vt-input`.
-    fn vtracer(&self, grid: &Grid) -> Result<Vec<RdSample>, CliError> {
-        let white = self.target.over([1.0, 1.0, 1.0]);
-        let mut inputs: Vec<(&Image, &str)> = Vec::new();
-        if grid.vt_input != VtInput::White {
-            inputs.push((self.target, ""));
-        }
-        if grid.vt_input != VtInput::Rgba {
-            inputs.push((&white, " white"));
-        }
-        let mut out = Vec::new();
-        for (input, suffix) in inputs {
-            for polygon in [false, true] {
-                for &filter_speckle in &grid.speckles {
-                    for &color_precision in &grid.precisions {
-                        let s = TracerSetting {
-                            polygon,
-                            filter_speckle,
-                            color_precision,
-                            ..TracerSetting::default()
-                        };
-                        let t0 = Instant::now();
-                        let svg = trace(input, &s)
-                            .map_err(anyhow::Error::msg)
-                            .failed(|| format!("{}: vtracer", self.image))?
-                            .svg;
-                        let secs = t0.elapsed().as_secs_f64();
-                        let label = format!("{}{suffix}", s.label());
-                        out.push(self.score("vtracer", &label, &svg, secs)?);
-                    }
-                }
-            }
-        }
-        Ok(out)
-    }
-
-    /// imagetracer's grid on the PNG file itself (the driver composes it over white).
-    fn imagetracer(
-        &self,
-        tracer: &ImageTracer,
-        file: &Path,
-        colors: &[usize],
-    ) -> Result<Vec<RdSample>, CliError> {
-        let mut out = Vec::new();
-        for (label, options) in imagetracer_grid(colors) {
-            let (svg, secs) = tracer
-                .run(file, &options)
-                .failed(|| format!("{}: {label}", self.image))?;
-            out.push(self.score("imagetracer", &label, &svg, secs)?);
-        }
-        Ok(out)
-    }
-
-    /// potrace's grid on the image thresholded to black and white.
-    fn potrace(&self, bin: &str) -> Result<Vec<RdSample>, CliError> {
-        let pbm = to_pbm(self.target);
-        let mut out = Vec::new();
-        for (label, args) in potrace_grid() {
-            let (svg, secs) = run_potrace(bin, &pbm, &args)
-                .failed(|| format!("{}: potrace {label}", self.image))?;
-            out.push(self.score("potrace", &label, &svg, secs)?);
-        }
-        Ok(out)
-    }
-
-    /// Our LIVE run `label`, written as every run writes it (fewest decimals within the render
-    /// tolerance, simple outlines) and timed with the tracing.
-    fn live(&self, label: &str, cfg: &LiveConfig) -> Result<RdSample, CliError> {
-        let t0 = Instant::now();
-        let res = live::vectorize(self.target, cfg, &NullSink, &CancelToken::new())
-            .failed(|| format!("{}: live {label}", self.image))?;
-        let svg = crate::vector::write_svg(&res.scene, &cfg.colors);
-        let secs = t0.elapsed().as_secs_f64();
-        let s = self.score("live", label, &svg, secs)?;
-        eprintln!(
-            "{}/{}: live {label:9} paths {:3} psnr {:6.2} ssim {:.4} bytes {:6} gz {:5} {:.2} s",
-            self.set, self.image, s.paths, s.psnr, s.ssim, s.svg_bytes, s.svg_gz_bytes, s.seconds
-        );
-        Ok(s)
-    }
-
-    /// Scores one SVG against the target.
-    fn score(
-        &self,
-        tool: &str,
-        setting: &str,
-        svg: &str,
-        seconds: f64,
-    ) -> Result<RdSample, CliError> {
-        let back = render_svg(svg, self.target.width, self.target.height)
-            .failed(|| format!("{}: {tool} {setting}: cannot render", self.image))?;
-        Ok(RdSample {
-            set: self.set.to_string(),
-            image: self.image.clone(),
-            tool: tool.to_string(),
-            setting: setting.to_string(),
-            paths: svg.matches("<path").count(),
-            psnr: psnr(self.target, &back),
-            ssim: ssim_over_white(self.target, &back),
-            svg_bytes: svg.len(),
-            svg_gz_bytes: gzip_len(svg),
-            seconds,
-            editability: editability(svg),
-        })
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -627,17 +425,5 @@ mod tests {
             parse_list::<usize>("--x", "", |_| true, "n"),
             Err(CliError::Usage(_))
         ));
-    }
-
-    #[test]
-    fn spread_picks_evenly() {
-        let files: Vec<PathBuf> = (0..10).map(|i| PathBuf::from(format!("{i}"))).collect();
-        let got: Vec<String> = spread(files.clone(), Some(3))
-            .iter()
-            .map(|p| p.display().to_string())
-            .collect();
-        assert_eq!(got, ["0", "3", "6"]);
-        assert_eq!(spread(files.clone(), Some(20)).len(), 10);
-        assert_eq!(spread(files, None).len(), 10);
     }
 }
