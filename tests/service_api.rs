@@ -129,6 +129,73 @@ async fn vectorize_job_end_to_end_with_events_and_results() {
     assert_eq!(ns, (2..=last_n).collect::<Vec<_>>());
     assert_eq!(replay.first().unwrap().event, "state");
     assert_eq!(replay.last().unwrap().event, "done");
+    // Every event is a resumption point: its id is the last snapshot sent so far (1 before the
+    // replayed ones here, as the client said), never going back.
+    let ids: Vec<i64> = replay
+        .iter()
+        .map(|e| {
+            e.id.as_deref()
+                .expect("every event has an id")
+                .parse()
+                .unwrap()
+        })
+        .collect();
+    assert_eq!(ids[0], 1, "{ids:?}");
+    assert!(ids.windows(2).all(|w| w[0] <= w[1]), "{ids:?}");
+    assert_eq!(*ids.last().unwrap(), last_n);
+
+    // A first connection asks for a full replay with ?from=0 (cache-busters are ignored).
+    let (_, full) = sse(
+        a,
+        &format!("/jobs/{id}/events?from=0&_=123"),
+        &[],
+        Duration::from_secs(5),
+        |e| e.event == "done",
+    )
+    .await;
+    let ns: Vec<i64> = full
+        .iter()
+        .filter(|e| e.event == "snapshot")
+        .map(|e| e.json()["n"].as_i64().unwrap())
+        .collect();
+    assert_eq!(ns, (1..=last_n).collect::<Vec<_>>());
+    assert_eq!(full.first().unwrap().id.as_deref(), Some("0"));
+    let r = get(a, &format!("/jobs/{id}/events?from=-1")).await;
+    assert_eq!(r.status, 400, "{}", r.text());
+    assert_eq!(r.json()["error"]["field"], "from");
+
+    // Generated clients that only know files ask for application/octet-stream: same bytes.
+    for (path, native) in [
+        ("result.svg", "image/svg+xml"),
+        ("result.png", "image/png"),
+        ("snapshots/1.svg", "image/svg+xml"),
+    ] {
+        let path = format!("/jobs/{id}/{path}");
+        let plain = get(a, &path).await;
+        let octet = request(
+            a,
+            "GET",
+            &path,
+            &[("Accept", "application/octet-stream")],
+            None,
+        )
+        .await;
+        assert_eq!(octet.status, 200);
+        assert_eq!(
+            octet.header("content-type"),
+            Some("application/octet-stream")
+        );
+        assert_eq!(octet.body, plain.body);
+        let both = request(
+            a,
+            "GET",
+            &path,
+            &[("Accept", &format!("{native}, application/octet-stream"))],
+            None,
+        )
+        .await;
+        assert!(both.header("content-type").unwrap().starts_with(native));
+    }
     srv.stop().await;
 }
 

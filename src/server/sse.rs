@@ -2,10 +2,12 @@
 //!
 //! Stream: `state` (the stored job) first; then stored snapshots the client has not seen; then
 //! live `progress`, `snapshot` and `state` events; finally one of `done`, `failed`, `cancelled`
-//! (data = the job) and the stream ends. Snapshot events carry `id: N` (the snapshot number), so
-//! a reconnecting EventSource sends `Last-Event-ID: N` and receives every stored snapshot after
-//! N; without it only the latest snapshot is replayed. Keep-alive comments go out every
-//! `server.sse_heartbeat_secs`.
+//! (data = the job) and the stream ends. Every event carries `id: N`, the number of the last
+//! snapshot sent on the stream so far (0 before the first), so a reconnecting EventSource sends
+//! `Last-Event-ID: N` and receives every stored snapshot after N, wherever it was cut off. A first
+//! connection asks for the same with `?from=N` (`?from=0`: every stored snapshot); without
+//! either only the latest snapshot is replayed. Other query parameters (cache-busters) are
+//! ignored. Keep-alive comments go out every `server.sse_heartbeat_secs`.
 //!
 //! Each stream is fed by its own task from a per-job broadcast channel. The worker's publish
 //! never waits; when a client reads too slowly its channel lags and the task resynchronises from
@@ -23,7 +25,8 @@ use super::types::{JobView, ProgressView};
 use crate::progress::Stage;
 use crate::store::{Backend, JobRow, JobStatus, SnapshotRow};
 use crate::worker::events::JobEvent;
-use axum::extract::{Extension, Path, State};
+use axum::extract::rejection::QueryRejection;
+use axum::extract::{Extension, Path, Query, State};
 use axum::http::HeaderMap;
 use axum::response::sse::{Event, KeepAlive, Sse};
 use futures_util::Stream;
@@ -34,13 +37,48 @@ use tokio::sync::{broadcast, mpsc};
 /// Snapshots replayed at most on (re)connect.
 const REPLAY_LIMIT: i64 = 500;
 
+/// The query of `GET /jobs/{id}/events`; other parameters are ignored.
+#[derive(serde::Deserialize)]
+pub(super) struct EventsQuery {
+    /// Replay every stored snapshot after this number (`0`: all), as `Last-Event-ID` does.
+    from: Option<String>,
+}
+
+/// Where the stream starts: the `Last-Event-ID` header of a reconnecting client, else the
+/// `from` query parameter; `None`: the latest snapshot only.
+fn start_after(headers: &HeaderMap, query: &EventsQuery) -> Result<Option<i64>, ApiError> {
+    let header = headers
+        .get("last-event-id")
+        .and_then(|v| v.to_str().ok())
+        .and_then(|s| s.trim().parse().ok());
+    if header.is_some() {
+        return Ok(header);
+    }
+    match query.from.as_deref() {
+        None => Ok(None),
+        Some(s) => match s.trim().parse::<i64>() {
+            Ok(n) if n >= 0 => Ok(Some(n)),
+            _ => Err(ApiError::InvalidQuery {
+                field: "from".into(),
+                reason: format!("must be a snapshot number (an integer, 0 or more), got {s:?}"),
+            }),
+        },
+    }
+}
+
 pub(super) async fn events(
     State(state): State<AppState>,
     Extension(caller): Extension<Caller>,
     Path(raw): Path<String>,
+    query: Result<Query<EventsQuery>, QueryRejection>,
     headers: HeaderMap,
 ) -> Result<Sse<impl Stream<Item = Result<Event, Infallible>>>, ApiError> {
     let id = job_id(&raw)?;
+    let Query(query) = query.map_err(|e| ApiError::InvalidQuery {
+        field: "query".into(),
+        reason: e.body_text(),
+    })?;
+    let last_seen = start_after(&headers, &query)?;
     let permit = state
         .sse_permits
         .clone()
@@ -49,10 +87,6 @@ pub(super) async fn events(
             what: "too many event streams are open",
             retry_after_secs: 5,
         })?;
-    let last_seen: Option<i64> = headers
-        .get("last-event-id")
-        .and_then(|v| v.to_str().ok())
-        .and_then(|s| s.trim().parse().ok());
     // Subscribe before reading the stored state so nothing falls between the two.
     let rx = state.hub.subscribe(&id);
     let row = load_job(&state, &id, &caller).await?;
@@ -89,7 +123,7 @@ struct SnapshotView<'a> {
 }
 
 fn snapshot_event(snapshot: &SnapshotView<'_>) -> Event {
-    json_event("snapshot", snapshot).id(snapshot.n.to_string())
+    json_event("snapshot", snapshot)
 }
 
 fn progress_event(progress: &ProgressView) -> Event {
@@ -117,7 +151,10 @@ struct Feed {
 }
 
 impl Feed {
+    /// Sends `e` with the stream's position as its id (the last snapshot sent, 0 before any),
+    /// so a client cut off after any event resumes where it was.
     async fn send(&self, e: Event) -> Result<(), ()> {
+        let e = e.id(self.sent_snapshot.to_string());
         self.tx.send(e).await.map_err(|_| ())
     }
 
@@ -137,8 +174,8 @@ impl Feed {
     /// Sends `snapshot` unless the client has it already.
     async fn send_snapshot(&mut self, snapshot: &SnapshotView<'_>) -> Result<(), ()> {
         if snapshot.n > self.sent_snapshot {
-            self.send(snapshot_event(snapshot)).await?;
             self.sent_snapshot = snapshot.n;
+            self.send(snapshot_event(snapshot)).await?;
         }
         Ok(())
     }

@@ -6,8 +6,32 @@ use crate::server::error::ApiError;
 use crate::server::tenant::Caller;
 use crate::store::JobStatus;
 use axum::extract::{Extension, Path, State};
-use axum::http::header;
+use axum::http::{HeaderMap, header};
 use axum::response::{IntoResponse, Response};
+
+/// The generic binary type every download is also served as, for clients that cannot name
+/// `image/svg+xml` or `image/png` (code generators map it to a file).
+const OCTET_STREAM: &str = "application/octet-stream";
+
+/// Whether the client asked for [`OCTET_STREAM`] rather than the native type `native`: its
+/// `Accept` names `application/octet-stream` and not `native` (without an `Accept`, or with
+/// `*/*`, the native type is served).
+fn wants_octet_stream(headers: &HeaderMap, native: &str) -> bool {
+    let accept = headers
+        .get_all(header::ACCEPT)
+        .iter()
+        .filter_map(|v| v.to_str().ok())
+        .flat_map(|v| v.split(','))
+        .map(|t| {
+            t.split(';')
+                .next()
+                .unwrap_or("")
+                .trim()
+                .to_ascii_lowercase()
+        })
+        .collect::<Vec<_>>();
+    accept.iter().any(|t| t == OCTET_STREAM) && !accept.iter().any(|t| t == native)
+}
 
 async fn finished_result(
     state: &AppState,
@@ -33,11 +57,16 @@ async fn finished_result(
 
 /// An SVG body. Opened directly in a browser it can run nothing and load nothing (the
 /// safe-output profile already keeps scripts out; the policy is the second wall), and it is
-/// never sniffed as another type.
-fn svg_response(svg: String) -> Response {
+/// never sniffed as another type. Served as [`OCTET_STREAM`] when the client asks for that.
+fn svg_response(headers: &HeaderMap, svg: String) -> Response {
+    let content_type = if wants_octet_stream(headers, "image/svg+xml") {
+        OCTET_STREAM
+    } else {
+        "image/svg+xml; charset=utf-8"
+    };
     (
         [
-            (header::CONTENT_TYPE, "image/svg+xml; charset=utf-8"),
+            (header::CONTENT_TYPE, content_type),
             (
                 header::CONTENT_SECURITY_POLICY,
                 "default-src 'none'; style-src 'unsafe-inline'",
@@ -53,9 +82,11 @@ pub(in crate::server) async fn result_svg(
     State(state): State<AppState>,
     Extension(caller): Extension<Caller>,
     Path(raw): Path<String>,
+    headers: HeaderMap,
 ) -> Result<Response, ApiError> {
     let id = job_id(&raw)?;
     Ok(svg_response(
+        &headers,
         finished_result(&state, &id, &caller).await?.svg,
     ))
 }
@@ -86,6 +117,7 @@ pub(in crate::server) async fn result_png(
     State(state): State<AppState>,
     Extension(caller): Extension<Caller>,
     Path(raw): Path<String>,
+    headers: HeaderMap,
 ) -> Result<Response, ApiError> {
     let id = job_id(&raw)?;
     let result = finished_result(&state, &id, &caller).await?;
@@ -93,13 +125,19 @@ pub(in crate::server) async fn result_png(
         .await
         .map_err(|e| ApiError::Internal(e.to_string()))?
         .map_err(|e| ApiError::Internal(format!("rendering the preview failed: {e}")))?;
-    Ok(([(header::CONTENT_TYPE, "image/png")], png).into_response())
+    let content_type = if wants_octet_stream(&headers, "image/png") {
+        OCTET_STREAM
+    } else {
+        "image/png"
+    };
+    Ok(([(header::CONTENT_TYPE, content_type)], png).into_response())
 }
 
 pub(in crate::server) async fn snapshot(
     State(state): State<AppState>,
     Extension(caller): Extension<Caller>,
     Path((raw, file)): Path<(String, String)>,
+    headers: HeaderMap,
 ) -> Result<Response, ApiError> {
     let id = job_id(&raw)?;
     let n = file
@@ -119,5 +157,5 @@ pub(in crate::server) async fn snapshot(
             what: "snapshot",
             id: format!("{id}/{n} (it may have been pruned)"),
         })?;
-    Ok(svg_response(snap.svg))
+    Ok(svg_response(&headers, snap.svg))
 }
