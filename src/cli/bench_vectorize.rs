@@ -187,7 +187,7 @@ pub(super) fn with_budget(base: &LiveConfig, budget: PathBudget) -> LiveConfig {
 /// The PNGs of `--images` in name order (the first `--limit`); none is a usage error.
 fn list_images(a: &BenchVectorizeArgs) -> Result<Vec<PathBuf>, CliError> {
     let mut files: Vec<PathBuf> = std::fs::read_dir(&a.images)
-        .map_err(|e| CliError::Usage(format!("cannot read {}: {e}", a.images.display())))?
+        .bad_input(|| format!("cannot read {}", a.images.display()))?
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| p.extension().is_some_and(|x| x.eq_ignore_ascii_case("png")))
         .collect();

@@ -66,6 +66,9 @@ pub enum CliError {
         #[source]
         source: anyhow::Error,
     },
+    /// A run refused its input: a bad image, SVG or setting (exit code 2).
+    #[error(transparent)]
+    InvalidRun(crate::pipeline::PipelineError),
     /// The command failed on good input (exit code 1).
     #[error(transparent)]
     Other(#[from] anyhow::Error),
@@ -75,7 +78,7 @@ impl CliError {
     /// The process exit code: 2 for bad input (flags, values, files), 1 for a failure.
     fn exit_code(&self) -> u8 {
         match self {
-            CliError::Usage(_) | CliError::Input { .. } => 2,
+            CliError::Usage(_) | CliError::Input { .. } | CliError::InvalidRun(_) => 2,
             CliError::Other(_) => 1,
         }
     }
@@ -112,9 +115,7 @@ impl From<crate::pipeline::PipelineError> for CliError {
                 CliError::Usage(m)
             }
             // A stage's error that is the input's fault (a bad image, SVG or setting).
-            e if e.code() == crate::pipeline::FailureCode::InvalidInput => {
-                CliError::Usage(e.to_string())
-            }
+            e if e.code() == crate::pipeline::FailureCode::InvalidInput => CliError::InvalidRun(e),
             other => CliError::Other(anyhow::Error::new(other)),
         }
     }

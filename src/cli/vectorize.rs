@@ -83,16 +83,11 @@ pub enum InitArg {
 /// message before decoding them fully.
 pub fn load_input(path: &Path) -> Result<Image, CliError> {
     let dims = image::ImageReader::open(path)
-        .map_err(|e| CliError::Usage(format!("cannot open {}: {e}", path.display())))?
+        .bad_input(|| format!("cannot open {}", path.display()))?
         .with_guessed_format()
-        .map_err(|e| CliError::Usage(format!("cannot read {}: {e}", path.display())))?
+        .bad_input(|| format!("cannot read {}", path.display()))?
         .into_dimensions()
-        .map_err(|e| {
-            CliError::Usage(format!(
-                "{} is not a readable PNG/JPEG image: {e}",
-                path.display()
-            ))
-        })?;
+        .bad_input(|| format!("{} is not a readable PNG/JPEG image", path.display()))?;
     if dims.0 > MAX_INPUT_SIDE || dims.1 > MAX_INPUT_SIDE {
         return Err(CliError::Usage(format!(
             "{} is {}x{}; images larger than {MAX_INPUT_SIDE} px per side are refused \
@@ -102,7 +97,7 @@ pub fn load_input(path: &Path) -> Result<Image, CliError> {
             dims.1
         )));
     }
-    Image::open(path).map_err(|e| CliError::Usage(format!("{}: {e}", path.display())))
+    Image::open(path).bad_input(|| path.display().to_string())
 }
 
 /// Builds the LIVE configuration from the command-line options.

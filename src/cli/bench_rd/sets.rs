@@ -2,8 +2,8 @@
 //! `--sets` names, `--limit` files of each spread evenly in name order.
 
 use super::names;
-use crate::cli::CliError;
 use crate::cli::bench_vectorize::BenchVectorizeArgs;
+use crate::cli::{CliError, ResultExt};
 use std::path::{Path, PathBuf};
 
 /// The image sets of `--images`, only those of `--sets` when given; none is a usage error.
@@ -34,7 +34,7 @@ pub fn select_sets(a: &BenchVectorizeArgs) -> Result<Vec<(String, Vec<PathBuf>)>
 fn discover_sets(dir: &Path) -> Result<Vec<(String, Vec<PathBuf>)>, CliError> {
     let pngs = |d: &Path| -> Result<Vec<PathBuf>, CliError> {
         let mut v: Vec<PathBuf> = std::fs::read_dir(d)
-            .map_err(|e| CliError::Usage(format!("cannot read {}: {e}", d.display())))?
+            .bad_input(|| format!("cannot read {}", d.display()))?
             .filter_map(|e| e.ok().map(|e| e.path()))
             .filter(|p| p.is_file() && p.extension().is_some_and(|x| x.eq_ignore_ascii_case("png")))
             .collect();
@@ -52,7 +52,7 @@ fn discover_sets(dir: &Path) -> Result<Vec<(String, Vec<PathBuf>)>, CliError> {
         sets.push((name, top));
     }
     let mut subs: Vec<PathBuf> = std::fs::read_dir(dir)
-        .map_err(|e| CliError::Usage(format!("cannot read {}: {e}", dir.display())))?
+        .bad_input(|| format!("cannot read {}", dir.display()))?
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| p.is_dir())
         .collect();
