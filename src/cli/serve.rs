@@ -87,7 +87,8 @@ pub fn run(args: NodeArgs, bind: Option<SocketAddr>, role: Role) -> Result<(), C
         None => {
             let mut dirs = cfg.model_dirs();
             if dirs.sd_dir.is_none() {
-                let default = crate::pipeline::default_model_dir().map_err(CliError::Usage)?;
+                let default = crate::pipeline::default_model_dir()
+                    .map_err(|e| CliError::Usage(e.to_string()))?;
                 dirs = dirs.or_default_model(default);
             }
             (

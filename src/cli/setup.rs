@@ -39,7 +39,9 @@ pub fn run(args: SetupArgs) -> Result<(), CliError> {
     if args.no_retrieval {
         return Ok(());
     }
-    let Some(model) = crate::pipeline::default_model_dir().map_err(CliError::Usage)? else {
+    let Some(model) =
+        crate::pipeline::default_model_dir().map_err(|e| CliError::Usage(e.to_string()))?
+    else {
         println!("retrieval index: skipped (the embedded model was not found)");
         return Ok(());
     };
