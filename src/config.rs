@@ -298,14 +298,20 @@ impl Config {
 
     /// Checks value ranges that serde cannot.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        let bad = |key, reason: &str| {
-            Err(ConfigError::Invalid {
-                key,
-                reason: reason.into(),
-            })
-        };
+        self.validate_storage()?;
+        self.validate_service()?;
+        self.validate_models()?;
+        self.validate_keys()?;
+        self.validate_streams()?;
+        self.limits
+            .validate()
+            .map_err(|(key, reason)| ConfigError::Invalid { key, reason })
+    }
+
+    /// The address, the database and the queue's leases and attempts.
+    fn validate_storage(&self) -> Result<(), ConfigError> {
         if self.server.bind.parse::<std::net::SocketAddr>().is_err() {
-            return bad("server.bind", "must be ADDR:PORT, e.g. 127.0.0.1:8080");
+            return invalid("server.bind", "must be ADDR:PORT, e.g. 127.0.0.1:8080");
         }
         if let Err(e) = self.database.location() {
             return Err(ConfigError::Invalid {
@@ -314,51 +320,61 @@ impl Config {
             });
         }
         if self.database.max_connections < 1 {
-            return bad("database.max_connections", "must be at least 1");
+            return invalid("database.max_connections", "must be at least 1");
         }
         if self.queue.lease_secs == 0 || self.queue.heartbeat_secs == 0 {
-            return bad("queue.lease_secs", "lease and heartbeat must be positive");
+            return invalid("queue.lease_secs", "lease and heartbeat must be positive");
         }
         if self.queue.heartbeat_secs >= self.queue.lease_secs {
-            return bad(
+            return invalid(
                 "queue.heartbeat_secs",
                 "must be shorter than queue.lease_secs (a lease must survive a heartbeat gap)",
             );
         }
         if self.queue.max_attempts == 0 {
-            return bad("queue.max_attempts", "must be at least 1");
+            return invalid("queue.max_attempts", "must be at least 1");
         }
         if self.queue.max_lost_attempts == 0 {
-            return bad("queue.max_lost_attempts", "must be at least 1");
+            return invalid("queue.max_lost_attempts", "must be at least 1");
         }
+        Ok(())
+    }
+
+    /// Logging, the queue depth, isolation, connections and upload sizes.
+    fn validate_service(&self) -> Result<(), ConfigError> {
         if !matches!(self.log.format.as_str(), "text" | "json") {
-            return bad("log.format", "must be \"text\" or \"json\"");
+            return invalid("log.format", "must be \"text\" or \"json\"");
         }
         if self.server.max_queue_depth < 1 {
-            return bad("server.max_queue_depth", "must be at least 1");
+            return invalid("server.max_queue_depth", "must be at least 1");
         }
         if !matches!(self.queue.isolation.as_str(), "process" | "thread") {
-            return bad("queue.isolation", "must be \"process\" or \"thread\"");
+            return invalid("queue.isolation", "must be \"process\" or \"thread\"");
         }
         if self.server.max_connections < 1 {
-            return bad("server.max_connections", "must be at least 1");
+            return invalid("server.max_connections", "must be at least 1");
         }
         if self.server.header_read_timeout_secs < 1 {
-            return bad("server.header_read_timeout_secs", "must be at least 1");
+            return invalid("server.header_read_timeout_secs", "must be at least 1");
         }
         if self.server.body_read_timeout_secs < 1 {
-            return bad("server.body_read_timeout_secs", "must be at least 1");
+            return invalid("server.body_read_timeout_secs", "must be at least 1");
         }
         if self.server.max_stored_upload_bytes < self.server.max_body_bytes as u64 {
-            return bad(
+            return invalid(
                 "server.max_stored_upload_bytes",
                 "must be at least server.max_body_bytes (one upload must fit)",
             );
         }
+        Ok(())
+    }
+
+    /// The model encoder and device.
+    fn validate_models(&self) -> Result<(), ConfigError> {
         if let Err(e) = self.models.encoder.parse::<EncoderChoice>() {
             return Err(ConfigError::Invalid {
                 key: "models.encoder",
-                reason: e,
+                reason: e.to_string(),
             });
         }
         if let Err(e) = ComputeDevice::parse_built(&self.models.device) {
@@ -367,6 +383,11 @@ impl Config {
                 reason: e.to_string(),
             });
         }
+        Ok(())
+    }
+
+    /// The API and metrics keys and the tenants: valid names, long keys, all different.
+    fn validate_keys(&self) -> Result<(), ConfigError> {
         let mut keys: Vec<&str> = [&self.server.api_key, &self.server.metrics_key]
             .into_iter()
             .map(String::as_str)
@@ -379,13 +400,13 @@ impl Config {
                     .chars()
                     .all(|c| c.is_ascii_alphanumeric() || matches!(c, '.' | '_' | '-'));
             if !ok_name || !names.insert(t.name.as_str()) {
-                return bad(
+                return invalid(
                     "server.tenants.name",
                     "must be 1 to 64 of A-Z a-z 0-9 . _ - and unique",
                 );
             }
             if t.key.trim().len() < 16 || t.key.trim() != t.key {
-                return bad(
+                return invalid(
                     "server.tenants.key",
                     "must be at least 16 characters without surrounding spaces",
                 );
@@ -394,20 +415,23 @@ impl Config {
         }
         let distinct: std::collections::HashSet<&str> = keys.iter().copied().collect();
         if distinct.len() != keys.len() {
-            return bad("server.tenants.key", "every key must be different");
+            return invalid("server.tenants.key", "every key must be different");
         }
+        Ok(())
+    }
+
+    /// SSE streams, concurrent decodes and the body size.
+    fn validate_streams(&self) -> Result<(), ConfigError> {
         if self.server.max_sse_streams == 0 {
-            return bad("server.max_sse_streams", "must be at least 1");
+            return invalid("server.max_sse_streams", "must be at least 1");
         }
         if self.server.max_concurrent_decodes == 0 {
-            return bad("server.max_concurrent_decodes", "must be at least 1");
+            return invalid("server.max_concurrent_decodes", "must be at least 1");
         }
         if self.server.max_body_bytes < 1024 {
-            return bad("server.max_body_bytes", "must be at least 1024");
+            return invalid("server.max_body_bytes", "must be at least 1024");
         }
-        self.limits
-            .validate()
-            .map_err(|(key, reason)| ConfigError::Invalid { key, reason })
+        Ok(())
     }
 
     /// The job limits (`[limits]`).
@@ -428,6 +452,14 @@ impl Config {
             ..ModelDirs::default()
         }
     }
+}
+
+/// `Err(Invalid)` for `key`.
+fn invalid(key: &'static str, reason: &str) -> Result<(), ConfigError> {
+    Err(ConfigError::Invalid {
+        key,
+        reason: reason.into(),
+    })
 }
 
 /// An environment override that is not of its setting's type.

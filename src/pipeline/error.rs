@@ -10,6 +10,7 @@
 //! statements set two of its codes; imports flow from the pipeline to the store.)
 
 use crate::image::ImageError;
+use crate::progress::CheckpointError;
 use crate::scene::SceneError;
 use crate::stages::live::LiveError;
 use crate::stages::sds::SdsError;
@@ -62,6 +63,9 @@ pub enum PipelineError {
     /// The job's SVG cannot be imported (the input's fault).
     #[error("svg: {0}")]
     Svg(#[from] SvgError),
+    /// A checkpoint could not be saved (worth retrying the job).
+    #[error("transient failure: {0}")]
+    Checkpoint(#[from] CheckpointError),
     /// A failure a job's child process reported, as its code and message (the source stayed
     /// in that process).
     #[error("{message}")]
@@ -80,18 +84,18 @@ impl PipelineError {
             PipelineError::InvalidSpec(_) => FailureCode::InvalidSpec,
             PipelineError::ModelsNotConfigured(_) => FailureCode::ModelsNotConfigured,
             PipelineError::Cancelled => FailureCode::Cancelled,
-            PipelineError::Transient(_) => FailureCode::Transient,
+            PipelineError::Transient(_) | PipelineError::Checkpoint(_) => FailureCode::Transient,
             PipelineError::ResourceLimit(_) => FailureCode::ResourceLimit,
             PipelineError::Crashed(_) => FailureCode::Crashed,
             PipelineError::Live(e) => match e {
                 LiveError::Cancelled => FailureCode::Cancelled,
                 LiveError::Target(_) | LiveError::Config(_) => FailureCode::InvalidInput,
-                LiveError::Checkpoint(_) => FailureCode::Transient,
+                LiveError::Checkpoint(_) | LiveError::Save(_) => FailureCode::Transient,
                 _ => FailureCode::Failed,
             },
             PipelineError::Sds(e) => match e {
                 SdsError::Config(_) => FailureCode::InvalidInput,
-                SdsError::Checkpoint(_) => FailureCode::Transient,
+                SdsError::Checkpoint(_) | SdsError::Save(_) => FailureCode::Transient,
                 _ => FailureCode::Failed,
             },
             PipelineError::Sample(SampleError::Cancelled) => FailureCode::Cancelled,

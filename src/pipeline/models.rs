@@ -29,15 +29,13 @@ pub enum EncoderChoice {
 }
 
 impl std::str::FromStr for EncoderChoice {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
+    type Err = UnknownEncoder;
+    fn from_str(s: &str) -> Result<Self, UnknownEncoder> {
         match s.to_ascii_lowercase().as_str() {
             "auto" => Ok(EncoderChoice::Auto),
             "vae" => Ok(EncoderChoice::Vae),
             "taesd" => Ok(EncoderChoice::Taesd),
-            other => Err(format!(
-                "unknown encoder {other:?} (expected vae, taesd or auto)"
-            )),
+            other => Err(UnknownEncoder(other.to_string())),
         }
     }
 }
@@ -112,16 +110,13 @@ pub fn resolve_default_model(
     env_value: Option<&std::ffi::OsStr>,
     cwd: Option<&Path>,
     crate_root: &Path,
-) -> Result<Option<PathBuf>, String> {
+) -> Result<Option<PathBuf>, NotReady> {
     if let Some(v) = env_value.filter(|v| !v.is_empty()) {
         let dir = PathBuf::from(v);
         return if is_model_dir(&dir) {
             Ok(Some(dir))
         } else {
-            Err(format!(
-                "{DEFAULT_MODEL_ENV}={} is not a model directory (no unet/config.json)",
-                dir.display()
-            ))
+            Err(NotReady::EnvNotAModel(dir))
         };
     }
     Ok([
@@ -135,13 +130,62 @@ pub fn resolve_default_model(
 
 /// [`resolve_default_model`] for this process (environment, current directory, this crate's
 /// source tree).
-pub fn default_model_dir() -> Result<Option<PathBuf>, String> {
+pub fn default_model_dir() -> Result<Option<PathBuf>, NotReady> {
     resolve_default_model(
         std::env::var_os(DEFAULT_MODEL_ENV).as_deref(),
         std::env::current_dir().ok().as_deref(),
         Path::new(env!("CARGO_MANIFEST_DIR")),
     )
 }
+
+/// Why text runs cannot run here; each message says how to configure what is missing.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum NotReady {
+    /// No model configured, and the embedded one not found.
+    #[error(
+        "text-to-SVG needs a diffusion model: the embedded {EMBEDDED_MODEL} was not found (set \
+         {DEFAULT_MODEL_ENV} to its directory), or set `sd_dir` in the [models] section of \
+         config.toml (or the VECTORFUSION_MODELS_SD_DIR environment variable) to a \
+         diffusers-layout model directory, then restart the server"
+    )]
+    NoModel,
+    /// The command line was given no model at all.
+    #[error("no model")]
+    NoModelGiven,
+    #[error("the analytic test teacher directory {} does not exist", .0.display())]
+    AnalyticDir(PathBuf),
+    #[error(
+        "the configured Stable Diffusion directory {} does not exist or is not a diffusers \
+         layout (no unet/config.json): fix `sd_dir` in the [models] section of config.toml (or \
+         VECTORFUSION_MODELS_SD_DIR)",
+        .0.display()
+    )]
+    NotDiffusers(PathBuf),
+    #[error(
+        "the model {} has no text encoder weights ({} holds none; for the embedded model run \
+         `vectorfusion setup` or set VF_MINILM_DIR: see docs/EMBEDDED.md, \"MiniLM weights\")",
+        model.display(),
+        encoder.display()
+    )]
+    NoTextEncoderWeights { model: PathBuf, encoder: PathBuf },
+    #[error(
+        "the configured CLIP scorer directory {} does not exist: fix `clip_dir` in the [models] \
+         section of config.toml",
+        .0.display()
+    )]
+    ClipDir(PathBuf),
+    /// The model environment variable names a directory that is not a model.
+    #[error("{DEFAULT_MODEL_ENV}={} is not a model directory (no unet/config.json)", .0.display())]
+    EnvNotAModel(PathBuf),
+    /// A test executor built without text models.
+    #[error("test executor configured without text models")]
+    Disabled,
+}
+
+/// An encoder name that is none of vae, taesd, auto.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("unknown encoder {0:?} (expected vae, taesd or auto)")]
+pub struct UnknownEncoder(pub String);
 
 /// Model locations (diffusers-layout directories).
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -216,36 +260,23 @@ impl ModelDirs {
         })
     }
 
-    /// `Ok` when text runs can run (a model configured and loadable); otherwise a message
-    /// telling the operator how to configure one.
-    pub fn text_ready(&self) -> Result<(), String> {
+    /// `Ok` when text runs can run (a model configured and loadable); otherwise why not, with
+    /// how to configure one.
+    pub fn text_ready(&self) -> Result<(), NotReady> {
         if self.sd_dir.is_none()
             && let Some(dir) = &self.analytic_dir
         {
             return if dir.is_dir() {
                 Ok(())
             } else {
-                Err(format!(
-                    "the analytic test teacher directory {} does not exist",
-                    dir.display()
-                ))
+                Err(NotReady::AnalyticDir(dir.clone()))
             };
         }
         let Some(dir) = &self.sd_dir else {
-            return Err(format!(
-                "text-to-SVG needs a diffusion model: the embedded {EMBEDDED_MODEL} was not found \
-                 (set {DEFAULT_MODEL_ENV} to its directory), or set `sd_dir` in the [models] \
-                 section of config.toml (or the VECTORFUSION_MODELS_SD_DIR environment variable) \
-                 to a diffusers-layout model directory, then restart the server"
-            ));
+            return Err(NotReady::NoModel);
         };
         if !dir.join("unet").join("config.json").is_file() {
-            return Err(format!(
-                "the configured Stable Diffusion directory {} does not exist or is not a \
-                 diffusers layout (no unet/config.json): fix `sd_dir` in the [models] section of \
-                 config.toml (or VECTORFUSION_MODELS_SD_DIR)",
-                dir.display()
-            ));
+            return Err(NotReady::NotDiffusers(dir.clone()));
         }
         let te = dir.join("text_encoder");
         // The embedded model's MiniLM weights are not committed: they resolve from
@@ -254,22 +285,15 @@ impl ModelDirs {
         if te.is_dir()
             && !crate::models::bert::weights::text_encoder_weights_available(&te, &locations)
         {
-            return Err(format!(
-                "the model {} has no text encoder weights ({} holds none; for the embedded \
-                 model run `vectorfusion setup` or set VF_MINILM_DIR: see docs/EMBEDDED.md, \
-                 \"MiniLM weights\")",
-                dir.display(),
-                te.display()
-            ));
+            return Err(NotReady::NoTextEncoderWeights {
+                model: dir.clone(),
+                encoder: te,
+            });
         }
         if let Some(c) = &self.clip_dir
             && !c.is_dir()
         {
-            return Err(format!(
-                "the configured CLIP scorer directory {} does not exist: fix `clip_dir` in the \
-                 [models] section of config.toml",
-                c.display()
-            ));
+            return Err(NotReady::ClipDir(c.clone()));
         }
         Ok(())
     }

@@ -107,7 +107,9 @@ fn default_model_resolution_order() {
         Ok(Some(env.clone()))
     );
     let missing = root.join("missing");
-    let e = resolve_default_model(Some(missing.as_os_str()), Some(&cwd), &crate_root).unwrap_err();
+    let e = resolve_default_model(Some(missing.as_os_str()), Some(&cwd), &crate_root)
+        .unwrap_err()
+        .to_string();
     assert!(
         e.contains(DEFAULT_MODEL_ENV) && e.contains("missing"),
         "{e}"
@@ -161,7 +163,10 @@ fn default_model_fills_unconfigured_dirs_and_passes_the_submit_check() {
     // are fetched) is refused at submit time with a pointer to the docs
     std::fs::create_dir_all(model.join("text_encoder")).unwrap();
     let dirs = ModelDirs::default().or_default_model(Some(model.clone()));
-    let msg = DefaultExecutor::new(dirs.clone()).text_ready().unwrap_err();
+    let msg = DefaultExecutor::new(dirs.clone())
+        .text_ready()
+        .unwrap_err()
+        .to_string();
     assert!(
         msg.contains("MiniLM") && msg.contains("EMBEDDED.md"),
         "{msg}"
@@ -170,7 +175,10 @@ fn default_model_fills_unconfigured_dirs_and_passes_the_submit_check() {
     assert!(DefaultExecutor::new(dirs).text_ready().is_ok());
     // absent default: still the configuration hint
     let none = ModelDirs::default().or_default_model(None);
-    let msg = DefaultExecutor::new(none).text_ready().unwrap_err();
+    let msg = DefaultExecutor::new(none)
+        .text_ready()
+        .unwrap_err()
+        .to_string();
     assert!(
         msg.contains("sd_dir") && msg.contains(EMBEDDED_MODEL),
         "{msg}"
@@ -248,12 +256,11 @@ fn pixel_presets_suit_a_small_prior() {
 #[test]
 fn default_executor_refuses_text_with_configuration_hint() {
     let e = DefaultExecutor::default();
-    let msg = e.text_ready().unwrap_err();
+    let msg = e.text_ready().unwrap_err().to_string();
     assert!(msg.contains("sd_dir"), "{msg}");
     let ctx = JobContext::detached(CancelToken::new());
     // The spec's image bytes are not an image: a clear input error, not a panic.
-    assert!(matches!(
-        e.run(&spec(), &ctx),
-        Err(PipelineError::InvalidInput(_))
-    ));
+    let err = e.run(&spec(), &ctx).unwrap_err();
+    assert!(matches!(err, PipelineError::Image(_)), "{err}");
+    assert_eq!(err.code(), crate::pipeline::FailureCode::InvalidInput);
 }

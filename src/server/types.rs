@@ -68,7 +68,8 @@ fn whole_numbers_as_integers(obj: &mut Map<String, Value>) {
 
 /// Parses and validates a `POST /jobs` body into a [`JobSpec`]: the request as given and the
 /// plan resolved from it. `default_seed` seeds jobs that give no seed (so every job is
-/// reproducible from its stored spec). Image decoding is checked separately ([`check_image`])
+/// reproducible from its stored spec). A text job the executor is not ready for is refused
+/// ([`ApiError::ModelsNotConfigured`]). Image decoding is checked separately ([`check_image`])
 /// because it is CPU work.
 pub fn parse_submit(
     body: &[u8],
@@ -81,12 +82,17 @@ pub fn parse_submit(
     // The request's own fields first ...
     spec.validate(limits)
         .map_err(|e| ApiError::invalid(e.field, e.reason))?;
-    // ... then the plan: omitted paths/steps/samples are the preset's, resolved once, exactly
-    // as the CLI resolves them, and checked against the limits. A text job the executor cannot
-    // run yet is refused by the caller with the configuration hint, not here.
-    if spec.kind == JobKind::Text && executor.text_ready().is_err() {
-        return Ok(spec);
+    // ... then whether it can run: a text job the executor cannot run yet is refused with the
+    // configuration hint (the submit path's one readiness check, before any upload is decoded)
+    // ...
+    if spec.kind == JobKind::Text
+        && let Err(e) = executor.text_ready()
+    {
+        tracing::warn!(reason = %e, "text job refused: text models are not configured");
+        return Err(ApiError::ModelsNotConfigured(e.to_string()));
     }
+    // ... then the plan: omitted paths/steps/samples are the preset's, resolved once, exactly
+    // as the CLI resolves them, and checked against the limits.
     let plan = executor
         .plan(&request_of(&spec), limits)
         .map_err(|e| plan_error(e, &obj, spec.preset))?;

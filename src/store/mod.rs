@@ -412,7 +412,7 @@ impl Store {
         let stored = sqlx::query(sql!(self, "insert_upload.sql"))
             .bind(&job.id)
             .bind(&job.tenant)
-            .bind(&up.image)
+            .bind(up.image.as_deref())
             .bind(&up.svg)
             .bind(up.bytes())
             .bind(now)

@@ -391,7 +391,7 @@ async fn uploads_live_apart_within_their_quotas_and_go_when_the_job_ends(b: Back
         return;
     };
     let up = |n: usize, tenant_cap: i64| NewUpload {
-        image: Some("A".repeat(n)),
+        image: Some(vec![b'A'; n]),
         svg: None,
         max_total_bytes: 1000,
         max_tenant_bytes: tenant_cap,
@@ -407,7 +407,8 @@ async fn uploads_live_apart_within_their_quotas_and_go_when_the_job_ends(b: Back
             .unwrap();
     assert!(row_bytes < 100, "the job row holds {row_bytes} bytes");
     let stored = store.upload(&ra.id).await.unwrap().unwrap();
-    assert_eq!(stored.image.map(|i| i.len()), Some(600));
+    assert_eq!(stored.image_bytes.map(|i| i.len()), Some(600));
+    assert_eq!(stored.image_base64, None);
     assert_eq!(store.upload_bytes(None).await.unwrap(), 600);
 
     // 600 + 500 > 1000: refused, and the job is not inserted either.

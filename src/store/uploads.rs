@@ -1,13 +1,14 @@
 //! Uploads, stored apart from the job row (`migrations/*/0005_uploads.sql`, `0001` on PostgreSQL): written once at
-//! submit, read once per claim, deleted when the job finishes.
+//! submit, read once per claim, deleted when the job finishes. An image is stored as its bytes
+//! (`0006_upload_bytes.sql`, `0002` on PostgreSQL): the API's base64 is decoded once, at submit.
 
 use super::{Store, StoreError, sql};
 
 /// A new job's upload and the quotas its insert must respect.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct NewUpload {
-    /// The image as base64 (the API's encoding).
-    pub image: Option<String>,
+    /// The image file's bytes (PNG or JPEG).
+    pub image: Option<Vec<u8>>,
     pub svg: Option<String>,
     /// All stored uploads together may hold at most this many bytes.
     pub max_total_bytes: i64,
@@ -18,8 +19,7 @@ pub struct NewUpload {
 impl NewUpload {
     /// Bytes it takes in the store.
     pub fn bytes(&self) -> i64 {
-        let n =
-            self.image.as_ref().map_or(0, String::len) + self.svg.as_ref().map_or(0, String::len);
+        let n = self.image.as_ref().map_or(0, Vec::len) + self.svg.as_ref().map_or(0, String::len);
         i64::try_from(n).unwrap_or(i64::MAX)
     }
 }
@@ -27,8 +27,10 @@ impl NewUpload {
 /// A stored upload, as the worker reads it back.
 #[derive(Clone, Debug, PartialEq, sqlx::FromRow)]
 pub struct UploadRow {
-    /// base64
-    pub image: Option<String>,
+    /// The image file's bytes.
+    pub image_bytes: Option<Vec<u8>>,
+    /// The image as base64: only uploads older versions stored (jobs queued across an upgrade).
+    pub image_base64: Option<String>,
     pub svg: Option<String>,
 }
 

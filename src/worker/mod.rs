@@ -16,7 +16,7 @@ mod sink;
 pub mod test_executor;
 mod upload;
 
-use crate::pipeline::{Executor, FailureCode, JobContext, JobSpec, PipelineError};
+use crate::pipeline::{Executor, FailureCode, JobContext, JobSpec, PipelineError, RunOutput};
 use crate::progress::{CancelToken, CheckpointError};
 use crate::store::{Heartbeat, JobRow, JobStatus, Lease, Store, now_ms};
 use events::{Hub, JobEvent};
@@ -277,31 +277,10 @@ fn worker_loop(s: &Shared, worker_id: &str) {
 }
 
 fn run_job(s: &Shared, row: JobRow, lease: Lease) {
-    let job_id = row.id.clone();
-    let mut spec: JobSpec = match serde_json::from_str(&row.spec) {
-        Ok(spec) => spec,
-        Err(e) => {
-            let e = PipelineError::InvalidSpec(format!("its spec: {e}"));
-            error!(error = %e, "job cannot run");
-            fail_attempt(s, &lease, &e, now_ms());
-            return;
-        }
+    let Some(spec) = read_job(s, &row, &lease) else {
+        return;
     };
-    match upload::attach(&s.store, &s.runtime, &job_id, &mut spec) {
-        Ok(()) => {}
-        Err(upload::AttachError::Store(msg)) => {
-            // A database hiccup (more likely with a networked PostgreSQL): another attempt may
-            // read it, as after a transient pipeline error.
-            fail_attempt(s, &lease, &PipelineError::Transient(msg), now_ms());
-            return;
-        }
-        Err(upload::AttachError::Invalid(msg)) => {
-            let e = PipelineError::InvalidSpec(msg);
-            error!(error = %e, "job cannot run");
-            fail_attempt(s, &lease, &e, now_ms());
-            return;
-        }
-    }
+    let job_id = row.id.clone();
     let resume = row
         .checkpoint
         .as_deref()
@@ -309,20 +288,7 @@ fn run_job(s: &Shared, row: JobRow, lease: Lease) {
     info!(kind = %row.kind, resumed = resume.is_some(), "job started");
     s.hub.publish(&job_id, JobEvent::Status(JobStatus::Running));
 
-    let cancel = CancelToken::new();
-    let reason = Arc::new(Mutex::new(None));
-    s.running().insert(
-        job_id.clone(),
-        Running {
-            cancel: cancel.clone(),
-            reason: reason.clone(),
-        },
-    );
-    if s.shutdown.load(Ordering::SeqCst) {
-        set_reason(&reason, StopReason::Shutdown);
-        cancel.cancel();
-    }
-
+    let (cancel, reason) = register(s, &job_id);
     let heartbeat = s.runtime.spawn(
         heartbeat_loop(
             s.store.clone(),
@@ -334,24 +300,12 @@ fn run_job(s: &Shared, row: JobRow, lease: Lease) {
         )
         .instrument(tracing::Span::current()),
     );
-
     let sink = Arc::new(sink::WorkerSink::new(s, &lease));
-    let ckpt_store = s.store.clone();
-    let ckpt_lease = lease.clone();
-    let rt = s.runtime.clone();
-    let checkpointer = Box::new(move |state: serde_json::Value| {
-        let text = serde_json::to_string(&state)?;
-        match rt.block_on(ckpt_store.save_checkpoint(&ckpt_lease, &text, now_ms())) {
-            Ok(true) => Ok(()),
-            Ok(false) => Err(CheckpointError::LeaseLost),
-            Err(e) => Err(CheckpointError::Store(Box::new(e))),
-        }
-    });
     let ctx = JobContext::new(
         sink.clone(),
-        cancel.clone(),
+        cancel,
         s.settings.checkpoint_every_steps,
-        checkpointer,
+        checkpointer(s, &lease),
         resume,
     );
     let started = Instant::now();
@@ -367,59 +321,132 @@ fn run_job(s: &Shared, row: JobRow, lease: Lease) {
     }
     let now = now_ms();
     match outcome {
-        Ok(Ok(out)) => {
-            // A report always serialises; `{}` only guards the impossible.
-            let detail = serde_json::to_string(&out.report).unwrap_or_else(|_| "{}".into());
-            match s.runtime.block_on(s.store.complete(
-                &lease,
-                &out.svg,
-                out.paths as i64,
-                &detail,
-                now,
-            )) {
-                Ok(true) => {
-                    let secs = started.elapsed().as_secs_f64();
-                    s.metrics.observe_job(secs);
-                    Metrics::inc(&s.metrics.jobs_succeeded);
-                    info!(seconds = secs, paths = out.paths, "job succeeded");
-                    s.hub
-                        .publish(&job_id, JobEvent::Finished(JobStatus::Succeeded));
-                }
-                Ok(false) => {
-                    Metrics::inc(&s.metrics.leases_lost);
-                    warn!("lease lost before completion; result discarded");
-                }
-                Err(e) => {
-                    error!(error = %e, "storing the result failed; the lease will expire and the job rerun")
-                }
-            }
-        }
-        Ok(Err(PipelineError::Cancelled)) => match stop {
-            Some(StopReason::Shutdown) => match s.runtime.block_on(s.store.release(&lease, now)) {
-                Ok(Some(_)) => {
-                    info!("job interrupted by shutdown; back in the queue");
-                    s.hub.publish(&job_id, JobEvent::Status(JobStatus::Queued));
-                }
-                Ok(None) => warn!("lease lost before release"),
-                Err(e) => error!(error = %e, "releasing the job failed; its lease will expire"),
-            },
-            _ => match s.runtime.block_on(s.store.finish_cancelled(&lease, now)) {
-                Ok(Some(_)) => {
-                    Metrics::inc(&s.metrics.jobs_cancelled);
-                    info!("job cancelled");
-                    s.hub
-                        .publish(&job_id, JobEvent::Finished(JobStatus::Cancelled));
-                }
-                Ok(None) => warn!("lease lost before cancellation was recorded"),
-                Err(e) => error!(error = %e, "recording the cancellation failed"),
-            },
-        },
+        Ok(Ok(out)) => complete(s, &lease, &out, started),
+        Ok(Err(PipelineError::Cancelled)) => stopped(s, &lease, stop, now),
         Ok(Err(e)) => fail_attempt(s, &lease, &e, now),
         Err(panic) => {
             let e = PipelineError::panicked(panic.as_ref());
             error!(error = %e, "executor panicked");
             fail_attempt(s, &lease, &e, now);
         }
+    }
+}
+
+/// The claimed job's spec with its upload put back; `None` when it cannot be read (the attempt
+/// is recorded as failed: `invalid_spec`, or `transient` when the database did not answer).
+fn read_job(s: &Shared, row: &JobRow, lease: &Lease) -> Option<JobSpec> {
+    let mut spec: JobSpec = match serde_json::from_str(&row.spec) {
+        Ok(spec) => spec,
+        Err(e) => {
+            let e = PipelineError::InvalidSpec(format!("its spec: {e}"));
+            error!(error = %e, "job cannot run");
+            fail_attempt(s, lease, &e, now_ms());
+            return None;
+        }
+    };
+    let e = match upload::attach(&s.store, &s.runtime, &row.id, &mut spec) {
+        Ok(()) => return Some(spec),
+        // A database hiccup (more likely with a networked PostgreSQL): another attempt may
+        // read it, as after a transient pipeline error.
+        Err(upload::AttachError::Store(msg)) => PipelineError::Transient(msg),
+        Err(upload::AttachError::Invalid(msg)) => {
+            let e = PipelineError::InvalidSpec(msg);
+            error!(error = %e, "job cannot run");
+            e
+        }
+    };
+    fail_attempt(s, lease, &e, now_ms());
+    None
+}
+
+/// Registers `job_id` as running on this node: its cancel token and the slot for why it stops
+/// (already cancelled when the pool is shutting down).
+fn register(s: &Shared, job_id: &str) -> (CancelToken, Arc<Mutex<Option<StopReason>>>) {
+    let cancel = CancelToken::new();
+    let reason = Arc::new(Mutex::new(None));
+    s.running().insert(
+        job_id.to_string(),
+        Running {
+            cancel: cancel.clone(),
+            reason: reason.clone(),
+        },
+    );
+    if s.shutdown.load(Ordering::SeqCst) {
+        set_reason(&reason, StopReason::Shutdown);
+        cancel.cancel();
+    }
+    (cancel, reason)
+}
+
+/// Saves a running job's checkpoints in the store, under its lease.
+fn checkpointer(
+    s: &Shared,
+    lease: &Lease,
+) -> Box<dyn Fn(serde_json::Value) -> Result<(), CheckpointError> + Send + Sync> {
+    let store = s.store.clone();
+    let lease = lease.clone();
+    let rt = s.runtime.clone();
+    Box::new(move |state: serde_json::Value| {
+        let text = serde_json::to_string(&state)?;
+        match rt.block_on(store.save_checkpoint(&lease, &text, now_ms())) {
+            Ok(true) => Ok(()),
+            Ok(false) => Err(CheckpointError::LeaseLost),
+            Err(e) => Err(CheckpointError::Store(Box::new(e))),
+        }
+    })
+}
+
+/// Stores a finished job's result (guarded by the lease).
+fn complete(s: &Shared, lease: &Lease, out: &RunOutput, started: Instant) {
+    // A report always serialises; `{}` only guards the impossible.
+    let detail = serde_json::to_string(&out.report).unwrap_or_else(|_| "{}".into());
+    let stored =
+        s.runtime.block_on(
+            s.store
+                .complete(lease, &out.svg, out.paths as i64, &detail, now_ms()),
+        );
+    match stored {
+        Ok(true) => {
+            let secs = started.elapsed().as_secs_f64();
+            s.metrics.observe_job(secs);
+            Metrics::inc(&s.metrics.jobs_succeeded);
+            info!(seconds = secs, paths = out.paths, "job succeeded");
+            s.hub
+                .publish(&lease.job_id, JobEvent::Finished(JobStatus::Succeeded));
+        }
+        Ok(false) => {
+            Metrics::inc(&s.metrics.leases_lost);
+            warn!("lease lost before completion; result discarded");
+        }
+        Err(e) => {
+            error!(error = %e, "storing the result failed; the lease will expire and the job rerun")
+        }
+    }
+}
+
+/// Records a job that stopped when asked: back in the queue on shutdown, else cancelled.
+fn stopped(s: &Shared, lease: &Lease, stop: Option<StopReason>, now: i64) {
+    let job_id = &lease.job_id;
+    if stop == Some(StopReason::Shutdown) {
+        match s.runtime.block_on(s.store.release(lease, now)) {
+            Ok(Some(_)) => {
+                info!("job interrupted by shutdown; back in the queue");
+                s.hub.publish(job_id, JobEvent::Status(JobStatus::Queued));
+            }
+            Ok(None) => warn!("lease lost before release"),
+            Err(e) => error!(error = %e, "releasing the job failed; its lease will expire"),
+        }
+        return;
+    }
+    match s.runtime.block_on(s.store.finish_cancelled(lease, now)) {
+        Ok(Some(_)) => {
+            Metrics::inc(&s.metrics.jobs_cancelled);
+            info!("job cancelled");
+            s.hub
+                .publish(job_id, JobEvent::Finished(JobStatus::Cancelled));
+        }
+        Ok(None) => warn!("lease lost before cancellation was recorded"),
+        Err(e) => error!(error = %e, "recording the cancellation failed"),
     }
 }
 

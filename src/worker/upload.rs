@@ -1,5 +1,6 @@
 //! A claimed job's upload, read back from its own table (`store::uploads`): the stored spec holds
-//! "" markers where the image and the starting SVG were.
+//! "" markers where the image and the starting SVG were. The image comes back as the bytes the
+//! submit decoded (no base64 on the way).
 
 use crate::pipeline::JobSpec;
 use crate::store::{Store, StoreError};
@@ -52,13 +53,16 @@ pub(super) fn attach(
         .map_err(AttachError::from_store)?
         .ok_or("the job's upload is no longer stored")?;
     if wants_image {
-        let b64 = up.image.ok_or("the job's stored upload has no image")?;
-        let bytes = base64::engine::general_purpose::STANDARD
-            .decode(b64.as_bytes())
-            .map_err(|e| {
-                AttachError::Invalid(format!("the job's stored image is not base64: {e}"))
-            })?;
-        spec.image = Some(bytes);
+        spec.image = Some(match (up.image_bytes, up.image_base64) {
+            (Some(bytes), _) => bytes,
+            // Stored by an older version (a job queued across the upgrade).
+            (None, Some(b64)) => base64::engine::general_purpose::STANDARD
+                .decode(b64.as_bytes())
+                .map_err(|e| {
+                    AttachError::Invalid(format!("the job's stored image is not base64: {e}"))
+                })?,
+            (None, None) => return Err("the job's stored upload has no image".into()),
+        });
     }
     if wants_svg {
         spec.svg = Some(up.svg.ok_or("the job's stored upload has no SVG")?);
@@ -93,7 +97,7 @@ mod tests {
             ..NewJob::new(id, JobKind::Vectorize, "{}")
         };
         let up = NewUpload {
-            image: Some("AQID".into()),
+            image: Some(vec![1, 2, 3]),
             svg: None,
             max_total_bytes: 1 << 20,
             max_tenant_bytes: 0,
@@ -106,6 +110,18 @@ mod tests {
         let mut spec = marked_spec();
         attach(&store, rt.handle(), "with", &mut spec).unwrap();
         assert_eq!(spec.image, Some(vec![1, 2, 3]));
+
+        // An upload an older version stored as base64 still reads.
+        rt.block_on(
+            sqlx::query(
+                "UPDATE uploads SET image_bytes = NULL, image = 'AQIE' WHERE job_id = 'with'",
+            )
+            .execute(store.pool()),
+        )
+        .unwrap();
+        let mut spec = marked_spec();
+        attach(&store, rt.handle(), "with", &mut spec).unwrap();
+        assert_eq!(spec.image, Some(vec![1, 2, 4]));
 
         let mut spec = marked_spec();
         let err = attach(&store, rt.handle(), "without", &mut spec).unwrap_err();

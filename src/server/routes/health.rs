@@ -23,7 +23,7 @@ pub(in crate::server) async fn readyz(State(state): State<AppState>) -> Response
         "workers": state.pool.workers(),
         "text_models": match &text {
             Ok(()) => "ready".to_string(),
-            Err(m) => crate::server::error::without_paths(m),
+            Err(m) => crate::server::error::without_paths(&m.to_string()),
         },
         "text_jobs_accepted": text.is_ok(),
     });

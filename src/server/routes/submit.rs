@@ -1,7 +1,7 @@
 //! `POST /jobs`: admission (media type, body size and read time, Idempotency-Key, upload
 //! validation, tenant quota, queue depth), then the insert or the replay of a known key.
 
-use crate::pipeline::{JobKind, JobSpec};
+use crate::pipeline::JobSpec;
 use crate::server::AppState;
 use crate::server::error::ApiError;
 use crate::server::tenant::Caller;
@@ -49,12 +49,6 @@ pub(in crate::server) async fn submit(
     );
     let spec = parse(&state, &body, default_seed).await?;
     let (spec, upload) = check_upload(&state, spec).await?;
-    if spec.kind == JobKind::Text
-        && let Err(msg) = state.executor.text_ready()
-    {
-        tracing::warn!(reason = %msg, "text job refused: text models are not configured");
-        return Err(ApiError::ModelsNotConfigured(msg));
-    }
     let hash = key
         .as_ref()
         .map(|_| format!("{:x}", sha2::Sha256::digest(&body)));
@@ -256,15 +250,12 @@ async fn admit(
     Ok(None)
 }
 
-/// Moves a validated spec's upload out of it (the image as base64, the SVG), leaving the ""
-/// markers the stored job keeps in their place (`store::uploads`; the worker puts it back).
+/// Moves a validated spec's upload out of it (the image as the bytes decoded from the request,
+/// the SVG), leaving the "" markers the stored job keeps in their place (`store::uploads`; the
+/// worker puts it back).
 fn take_upload(spec: &mut JobSpec) -> NewUpload {
-    use base64::Engine as _;
     NewUpload {
-        image: spec
-            .image
-            .as_mut()
-            .map(|b| base64::engine::general_purpose::STANDARD.encode(std::mem::take(b))),
+        image: spec.image.as_mut().map(std::mem::take),
         svg: spec.svg.as_mut().map(std::mem::take),
         ..NewUpload::default()
     }

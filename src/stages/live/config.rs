@@ -32,6 +32,8 @@ pub enum LiveError {
     Tracer(String),
     #[error("saving a checkpoint failed: {0}")]
     Checkpoint(String),
+    #[error("saving a checkpoint failed: {0}")]
+    Save(#[from] crate::progress::CheckpointError),
 }
 
 /// How many paths to use.

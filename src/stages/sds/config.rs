@@ -28,6 +28,8 @@ pub enum SdsError {
     Resume(String),
     #[error("saving an SDS checkpoint failed: {0}")]
     Checkpoint(String),
+    #[error("saving an SDS checkpoint failed: {0}")]
+    Save(#[from] crate::progress::CheckpointError),
 }
 
 /// The weighting `w(t)` of the SDS gradient.

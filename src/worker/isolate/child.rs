@@ -3,7 +3,7 @@
 //! checkpoints and the outcome to stdout. Logs go to stderr. When stdin closes (the server is
 //! gone) it exits at once.
 
-use super::protocol::{CANCEL, ChildExecutor, FromChild, Start};
+use super::protocol::{CANCEL, ChildExecutor, FromChild, read_start};
 use crate::pipeline::{DefaultExecutor, Executor, JobContext, PipelineError};
 use crate::progress::{CancelToken, CheckpointError};
 use crate::worker::test_executor::TestExecutor;
@@ -17,16 +17,10 @@ const ORPHANED: i32 = 70;
 /// Runs one job over stdin/stdout; returns the process exit status (0 once an outcome was
 /// written, 2 for an unreadable start).
 pub fn run_stdio() -> i32 {
-    let stdin = std::io::stdin();
-    let mut first = String::new();
-    if let Err(e) = stdin.lock().read_line(&mut first) {
-        eprintln!("job-child: cannot read the job: {e}");
-        return 2;
-    }
-    let start: Start = match serde_json::from_str(&first) {
+    let start = match read_start(&mut std::io::stdin().lock()) {
         Ok(s) => s,
         Err(e) => {
-            eprintln!("job-child: the job is not a valid start message: {e}");
+            eprintln!("job-child: {e}");
             return 2;
         }
     };

@@ -22,12 +22,12 @@ use crate::pipeline::{
     Executor, JobContext, JobSpec, Limits, PipelineError, PlanRequest, RunOutput, RunPlan,
     SpecError,
 };
-use protocol::{CANCEL, FromChild, Start};
+use protocol::{CANCEL, FromChild, write_start};
 use std::io::{BufRead, BufReader, Write};
 use std::path::PathBuf;
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, ChildStdin, Command, Stdio};
 use std::sync::Arc;
-use std::sync::mpsc::{RecvTimeoutError, channel};
+use std::sync::mpsc::{Receiver, RecvTimeoutError, channel};
 use std::time::{Duration, Instant};
 
 /// How often the parent checks the child's memory, time and cancellation.
@@ -84,107 +84,31 @@ impl Drop for Reaped {
 
 impl Executor for ProcessExecutor {
     fn run(&self, spec: &JobSpec, ctx: &JobContext) -> Result<RunOutput, PipelineError> {
-        let start = Start {
-            executor: self.child.clone(),
-            spec: spec.clone(),
-            resume: ctx.resume_state(),
-            checkpoint_every: ctx.checkpoint_every(),
-        };
-        let mut first = serde_json::to_vec(&start)
-            .map_err(|e| PipelineError::Failed(format!("cannot encode the job: {e}")))?;
-        first.push(b'\n');
-        let child = Command::new(&self.exe)
-            .arg("job-child")
-            .stdin(Stdio::piped())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::inherit())
-            .spawn()
-            .map_err(|e| PipelineError::Transient(format!("cannot start the job process: {e}")))?;
-        let mut child = Reaped(child);
-        let pid = child.0.id();
+        let mut child = self.spawn()?;
         let mut stdin = child.0.stdin.take();
         // A child that dies at once closes its stdin; the outcome below says why.
         if let Some(w) = stdin.as_mut() {
-            let _ = w.write_all(&first).and_then(|()| w.flush());
+            let resume = ctx.resume_state();
+            let every = ctx.checkpoint_every();
+            let _ = write_start(w, self.child.clone(), spec, resume, every);
         }
-        let stdout = child
-            .0
-            .stdout
-            .take()
-            .ok_or_else(|| PipelineError::Transient("the job process has no stdout".into()))?;
-        let (tx, rx) = channel::<String>();
-        let reader = std::thread::Builder::new()
-            .name("vf-job-out".into())
-            .spawn(move || {
-                for line in BufReader::new(stdout).lines() {
-                    let Ok(line) = line else { break };
-                    if tx.send(line).is_err() {
-                        break;
-                    }
-                }
-            })
-            .map_err(|e| PipelineError::Transient(format!("cannot start a reader thread: {e}")))?;
-
-        let began = Instant::now();
-        let mut last_check = began;
-        let mut outcome: Option<Result<RunOutput, PipelineError>> = None;
-        let mut stopped: Option<PipelineError> = None;
-        let mut cancel_sent = false;
-        loop {
-            match rx.recv_timeout(POLL) {
-                Ok(line) => match serde_json::from_str::<FromChild>(&line) {
-                    Ok(FromChild::Progress(p)) => ctx.report(p),
-                    Ok(FromChild::Checkpoint(v)) => {
-                        if let Err(e) = ctx.checkpoint(v) {
-                            let _ = child.0.kill();
-                            stopped.get_or_insert(e.into());
-                        }
-                    }
-                    Ok(FromChild::Done(out)) => outcome = Some(Ok(*out)),
-                    Ok(FromChild::Error { code, message }) => {
-                        outcome = Some(Err(PipelineError::reported(code, message)))
-                    }
-                    Err(_) => tracing::info!(target: "job_child", "{line}"),
-                },
-                Err(RecvTimeoutError::Timeout) => {}
-                Err(RecvTimeoutError::Disconnected) => break,
-            }
-            if stopped.is_some() || last_check.elapsed() < POLL {
-                continue;
-            }
-            last_check = Instant::now();
-            if ctx.is_cancelled() && !cancel_sent {
-                cancel_sent = true;
-                if let Some(w) = stdin.as_mut() {
-                    let _ = writeln!(w, "{CANCEL}").and_then(|()| w.flush());
-                }
-            }
-            let limit = self.limits;
-            if !limit.max_wall.is_zero() && began.elapsed() > limit.max_wall {
-                let _ = child.0.kill();
-                stopped = Some(PipelineError::ResourceLimit(format!(
-                    "the job ran longer than its wall-clock limit of {} s (queue.job_wall_secs)",
-                    limit.max_wall.as_secs()
-                )));
-            } else if limit.max_rss_bytes > 0
-                && let Some(rss) = rss_bytes(pid)
-                && rss > limit.max_rss_bytes
-            {
-                let _ = child.0.kill();
-                stopped = Some(PipelineError::ResourceLimit(format!(
-                    "the job used {} MiB of memory, past its limit of {} MiB (queue.job_memory_mb)",
-                    rss >> 20,
-                    limit.max_rss_bytes >> 20
-                )));
-            }
-        }
+        let (rx, reader) = read_lines(&mut child)?;
+        let mut watch = Watch {
+            limits: self.limits,
+            pid: child.0.id(),
+            began: Instant::now(),
+            outcome: None,
+            stopped: None,
+            cancel_sent: false,
+        };
+        watch.watch(&mut child, stdin.as_mut(), &rx, ctx);
         drop(stdin);
         let status = child.0.wait();
         let _ = reader.join();
-        if let Some(e) = stopped {
+        if let Some(e) = watch.stopped {
             return Err(e);
         }
-        outcome.unwrap_or_else(|| {
+        watch.outcome.unwrap_or_else(|| {
             let how = match status {
                 Ok(s) => describe(s),
                 Err(e) => format!("its status is unknown ({e})"),
@@ -201,6 +125,132 @@ impl Executor for ProcessExecutor {
 
     fn plan(&self, request: &PlanRequest, limits: &Limits) -> Result<RunPlan, SpecError> {
         self.inner.plan(request, limits)
+    }
+}
+
+impl ProcessExecutor {
+    /// Starts the job process (`vectorfusion job-child`) with piped stdin and stdout.
+    fn spawn(&self) -> Result<Reaped, PipelineError> {
+        Command::new(&self.exe)
+            .arg("job-child")
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .map(Reaped)
+            .map_err(|e| PipelineError::Transient(format!("cannot start the job process: {e}")))
+    }
+}
+
+/// The lines the job process writes, from a reader thread (it ends with the process's stdout).
+fn read_lines(
+    child: &mut Reaped,
+) -> Result<(Receiver<String>, std::thread::JoinHandle<()>), PipelineError> {
+    let stdout = child
+        .0
+        .stdout
+        .take()
+        .ok_or_else(|| PipelineError::Transient("the job process has no stdout".into()))?;
+    let (tx, rx) = channel::<String>();
+    let reader = std::thread::Builder::new()
+        .name("vf-job-out".into())
+        .spawn(move || {
+            for line in BufReader::new(stdout).lines() {
+                let Ok(line) = line else { break };
+                if tx.send(line).is_err() {
+                    break;
+                }
+            }
+        })
+        .map_err(|e| PipelineError::Transient(format!("cannot start a reader thread: {e}")))?;
+    Ok((rx, reader))
+}
+
+/// A running job process as the parent watches it.
+struct Watch {
+    limits: JobLimits,
+    pid: u32,
+    began: Instant,
+    /// What the job process answered (`done` or `error`).
+    outcome: Option<Result<RunOutput, PipelineError>>,
+    /// Why the parent killed it (a limit, a refused checkpoint).
+    stopped: Option<PipelineError>,
+    cancel_sent: bool,
+}
+
+impl Watch {
+    /// Relays the job process's lines to `ctx` until its stdout closes; every [`POLL`] passes
+    /// a cancellation on and checks the limits.
+    fn watch(
+        &mut self,
+        child: &mut Reaped,
+        mut stdin: Option<&mut ChildStdin>,
+        rx: &Receiver<String>,
+        ctx: &JobContext,
+    ) {
+        let mut last_check = self.began;
+        loop {
+            match rx.recv_timeout(POLL) {
+                Ok(line) => self.on_line(child, &line, ctx),
+                Err(RecvTimeoutError::Timeout) => {}
+                Err(RecvTimeoutError::Disconnected) => break,
+            }
+            if self.stopped.is_some() || last_check.elapsed() < POLL {
+                continue;
+            }
+            last_check = Instant::now();
+            if ctx.is_cancelled() && !self.cancel_sent {
+                self.cancel_sent = true;
+                if let Some(w) = stdin.as_mut() {
+                    let _ = writeln!(w, "{CANCEL}").and_then(|()| w.flush());
+                }
+            }
+            if let Some(e) = self.over_limit() {
+                let _ = child.0.kill();
+                self.stopped = Some(e);
+            }
+        }
+    }
+
+    /// One line of the job process: progress and checkpoints go to `ctx`, `done` and `error`
+    /// are the outcome, anything else is its log.
+    fn on_line(&mut self, child: &mut Reaped, line: &str, ctx: &JobContext) {
+        match serde_json::from_str::<FromChild>(line) {
+            Ok(FromChild::Progress(p)) => ctx.report(p),
+            Ok(FromChild::Checkpoint(v)) => {
+                if let Err(e) = ctx.checkpoint(v) {
+                    let _ = child.0.kill();
+                    self.stopped.get_or_insert(e.into());
+                }
+            }
+            Ok(FromChild::Done(out)) => self.outcome = Some(Ok(*out)),
+            Ok(FromChild::Error { code, message }) => {
+                self.outcome = Some(Err(PipelineError::reported(code, message)))
+            }
+            Err(_) => tracing::info!(target: "job_child", "{line}"),
+        }
+    }
+
+    /// The limit the job process has passed, if any.
+    fn over_limit(&self) -> Option<PipelineError> {
+        let limit = self.limits;
+        if !limit.max_wall.is_zero() && self.began.elapsed() > limit.max_wall {
+            return Some(PipelineError::ResourceLimit(format!(
+                "the job ran longer than its wall-clock limit of {} s (queue.job_wall_secs)",
+                limit.max_wall.as_secs()
+            )));
+        }
+        if limit.max_rss_bytes == 0 {
+            return None;
+        }
+        let rss = rss_bytes(self.pid)?;
+        (rss > limit.max_rss_bytes).then(|| {
+            PipelineError::ResourceLimit(format!(
+                "the job used {} MiB of memory, past its limit of {} MiB (queue.job_memory_mb)",
+                rss >> 20,
+                limit.max_rss_bytes >> 20
+            ))
+        })
     }
 }
 
