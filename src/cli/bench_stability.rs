@@ -5,8 +5,7 @@
 //! loss), final quality spread (PSNR of the render against the nearest teacher target, analytic
 //! teacher only) and seconds per run.
 
-use super::generate::cli_limits;
-use super::request_args::{BudgetArgs, ModelArgs, parse_word};
+use super::request_args::{BudgetArgs, ModelArgs, cli_limits, parse_word};
 use super::{CliError, ResultExt};
 use crate::image::{Image, psnr};
 use crate::pipeline::{

@@ -7,14 +7,13 @@
 //! `VECTORFUSION_MODELS_SD_DIR`), the embedded default model is used ([`default_model_dir`]:
 //! `VF_DEFAULT_MODEL`, else `models/vf-icon`), with its `scorer/` as the default scorer.
 
-use super::request_args::{ModelArgs, RequestArgs, parse_word};
+use super::request_args::{ModelArgs, RequestArgs, cli_limits, parse_word};
 use super::{CliError, ResultExt};
 use crate::pipeline::{
-    DefaultExecutor, EncoderChoice, Executor, JobContext, Limits, Method, ModelDirs, PlanRequest,
-    RunInput, StartKind, default_model_dir,
+    DefaultExecutor, EncoderChoice, Executor, JobContext, Method, ModelDirs, PlanRequest, RunInput,
+    StartKind, default_model_dir,
 };
 use crate::progress::{CancelToken, Progress, Stage};
-use crate::scene::MAX_PATHS;
 use anyhow::Context;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::PathBuf;
@@ -85,16 +84,6 @@ fn no_model() -> CliError {
         crate::pipeline::EMBEDDED_MODEL,
         crate::pipeline::DEFAULT_MODEL_ENV
     ))
-}
-
-/// Limits of a command-line run: only what the stages themselves cap.
-pub(crate) fn cli_limits() -> Limits {
-    Limits {
-        max_paths: MAX_PATHS as u32,
-        max_steps: u32::MAX,
-        max_samples: u32::MAX,
-        ..Limits::default()
-    }
 }
 
 /// The model directories of a command-line run (`--model`/`--teacher`, `--scorer`, `--taesd`,

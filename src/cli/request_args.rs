@@ -1,12 +1,13 @@
 //! The request flags `generate`, `eval` and `bench stability` share, as flag groups each
 //! command flattens: the teacher ([`ModelArgs`]), the budget ([`BudgetArgs`]) and the rest of
 //! a text request ([`RequestArgs`], turned into the plan's [`PlanRequest`] by
-//! [`RequestArgs::plan_request`]). Values are parsed by clap, so a bad one is a usage error
-//! (exit code 2) naming its flag.
+//! [`RequestArgs::plan_request`]), and the limits every command-line plan is checked against
+//! ([`cli_limits`]). Values are parsed by clap, so a bad one is a usage error (exit code 2)
+//! naming its flag.
 
 use super::tuning::SdsTuningArgs;
 use crate::models::ComputeDevice;
-use crate::pipeline::{Method, ModelDirs, PlanRequest, Preset, Style};
+use crate::pipeline::{Limits, Method, ModelDirs, PlanRequest, Preset, Style};
 use std::path::PathBuf;
 use std::str::FromStr;
 
@@ -17,8 +18,8 @@ pub struct ModelArgs {
     /// Stable Diffusion model directory (diffusers layout).
     #[arg(long, conflicts_with = "teacher")]
     pub model: Option<PathBuf>,
-    /// `analytic:DIR`: the analytic TEST teacher built from the PNG targets in DIR (the
-    /// directory is what is kept).
+    /// `analytic:DIR`: the analytic TEST teacher built from the PNG targets in DIR (held as
+    /// DIR).
     #[arg(long, value_name = "analytic:DIR", value_parser = parse_analytic_teacher)]
     pub teacher: Option<PathBuf>,
     /// Where the diffusion model runs: cpu, cuda or cuda:N (CUDA needs a build with the `cuda`
@@ -105,6 +106,16 @@ impl RequestArgs {
 #[derive(Debug, thiserror::Error)]
 #[error("unknown teacher {0:?}: the only test teacher is analytic:DIR")]
 pub struct UnknownTeacher(pub String);
+
+/// Limits of a command-line run: only what the stages themselves cap.
+pub fn cli_limits() -> Limits {
+    Limits {
+        max_paths: crate::scene::MAX_PATHS as u32,
+        max_steps: u32::MAX,
+        max_samples: u32::MAX,
+        ..Limits::default()
+    }
+}
 
 /// `--teacher analytic:DIR`: DIR (the only test teacher).
 pub fn parse_analytic_teacher(spec: &str) -> Result<PathBuf, UnknownTeacher> {

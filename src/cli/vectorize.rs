@@ -268,7 +268,7 @@ fn trace(
         },
         ..PlanRequest::text("")
     };
-    let plan = exec.plan(&request, &super::generate::cli_limits())?;
+    let plan = exec.plan(&request, &super::request_args::cli_limits())?;
     let ctx = JobContext::new(
         std::sync::Arc::new(sink),
         CancelToken::new(),
