@@ -99,6 +99,12 @@ async fn vectorize_job_end_to_end_with_events_and_results() {
     let r = get(a, "/jobs?status=succeeded&limit=10").await;
     assert_eq!(r.status, 200);
     assert_eq!(r.json()["jobs"][0]["id"], id.as_str());
+    // Cache-busters (names starting with _) are ignored; a typo is a 400 naming it.
+    let r = get(a, "/jobs?status=succeeded&_=1712").await;
+    assert_eq!(r.status, 200, "{}", r.text());
+    let r = get(a, "/jobs?stauts=succeeded").await;
+    assert_eq!(r.status, 400);
+    assert_eq!(r.json()["error"]["field"], "stauts");
 
     let m = get(a, "/metrics").await.text();
     assert!(m.contains("vectorfusion_jobs_succeeded_total 1"), "{m}");
@@ -544,6 +550,15 @@ async fn bad_input_gets_clear_4xx_json_never_500() {
             "unknown query param",
             "GET",
             "/jobs?colour=red",
+            None,
+            None,
+            400,
+            "invalid_query",
+        ),
+        raw(
+            "unknown events query param",
+            "GET",
+            "/jobs/00000000-0000-4000-8000-000000000000/events?colour=red",
             None,
             None,
             400,

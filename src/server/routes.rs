@@ -11,6 +11,6 @@ mod submit;
 
 pub(super) use access::{auth_and_count, method_not_allowed, no_route};
 pub(super) use health::{healthz, metrics, readyz};
-pub(super) use jobs::{cancel, get_job, job_id, list, load_job};
+pub(super) use jobs::{cancel, check_other_params, get_job, job_id, list, load_job};
 pub(super) use results::{result_png, result_svg, snapshot};
 pub(super) use submit::submit;

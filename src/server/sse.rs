@@ -6,8 +6,9 @@
 //! snapshot sent on the stream so far (0 before the first), so a reconnecting EventSource sends
 //! `Last-Event-ID: N` and receives every stored snapshot after N, wherever it was cut off. A first
 //! connection asks for the same with `?from=N` (`?from=0`: every stored snapshot); without
-//! either only the latest snapshot is replayed. Other query parameters (cache-busters) are
-//! ignored. Keep-alive comments go out every `server.sse_heartbeat_secs`.
+//! either only the latest snapshot is replayed. Other query parameters are
+//! refused unless their names start with `_` (cache-busters). Keep-alive comments go out every
+//! `server.sse_heartbeat_secs`.
 //!
 //! Each stream is fed by its own task from a per-job broadcast channel. The worker's publish
 //! never waits; when a client reads too slowly its channel lags and the task resynchronises from
@@ -19,7 +20,7 @@
 
 use super::AppState;
 use super::error::ApiError;
-use super::routes::{job_id, load_job};
+use super::routes::{check_other_params, job_id, load_job};
 use super::tenant::Caller;
 use super::types::{JobView, ProgressView};
 use crate::progress::Stage;
@@ -37,16 +38,20 @@ use tokio::sync::{broadcast, mpsc};
 /// Snapshots replayed at most on (re)connect.
 const REPLAY_LIMIT: i64 = 500;
 
-/// The query of `GET /jobs/{id}/events`; other parameters are ignored.
+/// The query of `GET /jobs/{id}/events`.
 #[derive(serde::Deserialize)]
 pub(super) struct EventsQuery {
     /// Replay every stored snapshot after this number (`0`: all), as `Last-Event-ID` does.
     from: Option<String>,
+    /// Every other parameter ([`check_other_params`]: `_`-names ignored, others refused).
+    #[serde(flatten)]
+    other: std::collections::BTreeMap<String, String>,
 }
 
 /// Where the stream starts: the `Last-Event-ID` header of a reconnecting client, else the
 /// `from` query parameter; `None`: the latest snapshot only.
 fn start_after(headers: &HeaderMap, query: &EventsQuery) -> Result<Option<i64>, ApiError> {
+    check_other_params(&query.other, "from")?;
     let header = headers
         .get("last-event-id")
         .and_then(|v| v.to_str().ok())

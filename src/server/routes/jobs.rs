@@ -59,11 +59,31 @@ pub(in crate::server) async fn get_job(
 }
 
 #[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
 pub(in crate::server) struct ListQuery {
     status: Option<String>,
     limit: Option<String>,
     cursor: Option<String>,
+    /// Every other parameter: see [`check_other_params`].
+    #[serde(flatten)]
+    other: std::collections::BTreeMap<String, String>,
+}
+
+/// The one rule for query parameters a route does not know: a name starting with `_` (a
+/// cache-buster such as `_=1712`) is ignored; any other is a 400 naming it, so a typo
+/// (`?stauts=running`) is not silently ignored. `accepted` lists the route's own parameters.
+pub(in crate::server) fn check_other_params(
+    other: &std::collections::BTreeMap<String, String>,
+    accepted: &str,
+) -> Result<(), ApiError> {
+    match other.keys().find(|k| !k.starts_with('_')) {
+        None => Ok(()),
+        Some(k) => Err(ApiError::InvalidQuery {
+            field: k.clone(),
+            reason: format!(
+                "unknown query parameter; accepted: {accepted} (names starting with _ are ignored)"
+            ),
+        }),
+    }
 }
 
 pub(in crate::server) async fn list(
@@ -78,6 +98,7 @@ pub(in crate::server) async fn list(
             e.body_text()
         ),
     })?;
+    check_other_params(&q.other, "status, limit, cursor")?;
     let bad = |field: &str, reason: String| ApiError::InvalidQuery {
         field: field.into(),
         reason,
