@@ -179,20 +179,80 @@ pub struct Sampler {
     clip_x0: Option<f64>,
 }
 
+/// A scheduler config this sampler cannot use.
+fn bad_config(reason: String) -> ModelError {
+    ModelError::Config {
+        path: "scheduler_config.json".into(),
+        reason,
+    }
+}
+
+/// The `steps` timesteps of `cfg.timestep_spacing` (as diffusers spaces them), from the last.
+fn spaced_timesteps(cfg: &SchedulerConfig, steps: usize) -> Result<Vec<f64>> {
+    let n = cfg.num_train_timesteps;
+    let ratio = n / steps;
+    Ok(match cfg.timestep_spacing.as_str() {
+        "leading" => (0..steps)
+            .rev()
+            .map(|i| (i * ratio + cfg.steps_offset) as f64)
+            .collect(),
+        "trailing" => {
+            let r = n as f64 / steps as f64;
+            (0..steps)
+                // numpy's round: halves to even (1000 / 16 steps: 812.5 → 812)
+                .map(|i| (n as f64 - i as f64 * r).round_ties_even() - 1.0)
+                .collect()
+        }
+        "linspace" => (0..steps)
+            .rev()
+            .map(|i| {
+                if steps == 1 {
+                    0.0
+                } else {
+                    i as f64 * (n - 1) as f64 / (steps - 1) as f64
+                }
+            })
+            .collect(),
+        other => {
+            return Err(bad_config(format!(
+                "timestep_spacing {other:?} is not supported"
+            )));
+        }
+    })
+}
+
+/// Euler's σ at each of `timesteps` (interpolated between the training steps of `ac`), plus a
+/// final 0.
+fn euler_sigmas(ac: &[f64], timesteps: &[f64]) -> Vec<f64> {
+    let n = ac.len();
+    let all: Vec<f64> = ac.iter().map(|a| ((1.0 - a) / a).sqrt()).collect();
+    let interp = |t: f64| {
+        let t = t.clamp(0.0, (n - 1) as f64);
+        let i = t.floor() as usize;
+        let f = t - i as f64;
+        if i + 1 < n {
+            all[i] * (1.0 - f) + all[i + 1] * f
+        } else {
+            all[n - 1]
+        }
+    };
+    let mut s: Vec<f64> = timesteps.iter().map(|&t| interp(t)).collect();
+    s.push(0.0);
+    s
+}
+
 impl Sampler {
     pub fn new(cfg: &SchedulerConfig, kind: SamplerKind, steps: usize) -> Result<Self> {
-        let bad = |r: String| ModelError::Config {
-            path: "scheduler_config.json".into(),
-            reason: r,
-        };
-        let ac = cfg.alphas_cumprod().map_err(|e| bad(e.to_string()))?;
+        let ac = cfg
+            .alphas_cumprod()
+            .map_err(|e| bad_config(e.to_string()))?;
         if cfg.thresholding {
-            return Err(bad(
+            return Err(bad_config(
                 "thresholding (dynamic x0 thresholding) is not supported".into(),
             ));
         }
         if cfg.clip_sample && (cfg.clip_sample_range.is_nan() || cfg.clip_sample_range <= 0.0) {
-            return Err(bad(format!(
+            return Err(bad_config(format!(
                 "clip_sample_range must be positive, got {}",
                 cfg.clip_sample_range
             )));
@@ -203,31 +263,7 @@ impl Sampler {
                 "steps must be in 1..={n}, got {steps}"
             )));
         }
-        let ratio = n / steps;
-        let spaced: Vec<f64> = match cfg.timestep_spacing.as_str() {
-            "leading" => (0..steps)
-                .rev()
-                .map(|i| (i * ratio + cfg.steps_offset) as f64)
-                .collect(),
-            "trailing" => {
-                let r = n as f64 / steps as f64;
-                (0..steps)
-                    // numpy's round: halves to even (1000 / 16 steps: 812.5 → 812)
-                    .map(|i| (n as f64 - i as f64 * r).round_ties_even() - 1.0)
-                    .collect()
-            }
-            "linspace" => (0..steps)
-                .rev()
-                .map(|i| {
-                    if steps == 1 {
-                        0.0
-                    } else {
-                        i as f64 * (n - 1) as f64 / (steps - 1) as f64
-                    }
-                })
-                .collect(),
-            other => return Err(bad(format!("timestep_spacing {other:?} is not supported"))),
-        };
+        let spaced = spaced_timesteps(cfg, steps)?;
         let (timesteps, sigmas) = match kind {
             SamplerKind::Ddim => {
                 let t: Vec<f64> = if cfg.timestep_spacing == "linspace" {
@@ -238,25 +274,15 @@ impl Sampler {
                 (t, Vec::new())
             }
             SamplerKind::Euler => {
-                let all: Vec<f64> = ac.iter().map(|a| ((1.0 - a) / a).sqrt()).collect();
-                let interp = |t: f64| {
-                    let t = t.clamp(0.0, (n - 1) as f64);
-                    let i = t.floor() as usize;
-                    let f = t - i as f64;
-                    if i + 1 < n {
-                        all[i] * (1.0 - f) + all[i + 1] * f
-                    } else {
-                        all[n - 1]
-                    }
-                };
-                let mut s: Vec<f64> = spaced.iter().map(|&t| interp(t)).collect();
-                s.push(0.0);
+                let s = euler_sigmas(&ac, &spaced);
                 (spaced, s)
             }
         };
         for &t in &timesteps {
             if t < 0.0 || t >= n as f64 {
-                return Err(bad(format!("timestep {t} out of range for {steps} steps")));
+                return Err(bad_config(format!(
+                    "timestep {t} out of range for {steps} steps"
+                )));
             }
         }
         let final_alpha_cumprod = if cfg.set_alpha_to_one { 1.0 } else { ac[0] };
@@ -268,7 +294,7 @@ impl Sampler {
             timesteps,
             sigmas,
             final_alpha_cumprod,
-            step_ratio: ratio,
+            step_ratio: n / steps,
             clip_x0: cfg.clip_sample.then_some(cfg.clip_sample_range),
         })
     }

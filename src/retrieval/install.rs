@@ -231,21 +231,7 @@ pub fn install(
     let mut captions: BTreeMap<String, usize> = BTreeMap::new();
     let mut icons_raw: Vec<(usize, String, String)> = Vec::new();
     for (pi, p) in packages.iter().enumerate() {
-        let path = set_path(&dir, &p.set, &p.version);
-        let text = match std::fs::read_to_string(&path) {
-            Ok(t) => t,
-            Err(_) => {
-                let bytes = fetch_tarball(p, loc, allow_download)?;
-                let t = icons_json_from_tgz(&bytes).map_err(|e| RetrievalError::Package {
-                    set: p.set.clone(),
-                    reason: e.to_string(),
-                })?;
-                let parent = path.parent().unwrap_or(&dir);
-                std::fs::create_dir_all(parent).map_err(|e| RetrievalError::file(parent, e))?;
-                std::fs::write(&path, &t).map_err(|e| RetrievalError::file(&path, e))?;
-                t
-            }
-        };
+        let text = set_text(p, &dir, loc, allow_download)?;
         let icons = iconify::icons(&text).map_err(|e| RetrievalError::Package {
             set: p.set.clone(),
             reason: e.to_string(),
@@ -261,11 +247,50 @@ pub fn install(
             icons_raw.push((pi, icon.name.clone(), cap));
         }
     }
-    // Captions in sorted order; embedded in batches of similar length (cheaper to pad).
+    // Captions in sorted order (each caption's number is its place in it).
     let list: Vec<String> = captions.keys().cloned().collect();
     for (i, c) in list.iter().enumerate() {
         captions.insert(c.clone(), i);
     }
+    let (dim, embeddings) = embed_captions(&list, embed)?;
+    let icons = icons_raw
+        .into_iter()
+        .map(|(p, name, cap)| (p, name, captions[&cap]))
+        .collect();
+    let idx = IconIndex::new(dir, sha, packages, list, icons, dim, embeddings)?;
+    idx.save()?;
+    Ok(idx)
+}
+
+/// The `icons.json` of `p`: kept in the index directory `dir`, else taken from its tarball
+/// (and kept).
+fn set_text(
+    p: &PinnedPackage,
+    dir: &Path,
+    loc: &RetrievalLocations,
+    allow_download: bool,
+) -> Result<String, RetrievalError> {
+    let path = set_path(dir, &p.set, &p.version);
+    if let Ok(t) = std::fs::read_to_string(&path) {
+        return Ok(t);
+    }
+    let bytes = fetch_tarball(p, loc, allow_download)?;
+    let t = icons_json_from_tgz(&bytes).map_err(|e| RetrievalError::Package {
+        set: p.set.clone(),
+        reason: e.to_string(),
+    })?;
+    let parent = path.parent().unwrap_or(dir);
+    std::fs::create_dir_all(parent).map_err(|e| RetrievalError::file(parent, e))?;
+    std::fs::write(&path, &t).map_err(|e| RetrievalError::file(&path, e))?;
+    Ok(t)
+}
+
+/// The embeddings of `list` (row `i` of caption `i`), embedded in batches of similar length
+/// (cheaper to pad), and their dimension. Every embedding must be finite and of one size.
+fn embed_captions(
+    list: &[String],
+    embed: &mut Embedder,
+) -> Result<(usize, Vec<f32>), RetrievalError> {
     let mut order: Vec<usize> = (0..list.len()).collect();
     order.sort_by_key(|&i| (list[i].len(), i));
     let mut rows: Vec<Vec<f32>> = vec![Vec::new(); list.len()];
@@ -292,14 +317,7 @@ pub fn install(
             rows[i] = v;
         }
     }
-    let embeddings: Vec<f32> = rows.concat();
-    let icons = icons_raw
-        .into_iter()
-        .map(|(p, name, cap)| (p, name, captions[&cap]))
-        .collect();
-    let idx = IconIndex::new(dir, sha, packages, list, icons, dim, embeddings)?;
-    idx.save()?;
-    Ok(idx)
+    Ok((dim, rows.concat()))
 }
 
 #[cfg(test)]

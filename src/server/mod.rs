@@ -180,42 +180,14 @@ pub async fn run_node(
         .location()
         .map_err(|e| ServerError::Config(e.to_string()))?;
     let store = Store::connect(&location, cfg.database.max_connections).await?;
-    let hub = Hub::new();
-    let metrics = Arc::new(Metrics::default());
-    let pool = WorkerPool::start(
-        store.clone(),
-        executor.clone(),
-        hub.clone(),
-        metrics.clone(),
-        WorkerSettings::from_config(&cfg),
-        tokio::runtime::Handle::current(),
-    )?;
-    let (stop_tx, stop_rx) = watch::channel(false);
-    let decode_permits = Arc::new(tokio::sync::Semaphore::new(
-        cfg.server.max_concurrent_decodes,
-    ));
-    let sse_permits = Arc::new(tokio::sync::Semaphore::new(cfg.server.max_sse_streams));
-    let state = AppState(Arc::new(Inner {
-        store: store.clone(),
-        hub,
-        metrics,
-        executor,
-        pool,
-        limits: cfg.limits(),
-        cfg,
-        shutdown: stop_rx,
-        queued_estimate: AtomicI64::new(0),
-        decode_permits,
-        sse_permits,
-    }));
-    let pruner = tokio::spawn(prune_loop(state.clone()));
-    let counter = tokio::spawn(depth_loop(state.clone()));
-    let wakeups = match &location {
-        DbLocation::Postgres(url) => {
-            Some(tokio::spawn(wakeups::listen(state.clone(), url.clone())))
-        }
-        DbLocation::Sqlite(_) => None,
-    };
+    let (state, stop_tx) = app_state(cfg, executor, store.clone())?;
+    let mut background = vec![
+        tokio::spawn(prune_loop(state.clone())),
+        tokio::spawn(depth_loop(state.clone())),
+    ];
+    if let DbLocation::Postgres(url) = &location {
+        background.push(tokio::spawn(wakeups::listen(state.clone(), url.clone())));
+    }
     let app = router(state.clone(), role);
     let addr = listener.local_addr()?;
     info!(%addr, ?role, workers = state.pool.workers(), db = %location, "listening");
@@ -234,6 +206,67 @@ pub async fn run_node(
         let _ = stop_tx.send(true);
         st.pool.begin_shutdown();
     };
+    serve_until_stopped(&state, listener, app, graceful, grace).await;
+    for task in background {
+        task.abort();
+    }
+    // Workers finish their current step, record the interruption and exit.
+    let left = stop_at.get().map_or(grace, |t: &std::time::Instant| {
+        grace.saturating_sub(t.elapsed())
+    });
+    join_workers(&state, left, grace).await;
+    store.close().await;
+    info!("stopped");
+    Ok(())
+}
+
+/// The node's shared state over `store` (its worker pool started) and the sender of its stop
+/// signal.
+fn app_state(
+    cfg: Config,
+    executor: Arc<dyn Executor>,
+    store: Store,
+) -> Result<(AppState, watch::Sender<bool>), ServerError> {
+    let hub = Hub::new();
+    let metrics = Arc::new(Metrics::default());
+    let pool = WorkerPool::start(
+        store.clone(),
+        executor.clone(),
+        hub.clone(),
+        metrics.clone(),
+        WorkerSettings::from_config(&cfg),
+        tokio::runtime::Handle::current(),
+    )?;
+    let (stop_tx, stop_rx) = watch::channel(false);
+    let decode_permits = Arc::new(tokio::sync::Semaphore::new(
+        cfg.server.max_concurrent_decodes,
+    ));
+    let sse_permits = Arc::new(tokio::sync::Semaphore::new(cfg.server.max_sse_streams));
+    let state = AppState(Arc::new(Inner {
+        store,
+        hub,
+        metrics,
+        executor,
+        pool,
+        limits: cfg.limits(),
+        cfg,
+        shutdown: stop_rx,
+        queued_estimate: AtomicI64::new(0),
+        decode_permits,
+        sse_permits,
+    }));
+    Ok((state, stop_tx))
+}
+
+/// Serves `app` on `listener` until `graceful` has run and the connections closed, or `grace`
+/// after the stop signal (then the connections left are closed).
+async fn serve_until_stopped(
+    state: &AppState,
+    listener: TcpListener,
+    app: Router,
+    graceful: impl Future<Output = ()> + Send + 'static,
+    grace: Duration,
+) {
     let conn_limits = listen::ConnLimits {
         max_connections: state.cfg.server.max_connections,
         header_read_timeout: Duration::from_secs(state.cfg.server.header_read_timeout_secs),
@@ -250,15 +283,10 @@ pub async fn run_node(
             warn!("connections still open {}s after the shutdown request; closing them", grace.as_secs());
         }
     };
-    pruner.abort();
-    counter.abort();
-    if let Some(w) = wakeups {
-        w.abort();
-    }
-    // Workers finish their current step, record the interruption and exit.
-    let left = stop_at.get().map_or(grace, |t: &std::time::Instant| {
-        grace.saturating_sub(t.elapsed())
-    });
+}
+
+/// Waits up to `left` for the worker threads (`grace` is the whole deadline, for the log).
+async fn join_workers(state: &AppState, left: Duration, grace: Duration) {
     let st = state.clone();
     let joined =
         tokio::time::timeout(left, tokio::task::spawn_blocking(move || st.pool.join())).await;
@@ -268,9 +296,6 @@ pub async fn run_node(
             grace.as_secs()
         );
     }
-    store.close().await;
-    info!("stopped");
-    Ok(())
 }
 
 async fn prune_loop(state: AppState) {

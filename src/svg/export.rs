@@ -250,118 +250,155 @@ fn common<T: PartialEq + Clone>(mut items: impl Iterator<Item = T>) -> Option<T>
 /// Writes `scene` as a standalone SVG document (see the docs of [`crate::svg`]). Never fails
 /// for a scene that passes [`Scene::validate`]; invalid values are written as they are.
 pub fn to_svg(scene: &Scene, opts: &SvgOptions) -> String {
-    let p = opts.precision.min(MAX_PRECISION) as usize;
-    let mut out = String::with_capacity(128 + 96 * scene.shapes.len());
-    let (w, h) = (scene.width, scene.height);
-    let _ = write!(
-        out,
-        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" viewBox="0 0 {w} {h}">"#
-    );
-    out.push('\n');
-    if scene.background.a > 0.0 {
-        let _ = write!(out, r#"<rect width="{w}" height="{h}""#);
-        let c = hex(scene.background);
-        if c != "#000" {
-            push_attr(&mut out, "fill", &c);
-        }
-        let o = num(scene.background.a.clamp(0.0, 1.0), opacity_decimals(p));
-        if o != "1" {
-            push_attr(&mut out, "fill-opacity", &o);
-        }
-        out.push_str("/>\n");
-    }
-
+    let mut w = Writer {
+        out: String::with_capacity(128 + 96 * scene.shapes.len()),
+        scene,
+        opts,
+        p: opts.precision.min(MAX_PRECISION) as usize,
+        groups: 0,
+    };
+    w.header();
     let items: Vec<(usize, Paint)> = scene
         .shapes
         .iter()
         .enumerate()
-        .map(|(i, sh)| (i, Paint::of(sh, p)))
+        .map(|(i, sh)| (i, Paint::of(sh, w.p)))
         .filter(|(_, paint)| paint.visible())
         .collect();
-
-    // Stroke attributes shared by all stroked paths go on one outer group (caps and joins are
-    // always round, so two stroked paths already pay for it).
     let mut ctx = Inherited::root();
-    let stroked: Vec<&StrokePaint> = items
-        .iter()
-        .filter_map(|(_, q)| q.stroke.as_ref())
-        .collect();
-    let outer = stroked.len() >= 2;
+    let outer = w.stroke_group(&items, &mut ctx);
+    let mut i = 0;
+    while i < items.len() {
+        i = w.fill_run(&items, i, &ctx);
+    }
     if outer {
+        w.out.push_str("</g>\n");
+    }
+    w.out.push_str("</svg>\n");
+    w.out
+}
+
+/// One scene being written.
+struct Writer<'a> {
+    out: String,
+    scene: &'a Scene,
+    opts: &'a SvgOptions,
+    /// Decimals of coordinates.
+    p: usize,
+    /// Colour groups written so far (their ids count up).
+    groups: usize,
+}
+
+impl Writer<'_> {
+    /// The `<svg>` element and the background rectangle (when the background shows).
+    fn header(&mut self) {
+        let (w, h) = (self.scene.width, self.scene.height);
+        let out = &mut self.out;
+        let _ = write!(
+            out,
+            r#"<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" viewBox="0 0 {w} {h}">"#
+        );
+        out.push('\n');
+        let background = self.scene.background;
+        if background.a > 0.0 {
+            let _ = write!(out, r#"<rect width="{w}" height="{h}""#);
+            let c = hex(background);
+            if c != "#000" {
+                push_attr(out, "fill", &c);
+            }
+            let o = num(background.a.clamp(0.0, 1.0), opacity_decimals(self.p));
+            if o != "1" {
+                push_attr(out, "fill-opacity", &o);
+            }
+            out.push_str("/>\n");
+        }
+    }
+
+    /// Opens one outer group with the stroke attributes shared by all stroked paths, when two
+    /// or more are stroked (caps and joins are always round, so two stroked paths already pay
+    /// for it); `ctx` learns what it sets. Returns whether it opened one.
+    fn stroke_group(&mut self, items: &[(usize, Paint)], ctx: &mut Inherited) -> bool {
+        let stroked: Vec<&StrokePaint> = items
+            .iter()
+            .filter_map(|(_, q)| q.stroke.as_ref())
+            .collect();
+        if stroked.len() < 2 {
+            return false;
+        }
+        let out = &mut self.out;
         let all_stroked = stroked.len() == items.len();
         out.push_str("<g");
         if let Some(f) = common(items.iter().map(|(_, q)| &q.fill))
             && f == "none"
         {
             ctx.fill = f.clone();
-            push_attr(&mut out, "fill", f);
+            push_attr(out, "fill", f);
         }
         if all_stroked && let Some(c) = common(stroked.iter().map(|s| &s.color)) {
-            push_attr(&mut out, "stroke", c);
+            push_attr(out, "stroke", c);
             ctx.stroke = Some(c.clone());
         }
         if let Some(wd) = common(stroked.iter().map(|s| &s.width)) {
-            push_attr(&mut out, "stroke-width", wd);
+            push_attr(out, "stroke-width", wd);
             ctx.stroke_width = Some(wd.clone());
         }
         if all_stroked && let Some(Some(o)) = common(stroked.iter().map(|s| &s.opacity)) {
-            push_attr(&mut out, "stroke-opacity", o);
+            push_attr(out, "stroke-opacity", o);
             ctx.stroke_opacity = Some(o.clone());
         }
         out.push_str(CAPS);
         ctx.caps = true;
         out.push_str(">\n");
+        true
     }
 
-    let mut groups = 0usize;
-    let mut i = 0;
-    while i < items.len() {
+    /// The paths from `items[i]` on: a run of two or more with one fill in a colour group
+    /// (when grouping by colour and the fill is not inherited already), else the one path.
+    /// Returns where the next run starts.
+    fn fill_run(&mut self, items: &[(usize, Paint)], i: usize, ctx: &Inherited) -> usize {
         let fill = &items[i].1.fill;
         let mut j = i + 1;
         while j < items.len() && &items[j].1.fill == fill {
             j += 1;
         }
         let run = &items[i..j];
-        let grouped = opts.group_by_color && run.len() >= 2 && *fill != ctx.fill;
+        let grouped = self.opts.group_by_color && run.len() >= 2 && *fill != ctx.fill;
         let mut inner = ctx.clone();
         if grouped {
-            groups += 1;
+            self.groups += 1;
+            let out = &mut self.out;
             out.push_str("<g");
-            if opts.ids {
-                push_attr(&mut out, "id", &format!("c{groups}"));
+            if self.opts.ids {
+                push_attr(out, "id", &format!("c{}", self.groups));
             }
-            push_attr(&mut out, "fill", fill);
+            push_attr(out, "fill", fill);
             inner.fill = fill.clone();
             if *fill != "none"
                 && let Some(Some(o)) = common(run.iter().map(|(_, q)| &q.fill_opacity))
             {
-                push_attr(&mut out, "fill-opacity", o);
+                push_attr(out, "fill-opacity", o);
                 inner.fill_opacity = Some(o.clone());
             }
             out.push_str(">\n");
         }
         let run_end = if grouped { j } else { i + 1 };
         for (index, paint) in &items[i..run_end] {
+            let out = &mut self.out;
             out.push_str("<path");
-            if opts.ids {
-                push_attr(&mut out, "id", &format!("p{}", index + 1));
+            if self.opts.ids {
+                push_attr(out, "id", &format!("p{}", index + 1));
             }
             out.push_str(r#" d=""#);
-            push_path_data(&mut out, &scene.shapes[*index], p);
+            push_path_data(out, &self.scene.shapes[*index], self.p);
             out.push('"');
-            push_paint(&mut out, paint, &inner);
+            push_paint(out, paint, &inner);
             out.push_str("/>\n");
         }
         if grouped {
-            out.push_str("</g>\n");
+            self.out.push_str("</g>\n");
         }
-        i = run_end;
+        run_end
     }
-    if outer {
-        out.push_str("</g>\n");
-    }
-    out.push_str("</svg>\n");
-    out
 }
 
 /// Where the previous token of path data ended, for the separator rules.

@@ -97,6 +97,33 @@ fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
     }
 }
 
+/// Jobs by status, the queue depth and the workers (gauges).
+fn render_gauges(out: &mut String, jobs_by_status: &[(String, i64)], workers: usize, busy: usize) {
+    let count = |status: &str| {
+        jobs_by_status
+            .iter()
+            .find(|(s, _)| s == status)
+            .map_or(0, |(_, n)| *n)
+    };
+    let _ = writeln!(
+        out,
+        "# HELP vectorfusion_jobs Jobs in the database by status.\n# TYPE vectorfusion_jobs gauge"
+    );
+    for st in crate::store::JobStatus::ALL {
+        let n = count(st.as_str());
+        let _ = writeln!(out, "vectorfusion_jobs{{status=\"{}\"}} {n}", st.as_str());
+    }
+    let queued = count("queued");
+    let _ = writeln!(
+        out,
+        "# HELP vectorfusion_queue_depth Jobs waiting to run.\n# TYPE vectorfusion_queue_depth gauge\nvectorfusion_queue_depth {queued}"
+    );
+    let _ = writeln!(
+        out,
+        "# HELP vectorfusion_workers Worker threads.\n# TYPE vectorfusion_workers gauge\nvectorfusion_workers {workers}\n# HELP vectorfusion_workers_busy Workers running a job.\n# TYPE vectorfusion_workers_busy gauge\nvectorfusion_workers_busy {busy}"
+    );
+}
+
 fn label_value(s: &str) -> String {
     s.replace('\\', "\\\\")
         .replace('"', "\\\"")
@@ -140,72 +167,53 @@ impl Metrics {
     /// Prometheus text; `jobs_by_status` comes from the database at scrape time.
     pub fn render(&self, jobs_by_status: &[(String, i64)], workers: usize, busy: usize) -> String {
         let mut out = String::new();
-        let counter = |out: &mut String, name: &str, help: &str, v: u64| {
+        render_gauges(&mut out, jobs_by_status, workers, busy);
+        self.render_counters(&mut out);
+        self.render_histograms(&mut out);
+        out
+    }
+
+    /// The job counters, then the failures by code.
+    fn render_counters(&self, out: &mut String) {
+        let counters: [(&str, &str, &AtomicU64); 6] = [
+            (
+                "vectorfusion_jobs_submitted_total",
+                "Jobs accepted by POST /jobs.",
+                &self.jobs_submitted,
+            ),
+            (
+                "vectorfusion_jobs_rejected_total",
+                "Submissions refused with 429 because the queue was full.",
+                &self.jobs_rejected_queue_full,
+            ),
+            (
+                "vectorfusion_jobs_succeeded_total",
+                "Jobs that succeeded.",
+                &self.jobs_succeeded,
+            ),
+            (
+                "vectorfusion_jobs_cancelled_total",
+                "Jobs cancelled while running.",
+                &self.jobs_cancelled,
+            ),
+            (
+                "vectorfusion_jobs_retried_total",
+                "Attempts that failed with a retryable error and were re-queued.",
+                &self.jobs_retried,
+            ),
+            (
+                "vectorfusion_leases_lost_total",
+                "Attempts abandoned because the lease was lost.",
+                &self.leases_lost,
+            ),
+        ];
+        for (name, help, c) in counters {
+            let v = c.load(Ordering::Relaxed);
             let _ = writeln!(
                 out,
                 "# HELP {name} {help}\n# TYPE {name} counter\n{name} {v}"
             );
-        };
-        let _ = writeln!(
-            out,
-            "# HELP vectorfusion_jobs Jobs in the database by status.\n# TYPE vectorfusion_jobs gauge"
-        );
-        for st in crate::store::JobStatus::ALL {
-            let n = jobs_by_status
-                .iter()
-                .find(|(s, _)| s == st.as_str())
-                .map_or(0, |(_, n)| *n);
-            let _ = writeln!(out, "vectorfusion_jobs{{status=\"{}\"}} {n}", st.as_str());
         }
-        let queued = jobs_by_status
-            .iter()
-            .find(|(s, _)| s == "queued")
-            .map_or(0, |(_, n)| *n);
-        let _ = writeln!(
-            out,
-            "# HELP vectorfusion_queue_depth Jobs waiting to run.\n# TYPE vectorfusion_queue_depth gauge\nvectorfusion_queue_depth {queued}"
-        );
-        let _ = writeln!(
-            out,
-            "# HELP vectorfusion_workers Worker threads.\n# TYPE vectorfusion_workers gauge\nvectorfusion_workers {workers}\n# HELP vectorfusion_workers_busy Workers running a job.\n# TYPE vectorfusion_workers_busy gauge\nvectorfusion_workers_busy {busy}"
-        );
-        let ld = |c: &AtomicU64| c.load(Ordering::Relaxed);
-        counter(
-            &mut out,
-            "vectorfusion_jobs_submitted_total",
-            "Jobs accepted by POST /jobs.",
-            ld(&self.jobs_submitted),
-        );
-        counter(
-            &mut out,
-            "vectorfusion_jobs_rejected_total",
-            "Submissions refused with 429 because the queue was full.",
-            ld(&self.jobs_rejected_queue_full),
-        );
-        counter(
-            &mut out,
-            "vectorfusion_jobs_succeeded_total",
-            "Jobs that succeeded.",
-            ld(&self.jobs_succeeded),
-        );
-        counter(
-            &mut out,
-            "vectorfusion_jobs_cancelled_total",
-            "Jobs cancelled while running.",
-            ld(&self.jobs_cancelled),
-        );
-        counter(
-            &mut out,
-            "vectorfusion_jobs_retried_total",
-            "Attempts that failed with a retryable error and were re-queued.",
-            ld(&self.jobs_retried),
-        );
-        counter(
-            &mut out,
-            "vectorfusion_leases_lost_total",
-            "Attempts abandoned because the lease was lost.",
-            ld(&self.leases_lost),
-        );
         let _ = writeln!(
             out,
             "# HELP vectorfusion_job_failures_total Jobs that failed for good, by error code.\n# TYPE vectorfusion_job_failures_total counter"
@@ -216,18 +224,22 @@ impl Metrics {
                 "vectorfusion_job_failures_total{{code=\"{code}\"}} {n}"
             );
         }
+    }
+
+    /// Job and stage durations, then HTTP responses and their handling time.
+    fn render_histograms(&self, out: &mut String) {
         let _ = writeln!(
             out,
             "# HELP vectorfusion_job_duration_seconds Wall time of successful attempts.\n# TYPE vectorfusion_job_duration_seconds histogram"
         );
-        lock(&self.job_seconds).render(&mut out, "vectorfusion_job_duration_seconds", "");
+        lock(&self.job_seconds).render(out, "vectorfusion_job_duration_seconds", "");
         let _ = writeln!(
             out,
             "# HELP vectorfusion_stage_duration_seconds Wall time per pipeline stage.\n# TYPE vectorfusion_stage_duration_seconds histogram"
         );
         for (stage, h) in lock(&self.stage_seconds).iter() {
             h.render(
-                &mut out,
+                out,
                 "vectorfusion_stage_duration_seconds",
                 &format!("stage=\"{}\"", label_value(stage)),
             );
@@ -248,11 +260,10 @@ impl Metrics {
         );
         for (route, h) in lock(&self.http_seconds).iter() {
             h.render(
-                &mut out,
+                out,
                 "vectorfusion_http_request_duration_seconds",
                 &format!("route=\"{}\"", label_value(route)),
             );
         }
-        out
     }
 }

@@ -221,33 +221,8 @@ pub fn convert_state_dict(
             Some(r) => ("vision_model", r),
             None => ("text_model", k.as_str()),
         };
-        let simple = match (tower, key) {
-            ("text_model", "token_embedding.weight") => {
-                Some("text_model.embeddings.token_embedding.weight".to_string())
-            }
-            ("text_model", "positional_embedding") => {
-                Some("text_model.embeddings.position_embedding.weight".to_string())
-            }
-            ("text_model", "ln_final.weight") => Some("text_model.final_layer_norm.weight".into()),
-            ("text_model", "ln_final.bias") => Some("text_model.final_layer_norm.bias".into()),
-            ("text_model", "logit_scale") => Some("logit_scale".into()),
-            ("vision_model", "conv1.weight") => {
-                Some("vision_model.embeddings.patch_embedding.weight".into())
-            }
-            ("vision_model", "class_embedding") => {
-                Some("vision_model.embeddings.class_embedding".into())
-            }
-            ("vision_model", "positional_embedding") => {
-                Some("vision_model.embeddings.position_embedding.weight".into())
-            }
-            ("vision_model", "ln_pre.weight") => Some("vision_model.pre_layrnorm.weight".into()),
-            ("vision_model", "ln_pre.bias") => Some("vision_model.pre_layrnorm.bias".into()),
-            ("vision_model", "ln_post.weight") => Some("vision_model.post_layernorm.weight".into()),
-            ("vision_model", "ln_post.bias") => Some("vision_model.post_layernorm.bias".into()),
-            _ => None,
-        };
-        if let Some(name) = simple {
-            out.insert(name, t);
+        if let Some(name) = renamed(tower, key) {
+            out.insert(name.to_string(), t);
             continue;
         }
         match (tower, key) {
@@ -266,36 +241,74 @@ pub fn convert_state_dict(
             (_, "attn_mask") => continue,
             _ => {}
         }
-        let Some(rest) = key.strip_prefix("transformer.resblocks.") else {
-            return Err(ClipError::Config(format!(
+        let unsupported = || {
+            ClipError::Config(format!(
                 "unsupported OpenCLIP tensor `{k}` (this variant is not supported)"
-            )));
+            ))
         };
-        if let Some(n) = rest.strip_suffix(".attn.in_proj_weight") {
-            let w = t.dim(0)? / 3;
-            for (i, q) in ["q", "k", "v"].iter().enumerate() {
-                out.insert(
-                    format!("{tower}.encoder.layers.{n}.self_attn.{q}_proj.weight"),
-                    t.narrow(0, i * w, w)?.contiguous()?,
-                );
-            }
-        } else if let Some(n) = rest.strip_suffix(".attn.in_proj_bias") {
-            let w = t.dim(0)? / 3;
-            for (i, q) in ["q", "k", "v"].iter().enumerate() {
-                out.insert(
-                    format!("{tower}.encoder.layers.{n}.self_attn.{q}_proj.bias"),
-                    t.narrow(0, i * w, w)?.contiguous()?,
-                );
-            }
-        } else if let Some(name) = rename_block(rest) {
-            out.insert(format!("{tower}.{name}"), t);
-        } else {
-            return Err(ClipError::Config(format!(
-                "unsupported OpenCLIP tensor `{k}` (this variant is not supported)"
-            )));
+        let rest = key
+            .strip_prefix("transformer.resblocks.")
+            .ok_or_else(unsupported)?;
+        if !convert_block(&mut out, tower, rest, &t)? {
+            return Err(unsupported());
         }
     }
     Ok(out)
+}
+
+/// The transformers name of a tensor OpenCLIP keeps whole outside its blocks.
+fn renamed(tower: &str, key: &str) -> Option<&'static str> {
+    Some(match (tower, key) {
+        ("text_model", "token_embedding.weight") => "text_model.embeddings.token_embedding.weight",
+        ("text_model", "positional_embedding") => "text_model.embeddings.position_embedding.weight",
+        ("text_model", "ln_final.weight") => "text_model.final_layer_norm.weight",
+        ("text_model", "ln_final.bias") => "text_model.final_layer_norm.bias",
+        ("text_model", "logit_scale") => "logit_scale",
+        ("vision_model", "conv1.weight") => "vision_model.embeddings.patch_embedding.weight",
+        ("vision_model", "class_embedding") => "vision_model.embeddings.class_embedding",
+        ("vision_model", "positional_embedding") => {
+            "vision_model.embeddings.position_embedding.weight"
+        }
+        ("vision_model", "ln_pre.weight") => "vision_model.pre_layrnorm.weight",
+        ("vision_model", "ln_pre.bias") => "vision_model.pre_layrnorm.bias",
+        ("vision_model", "ln_post.weight") => "vision_model.post_layernorm.weight",
+        ("vision_model", "ln_post.bias") => "vision_model.post_layernorm.bias",
+        _ => return None,
+    })
+}
+
+/// Converts tensor `rest` (after `transformer.resblocks.`) of a block of `tower` into `out`:
+/// the fused q/k/v projection split in three, other tensors renamed. `false`: not a tensor of
+/// a block this implementation knows.
+fn convert_block(
+    out: &mut HashMap<String, Tensor>,
+    tower: &str,
+    rest: &str,
+    t: &Tensor,
+) -> Result<bool, ClipError> {
+    let fused = [
+        (".attn.in_proj_weight", "weight"),
+        (".attn.in_proj_bias", "bias"),
+    ];
+    for (suffix, kind) in fused {
+        if let Some(n) = rest.strip_suffix(suffix) {
+            let w = t.dim(0)? / 3;
+            for (i, q) in ["q", "k", "v"].iter().enumerate() {
+                out.insert(
+                    format!("{tower}.encoder.layers.{n}.self_attn.{q}_proj.{kind}"),
+                    t.narrow(0, i * w, w)?.contiguous()?,
+                );
+            }
+            return Ok(true);
+        }
+    }
+    match rename_block(rest) {
+        Some(name) => {
+            out.insert(format!("{tower}.{name}"), t.clone());
+            Ok(true)
+        }
+        None => Ok(false),
+    }
 }
 
 /// Loads model, preprocessing and tokenizer from an OpenCLIP directory. The tokenizer files

@@ -108,6 +108,14 @@ fn head_dim() -> Value {
     Value::from(8)
 }
 
+/// `Err(Unsupported)`: `setting` (with `value`) is a feature this implementation does not have.
+fn unsupported<T>(
+    setting: &'static str,
+    value: Option<String>,
+) -> std::result::Result<T, ConfigIssue> {
+    Err(ConfigIssue::Unsupported { setting, value })
+}
+
 /// An int or a per-block list of ints.
 fn per_block(v: &Value, n: usize, name: &str) -> std::result::Result<Vec<usize>, ConfigIssue> {
     match v {
@@ -193,20 +201,51 @@ impl UnetConfig {
                 self.up_block_types.len()
             )));
         }
-        let bad = |setting: &'static str, value: Option<String>| {
-            Err(ConfigIssue::Unsupported { setting, value })
-        };
+        self.check_blocks_supported()?;
+        self.check_embeddings_supported()?;
+        let cross = match &self.cross_attention_dim {
+            Value::Number(x) => x.as_u64().map(|x| x as usize),
+            _ => None,
+        }
+        .ok_or_else(|| {
+            ConfigIssue::Inconsistent("cross_attention_dim must be a single integer".into())
+        })?;
+        let (levels, mid) = self.levels(n)?;
+        if self.layers_per_block == 0 {
+            return Err(ConfigIssue::Inconsistent("layers_per_block is 0".into()));
+        }
+        Ok(UnetArch {
+            in_channels: self.in_channels,
+            out_channels: self.out_channels,
+            levels,
+            layers_per_block: self.layers_per_block,
+            mid,
+            groups: self.norm_num_groups,
+            eps: self.norm_eps,
+            cross_attention_dim: cross,
+            downsample_padding: self.downsample_padding as usize,
+            mid_block_scale_factor: self.mid_block_scale_factor,
+            flip_sin_to_cos: self.flip_sin_to_cos,
+            freq_shift: self.freq_shift,
+            center_input_sample: self.center_input_sample,
+            upcast_attention: self.upcast_attention,
+        })
+    }
+
+    /// Refuses the block features this implementation does not have (other activations,
+    /// attention variants, class and extra embeddings, resnet options).
+    fn check_blocks_supported(&self) -> std::result::Result<(), ConfigIssue> {
         if self.act_fn != "silu" {
-            return bad("act_fn", Some(format!("{:?}", self.act_fn)));
+            return unsupported("act_fn", Some(format!("{:?}", self.act_fn)));
         }
         if self.dual_cross_attention {
-            return bad("dual_cross_attention", None);
+            return unsupported("dual_cross_attention", None);
         }
         if matches!(&self.only_cross_attention, Value::Bool(true))
             || matches!(&self.only_cross_attention, Value::Array(a) if a.iter().any(|x| x == &Value::Bool(true)))
             || self.mid_block_only_cross_attention == Some(true)
         {
-            return bad("only_cross_attention", None);
+            return unsupported("only_cross_attention", None);
         }
         for (name, v) in [
             ("class_embed_type", &self.class_embed_type),
@@ -216,31 +255,36 @@ impl UnetConfig {
             ("cross_attention_norm", &self.cross_attention_norm),
         ] {
             if v.is_some() {
-                return bad(name, None);
+                return unsupported(name, None);
             }
         }
         if self.num_class_embeds.is_some() || self.class_embeddings_concat {
-            return bad("class embeddings", None);
+            return unsupported("class embeddings", None);
         }
         if self.encoder_hid_dim.is_some() {
-            return bad("encoder_hid_dim", None);
+            return unsupported("encoder_hid_dim", None);
         }
         if self.time_cond_proj_dim.is_some() {
-            return bad("time_cond_proj_dim (LCM)", None);
+            return unsupported("time_cond_proj_dim (LCM)", None);
         }
         if self.resnet_skip_time_act {
-            return bad("resnet_skip_time_act", None);
+            return unsupported("resnet_skip_time_act", None);
         }
         if self.resnet_out_scale_factor.is_some_and(|f| f != 1.0) {
-            return bad("resnet_out_scale_factor other than 1", None);
+            return unsupported("resnet_out_scale_factor other than 1", None);
         }
         if !self.reverse_transformer_layers_per_block.is_null() {
-            return bad("reverse_transformer_layers_per_block", None);
+            return unsupported("reverse_transformer_layers_per_block", None);
         }
+        Ok(())
+    }
+
+    /// Refuses the time-embedding and layout variants this implementation does not have.
+    fn check_embeddings_supported(&self) -> std::result::Result<(), ConfigIssue> {
         if let Some(d) = self.time_embedding_dim
             && d != 4 * self.block_out_channels[0]
         {
-            return bad(
+            return unsupported(
                 "time_embedding_dim other than 4 × block_out_channels[0]",
                 None,
             );
@@ -259,35 +303,33 @@ impl UnetConfig {
             ("attention_type", &self.attention_type, "default"),
         ] {
             if v.as_deref().is_some_and(|t| t != only) {
-                return bad(name, Some(format!("other than {only}")));
+                return unsupported(name, Some(format!("other than {only}")));
             }
         }
         if self.conv_in_kernel.is_some_and(|k| k != 3)
             || self.conv_out_kernel.is_some_and(|k| k != 3)
         {
-            return bad("conv kernels other than 3", None);
+            return unsupported("conv kernels other than 3", None);
         }
         if self
             .mid_block_type
             .as_deref()
             .is_some_and(|t| t != "UNetMidBlock2DCrossAttn")
         {
-            return bad("mid_block_type", Some(format!("{:?}", self.mid_block_type)));
+            return unsupported("mid_block_type", Some(format!("{:?}", self.mid_block_type)));
         }
         if self.downsample_padding.fract() != 0.0 || !(0.0..=1.0).contains(&self.downsample_padding)
         {
-            return bad(
+            return unsupported(
                 "downsample_padding",
                 Some(self.downsample_padding.to_string()),
             );
         }
-        let cross = match &self.cross_attention_dim {
-            Value::Number(x) => x.as_u64().map(|x| x as usize),
-            _ => None,
-        }
-        .ok_or_else(|| {
-            ConfigIssue::Inconsistent("cross_attention_dim must be a single integer".into())
-        })?;
+        Ok(())
+    }
+
+    /// The `n` levels (their channels and transformers) and the mid block's transformer.
+    fn levels(&self, n: usize) -> std::result::Result<(Vec<LevelArch>, AttnArch), ConfigIssue> {
         // diffusers: `num_attention_heads or attention_head_dim` is the head count (the legacy
         // naming of SD 1.x/2.x configs)
         let heads = if self.num_attention_heads.is_null() {
@@ -329,12 +371,12 @@ impl UnetConfig {
             let down_attn = match self.down_block_types[i].as_str() {
                 "CrossAttnDownBlock2D" => Some(attn(i)?),
                 "DownBlock2D" => None,
-                t => return bad("down_block_types", Some(format!("{t:?}"))),
+                t => return unsupported("down_block_types", Some(format!("{t:?}"))),
             };
             let up_attn = match self.up_block_types[n - 1 - i].as_str() {
                 "CrossAttnUpBlock2D" => Some(attn(i)?),
                 "UpBlock2D" => None,
-                t => return bad("up_block_types", Some(format!("{t:?}"))),
+                t => return unsupported("up_block_types", Some(format!("{t:?}"))),
             };
             levels.push(LevelArch {
                 channels: c,
@@ -343,25 +385,7 @@ impl UnetConfig {
             });
         }
         let mid = attn(n - 1).map_err(|e| ConfigIssue::Inconsistent(format!("mid block: {e}")))?;
-        if self.layers_per_block == 0 {
-            return Err(ConfigIssue::Inconsistent("layers_per_block is 0".into()));
-        }
-        Ok(UnetArch {
-            in_channels: self.in_channels,
-            out_channels: self.out_channels,
-            levels,
-            layers_per_block: self.layers_per_block,
-            mid,
-            groups: self.norm_num_groups,
-            eps: self.norm_eps,
-            cross_attention_dim: cross,
-            downsample_padding: self.downsample_padding as usize,
-            mid_block_scale_factor: self.mid_block_scale_factor,
-            flip_sin_to_cos: self.flip_sin_to_cos,
-            freq_shift: self.freq_shift,
-            center_input_sample: self.center_input_sample,
-            upcast_attention: self.upcast_attention,
-        })
+        Ok((levels, mid))
     }
 
     /// The full-size SD 1.5 UNet config (benchmarks with random weights).
