@@ -88,8 +88,10 @@ pub enum ModelError {
     /// The BERT text encoder or its tokenizer failed to load or run.
     #[error("text encoder: {0}")]
     Bert(#[from] bert::BertError),
-    #[error("not implemented: {0}")]
-    NotImplemented(&'static str),
+    /// Text embeddings asked of a model assembled without a text encoder (benchmarks build the
+    /// UNet and VAE alone).
+    #[error("this StableDiffusion was assembled without a text encoder")]
+    NoTextEncoder,
 }
 
 pub type Result<T> = std::result::Result<T, ModelError>;

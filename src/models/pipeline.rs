@@ -311,9 +311,7 @@ impl StableDiffusion {
 
     /// Embeddings of a prompt, `[1, 77, cross_attention_dim]`.
     pub fn embed_text(&self, prompt: &str) -> Result<Tensor> {
-        let t = self.text.as_ref().ok_or(ModelError::NotImplemented(
-            "this StableDiffusion was assembled without a text encoder",
-        ))?;
+        let t = self.text.as_ref().ok_or(ModelError::NoTextEncoder)?;
         t.embed(prompt, &self.device)
     }
 

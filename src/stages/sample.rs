@@ -22,10 +22,6 @@ pub fn retrieved_count(k: u32, share: f64) -> usize {
     ((f64::from(k) * share - 1e-9).ceil().max(0.0) as usize).min(k as usize)
 }
 
-fn failed(what: &str, e: impl std::fmt::Display) -> SampleError {
-    SampleError::Failed(format!("{what}: {e}"))
-}
-
 /// The K raster samples of one caption and the scorer's pick among them.
 ///
 /// Invariant: `images` is not empty and `best < images.len()` (checked where it is built).
@@ -121,16 +117,16 @@ pub fn sample_and_rerank(
     let (hits, starts): (Vec<Hit>, Vec<Image>) = hits.into_iter().unzip();
     let images = teacher.sample(prompt, &starts, cfg, sink, cancel)?;
     if images.is_empty() {
-        return Err(failed("sampling", "no samples drawn (K = 0)"));
+        return Err(SampleError::failed("sampling", "no samples drawn (K = 0)"));
     }
     let (best, scores) = match scorer {
         Some(scorer) => scorer
             .best_of(&images, caption)
-            .map_err(|e| failed("CLIP rerank", e))?,
+            .map_err(|e| SampleError::failed("CLIP rerank", e))?,
         None => (0, Vec::new()),
     };
     if best >= images.len() {
-        return Err(failed("rerank", "best index out of range"));
+        return Err(SampleError::failed("rerank", "best index out of range"));
     }
     let mut sources: Vec<Option<Hit>> = hits.into_iter().map(Some).collect();
     sources.resize(images.len(), None);

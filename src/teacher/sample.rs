@@ -33,15 +33,18 @@ pub enum SampleError {
     Failed(String),
 }
 
-fn failed(what: &str, e: impl std::fmt::Display) -> SampleError {
-    SampleError::Failed(format!("{what}: {e}"))
+impl SampleError {
+    /// A failure of `what` (a step of sampling or reranking) because of `e`.
+    pub fn failed(what: &str, e: impl std::fmt::Display) -> SampleError {
+        SampleError::Failed(format!("{what}: {e}"))
+    }
 }
 
 /// An opaque RGB image as `[1, 3, H, W]` in `[0, 1]` (alpha composited over white).
 pub fn image_tensor(image: &Image, device: &candle_core::Device) -> Result<Tensor, SampleError> {
     let (w, h) = (image.width as usize, image.height as usize);
     Tensor::from_vec(image.planar_rgb_over_white(), (1, 3, h, w), device)
-        .map_err(|e| failed("image", e))
+        .map_err(|e| SampleError::failed("image", e))
 }
 
 /// `[1, 3, H, W]` in `[0, 1]` → opaque [`Image`]; non-finite values are an error.
@@ -49,15 +52,20 @@ pub fn tensor_image(t: &Tensor) -> Result<Image, SampleError> {
     let dims = t.dims().to_vec();
     let (h, w) = match dims.as_slice() {
         [1, 3, h, w] => (*h, *w),
-        _ => return Err(failed("decode", format!("unexpected shape {dims:?}"))),
+        _ => {
+            return Err(SampleError::failed(
+                "decode",
+                format!("unexpected shape {dims:?}"),
+            ));
+        }
     };
     let v: Vec<f32> = t
         .to_dtype(DType::F32)
         .and_then(|x| x.flatten_all())
         .and_then(|x| x.to_vec1())
-        .map_err(|e| failed("decode", e))?;
+        .map_err(|e| SampleError::failed("decode", e))?;
     if v.iter().any(|x| !x.is_finite()) {
-        return Err(failed("decode", "non-finite pixels"));
+        return Err(SampleError::failed("decode", "non-finite pixels"));
     }
     let mut im = Image::new(w as u32, h as u32);
     for p in 0..h * w {
@@ -83,7 +91,7 @@ pub fn draw(
 ) -> Result<Vec<Image>, SampleError> {
     let (cond, uncond) = sd
         .text_embeddings(prompt)
-        .map_err(|e| failed("text encoder", e))?;
+        .map_err(|e| SampleError::failed("text encoder", e))?;
     let [c, h, w] = latent_shape;
     // noise samples draw from the sampler's historical stream; SDEdit noise from its own
     let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed ^ 0x5a3b_1e00);
@@ -101,15 +109,15 @@ pub fn draw(
             &mut rng
         };
         let noise: Vec<f32> = (0..c * h * w).map(|_| super::gaussian(r)).collect();
-        let noise =
-            Tensor::from_vec(noise, (1, c, h, w), sd.device()).map_err(|e| failed("noise", e))?;
+        let noise = Tensor::from_vec(noise, (1, c, h, w), sd.device())
+            .map_err(|e| SampleError::failed("noise", e))?;
         let traj = if let Some(start) = start {
             let x = image_tensor(start, sd.device())?;
             let z = sd
                 .encode(&x)
-                .map_err(|e| failed("encode the start image", e))?;
+                .map_err(|e| SampleError::failed("encode the start image", e))?;
             if z.dims() != [1, c, h, w] {
-                return Err(failed(
+                return Err(SampleError::failed(
                     "encode the start image",
                     format!("latent {:?}, expected {:?}", z.dims(), [1, c, h, w]),
                 ));
@@ -133,13 +141,17 @@ pub fn draw(
                 SamplerKind::Ddim,
             )
         }
-        .map_err(|e| failed("sampling", e))?;
+        .map_err(|e| SampleError::failed("sampling", e))?;
         let z = traj
             .last()
-            .ok_or_else(|| failed("sampling", "no sampler steps"))?;
-        let img = sd.decode(z).map_err(|e| failed("decode", e))?;
+            .ok_or_else(|| SampleError::failed("sampling", "no sampler steps"))?;
+        let img = sd.decode(z).map_err(|e| SampleError::failed("decode", e))?;
         out.push(tensor_image(&img)?);
-        sink.report(Progress::new(crate::progress::Stage::Sample, i as u32 + 1, cfg.k));
+        sink.report(Progress::new(
+            crate::progress::Stage::Sample,
+            i as u32 + 1,
+            cfg.k,
+        ));
     }
     Ok(out)
 }
