@@ -45,6 +45,20 @@ fn render_writes_png_of_requested_size() {
     assert_eq!(o.status.code(), Some(2), "bad input exits 2 (README)");
     assert!(String::from_utf8_lossy(&o.stderr).contains("cannot parse SVG"));
 
+    // A missing input file is bad input too (2), with a message naming it.
+    let missing = dir.join("missing.svg");
+    let o = bin()
+        .args([
+            "render",
+            missing.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2), "a missing input exits 2");
+    assert!(String::from_utf8_lossy(&o.stderr).contains("missing.svg"));
+
     // Hostile input is refused at once, without growing: a circle of radius 1e38, an entity
     // bomb, and /dev/zero (read with a size cap, never to the end).
     let hostile = [

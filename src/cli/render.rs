@@ -18,14 +18,9 @@ pub struct RenderArgs {
 }
 
 pub fn run(args: RenderArgs) -> Result<(), CliError> {
-    // A file that cannot be read is a runtime failure (1); one that is not a valid scene is bad
-    // input (2), as README's exit codes say.
-    let scene = svg::load_scene(&args.input).map_err(|e| match &e {
-        svg::SvgError::Io { source, .. } if source.kind() != std::io::ErrorKind::InvalidData => {
-            CliError::Other(e.into())
-        }
-        _ => CliError::Usage(e.to_string()),
-    })?;
+    // The input is the user's: a file that is missing, unreadable or not a valid scene is bad
+    // input (2), as README's exit codes say; only writing the output is a runtime failure (1).
+    let scene = svg::load_scene(&args.input).map_err(|e| CliError::Usage(e.to_string()))?;
     let scene = match args.size {
         Some(n) if n == 0 || n > crate::scene::MAX_SIDE => {
             return Err(CliError::Usage(format!(

@@ -23,8 +23,10 @@ pub struct ServeArgs {
 /// only /healthz, /readyz and /metrics.
 #[derive(clap::Args, Debug)]
 pub struct WorkerArgs {
-    /// Listen address of the health and metrics endpoints.
-    #[arg(long, value_name = "ADDR:PORT", default_value = "127.0.0.1:8081")]
+    /// Listen address of the health and metrics endpoints. Default: a free port on localhost,
+    /// logged at start (`listening addr=…`), so several workers share a host without clashing;
+    /// name one for health checks and scraping.
+    #[arg(long, value_name = "ADDR:PORT", default_value = "127.0.0.1:0")]
     pub bind: SocketAddr,
     #[command(flatten)]
     pub node: NodeArgs,
@@ -164,5 +166,26 @@ async fn shutdown_signal() {
     tokio::select! {
         _ = ctrl_c => {},
         _ = term => {},
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::WorkerArgs;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        worker: WorkerArgs,
+    }
+
+    #[test]
+    fn a_worker_binds_a_free_port_unless_told() {
+        let default = Cli::try_parse_from(["worker"]).unwrap().worker.bind;
+        assert_eq!(default.port(), 0, "two workers on one host must not clash");
+        assert!(default.ip().is_loopback());
+        let told = Cli::try_parse_from(["worker", "--bind", "0.0.0.0:9100"]).unwrap();
+        assert_eq!(told.worker.bind.port(), 9100);
     }
 }
