@@ -94,6 +94,10 @@ async fn vectorize_job_end_to_end_with_events_and_results() {
     assert_eq!(v["progress"]["step"], 12);
     assert_eq!(v["progress"]["fraction"], 1.0);
     assert_eq!(v["attempt_history"][0]["outcome"], "succeeded");
+    // Times in RFC 3339, as every other time of the job.
+    let started = v["attempt_history"][0]["started_at"].as_str().unwrap();
+    chrono::DateTime::parse_from_rfc3339(started).unwrap();
+    assert!(v["attempt_history"][0]["finished_at"].is_string());
     assert!(v["run_ms"].as_i64().unwrap() >= 0);
 
     let r = get(a, "/jobs?status=succeeded&limit=10").await;

@@ -248,6 +248,30 @@ fn rfc3339(ms: Option<i64>) -> Option<String> {
         .map(|t| t.to_rfc3339_opts(chrono::SecondsFormat::Millis, true))
 }
 
+/// One attempt of a job as the API shows it: times in RFC 3339, as every other time.
+#[derive(Serialize)]
+pub struct AttemptView {
+    pub attempt: i64,
+    pub worker: String,
+    pub outcome: String,
+    pub error: Option<String>,
+    pub started_at: Option<String>,
+    pub finished_at: Option<String>,
+}
+
+impl From<&AttemptRow> for AttemptView {
+    fn from(row: &AttemptRow) -> Self {
+        AttemptView {
+            attempt: row.attempt,
+            worker: row.worker.clone(),
+            outcome: row.outcome.clone(),
+            error: row.error.clone(),
+            started_at: rfc3339(Some(row.started_at)),
+            finished_at: rfc3339(row.finished_at),
+        }
+    }
+}
+
 /// A job's progress as the API shows it: the job's `progress` and the `progress` event.
 #[derive(Serialize)]
 pub struct ProgressView {
@@ -364,7 +388,7 @@ pub struct JobView {
     pub params: Option<ParamsView>,
     pub links: Links,
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub attempt_history: Option<Vec<AttemptRow>>,
+    pub attempt_history: Option<Vec<AttemptView>>,
     /// Rejection sampling of an `sd_live*` text job: once it succeeded, or from its last
     /// checkpoint while it runs (`GET /jobs/{id}` only).
     #[serde(skip_serializing_if = "Option::is_none")]

@@ -4,7 +4,7 @@
 use crate::server::AppState;
 use crate::server::error::ApiError;
 use crate::server::tenant::Caller;
-use crate::server::types::{JobList, JobView};
+use crate::server::types::{AttemptView, JobList, JobView};
 use crate::store::{JobRow, JobStatus, now_ms};
 use crate::worker::events::JobEvent;
 use axum::Json;
@@ -54,7 +54,8 @@ pub(in crate::server) async fn get_job(
     } else if let Some(ck) = &row.checkpoint {
         view = view.with_checkpoint(ck);
     }
-    view.attempt_history = Some(state.store.attempts(&id).await?);
+    let attempts = state.store.attempts(&id).await?;
+    view.attempt_history = Some(attempts.iter().map(AttemptView::from).collect());
     Ok(Json(view))
 }
 
