@@ -571,6 +571,18 @@ async fn bad_input_gets_clear_4xx_json_never_500() {
     ];
     cases.extend([
         json_case(
+            "a command-line alias of a style",
+            json!({"kind": "text", "caption": "a cat", "style": "pixel"}),
+            "invalid_field",
+            "style",
+        ),
+        json_case(
+            "a command-line alias of a preset",
+            json!({"kind": "text", "caption": "a cat", "preset": "quality"}),
+            "invalid_field",
+            "preset",
+        ),
+        json_case(
             "missing kind",
             json!({"caption": "a cat"}),
             "invalid_field",
@@ -988,9 +1000,8 @@ async fn omitted_paths_steps_samples_are_the_presets_and_are_recorded() {
     // Vectorize: the preset's LIVE budget.
     let v = json!({"kind": "vectorize", "image": png_b64(8), "preset": "fast"});
     assert_eq!(params(v).await.0, json!(64));
-    // The new styles, in any accepted spelling, are stored and shown in the canonical one,
-    // with the plan the job runs with.
-    for (given, canonical, paths) in [("low-poly", "low_poly", 8), ("painting", "painting", 8)] {
+    // The new styles are stored and shown with the plan the job runs with.
+    for (given, canonical, paths) in [("low_poly", "low_poly", 8), ("painting", "painting", 8)] {
         let r = post_json(srv.addr, "/jobs", &text("draft", given)).await;
         assert_eq!(r.status, 202, "{}", r.text());
         let id = r.json()["id"].as_str().unwrap().to_string();

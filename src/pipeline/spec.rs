@@ -37,18 +37,17 @@ impl Method {
 /// Named speed/quality trade-offs, the one preset vocabulary of the service, `generate`,
 /// `vectorize` and the benchmarks: for text runs resolution, steps, paths, samples and encoder
 /// ([`Preset::settings_for`]), for vectorize runs LIVE's working size and iterations
-/// ([`Preset::live_config`]). `default` and `quality` are accepted as older names of `balanced`
-/// and `paper` (`quality` was the vectorize command's name of its largest preset).
+/// ([`Preset::live_config`]). The command line also accepts `default` and `quality`, older names
+/// of `balanced` and `paper` (`quality` was the vectorize command's name of its largest preset);
+/// the API and stored jobs use the canonical names only.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "snake_case")]
 pub enum Preset {
     Draft,
     Fast,
     #[default]
-    #[serde(alias = "default")]
     #[value(alias = "default")]
     Balanced,
-    #[serde(alias = "quality")]
     #[value(alias = "quality")]
     Paper,
 }
@@ -291,8 +290,7 @@ fn check_caption(c: &str, limits: &Limits) -> Result<(), SpecError> {
     Ok(())
 }
 
-/// A vocabulary word as serde spells it (snake_case, or one of the type's aliases), in any
-/// case and with `-` or spaces for `_`.
+/// A vocabulary word as serde spells it (snake_case), in any case and with `-` or spaces for `_`.
 fn parse_word<T: serde::de::DeserializeOwned>(
     s: &str,
     what: &str,
@@ -306,6 +304,11 @@ fn parse_word<T: serde::de::DeserializeOwned>(
 impl std::str::FromStr for Preset {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
+        match s.trim().to_ascii_lowercase().as_str() {
+            "default" => return Ok(Preset::Balanced),
+            "quality" => return Ok(Preset::Paper),
+            _ => {}
+        }
         parse_word(s, "preset", "draft, fast, balanced or paper")
     }
 }

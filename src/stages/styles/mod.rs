@@ -23,31 +23,38 @@ use crate::scene::{Rgba, Scene, SceneError, Shape, Trainable};
 use rand::{Rng, RngExt};
 use serde::{Deserialize, Serialize};
 
-/// An output style. Serialised (HTTP, stored jobs, JSON summaries) and printed in its one
-/// canonical spelling, snake_case (`pixel_art`); [`std::str::FromStr`] and serde also accept
-/// the aliases (`pixel-art`, `icon`, `line`, `low-poly`, ...).
+/// An output style. Serialised, read (HTTP, stored jobs, JSON summaries) and printed in its one
+/// canonical spelling, snake_case (`pixel_art`); the command line ([`std::str::FromStr`]) also
+/// takes any case, `-` or spaces for `_`, and the [`Style::ALIASES`].
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Style {
     /// Closed 4-segment filled paths (points, fills and background trainable).
     #[default]
-    #[serde(alias = "icon", alias = "flat")]
     Iconography,
     /// A fixed 32x32 grid of squares; only colours trainable.
-    #[serde(alias = "pixel-art", alias = "pixelart", alias = "pixel")]
     PixelArt,
     /// Open black strokes; only points trainable.
-    #[serde(alias = "line")]
     Sketch,
     /// Closed polygons with few vertices and flat opaque fills.
-    #[serde(alias = "low-poly", alias = "lowpoly")]
     LowPoly,
     /// Open strokes with trainable colour, width and points.
-    #[serde(alias = "paint")]
     Painting,
 }
 
 impl Style {
+    /// Other names the command line accepts; the API takes the canonical names only, so a
+    /// client generated from its spec has one value per style.
+    pub const ALIASES: [(&'static str, Style); 7] = [
+        ("icon", Style::Iconography),
+        ("flat", Style::Iconography),
+        ("pixelart", Style::PixelArt),
+        ("pixel", Style::PixelArt),
+        ("line", Style::Sketch),
+        ("lowpoly", Style::LowPoly),
+        ("paint", Style::Painting),
+    ];
+
     pub const ALL: [Style; 5] = [
         Style::Iconography,
         Style::PixelArt,
@@ -134,8 +141,11 @@ impl Style {
 impl std::str::FromStr for Style {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
-        let v = serde_json::Value::String(s.trim().to_ascii_lowercase().replace(' ', "_"));
-        Style::deserialize(v).map_err(|_| {
+        let word = s.trim().to_ascii_lowercase().replace(['-', ' '], "_");
+        if let Some((_, style)) = Style::ALIASES.iter().find(|(a, _)| *a == word) {
+            return Ok(*style);
+        }
+        Style::deserialize(serde_json::Value::String(word)).map_err(|_| {
             let names: Vec<&str> = Style::ALL.iter().map(|s| s.as_str()).collect();
             format!("unknown style {s:?} (expected {})", names.join(", "))
         })

@@ -141,10 +141,13 @@ fn one_canonical_spelling_and_the_aliases() {
         assert_eq!(json, serde_json::Value::String(s.as_str().into()));
         assert_eq!(serde_json::from_value::<Style>(json).unwrap(), s);
     }
-    assert_eq!(
-        serde_json::from_str::<Style>("\"pixel-art\"").unwrap(),
-        Style::PixelArt
-    );
+    // The API (serde) takes the canonical names only: one value per style in its spec.
+    for (alias, style) in Style::ALIASES {
+        assert_eq!(alias.parse::<Style>().unwrap(), style, "{alias}");
+        let json = serde_json::Value::String(alias.into());
+        assert!(serde_json::from_value::<Style>(json).is_err(), "{alias}");
+    }
+    assert!(serde_json::from_str::<Style>("\"pixel-art\"").is_err());
 }
 
 #[test]
