@@ -111,11 +111,13 @@ impl From<crate::pipeline::PipelineError> for CliError {
     fn from(e: crate::pipeline::PipelineError) -> Self {
         use crate::pipeline::PipelineError;
         match e {
-            PipelineError::InvalidInput(m) | PipelineError::ModelsNotConfigured(m) => {
-                CliError::Usage(m)
-            }
+            PipelineError::InvalidInput(m) => CliError::Usage(m),
             // A stage's error that is the input's fault (a bad image, SVG or setting).
             e if e.code() == crate::pipeline::FailureCode::InvalidInput => CliError::InvalidRun(e),
+            // Models missing or failing to load: a setting to fix, the cause kept.
+            e if e.code() == crate::pipeline::FailureCode::ModelsNotConfigured => {
+                CliError::InvalidRun(e)
+            }
             other => CliError::Other(anyhow::Error::new(other)),
         }
     }

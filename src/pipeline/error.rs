@@ -9,6 +9,7 @@
 //! that died. (`FailureCode` lives with the store, like `JobKind`, because the store's own
 //! statements set two of its codes; imports flow from the pipeline to the store.)
 
+use super::NotReady;
 use crate::image::ImageError;
 use crate::progress::CheckpointError;
 use crate::scene::SceneError;
@@ -27,8 +28,16 @@ pub enum PipelineError {
     /// The stored job (spec or upload) could not be read back.
     #[error("the stored job is unreadable: {0}")]
     InvalidSpec(String),
+    /// Text jobs cannot run here ([`NotReady`] says what to configure).
     #[error("models are not configured: {0}")]
-    ModelsNotConfigured(String),
+    NotReady(#[from] NotReady),
+    /// A configured model failed to load (`what`: which one, from where).
+    #[error("models are not configured: {what}: {source}")]
+    ModelLoad {
+        what: String,
+        #[source]
+        source: Box<dyn std::error::Error + Send + Sync>,
+    },
     #[error("cancelled")]
     Cancelled,
     /// A failure worth retrying (resource exhaustion, I/O hiccup).
@@ -82,7 +91,9 @@ impl PipelineError {
                 FailureCode::InvalidInput
             }
             PipelineError::InvalidSpec(_) => FailureCode::InvalidSpec,
-            PipelineError::ModelsNotConfigured(_) => FailureCode::ModelsNotConfigured,
+            PipelineError::NotReady(_) | PipelineError::ModelLoad { .. } => {
+                FailureCode::ModelsNotConfigured
+            }
             PipelineError::Cancelled => FailureCode::Cancelled,
             PipelineError::Transient(_) | PipelineError::Checkpoint(_) => FailureCode::Transient,
             PipelineError::ResourceLimit(_) => FailureCode::ResourceLimit,

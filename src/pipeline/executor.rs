@@ -72,9 +72,7 @@ impl DefaultExecutor {
     /// The models for a text plan (loaded once per size and encoder).
     pub fn load_models(&self, plan: &plan::TextPlan) -> Result<Arc<Models>, PipelineError> {
         if !self.downloads {
-            self.models
-                .text_ready()
-                .map_err(|e| PipelineError::ModelsNotConfigured(e.to_string()))?;
+            self.models.text_ready()?;
         }
         // A plan that chose TAESD when none is configured any more fails in `Models::load`.
         let encoder = plan.model.encoder;

@@ -336,7 +336,7 @@ impl Models {
             let dir = dirs
                 .analytic_dir
                 .as_deref()
-                .ok_or_else(|| PipelineError::ModelsNotConfigured("no sd_dir".into()))?;
+                .ok_or(PipelineError::NotReady(NotReady::NoModelGiven))?;
             let pool = if size >= 64 && size % 64 == 0 {
                 size / 64
             } else {
@@ -350,7 +350,16 @@ impl Models {
                     num_train_timesteps: 1000,
                 },
             )
-            .map_err(|e| PipelineError::ModelsNotConfigured(e.to_string()))?;
+            .map_err(|e| {
+                let what = format!(
+                    "cannot load the analytic test teacher from {}",
+                    dir.display()
+                );
+                PipelineError::ModelLoad {
+                    what,
+                    source: Box::new(e),
+                }
+            })?;
             return Ok(Models {
                 teacher: Box::new(teacher),
                 scorer,
@@ -368,10 +377,11 @@ impl Models {
         };
         let teacher =
             SdTeacher::load_on(sd_dir, size, taesd.as_deref(), dirs.device).map_err(|e| {
-                PipelineError::ModelsNotConfigured(format!(
-                    "cannot load Stable Diffusion from {}: {e}",
-                    sd_dir.display()
-                ))
+                let what = format!("cannot load Stable Diffusion from {}", sd_dir.display());
+                PipelineError::ModelLoad {
+                    what,
+                    source: Box::new(e),
+                }
             })?;
         let retrieval = match RetrievalLocations::from_env().load(sd_dir) {
             Ok(Some(idx)) => Ok(Arc::new(idx)),
@@ -396,10 +406,11 @@ impl Models {
 fn load_scorer(dir: Option<&Path>) -> Result<Option<Scorer>, PipelineError> {
     dir.map(|d| {
         Scorer::load(d).map_err(|e| {
-            PipelineError::ModelsNotConfigured(format!(
-                "cannot load the scorer from {}: {e}",
-                d.display()
-            ))
+            let what = format!("cannot load the scorer from {}", d.display());
+            PipelineError::ModelLoad {
+                what,
+                source: Box::new(e),
+            }
         })
     })
     .transpose()
