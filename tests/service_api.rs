@@ -571,6 +571,12 @@ async fn bad_input_gets_clear_4xx_json_never_500() {
     ];
     cases.extend([
         json_case(
+            "a seed JavaScript cannot keep exactly",
+            json!({"kind": "text", "caption": "a cat", "seed": 9007199254740992_u64}),
+            "invalid_field",
+            "seed",
+        ),
+        json_case(
             "a command-line alias of a style",
             json!({"kind": "text", "caption": "a cat", "style": "pixel"}),
             "invalid_field",

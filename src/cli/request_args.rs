@@ -71,7 +71,7 @@ pub struct RequestArgs {
     #[command(flatten)]
     pub budget: BudgetArgs,
     /// Seed of the run.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 0, value_parser = crate::pipeline::parse_seed)]
     pub seed: u64,
     /// Sample from noise only: no retrieved training icons as starting points (the embedded
     /// model starts a share of its K samples, `_retrieval_share`, from the icons nearest to the

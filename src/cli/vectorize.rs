@@ -32,7 +32,7 @@ pub struct VectorizeArgs {
     /// Adam iterations per stage; the preset's by default.
     #[arg(long)]
     pub iters: Option<u32>,
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 0, value_parser = crate::pipeline::parse_seed)]
     pub seed: u64,
     /// Preset: draft, fast, balanced or paper (`quality` is an older name of paper): the
     /// working size and iterations; the same vocabulary as `generate` and the service.

@@ -37,7 +37,10 @@ pub use report::{
     RerankReport, ResumePoint, RetrievalReport, RunMethod, RunOutput, RunReport, SdsReport,
     TraceReport,
 };
-pub use spec::{JobKind, JobSpec, Limits, Method, PRIORITY_RANGE, Preset, SpecError, Style};
+pub use spec::{
+    JobKind, JobSpec, Limits, MAX_SEED, Method, PRIORITY_RANGE, Preset, SpecError, Style,
+    check_seed, parse_seed,
+};
 pub use text::{Start, TextCheckpoint, run_text, sample_ranked};
 pub use vectorize::{VectorizeCheckpoint, run_vectorize};
 

@@ -175,6 +175,34 @@ impl SpecError {
 /// Allowed priority range (higher runs first).
 pub const PRIORITY_RANGE: std::ops::RangeInclusive<i32> = -100..=100;
 
+/// The largest seed: 2^53 − 1, the largest integer every JSON client keeps exactly (JavaScript
+/// numbers are doubles), so a seed read back and resubmitted is the same seed. Seeds derived
+/// from it (the plan's per-stage seeds, defaults from the job id) stay within it too.
+pub const MAX_SEED: u64 = (1 << 53) - 1;
+
+/// Parses a command-line seed (at most [`MAX_SEED`]).
+pub fn parse_seed(s: &str) -> Result<u64, String> {
+    let seed: u64 = s
+        .trim()
+        .parse()
+        .map_err(|e| format!("not a whole number: {e}"))?;
+    check_seed(seed).map_err(|e| e.reason)
+}
+
+/// `seed` if it is at most [`MAX_SEED`].
+pub fn check_seed(seed: u64) -> Result<u64, SpecError> {
+    if seed > MAX_SEED {
+        return Err(SpecError::new(
+            "seed",
+            format!(
+                "must be between 0 and {MAX_SEED} (2^53 - 1, the largest integer JavaScript \
+                 clients keep exactly), got {seed}"
+            ),
+        ));
+    }
+    Ok(seed)
+}
+
 /// `v` when it is within `1..=max`, otherwise an error naming `field`.
 pub(super) fn check_range(field: &'static str, v: u32, max: u32) -> Result<u32, SpecError> {
     if v == 0 || v > max {
@@ -190,6 +218,7 @@ impl JobSpec {
     /// Checks every field against `limits` and the kind's requirements (the numbers it gives;
     /// the plan checks the preset's).
     pub fn validate(&self, limits: &Limits) -> Result<(), SpecError> {
+        check_seed(self.seed)?;
         for (field, v, max) in [
             ("paths", self.paths, limits.max_paths),
             ("steps", self.steps, limits.max_steps),

@@ -12,7 +12,7 @@ fn spec() -> JobSpec {
         method: Method::SdLiveSds,
         paths: Some(16),
         steps: Some(100),
-        seed: u64::MAX,
+        seed: MAX_SEED,
         samples: Some(4),
         preset: Preset::Balanced,
         priority: 0,
@@ -38,6 +38,14 @@ fn validation_names_the_field() {
     let mut s = spec();
     s.paths = Some(0);
     assert_eq!(s.validate(&l).unwrap_err().field, "paths");
+    // Seeds stay within what JavaScript clients keep exactly.
+    let mut s = spec();
+    s.seed = MAX_SEED;
+    assert!(s.validate(&l).is_ok());
+    s.seed = MAX_SEED + 1;
+    assert_eq!(s.validate(&l).unwrap_err().field, "seed");
+    assert!(parse_seed("9007199254740992").is_err());
+    assert_eq!(parse_seed("9007199254740991"), Ok(MAX_SEED));
     let mut s = spec();
     s.image = None;
     assert_eq!(s.validate(&l).unwrap_err().field, "image");

@@ -46,7 +46,7 @@ pub(in crate::server) async fn submit(
         id.as_bytes()[..8]
             .try_into()
             .map_err(|_| ApiError::Internal("uuid has 16 bytes".into()))?,
-    );
+    ) & crate::pipeline::MAX_SEED;
     let spec = parse(&state, &body, default_seed).await?;
     let (spec, upload) = check_upload(&state, spec).await?;
     let hash = key
