@@ -97,6 +97,11 @@ fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
     }
 }
 
+/// The `# HELP` and `# TYPE` lines of metric `name`.
+fn help(out: &mut String, name: &str, help: &str, kind: &str) {
+    let _ = writeln!(out, "# HELP {name} {help}\n# TYPE {name} {kind}");
+}
+
 /// Jobs by status, the queue depth and the workers (gauges).
 fn render_gauges(out: &mut String, jobs_by_status: &[(String, i64)], workers: usize, busy: usize) {
     let count = |status: &str| {
@@ -207,16 +212,15 @@ impl Metrics {
                 &self.leases_lost,
             ),
         ];
-        for (name, help, c) in counters {
-            let v = c.load(Ordering::Relaxed);
-            let _ = writeln!(
-                out,
-                "# HELP {name} {help}\n# TYPE {name} counter\n{name} {v}"
-            );
+        for (name, text, c) in counters {
+            help(out, name, text, "counter");
+            let _ = writeln!(out, "{name} {}", c.load(Ordering::Relaxed));
         }
-        let _ = writeln!(
+        help(
             out,
-            "# HELP vectorfusion_job_failures_total Jobs that failed for good, by error code.\n# TYPE vectorfusion_job_failures_total counter"
+            "vectorfusion_job_failures_total",
+            "Jobs that failed for good, by error code.",
+            "counter",
         );
         for (code, n) in lock(&self.failures).iter() {
             let _ = writeln!(
@@ -228,42 +232,24 @@ impl Metrics {
 
     /// Job and stage durations, then HTTP responses and their handling time.
     fn render_histograms(&self, out: &mut String) {
-        let _ = writeln!(
-            out,
-            "# HELP vectorfusion_job_duration_seconds Wall time of successful attempts.\n# TYPE vectorfusion_job_duration_seconds histogram"
-        );
-        lock(&self.job_seconds).render(out, "vectorfusion_job_duration_seconds", "");
-        let _ = writeln!(
-            out,
-            "# HELP vectorfusion_stage_duration_seconds Wall time per pipeline stage.\n# TYPE vectorfusion_stage_duration_seconds histogram"
-        );
-        for (stage, h) in lock(&self.stage_seconds).iter() {
-            h.render(
-                out,
-                "vectorfusion_stage_duration_seconds",
-                &format!("stage=\"{}\"", label_value(stage)),
-            );
+        let job = "vectorfusion_job_duration_seconds";
+        help(out, job, "Wall time of successful attempts.", "histogram");
+        lock(&self.job_seconds).render(out, job, "");
+        let stage = "vectorfusion_stage_duration_seconds";
+        help(out, stage, "Wall time per pipeline stage.", "histogram");
+        for (name, h) in lock(&self.stage_seconds).iter() {
+            h.render(out, stage, &format!("stage=\"{}\"", label_value(name)));
         }
-        let _ = writeln!(
-            out,
-            "# HELP vectorfusion_http_responses_total HTTP responses by status code.\n# TYPE vectorfusion_http_responses_total counter"
-        );
+        let responses = "vectorfusion_http_responses_total";
+        help(out, responses, "HTTP responses by status code.", "counter");
         for (code, n) in lock(&self.http_responses).iter() {
-            let _ = writeln!(
-                out,
-                "vectorfusion_http_responses_total{{code=\"{code}\"}} {n}"
-            );
+            let _ = writeln!(out, "{responses}{{code=\"{code}\"}} {n}");
         }
-        let _ = writeln!(
-            out,
-            "# HELP vectorfusion_http_request_duration_seconds Server-side request handling time (to response headers).\n# TYPE vectorfusion_http_request_duration_seconds histogram"
-        );
+        let http = "vectorfusion_http_request_duration_seconds";
+        let what = "Server-side request handling time (to response headers).";
+        help(out, http, what, "histogram");
         for (route, h) in lock(&self.http_seconds).iter() {
-            h.render(
-                out,
-                "vectorfusion_http_request_duration_seconds",
-                &format!("route=\"{}\"", label_value(route)),
-            );
+            h.render(out, http, &format!("route=\"{}\"", label_value(route)));
         }
     }
 }

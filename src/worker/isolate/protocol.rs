@@ -119,12 +119,10 @@ mod tests {
         .unwrap()
     }
 
-    #[test]
-    fn the_image_follows_the_line_as_raw_bytes() {
+    /// What the server writes for a vectorize job with `image`.
+    fn wire(image: &[u8]) -> Vec<u8> {
         let mut spec = spec();
-        // Not UTF-8, and a newline inside: only a length says where the image ends.
-        let image = vec![0x89, b'P', b'N', b'G', b'\n', 0xff, 0x00];
-        spec.image = Some(image.clone());
+        spec.image = Some(image.to_vec());
         let mut wire = Vec::new();
         write_start(
             &mut wire,
@@ -134,6 +132,14 @@ mod tests {
             5,
         )
         .unwrap();
+        wire
+    }
+
+    #[test]
+    fn the_image_follows_the_line_as_raw_bytes() {
+        // Not UTF-8, and a newline inside: only a length says where the image ends.
+        let image = vec![0x89, b'P', b'N', b'G', b'\n', 0xff, 0x00];
+        let mut wire = wire(&image);
         let line_end = wire.iter().position(|&b| b == b'\n').unwrap();
         let header: serde_json::Value = serde_json::from_slice(&wire[..line_end]).unwrap();
         assert_eq!(header["spec"]["image"], serde_json::Value::Null);
@@ -152,17 +158,7 @@ mod tests {
 
     #[test]
     fn a_short_image_is_an_error() {
-        let mut spec = spec();
-        spec.image = Some(vec![7; 10]);
-        let mut wire = Vec::new();
-        write_start(
-            &mut wire,
-            ChildExecutor::Test { step_ms: 1 },
-            &spec,
-            None,
-            1,
-        )
-        .unwrap();
+        let mut wire = wire(&[7; 10]);
         wire.truncate(wire.len() - 7);
         let err = read_start(&mut std::io::Cursor::new(wire)).unwrap_err();
         assert!(
