@@ -469,7 +469,8 @@ fn a_stored_plan_runs_as_stored() {
         1,
         &exec,
     )
-    .unwrap();
+    .unwrap()
+    .spec;
     let plan = spec.plan.clone().expect("a plan is resolved at submit");
     let text = plan.text.as_ref().unwrap();
     assert_eq!((text.size, text.sds.as_ref().unwrap().steps), (32, 3));

@@ -145,7 +145,8 @@ fn service_job(exec: &DefaultExecutor, body: Value) -> String {
         11,
         exec,
     )
-    .unwrap_or_else(|e| panic!("{body}: {e:?}"));
+    .unwrap_or_else(|e| panic!("{body}: {e:?}"))
+    .spec;
     exec.run(&spec, &JobContext::detached(CancelToken::new()))
         .unwrap_or_else(|e| panic!("{body}: {e}"))
         .svg

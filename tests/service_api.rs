@@ -302,6 +302,17 @@ async fn idempotency_key_returns_the_same_job() {
     assert_eq!(r1.json()["id"], r2.json()["id"]);
     assert_eq!(r2.header("idempotent-replayed"), Some("true"));
     assert_eq!(r1.header("idempotent-replayed"), None);
+    // The same request re-serialised is the same request: keys reordered, other spacing, a
+    // trailing newline, null for an omitted field, a default spelled out, the image as a data URL.
+    let same = format!(
+        "{{ \"seed\": 5,\n  \"steps\": 3, \"style\": null, \"background\": \"auto\",\n  \
+         \"image\": \"data:image/png;base64,{}\", \"paths\": 2, \"kind\": \"vectorize\" }}\n",
+        png_b64(8)
+    );
+    let r = request(srv.addr, "POST", "/jobs", &h, Some(same.as_bytes())).await;
+    assert_eq!(r.status, 202, "{}", r.text());
+    assert_eq!(r.json()["id"], r1.json()["id"]);
+    assert_eq!(r.header("idempotent-replayed"), Some("true"));
     let other = serde_json::to_vec(&vectorize_body(2, 3, 6)).unwrap();
     let r3 = request(srv.addr, "POST", "/jobs", &h, Some(&other)).await;
     assert_eq!(r3.status, 409);

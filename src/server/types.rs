@@ -66,7 +66,39 @@ fn whole_numbers_as_integers(obj: &mut Map<String, Value>) {
     }
 }
 
-/// Parses and validates a `POST /jobs` body into a [`JobSpec`]: the request as given and the
+/// A parsed `POST /jobs` body.
+pub struct Submission {
+    /// The request as given, typed and validated, with the plan resolved from it.
+    pub spec: JobSpec,
+    /// SHA-256 (hex) of the canonical request: the spec with defaults applied, `null` the same as
+    /// an absent field, keys in one order, the image as its decoded bytes and the seed only when
+    /// given. Idempotency compares this, so the same request re-serialised is the same request.
+    pub digest: String,
+}
+
+/// The [`Submission::digest`] of `spec`, whose seed was given by the caller if `seed_given`.
+fn canonical_digest(spec: &JobSpec, seed_given: bool) -> Result<String, ApiError> {
+    use sha2::Digest;
+    let mut value = serde_json::to_value(spec).map_err(|e| ApiError::Internal(e.to_string()))?;
+    if let Value::Object(m) = &mut value {
+        m.remove("plan");
+        // The image is hashed as bytes below, not re-encoded.
+        m.remove("image");
+        if !seed_given {
+            m.insert("seed".into(), Value::Null);
+        }
+    }
+    let text = serde_json::to_string(&value).map_err(|e| ApiError::Internal(e.to_string()))?;
+    let mut hasher = sha2::Sha256::new();
+    hasher.update(text.as_bytes());
+    if let Some(image) = &spec.image {
+        hasher.update([0u8]);
+        hasher.update(image);
+    }
+    Ok(format!("{:x}", hasher.finalize()))
+}
+
+/// Parses and validates a `POST /jobs` body into a [`Submission`]: the request as given and the
 /// plan resolved from it. `default_seed` seeds jobs that give no seed (so every job is
 /// reproducible from its stored spec). A text job the executor is not ready for is refused
 /// ([`ApiError::ModelsNotConfigured`]). Image decoding is checked separately ([`check_image`])
@@ -76,9 +108,10 @@ pub fn parse_submit(
     limits: &Limits,
     default_seed: u64,
     executor: &dyn Executor,
-) -> Result<JobSpec, ApiError> {
+) -> Result<Submission, ApiError> {
     let obj = submit_object(body)?;
     let mut spec = request_from(&obj, default_seed)?;
+    let seed_given = obj.get("seed").is_some_and(|v| !v.is_null());
     // The request's own fields first ...
     spec.validate(limits)
         .map_err(|e| ApiError::invalid(e.field, e.reason))?;
@@ -97,7 +130,8 @@ pub fn parse_submit(
         .plan(&request_of(&spec), limits)
         .map_err(|e| plan_error(e, &obj, spec.preset))?;
     spec.plan = Some(plan);
-    Ok(spec)
+    let digest = canonical_digest(&spec, seed_given)?;
+    Ok(Submission { spec, digest })
 }
 
 /// The body as a JSON object of known fields, whole-number floats made integers.

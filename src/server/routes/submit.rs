@@ -5,7 +5,7 @@ use crate::pipeline::JobSpec;
 use crate::server::AppState;
 use crate::server::error::ApiError;
 use crate::server::tenant::Caller;
-use crate::server::types::{JobView, check_image, check_svg, parse_submit};
+use crate::server::types::{JobView, Submission, check_image, check_svg, parse_submit};
 use crate::store::{JobRow, NewJob, NewUpload, StoreError, now_ms};
 use crate::worker::metrics::Metrics;
 use axum::Json;
@@ -13,7 +13,6 @@ use axum::body::Body;
 use axum::extract::{Extension, State};
 use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
-use sha2::Digest;
 use std::sync::atomic::Ordering;
 
 const IDEMPOTENCY_HEADER: &str = "idempotency-key";
@@ -47,11 +46,9 @@ pub(in crate::server) async fn submit(
             .try_into()
             .map_err(|_| ApiError::Internal("uuid has 16 bytes".into()))?,
     ) & crate::pipeline::MAX_SEED;
-    let spec = parse(&state, &body, default_seed).await?;
+    let Submission { spec, digest } = parse(&state, &body, default_seed).await?;
     let (spec, upload) = check_upload(&state, spec).await?;
-    let hash = key
-        .as_ref()
-        .map(|_| format!("{:x}", sha2::Sha256::digest(&body)));
+    let hash = key.as_ref().map(|_| digest);
     if let Some(replayed) = admit(&state, &caller, &key, &hash).await? {
         return Ok(replayed);
     }
@@ -160,7 +157,7 @@ async fn parse(
     state: &AppState,
     body: &axum::body::Bytes,
     default_seed: u64,
-) -> Result<JobSpec, ApiError> {
+) -> Result<Submission, ApiError> {
     let limits = state.limits.clone();
     let executor = state.executor.clone();
     if body.len() <= INLINE_PARSE_BYTES {
