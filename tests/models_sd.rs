@@ -6,8 +6,8 @@ use common::{abs_max, fixture, max_abs};
 
 use candle_core::{DType, Device, Tensor};
 use std::collections::HashMap;
-use vectorfusion::models::pipeline::{load_scheduler, load_unet};
 use vectorfusion::models::scheduler::SamplerKind;
+use vectorfusion::models::stable_diffusion::{load_scheduler, load_unet};
 use vectorfusion::models::taesd::Taesd;
 use vectorfusion::models::{LoadOptions, ModelError, Precision, StableDiffusion};
 

@@ -10,7 +10,7 @@
 
 use crate::image::Image;
 use crate::models::clip::ClipError;
-use crate::models::clip::scorer::dot;
+use crate::models::scorer::clip::dot;
 use crate::models::scorer::{ImageTextScorer, ScorerError};
 use crate::svg::RenderError;
 use resvg::{tiny_skia, usvg};

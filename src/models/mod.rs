@@ -25,10 +25,10 @@ pub mod codec;
 pub mod kernels;
 pub mod loader;
 pub mod nn;
-pub mod pipeline;
 pub mod scheduler;
 pub mod scorer;
 mod serde_defaults;
+pub mod stable_diffusion;
 pub mod taesd;
 pub mod unet;
 pub mod vae;
@@ -36,7 +36,7 @@ pub mod vae;
 pub use loader::{
     ComputeDevice, DeviceError, LoadOptions, ModelSource, Precision, UnknownPrecision,
 };
-pub use pipeline::{ModelHints, StableDiffusion};
+pub use stable_diffusion::{ModelHints, StableDiffusion};
 
 /// Errors of the models layer.
 #[derive(Debug, thiserror::Error)]

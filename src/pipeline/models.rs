@@ -5,8 +5,8 @@
 use super::PipelineError;
 use super::plan::ModelFacts;
 use crate::models::ComputeDevice;
-use crate::models::pipeline::ModelHints;
 use crate::models::scorer::{ImageTextScorer, Scorer};
+use crate::models::stable_diffusion::ModelHints;
 use crate::retrieval::{IconIndex, RetrievalLocations};
 use crate::teacher::{AnalyticTeacher, AnalyticTeacherConfig, SdTeacher, Teacher};
 use serde::{Deserialize, Serialize};

@@ -7,15 +7,15 @@
 //! pretrained weights.
 
 pub mod analytic;
-pub mod sample;
+pub mod denoise;
 pub mod sd;
 
 pub use analytic::{AnalyticTeacher, AnalyticTeacherConfig};
-pub use sample::{SampleConfig, SampleError};
+pub use denoise::{SampleConfig, SampleError};
 pub use sd::SdTeacher;
 
 use crate::image::Image;
-use crate::models::pipeline::ModelHints;
+use crate::models::stable_diffusion::ModelHints;
 use crate::progress::{CancelToken, ProgressSink};
 use rand::{Rng, RngExt};
 

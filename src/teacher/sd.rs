@@ -11,7 +11,7 @@
 use super::{Conditioning, Latent, Pullback, SampleConfig, SampleError, Teacher, TeacherError};
 use crate::image::Image;
 use crate::models::codec::CodecKind;
-use crate::models::pipeline::ModelHints;
+use crate::models::stable_diffusion::ModelHints;
 use crate::models::{ComputeDevice, LoadOptions, StableDiffusion};
 use crate::progress::{CancelToken, ProgressSink};
 use candle_core::{DType, Tensor};
@@ -191,7 +191,7 @@ impl Teacher for SdTeacher {
         sink: &dyn ProgressSink,
         cancel: &CancelToken,
     ) -> Result<Vec<Image>, SampleError> {
-        super::sample::draw(
+        super::denoise::draw(
             &self.sd,
             self.latent_shape,
             prompt,

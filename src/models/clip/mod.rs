@@ -6,7 +6,6 @@ pub mod config;
 pub mod model;
 pub mod openclip;
 pub mod preprocess;
-pub mod scorer;
 pub mod text;
 pub mod tokenizer;
 pub mod vision;
@@ -14,7 +13,6 @@ pub mod vision;
 pub use config::{Activation, ClipConfig, ClipTextConfig, ClipVisionConfig};
 pub use model::ClipModel;
 pub use preprocess::PreprocessConfig;
-pub use scorer::ClipScorer;
 pub use text::{ClipTextModel, ClipTextModelWithProjection, ClipTextTransformer, TextOutput};
 pub use tokenizer::ClipTokenizer;
 

@@ -3,12 +3,12 @@
 //! `proj`, L2 norm. Text tower: the frozen MiniLM sentence embedding (mean pooled over the
 //! attention mask, L2 norm) → `text_proj` → L2 norm. Field names are the checkpoint keys.
 
+use super::clip::embed_in_batches;
 use super::{ImageTextScorer, ScorerError};
 use crate::image::Image;
 use crate::image::ops::resize;
 use crate::models::ConfigIssue;
 use crate::models::bert::{BertTextEncoder, l2_normalize};
-use crate::models::clip::scorer::embed_in_batches;
 use candle_core::{DType, Device, Tensor};
 use candle_nn::{Conv2d, Conv2dConfig, GroupNorm, Linear, Module, VarBuilder};
 use std::path::Path;

@@ -10,13 +10,15 @@
 //! - anything else: a CLIP directory (transformers or OpenCLIP layout), or for
 //!   [`Scorer::load_source`] a hub repo id.
 
+pub mod clip;
 pub mod iconclip;
 
+pub use clip::ClipScorer;
 pub use iconclip::{IconClip, IconClipConfig, IconClipScorer};
 
 use crate::image::Image;
 use crate::models::bert::BertError;
-use crate::models::clip::{ClipError, ClipScorer};
+use crate::models::clip::ClipError;
 use candle_core::Device;
 use std::path::{Path, PathBuf};
 
@@ -81,14 +83,14 @@ pub trait ImageTextScorer {
         Ok(self
             .image_embeddings(images)?
             .iter()
-            .map(|i| crate::models::clip::scorer::dot(i, t))
+            .map(|i| clip::dot(i, t))
             .collect())
     }
 
     /// Index of the best image for the caption (rejection sampling), plus all scores.
     fn best_of(&self, images: &[Image], caption: &str) -> Result<(usize, Vec<f32>), ScorerError> {
         let scores = self.score_images(images, caption)?;
-        let best = crate::models::clip::scorer::argmax(&scores)
+        let best = clip::argmax(&scores)
             .ok_or_else(|| ScorerError::Input("no images to choose from".into()))?;
         Ok((best, scores))
     }

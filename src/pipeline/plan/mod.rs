@@ -8,7 +8,7 @@ use super::presets::PresetSettings;
 use super::spec::check_range;
 use super::{EncoderChoice, JobKind, Limits, Method, Preset, SpecError, Style};
 use crate::augment::AugmentConfig;
-use crate::models::pipeline::ModelHints;
+use crate::models::stable_diffusion::ModelHints;
 use crate::stages::live::{CANVAS_SIDES, LiveConfig, PathBudget};
 use crate::stages::sds::{ReinitConfig, SdsConfig, T_MAX, T_MIN};
 use crate::vector::VectorOptions;

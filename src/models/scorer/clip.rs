@@ -1,11 +1,11 @@
 //! [`ClipScorer`]: a CLIP model, its tokenizer and its preprocessing, loaded from a directory,
 //! scoring images against captions (rejection sampling and evaluation).
 
-use super::model::ClipModel;
-use super::preprocess::{PreprocessConfig, preprocess};
-use super::tokenizer::ClipTokenizer;
-use super::{ClipError, openclip};
 use crate::image::Image;
+use crate::models::clip::model::ClipModel;
+use crate::models::clip::preprocess::{PreprocessConfig, preprocess};
+use crate::models::clip::tokenizer::ClipTokenizer;
+use crate::models::clip::{ClipError, openclip};
 use candle_core::{Device, Tensor};
 use std::path::{Path, PathBuf};
 
@@ -292,7 +292,9 @@ fn missing(dir: &Path) -> ClipError {
         hint: format!(
             " (a transformers CLIP directory, or an OpenCLIP one with {}; {}",
             openclip::CONFIG_FILE,
-            super::DOWNLOAD_HINT.trim_start().trim_start_matches('(')
+            crate::models::clip::DOWNLOAD_HINT
+                .trim_start()
+                .trim_start_matches('(')
         ),
     }
 }

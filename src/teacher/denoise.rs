@@ -1,8 +1,8 @@
-//! K raster samples of a prompt from a diffusion model ([`super::Teacher::sample`]). The first
-//! `starts.len()` samples begin from given images (SDEdit: encoded, noised to `strength`, then
-//! denoised with the caption-conditioned prior; the retrieval sampler passes the training icons
-//! nearest to the caption), the others from pure noise. Retrieval and reranking are the
-//! sample stage's ([`crate::stages::sample`]).
+//! The denoising loop behind [`super::Teacher::sample`]: K raster samples of a prompt from a
+//! diffusion model. The first `starts.len()` samples begin from given images (SDEdit: encoded,
+//! noised to `strength`, then denoised with the caption-conditioned prior; the retrieval sampler
+//! passes the training icons nearest to the caption), the others from pure noise. Retrieval and
+//! reranking are the sample stage's ([`crate::stages::sample`]).
 
 use crate::image::Image;
 use crate::models::StableDiffusion;
