@@ -54,6 +54,7 @@
 mod export;
 mod file;
 mod guard;
+mod path_data;
 mod profile;
 
 pub use export::{MAX_PRECISION, SvgOptions, to_svg, with_metadata, written_color};
@@ -104,6 +105,26 @@ pub enum RenderError {
 /// A blank `width × height` pixmap to render into.
 pub fn pixmap(width: u32, height: u32) -> Result<resvg::tiny_skia::Pixmap, RenderError> {
     resvg::tiny_skia::Pixmap::new(width, height).ok_or(RenderError::Pixmap { width, height })
+}
+
+/// Renders `svg` to PNG with resvg at its own size, scaled down so the longest side is at most
+/// `max_side` (the service's `result.png`, the command line's `-o out.png`).
+pub fn render_png(svg: &str, max_side: f32) -> Result<Vec<u8>, RenderError> {
+    use resvg::tiny_skia;
+    let tree = parse_usvg(svg)?;
+    let size = tree.size();
+    let scale = (max_side / size.width().max(size.height())).min(1.0);
+    let w = (size.width() * scale).ceil().max(1.0) as u32;
+    let h = (size.height() * scale).ceil().max(1.0) as u32;
+    let mut pixmap = pixmap(w, h)?;
+    resvg::render(
+        &tree,
+        tiny_skia::Transform::from_scale(scale, scale),
+        &mut pixmap.as_mut(),
+    );
+    pixmap
+        .encode_png()
+        .map_err(|e| RenderError::Png(e.to_string()))
 }
 
 /// One subpath as cubic segments `[p1, p2, p3]` after a start point.
