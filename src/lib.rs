@@ -10,6 +10,7 @@
 //! | [`svg`] | scene ⇄ SVG text: bounded import of untrusted SVG, compact export, the safe-output profile |
 //! | [`raster`] | differentiable CPU rasteriser: forward and backward |
 //! | [`losses`] | LIVE's losses (UDF-weighted L2, self-intersection), with gradients |
+//! | [`pdf`] | scene → one-page vector PDF (`result.pdf`, `-o out.pdf`) |
 //! | [`vector`] | the vector stage's finish: simple outlines, palettes, editability checks, compact export |
 //! | [`image`] | RGBA f32 buffers, PNG in/out, resizing, PSNR and SSIM |
 //! | [`models`] | models on candle: Stable Diffusion (UNet, VAE + VJP, TAESD, samplers, loading), CLIP, MiniLM, the scorers |
@@ -44,6 +45,7 @@ pub mod image;
 pub mod losses;
 pub mod models;
 pub mod optim;
+pub mod pdf;
 pub mod pipeline;
 pub mod progress;
 pub mod raster;

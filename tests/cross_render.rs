@@ -117,3 +117,76 @@ fn outputs_render_the_same_in_resvg_and_chromium() {
         report.join(", ")
     );
 }
+
+/// The same outputs as one-page vector PDFs (`result.pdf`, `-o out.pdf`) look the same in a PDF
+/// renderer (poppler's `pdftoppm`, at 96 dpi so a pixel is a pixel) as the SVG in resvg.
+/// Without `pdftoppm` (Debian `poppler-utils`) the test prints SKIP (and fails where `.ci/run`
+/// sets `VF_REQUIRE_ALL`).
+#[test]
+fn outputs_as_pdf_render_the_same_as_the_svg() {
+    let name = "outputs_as_pdf_render_the_same_as_the_svg";
+    if Command::new("pdftoppm").arg("-v").output().is_err() {
+        common::skip(
+            name,
+            "pdftoppm is not installed (apt-get install poppler-utils)",
+        );
+        return;
+    }
+    let golden: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(
+            PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/golden/run_plan.json"),
+        )
+        .unwrap(),
+    )
+    .unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let mut report = Vec::new();
+    for key in [
+        "service/sd_live_sds/iconography",
+        "service/sd_live_sds/pixel_art",
+        "service/sd_live_sds/sketch",
+        "service/vectorize",
+        "service/from-svg",
+        "service/small-prior",
+    ] {
+        let svg = at_side(golden[key].as_str().unwrap_or_else(|| panic!("{key}")));
+        let scene = vectorfusion::svg::from_svg(&svg).unwrap();
+        let stem = dir.path().join(key.replace('/', "_"));
+        let pdf = stem.with_extension("pdf");
+        std::fs::write(&pdf, vectorfusion::pdf::to_pdf(&scene)).unwrap();
+        let out = Command::new("pdftoppm")
+            .args(["-r", "96", "-png", "-singlefile"])
+            .arg(&pdf)
+            .arg(&stem)
+            .output()
+            .expect("pdftoppm runs");
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let img = image::open(stem.with_extension("png"))
+            .expect("a PNG")
+            .to_rgb8();
+        assert_eq!(img.dimensions(), (SIDE, SIDE), "{key}");
+        let b: Vec<f64> = img.pixels().flat_map(|p| p.0.map(f64::from)).collect();
+        let a = resvg_rgb(&svg);
+        let mean = a.iter().zip(&b).map(|(x, y)| (x - y).abs()).sum::<f64>() / a.len() as f64;
+        let large = a
+            .chunks(3)
+            .zip(b.chunks(3))
+            .filter(|(p, q)| p.iter().zip(q.iter()).any(|(x, y)| (x - y).abs() > 128.0))
+            .count() as f64
+            / (SIDE * SIDE) as f64;
+        report.push(format!(
+            "{key}: mean {mean:.2}/255, {:.3}% far",
+            large * 100.0
+        ));
+        assert!(
+            mean <= MAX_MEAN_ABS && large <= 0.005,
+            "{key}: PDF differs from the SVG: {}",
+            report.join("; ")
+        );
+    }
+    eprintln!("{}", report.join("\n"));
+}

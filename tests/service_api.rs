@@ -178,6 +178,7 @@ async fn vectorize_job_end_to_end_with_events_and_results() {
     for (path, native) in [
         ("result.svg", "image/svg+xml"),
         ("result.png", "image/png"),
+        ("result.pdf", "application/pdf"),
         ("snapshots/1.svg", "image/svg+xml"),
     ] {
         let path = format!("/jobs/{id}/{path}");

@@ -1,7 +1,7 @@
 """End to end through a client generated from openapi.yaml by openapi-python-client, used as an
 integrator would, without edits: submit a vectorize and a text job, follow each job's events
 (httpx-sse on the client's own httpx session, a full replay with ?from=0), read the job and
-download its SVG, PNG preview and first snapshot.
+download its SVG, PNG preview, PDF and first snapshot.
 
 Usage: python_e2e.py BASE_URL PNG_BASE64   (the generated package on PYTHONPATH)
 Prints one line per job and exits 0, or raises.
@@ -14,6 +14,7 @@ from httpx_sse import connect_sse
 from vectorfusion_client import Client
 from vectorfusion_client.api.default import (
     get_job,
+    result_pdf,
     result_png,
     result_svg,
     snapshot_svg,
@@ -63,6 +64,8 @@ def check(client, job):
     assert isinstance(svg, bytes) and svg.startswith(b"<svg"), svg[:40]
     png = result_png.sync(id=job.id, client=client)
     assert isinstance(png, bytes) and png.startswith(PNG_MAGIC), png[:8]
+    pdf = result_pdf.sync(id=job.id, client=client)
+    assert isinstance(pdf, bytes) and pdf.startswith(b"%PDF-"), pdf[:8]
     snap = snapshot_svg.sync(id=job.id, n=1, client=client)
     assert isinstance(snap, bytes) and snap.startswith(b"<svg"), snap[:40]
     print(f"{view.kind.value} {job.id}: {len(names)} events, svg {len(svg)} B, png {len(png)} B")

@@ -50,7 +50,7 @@ pub struct GenerateArgs {
     pub request: RequestArgs,
     #[command(flatten)]
     pub vector: super::vector_args::VectorArgs,
-    /// Output SVG path.
+    /// Output path: `.svg`, or `.pdf` (vector PDF) / `.png` (render) by extension.
     #[arg(short, long)]
     pub output: PathBuf,
     /// Write SVG snapshots here (`STAGE_STEP.svg`, every `--snapshot-every` steps).
@@ -174,8 +174,7 @@ pub fn run(args: GenerateArgs) -> Result<(), CliError> {
     );
     let out = exec.run_plan(&plan, &input, &ctx)?;
     bar.finish_and_clear();
-    std::fs::write(&args.output, &out.svg)
-        .with_context(|| format!("cannot write {}", args.output.display()))?;
+    super::write_result(&args.output, &out.svg)?;
     eprintln!("wrote {} ({} paths)", args.output.display(), out.paths);
     let summary = serde_json::json!({
         "output": args.output,

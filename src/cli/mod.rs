@@ -105,6 +105,25 @@ impl<T, E: Into<anyhow::Error>> ResultExt<T> for Result<T, E> {
     }
 }
 
+/// Writes a result SVG to `path` in the format its extension names: `.pdf` a one-page vector
+/// PDF ([`crate::pdf`]), `.png` the resvg render at the SVG's size (as the service's
+/// `result.png`), anything else the SVG itself.
+pub(crate) fn write_result(path: &std::path::Path, svg: &str) -> Result<(), CliError> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    let bytes = match ext.as_deref() {
+        Some("pdf") => crate::svg::from_svg(svg)
+            .map(|scene| crate::pdf::to_pdf(&scene))
+            .failed(|| "converting the result to PDF".into())?,
+        Some("png") => crate::svg::render_png(svg, crate::scene::MAX_SIDE as f32)
+            .failed(|| "rendering the result to PNG".into())?,
+        _ => svg.as_bytes().to_vec(),
+    };
+    std::fs::write(path, bytes).failed(|| format!("cannot write {}", path.display()))
+}
+
 /// A run's error: bad input and missing models are usage errors (exit code 2) said as the
 /// stage said them, anything else a failure that keeps the error as its source.
 impl From<crate::pipeline::PipelineError> for CliError {

@@ -17,7 +17,7 @@ pub const MAX_INPUT_SIDE: u32 = 4096;
 pub struct VectorizeArgs {
     /// Input image (PNG or JPEG).
     pub input: PathBuf,
-    /// Output SVG.
+    /// Output path: `.svg`, or `.pdf` (vector PDF) / `.png` (render) by extension.
     #[arg(short, long)]
     pub output: PathBuf,
     /// Number of paths, or `auto` (add stages while they pay off, then prune).
@@ -182,7 +182,7 @@ pub fn run(a: VectorizeArgs) -> Result<(), CliError> {
             },
         ),
     };
-    std::fs::write(&a.output, &svg).failed(|| format!("cannot write {}", a.output.display()))?;
+    super::write_result(&a.output, &svg)?;
     if let Some(p) = &a.preview {
         crate::raster::render(&result.scene)
             .save_png(p)

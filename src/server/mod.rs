@@ -115,6 +115,11 @@ fn route_table() -> Vec<(Method, &'static str, MethodRouter<AppState>)> {
         ),
         (
             Method::GET,
+            "/jobs/{id}/result.pdf",
+            get(routes::result_pdf),
+        ),
+        (
+            Method::GET,
             "/jobs/{id}/snapshots/{file}",
             get(routes::snapshot),
         ),

@@ -398,6 +398,7 @@ pub struct Links {
     pub events: String,
     pub result_svg: String,
     pub result_png: String,
+    pub result_pdf: String,
 }
 
 /// A job as returned by the API.
@@ -537,6 +538,7 @@ impl JobView {
                 events: format!("{base}/events"),
                 result_svg: format!("{base}/result.svg"),
                 result_png: format!("{base}/result.png"),
+                result_pdf: format!("{base}/result.pdf"),
                 this: base,
             },
             attempt_history: None,

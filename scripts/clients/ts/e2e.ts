@@ -1,7 +1,7 @@
 // End to end through a TypeScript client generated from openapi.yaml (openapi-typescript types +
 // openapi-fetch), used as an integrator would, without edits: submit a vectorize and a text job,
 // follow each job's events (a full replay with ?from=0), read the job and download its SVG, PNG
-// preview and first snapshot. `tsc` type-checks every call against the generated types first.
+// preview, PDF and first snapshot. `tsc` type-checks every call against the generated types first.
 //
 // Usage: node dist/e2e.js BASE_URL PNG_BASE64 — prints one line per job, exits 0 or throws.
 import createClient from "openapi-fetch";
@@ -68,6 +68,8 @@ async function run(id: string): Promise<void> {
   const path = { params: { path: { id } }, parseAs: "arrayBuffer" } as const;
   const svg = await bytes(client.GET("/jobs/{id}/result.svg", path));
   const preview = await bytes(client.GET("/jobs/{id}/result.png", path));
+  const pdf = await bytes(client.GET("/jobs/{id}/result.pdf", path));
+  check(new TextDecoder().decode(pdf.slice(0, 5)) === "%PDF-", "not a PDF");
   const snap = await bytes(
     client.GET("/jobs/{id}/snapshots/{n}.svg", { params: { path: { id, n: 1 } }, parseAs: "arrayBuffer" }),
   );

@@ -1,4 +1,5 @@
-//! A finished job's output: `result.svg`, the `result.png` preview and the snapshots.
+//! A finished job's output: `result.svg`, the `result.png` preview, `result.pdf` and the
+//! snapshots.
 
 use super::jobs::{job_id, load_job};
 use crate::server::AppState;
@@ -8,6 +9,9 @@ use crate::store::JobStatus;
 use axum::extract::{Extension, Path, State};
 use axum::http::{HeaderMap, header};
 use axum::response::{IntoResponse, Response};
+
+/// Longest side of `result.png`.
+const PREVIEW_MAX_SIDE: f32 = 1024.0;
 
 /// The generic binary type every download is also served as, for clients that cannot name
 /// `image/svg+xml` or `image/png` (code generators map it to a file).
@@ -91,28 +95,6 @@ pub(in crate::server) async fn result_svg(
     ))
 }
 
-/// Longest side of PNG previews.
-const PREVIEW_MAX_SIDE: f32 = 1024.0;
-
-/// Renders `svg` to PNG with resvg, scaled so the longest side is at most [`PREVIEW_MAX_SIDE`].
-pub fn render_png(svg: &str) -> Result<Vec<u8>, crate::svg::RenderError> {
-    use resvg::tiny_skia;
-    let tree = crate::svg::parse_usvg(svg)?;
-    let size = tree.size();
-    let scale = (PREVIEW_MAX_SIDE / size.width().max(size.height())).min(1.0);
-    let w = (size.width() * scale).ceil().max(1.0) as u32;
-    let h = (size.height() * scale).ceil().max(1.0) as u32;
-    let mut pixmap = crate::svg::pixmap(w, h)?;
-    resvg::render(
-        &tree,
-        tiny_skia::Transform::from_scale(scale, scale),
-        &mut pixmap.as_mut(),
-    );
-    pixmap
-        .encode_png()
-        .map_err(|e| crate::svg::RenderError::Png(e.to_string()))
-}
-
 pub(in crate::server) async fn result_png(
     State(state): State<AppState>,
     Extension(caller): Extension<Caller>,
@@ -121,16 +103,40 @@ pub(in crate::server) async fn result_png(
 ) -> Result<Response, ApiError> {
     let id = job_id(&raw)?;
     let result = finished_result(&state, &id, &caller).await?;
-    let png = tokio::task::spawn_blocking(move || render_png(&result.svg))
-        .await
-        .map_err(|e| ApiError::Internal(e.to_string()))?
-        .map_err(|e| ApiError::Internal(format!("rendering the preview failed: {e}")))?;
+    let png =
+        tokio::task::spawn_blocking(move || crate::svg::render_png(&result.svg, PREVIEW_MAX_SIDE))
+            .await
+            .map_err(|e| ApiError::Internal(e.to_string()))?
+            .map_err(|e| ApiError::Internal(format!("rendering the preview failed: {e}")))?;
     let content_type = if wants_octet_stream(&headers, "image/png") {
         OCTET_STREAM
     } else {
         "image/png"
     };
     Ok(([(header::CONTENT_TYPE, content_type)], png).into_response())
+}
+
+/// `result.pdf`: the final SVG as a one-page vector PDF ([`crate::pdf`]).
+pub(in crate::server) async fn result_pdf(
+    State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
+    Path(raw): Path<String>,
+    headers: HeaderMap,
+) -> Result<Response, ApiError> {
+    let id = job_id(&raw)?;
+    let result = finished_result(&state, &id, &caller).await?;
+    let pdf = tokio::task::spawn_blocking(move || {
+        crate::svg::from_svg(&result.svg).map(|scene| crate::pdf::to_pdf(&scene))
+    })
+    .await
+    .map_err(|e| ApiError::Internal(e.to_string()))?
+    .map_err(|e| ApiError::Internal(format!("converting the result to PDF failed: {e}")))?;
+    let content_type = if wants_octet_stream(&headers, "application/pdf") {
+        OCTET_STREAM
+    } else {
+        "application/pdf"
+    };
+    Ok(([(header::CONTENT_TYPE, content_type)], pdf).into_response())
 }
 
 pub(in crate::server) async fn snapshot(
