@@ -54,6 +54,28 @@ fn vectorize_writes_svg_and_preview() {
 }
 
 #[test]
+fn vectorize_writes_pdf_and_png_by_extension() {
+    let d = tmpdir("vec-formats");
+    let input = d.join("in.png");
+    write_icon(&input);
+    for (name, magic) in [("out.pdf", &b"%PDF-1.4"[..]), ("out.png", &b"\x89PNG"[..])] {
+        let out = bin()
+            .args(["vectorize", input.to_str().unwrap(), "-o"])
+            .arg(d.join(name))
+            .args(["--schedule", "2", "--iters", "10", "--size", "32", "-q"])
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let bytes = std::fs::read(d.join(name)).unwrap();
+        assert!(bytes.starts_with(magic), "{name}");
+    }
+}
+
+#[test]
 fn vectorize_reports_clear_errors() {
     let d = tmpdir("err");
     let junk = d.join("junk.png");
