@@ -30,6 +30,31 @@ fn at_side(svg: &str) -> String {
     format!("{head}{}", &svg[head_end..])
 }
 
+/// Real outputs of every kind (the run-plan golden SVGs), each at [`SIDE`] px.
+fn golden_outputs() -> Vec<(&'static str, String)> {
+    let golden: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(
+            PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/golden/run_plan.json"),
+        )
+        .unwrap(),
+    )
+    .unwrap();
+    [
+        "service/sd_live_sds/iconography",
+        "service/sd_live_sds/pixel_art",
+        "service/sd_live_sds/sketch",
+        "service/vectorize",
+        "service/from-svg",
+        "service/small-prior",
+    ]
+    .into_iter()
+    .map(|name| {
+        let svg = golden[name].as_str().unwrap_or_else(|| panic!("{name}"));
+        (name, at_side(svg))
+    })
+    .collect()
+}
+
 /// RGB over white, as f64 per channel.
 fn resvg_rgb(svg: &str) -> Vec<f64> {
     let tree = usvg::Tree::from_str(svg, &usvg::Options::default()).expect("resvg parses it");
@@ -83,25 +108,10 @@ fn outputs_render_the_same_in_resvg_and_chromium() {
         );
         return;
     };
-    let golden: serde_json::Value = serde_json::from_str(
-        &std::fs::read_to_string(
-            PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/golden/run_plan.json"),
-        )
-        .unwrap(),
-    )
-    .unwrap();
     let dir = tempfile::tempdir().unwrap();
     let mut report = Vec::new();
     let mut worst = 0.0f64;
-    for name in [
-        "service/sd_live_sds/iconography",
-        "service/sd_live_sds/pixel_art",
-        "service/sd_live_sds/sketch",
-        "service/vectorize",
-        "service/from-svg",
-        "service/small-prior",
-    ] {
-        let svg = at_side(golden[name].as_str().unwrap_or_else(|| panic!("{name}")));
+    for (name, svg) in golden_outputs() {
         let file = dir.path().join(format!("{}.svg", name.replace('/', "_")));
         std::fs::write(&file, &svg).unwrap();
         let a = resvg_rgb(&svg);
@@ -132,24 +142,9 @@ fn outputs_as_pdf_render_the_same_as_the_svg() {
         );
         return;
     }
-    let golden: serde_json::Value = serde_json::from_str(
-        &std::fs::read_to_string(
-            PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/golden/run_plan.json"),
-        )
-        .unwrap(),
-    )
-    .unwrap();
     let dir = tempfile::tempdir().unwrap();
     let mut report = Vec::new();
-    for key in [
-        "service/sd_live_sds/iconography",
-        "service/sd_live_sds/pixel_art",
-        "service/sd_live_sds/sketch",
-        "service/vectorize",
-        "service/from-svg",
-        "service/small-prior",
-    ] {
-        let svg = at_side(golden[key].as_str().unwrap_or_else(|| panic!("{key}")));
+    for (key, svg) in golden_outputs() {
         let scene = vectorfusion::svg::from_svg(&svg).unwrap();
         let stem = dir.path().join(key.replace('/', "_"));
         let pdf = stem.with_extension("pdf");

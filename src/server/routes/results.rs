@@ -102,18 +102,12 @@ pub(in crate::server) async fn result_png(
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
     let id = job_id(&raw)?;
-    let result = finished_result(&state, &id, &caller).await?;
-    let png =
-        tokio::task::spawn_blocking(move || crate::svg::render_png(&result.svg, PREVIEW_MAX_SIDE))
-            .await
-            .map_err(|e| ApiError::Internal(e.to_string()))?
-            .map_err(|e| ApiError::Internal(format!("rendering the preview failed: {e}")))?;
-    let content_type = if wants_octet_stream(&headers, "image/png") {
-        OCTET_STREAM
-    } else {
-        "image/png"
-    };
-    Ok(([(header::CONTENT_TYPE, content_type)], png).into_response())
+    let svg = finished_result(&state, &id, &caller).await?.svg;
+    converted(&headers, "image/png", move || {
+        crate::svg::render_png(&svg, PREVIEW_MAX_SIDE)
+            .map_err(|e| ApiError::Internal(format!("rendering the preview failed: {e}")))
+    })
+    .await
 }
 
 /// `result.pdf`: the final SVG as a one-page vector PDF ([`crate::pdf`]).
@@ -124,19 +118,31 @@ pub(in crate::server) async fn result_pdf(
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
     let id = job_id(&raw)?;
-    let result = finished_result(&state, &id, &caller).await?;
-    let pdf = tokio::task::spawn_blocking(move || {
-        crate::svg::from_svg(&result.svg).map(|scene| crate::pdf::to_pdf(&scene))
+    let svg = finished_result(&state, &id, &caller).await?.svg;
+    converted(&headers, "application/pdf", move || {
+        crate::svg::from_svg(&svg)
+            .map(|scene| crate::pdf::to_pdf(&scene))
+            .map_err(|e| ApiError::Internal(format!("converting the result to PDF failed: {e}")))
     })
     .await
-    .map_err(|e| ApiError::Internal(e.to_string()))?
-    .map_err(|e| ApiError::Internal(format!("converting the result to PDF failed: {e}")))?;
-    let content_type = if wants_octet_stream(&headers, "application/pdf") {
+}
+
+/// The bytes `convert` makes (CPU work, off the async threads), served as `native` or as
+/// [`OCTET_STREAM`] when the client asks for that.
+async fn converted(
+    headers: &HeaderMap,
+    native: &'static str,
+    convert: impl FnOnce() -> Result<Vec<u8>, ApiError> + Send + 'static,
+) -> Result<Response, ApiError> {
+    let bytes = tokio::task::spawn_blocking(convert)
+        .await
+        .map_err(|e| ApiError::Internal(e.to_string()))??;
+    let content_type = if wants_octet_stream(headers, native) {
         OCTET_STREAM
     } else {
-        "application/pdf"
+        native
     };
-    Ok(([(header::CONTENT_TYPE, content_type)], pdf).into_response())
+    Ok(([(header::CONTENT_TYPE, content_type)], bytes).into_response())
 }
 
 pub(in crate::server) async fn snapshot(
