@@ -38,6 +38,9 @@ use tokio::sync::{broadcast, mpsc};
 /// Snapshots replayed at most on (re)connect.
 const REPLAY_LIMIT: i64 = 500;
 
+/// The largest `from` (2^53 − 1, the largest integer every JSON client keeps exactly).
+const MAX_FROM: i64 = (1 << 53) - 1;
+
 /// The query of `GET /jobs/{id}/events`.
 #[derive(serde::Deserialize)]
 pub(super) struct EventsQuery {
@@ -62,10 +65,12 @@ fn start_after(headers: &HeaderMap, query: &EventsQuery) -> Result<Option<i64>, 
     match query.from.as_deref() {
         None => Ok(None),
         Some(s) => match s.trim().parse::<i64>() {
-            Ok(n) if n >= 0 => Ok(Some(n)),
+            Ok(n) if (0..=MAX_FROM).contains(&n) => Ok(Some(n)),
             _ => Err(ApiError::InvalidQuery {
                 field: "from".into(),
-                reason: format!("must be a snapshot number (an integer, 0 or more), got {s:?}"),
+                reason: format!(
+                    "must be a snapshot number (an integer from 0 to {MAX_FROM}), got {s:?}"
+                ),
             }),
         },
     }
