@@ -114,7 +114,11 @@ async fn a_body_sent_too_slowly_gets_408() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn uploads_are_stored_apart_under_a_quota_that_finished_jobs_free() {
     let image = common::png_b64(48);
-    let n = image.len();
+    // Uploads are stored (and counted against the quota) as the image's bytes, not its base64.
+    let n = base64::Engine::decode(&base64::engine::general_purpose::STANDARD, &image)
+        .unwrap()
+        .len();
+    let body_len = image.len();
     let dir = tempfile::tempdir().unwrap();
     let db = dir.path().join("jobs.db");
     let db_path = db.clone();
@@ -123,7 +127,7 @@ async fn uploads_are_stored_apart_under_a_quota_that_finished_jobs_free() {
         c.database.path = db_path;
         c.queue.workers = 1;
         // Room for three uploads of n bytes, not four.
-        c.server.max_body_bytes = n + 1024;
+        c.server.max_body_bytes = body_len + 1024;
         c.server.max_stored_upload_bytes = (3 * n + n / 2) as u64;
     })
     .await;
