@@ -12,7 +12,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::Duration;
 use vectorfusion::pipeline::{
-    DefaultExecutor, Executor, JobContext, JobSpec, PipelineError, RunOutput, RunReport,
+    DefaultExecutor, Executor, JobContext, JobSpec, PipelineError, RunOutput,
 };
 use vectorfusion::progress::{Progress, Stage};
 use vectorfusion::worker::test_executor::{TestExecutor, scene_at, scene_svg};
@@ -1136,12 +1136,7 @@ impl Executor for FlakyExecutor {
         if self.calls.fetch_add(1, Ordering::SeqCst) == 0 {
             return Err(PipelineError::Transient("simulated out-of-memory".into()));
         }
-        Ok(RunOutput::new(
-            vectorfusion::scene::Scene::new(4, 4, vectorfusion::scene::Rgba::TRANSPARENT)
-                .expect("a 4 px scene"),
-            "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"4\" height=\"4\"/>".into(),
-            RunReport::default(),
-        ))
+        Ok(common::runs::blank_output())
     }
     fn text_ready(&self) -> Result<(), vectorfusion::pipeline::NotReady> {
         Ok(())

@@ -161,12 +161,7 @@ impl vectorfusion::pipeline::Executor for NoopExecutor {
         _spec: &vectorfusion::pipeline::JobSpec,
         _ctx: &vectorfusion::pipeline::JobContext,
     ) -> Result<vectorfusion::pipeline::RunOutput, vectorfusion::pipeline::PipelineError> {
-        Ok(vectorfusion::pipeline::RunOutput::new(
-            vectorfusion::scene::Scene::new(4, 4, vectorfusion::scene::Rgba::TRANSPARENT)
-                .expect("a 4 px scene"),
-            r#"<svg xmlns="http://www.w3.org/2000/svg" width="4" height="4"/>"#.into(),
-            vectorfusion::pipeline::RunReport::default(),
-        ))
+        Ok(common::runs::blank_output())
     }
     fn text_ready(&self) -> Result<(), vectorfusion::pipeline::NotReady> {
         Ok(())

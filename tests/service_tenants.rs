@@ -179,12 +179,7 @@ impl vectorfusion::pipeline::Executor for SlowExecutor {
         _ctx: &vectorfusion::pipeline::JobContext,
     ) -> Result<vectorfusion::pipeline::RunOutput, vectorfusion::pipeline::PipelineError> {
         std::thread::sleep(Duration::from_secs(1));
-        Ok(vectorfusion::pipeline::RunOutput::new(
-            vectorfusion::scene::Scene::new(4, 4, vectorfusion::scene::Rgba::TRANSPARENT)
-                .expect("a 4 px scene"),
-            r#"<svg xmlns="http://www.w3.org/2000/svg" width="4" height="4"/>"#.into(),
-            vectorfusion::pipeline::RunReport::default(),
-        ))
+        Ok(common::runs::blank_output())
     }
     fn text_ready(&self) -> Result<(), vectorfusion::pipeline::NotReady> {
         Ok(())

@@ -47,3 +47,14 @@ pub fn run(exec: &DefaultExecutor, req: &PlanRequest) -> Result<RunOutput, Pipel
     };
     run_with(exec, req, &input, |_| {}, CancelToken::new())
 }
+
+/// A blank 4 px result (an empty scene and its SVG), for test executors whose output does not
+/// matter.
+pub fn blank_output() -> RunOutput {
+    RunOutput::new(
+        vectorfusion::scene::Scene::new(4, 4, vectorfusion::scene::Rgba::TRANSPARENT)
+            .expect("a 4 px scene"),
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="4" height="4"/>"#.into(),
+        vectorfusion::pipeline::RunReport::default(),
+    )
+}
