@@ -38,8 +38,8 @@ pub use report::{
     TraceReport,
 };
 pub use spec::{
-    JobKind, JobSpec, Limits, MAX_SEED, Method, PRIORITY_RANGE, Preset, SpecError, Style,
-    check_seed, parse_seed,
+    JobKind, JobSpec, Limits, MAX_JSON_INTEGER, MAX_SEED, Method, PRIORITY_RANGE, Preset,
+    SpecError, Style, check_seed, parse_seed,
 };
 pub use text::{Start, TextCheckpoint, run_text, sample_ranked};
 pub use vectorize::{VectorizeCheckpoint, run_vectorize};

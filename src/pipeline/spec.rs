@@ -175,10 +175,14 @@ impl SpecError {
 /// Allowed priority range (higher runs first).
 pub const PRIORITY_RANGE: std::ops::RangeInclusive<i32> = -100..=100;
 
-/// The largest seed: 2^53 − 1, the largest integer every JSON client keeps exactly (JavaScript
-/// numbers are doubles), so a seed read back and resubmitted is the same seed. Seeds derived
-/// from it (the plan's per-stage seeds, defaults from the job id) stay within it too.
-pub const MAX_SEED: u64 = (1 << 53) - 1;
+/// 2^53 − 1, the largest integer every JSON client keeps exactly (JavaScript numbers are
+/// doubles): the bound of every integer the API hands out to be sent back (seeds, event ids).
+pub const MAX_JSON_INTEGER: u64 = (1 << 53) - 1;
+
+/// The largest seed ([`MAX_JSON_INTEGER`]), so a seed read back and resubmitted is the same
+/// seed. Seeds derived from it (the plan's per-stage seeds, defaults from the job id) stay
+/// within it too.
+pub const MAX_SEED: u64 = MAX_JSON_INTEGER;
 
 /// Parses a command-line seed (at most [`MAX_SEED`]).
 pub fn parse_seed(s: &str) -> Result<u64, String> {

@@ -38,8 +38,8 @@ use tokio::sync::{broadcast, mpsc};
 /// Snapshots replayed at most on (re)connect.
 const REPLAY_LIMIT: i64 = 500;
 
-/// The largest `from` (2^53 − 1, the largest integer every JSON client keeps exactly).
-const MAX_FROM: i64 = (1 << 53) - 1;
+/// The largest `from`: event ids are snapshot numbers, which stay JSON-safe integers.
+const MAX_FROM: i64 = crate::pipeline::MAX_JSON_INTEGER as i64;
 
 /// The query of `GET /jobs/{id}/events`.
 #[derive(serde::Deserialize)]
