@@ -183,6 +183,15 @@ pub trait Teacher: Send + Sync {
     ) -> Result<Latent, TeacherError>;
 }
 
+/// `Ok` when `t` indexes a schedule of `len` timesteps, else [`TeacherError::Timestep`].
+pub fn check_timestep(t: usize, len: usize) -> Result<(), TeacherError> {
+    if t < len {
+        Ok(())
+    } else {
+        Err(TeacherError::Timestep { t, max: len })
+    }
+}
+
 /// [`Teacher::encode_linearised`] without a tape: encodes now, and runs
 /// [`Teacher::encode_vjp`] from scratch (a second encoder forward) when the pullback is called.
 /// The trait's default; also for wrappers that want this behaviour from a taped teacher.

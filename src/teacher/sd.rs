@@ -290,12 +290,7 @@ impl Teacher for SdTeacher {
         cond: &Conditioning,
         guidance: f32,
     ) -> Result<Latent, TeacherError> {
-        if t >= self.alphas.len() {
-            return Err(TeacherError::Timestep {
-                t,
-                max: self.alphas.len(),
-            });
-        }
+        super::check_timestep(t, self.alphas.len())?;
         let z = self.latent_tensor(z_t)?;
         let c = self.embedding(&cond.cond, &cond.embed_shape)?;
         let u = self.embedding(&cond.uncond, &cond.embed_shape)?;

@@ -27,7 +27,7 @@ use crate::image::Image;
 use crate::optim::{Adam, StepOutcome};
 use crate::progress::{CancelToken, CheckpointError, Progress, ProgressSink, Stage};
 use crate::scene::{ParamGroup, Params, Scene};
-use crate::teacher::{Conditioning, Latent, Teacher, TeacherError};
+use crate::teacher::{Conditioning, Latent, Teacher};
 use rand::{Rng, RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
@@ -152,13 +152,9 @@ pub fn sds_latent_grad(
     guidance: f32,
     weighting: Weighting,
 ) -> Result<(Latent, f64), SdsError> {
-    let ab = *teacher
-        .alphas_cumprod()
-        .get(t)
-        .ok_or(TeacherError::Timestep {
-            t,
-            max: teacher.alphas_cumprod().len(),
-        })?;
+    let alphas = teacher.alphas_cumprod();
+    crate::teacher::check_timestep(t, alphas.len())?;
+    let ab = alphas[t];
     if noise.len() != z.len() {
         return Err(SdsError::Config("noise length differs from latent".into()));
     }
