@@ -829,6 +829,56 @@ async fn bad_input_gets_clear_4xx_json_never_500() {
             "svg",
         ),
     ]);
+    // The canvas and the negative prompt: each refusal names its field.
+    for (name, body, field) in [
+        ("unknown aspect", json!({"aspect": "5:4"}), "aspect"),
+        (
+            "aspect and size",
+            json!({"aspect": "16:9", "width": 640, "height": 360}),
+            "width",
+        ),
+        ("width alone", json!({"width": 640}), "height"),
+        ("height alone", json!({"height": 640}), "width"),
+        (
+            "narrow canvas",
+            json!({"width": 63, "height": 640}),
+            "width",
+        ),
+        (
+            "huge canvas",
+            json!({"width": 640, "height": 4096}),
+            "height",
+        ),
+        (
+            "blank negative prompt",
+            json!({"negative_prompt": "  "}),
+            "negative_prompt",
+        ),
+        (
+            "long negative prompt",
+            json!({"negative_prompt": "x".repeat(1001)}),
+            "negative_prompt",
+        ),
+    ] {
+        let mut b = json!({"kind": "text", "caption": "a cat"});
+        b.as_object_mut()
+            .unwrap()
+            .extend(body.as_object().unwrap().clone());
+        cases.push(json_case(name, b, "invalid_field", field));
+    }
+    for field in ["aspect", "negative_prompt"] {
+        let v = if field == "aspect" {
+            json!("16:9")
+        } else {
+            json!("blurry")
+        };
+        cases.push(json_case(
+            "canvas on vectorize",
+            json!({"kind": "vectorize", "image": png_b64(4), field: v}),
+            "invalid_field",
+            field,
+        ));
+    }
     for c in &cases {
         let mut headers = Vec::new();
         if let Some(ct) = c.content_type {

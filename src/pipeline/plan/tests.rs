@@ -1,5 +1,7 @@
 use super::*;
+use crate::pipeline::canvas::SampleShape;
 use crate::scene::MAX_PATHS;
+use crate::stages::sds::SdsConfig;
 
 fn facts(small_prior: bool) -> ModelFacts {
     ModelFacts {
@@ -10,6 +12,12 @@ fn facts(small_prior: bool) -> ModelFacts {
         },
         encoder_choice: EncoderChoice::Auto,
         taesd_found: false,
+        sample_shape: if small_prior {
+            SampleShape::Square
+        } else {
+            SampleShape::Multiple(64)
+        },
+        negative_prompt: true,
     }
 }
 
