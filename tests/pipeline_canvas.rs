@@ -7,6 +7,7 @@ mod common;
 
 use common::http::{get, post_json};
 use common::runs;
+use common::server::TestServer;
 use common::wait_status;
 use serde_json::{Value, json};
 use std::path::{Path, PathBuf};
@@ -15,7 +16,7 @@ use std::time::Duration;
 use vectorfusion::image::Image;
 use vectorfusion::pipeline::canvas::CanvasPlan;
 use vectorfusion::pipeline::{
-    Aspect, CanvasRequest, DefaultExecutor, Executor, Method, Models, PlanRequest, Preset, Start,
+    Aspect, CanvasRequest, DefaultExecutor, Method, ModelDirs, Models, PlanRequest, Preset, Start,
     Style, run_text,
 };
 use vectorfusion::progress::{CancelToken, NullSink, ProgressSink};
@@ -29,20 +30,13 @@ fn fixture(name: &str) -> PathBuf {
         .join(name)
 }
 
+/// A draft request for a 16:9 canvas.
 fn req(method: Method, style: Style) -> PlanRequest {
-    PlanRequest {
-        style,
-        method,
-        preset: Preset::Draft,
-        steps: Some(3),
-        samples: Some(2),
-        seed: 3,
-        canvas: CanvasRequest {
-            aspect: Some(Aspect::Wide16x9),
-            ..CanvasRequest::default()
-        },
-        ..PlanRequest::text("a crown")
-    }
+    let mut r = PlanRequest::text("a crown");
+    (r.style, r.method, r.preset) = (style, method, Preset::Draft);
+    (r.steps, r.samples, r.seed) = (Some(3), Some(2), 3);
+    r.canvas.aspect = Some(Aspect::Wide16x9);
+    r
 }
 
 /// The `viewBox` of `svg` as `[x, y, w, h]`.
@@ -176,7 +170,7 @@ fn generate_writes_a_16_9_svg_and_refuses_bad_canvas_flags() {
     );
     let err = String::from_utf8_lossy(&st.stderr);
     assert_eq!(st.status.code(), Some(2), "{err}");
-    assert!(err.contains("negative_prompt"), "{err}");
+    assert!(err.contains("--negative-prompt"), "{err}");
 }
 
 /// The tiny Stable Diffusion teacher, recording the negative prompts it is given.
@@ -297,20 +291,12 @@ fn a_negative_prompt_reaches_sampling_and_sds() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_16_9_text_job_through_the_service() {
-    let dir = tempfile::tempdir().unwrap();
-    let mut cfg = vectorfusion::config::Config::default();
-    cfg.database.path = dir.path().join("jobs.db");
-    cfg.queue.workers = 1;
-    cfg.queue.poll_interval_ms = 20;
-    cfg.server.shutdown_grace_secs = 5;
-    cfg.models.sd_dir = fixture("sd-tiny").display().to_string();
-    let exec: Arc<dyn Executor> = Arc::new(DefaultExecutor::new(cfg.model_dirs()));
-    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
-    let a = listener.local_addr().unwrap();
-    let (tx, rx) = tokio::sync::oneshot::channel::<()>();
-    let task = tokio::spawn(vectorfusion::server::run(cfg, exec, listener, async move {
-        let _ = rx.await;
-    }));
+    let exec = DefaultExecutor::new(ModelDirs {
+        sd_dir: Some(fixture("sd-tiny")),
+        ..ModelDirs::default()
+    });
+    let srv = TestServer::start(Arc::new(exec), |c| c.queue.workers = 1).await;
+    let a = srv.addr;
     let body = json!({"kind": "text", "caption": "a crown", "method": "sd_live",
         "preset": "draft", "samples": 2, "seed": 5, "aspect": "16:9",
         "negative_prompt": "blurry"});
@@ -337,10 +323,5 @@ async fn a_16_9_text_job_through_the_service() {
     .await;
     assert_eq!(r.status, 400, "{}", r.text());
     assert_eq!(r.json()["error"]["field"], "height");
-    let _ = tx.send(());
-    tokio::time::timeout(Duration::from_secs(20), task)
-        .await
-        .unwrap()
-        .unwrap()
-        .unwrap();
+    srv.stop().await;
 }

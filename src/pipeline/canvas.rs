@@ -228,6 +228,16 @@ pub fn map_shape(shape: &Shape, s: (f32, f32), d: (f32, f32)) -> Shape {
     }
 }
 
+/// `scene`'s shapes scaled by `s` and moved by `d`, on a `width x height` canvas.
+fn mapped(scene: &Scene, (width, height): (u32, u32), s: (f32, f32), d: (f32, f32)) -> Scene {
+    Scene {
+        width,
+        height,
+        background: scene.background,
+        shapes: scene.shapes.iter().map(|sh| map_shape(sh, s, d)).collect(),
+    }
+}
+
 /// `scene` stretched to `width x height` (a random start drawn on a square, fitted to a
 /// non-square sample).
 pub fn stretched(scene: &Scene, width: u32, height: u32) -> Scene {
@@ -235,16 +245,7 @@ pub fn stretched(scene: &Scene, width: u32, height: u32) -> Scene {
         width as f32 / scene.width as f32,
         height as f32 / scene.height as f32,
     );
-    Scene {
-        width,
-        height,
-        background: scene.background,
-        shapes: scene
-            .shapes
-            .iter()
-            .map(|sh| map_shape(sh, s, (0.0, 0.0)))
-            .collect(),
-    }
+    mapped(scene, (width, height), s, (0.0, 0.0))
 }
 
 /// `scene` scaled uniformly to fit a `width x height` canvas and centred on it; the rest of
@@ -258,16 +259,7 @@ pub fn placed(scene: &Scene, width: u32, height: u32) -> Scene {
         (width as f32 - scene.width as f32 * k) / 2.0,
         (height as f32 - scene.height as f32 * k) / 2.0,
     );
-    Scene {
-        width,
-        height,
-        background: scene.background,
-        shapes: scene
-            .shapes
-            .iter()
-            .map(|sh| map_shape(sh, (k, k), d))
-            .collect(),
-    }
+    mapped(scene, (width, height), (k, k), d)
 }
 
 #[cfg(test)]

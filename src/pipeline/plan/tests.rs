@@ -460,7 +460,10 @@ fn a_canvas_resolves_once_into_the_plan() {
     // Stable Diffusion (balanced, 256 px) samples at the aspect; the SVG is exactly 16:9.
     let t = text(wide(PlanRequest::text("a crown")), false);
     let c = t.canvas.unwrap();
-    assert_eq!((c.width, c.height, c.sample_width, c.sample_height), (464, 261, 448, 256));
+    assert_eq!(
+        (c.width, c.height, c.sample_width, c.sample_height),
+        (464, 261, 448, 256)
+    );
     assert_eq!((t.sample_dims(), t.canvas_dims()), ((448, 256), (464, 261)));
     // The small prior draws its 64 px square on a 16:9 canvas.
     let t = text(wide(PlanRequest::text("a crown")), true);
@@ -482,7 +485,9 @@ fn a_canvas_resolves_once_into_the_plan() {
 #[test]
 fn bad_canvases_and_negative_prompts_name_their_field() {
     let err = |req: PlanRequest, f: &ModelFacts| {
-        resolve(&req, Some(f), &Limits::default()).unwrap_err().field
+        resolve(&req, Some(f), &Limits::default())
+            .unwrap_err()
+            .field
     };
     let sd = facts(false);
     let both = PlanRequest {
@@ -515,9 +520,18 @@ fn bad_canvases_and_negative_prompts_name_their_field() {
     assert_eq!(err(neg(&"x".repeat(1001)), &sd), "negative_prompt");
     assert_eq!(err(neg("a\u{7}b"), &sd), "negative_prompt");
     // The analytic test teacher has no unconditional branch to put it in.
-    assert_eq!(err(neg("blurry"), &ModelFacts::paper("test")), "negative_prompt");
+    assert_eq!(
+        err(neg("blurry"), &ModelFacts::paper("test")),
+        "negative_prompt"
+    );
     let t = text(neg("blurry"), true);
     assert_eq!(t.negative_prompt.as_deref(), Some("blurry"));
     assert_eq!(t.sds_config().unwrap().negative_prompt, "blurry");
-    assert_eq!(text(PlanRequest::text("x"), true).sds_config().unwrap().negative_prompt, "");
+    assert_eq!(
+        text(PlanRequest::text("x"), true)
+            .sds_config()
+            .unwrap()
+            .negative_prompt,
+        ""
+    );
 }
