@@ -262,6 +262,21 @@ pub fn placed(scene: &Scene, width: u32, height: u32) -> Scene {
     mapped(scene, (width, height), (k, k), d)
 }
 
+/// Keeps every shape of `scene` inside its canvas: control points past an edge are moved onto
+/// it (a shape reaching out of the sample is folded onto its edge, where a canvas of the
+/// sample's size cut it off), and shapes left without area (all outside one edge) are dropped.
+/// Before a sample is placed on a larger canvas, which would show what lay past its edges.
+pub fn kept_inside(scene: &mut Scene) {
+    let (w, h) = (scene.width as f32, scene.height as f32);
+    scene.shapes.retain_mut(|sh| {
+        for p in &mut sh.points {
+            *p = Point::new(p.x.clamp(0.0, w), p.y.clamp(0.0, h));
+        }
+        let (lo, hi) = sh.control_bounds();
+        hi.x > lo.x && hi.y > lo.y
+    });
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -363,6 +378,21 @@ mod tests {
         );
         assert!(y0.abs() < 1e-4 && (y1 - 72.0).abs() < 1e-4, "{y0} {y1}");
         assert_eq!(placed(&scene, 64, 64), scene);
+        // Past the sample's edges: folded onto them, or dropped when wholly outside.
+        let mut wide = scene.clone();
+        wide.shapes
+            .push(Shape::square(-10.0, 10.0, 30.0, crate::scene::Rgba::BLACK).unwrap());
+        wide.shapes
+            .push(Shape::square(70.0, 10.0, 30.0, crate::scene::Rgba::BLACK).unwrap());
+        kept_inside(&mut wide);
+        assert_eq!(wide.shapes.len(), 2);
+        assert_eq!(wide.shapes[0], scene.shapes[0]);
+        assert!(
+            wide.shapes[1]
+                .points
+                .iter()
+                .all(|p| p.x >= 0.0 && p.x <= 20.0)
+        );
         let s = stretched(&scene, 128, 64);
         assert_eq!((s.width, s.height), (128, 64));
         assert!(

@@ -11,7 +11,7 @@
 //! reported in the run's [`RunReport`]. The SDS stage checkpoints through the job context and a
 //! restarted job resumes from it to the identical SVG.
 
-use super::canvas::{map_shape, placed, stretched};
+use super::canvas::{kept_inside, map_shape, placed, stretched};
 use super::context::{resume_as, save_checkpoint};
 use super::plan::{MIN_OPACITY, TextPlan, min_area_at};
 use super::report::{
@@ -476,11 +476,16 @@ pub fn run_text(
         cancel,
         ctx,
     )?;
-    // 3. Pruning and the vector stage's finish.
+    // 3. Pruning and the vector stage's finish (on a canvas of its own, no shape reaches past
+    // the sample's edge, where the canvas now goes on) ...
+    if plan.canvas.is_some() {
+        kept_inside(&mut scene);
+    }
     finish(&mut scene, plan, &mut report);
-    // 4. The sample on the SVG's canvas (fitted and centred; the same scene without one).
-    let (cw, ch) = plan.canvas_dims();
-    let scene = placed(&scene, cw, ch);
+    // 4. ... then the sample fitted and centred on the SVG's canvas.
+    if let Some(c) = plan.canvas {
+        scene = placed(&scene, c.width, c.height);
+    }
     report.seconds = Some(t0.elapsed().as_secs_f64());
     scene.validate().map_err(PipelineError::scene("final"))?;
     let svg = crate::vector::write_svg(&scene, &plan.colors);
