@@ -567,39 +567,8 @@ fn text_plan(
     })
 }
 
-/// The shapes `req` is sampled at on `model`: pixel art draws its square grid.
-fn sample_shape(req: &PlanRequest, model: &ModelFacts) -> SampleShape {
-    match req.style {
-        crate::stages::styles::Style::PixelArt => SampleShape::Square,
-        _ => model.sample_shape,
-    }
-}
-
-/// `req`'s negative prompt, checked like a caption and refused for a model whose guidance
-/// has no unconditional branch to put it in.
-fn negative_prompt(
-    req: &PlanRequest,
-    model: &ModelFacts,
-    limits: &Limits,
-) -> Result<Option<String>, SpecError> {
-    let Some(n) = &req.negative_prompt else {
-        return Ok(None);
-    };
-    check_text("negative_prompt", n, limits)?;
-    if !model.negative_prompt {
-        return Err(SpecError::new(
-            "negative_prompt",
-            format!(
-                "{} has no classifier-free guidance with an unconditional branch to put a \
-                 negative prompt in",
-                model.name
-            ),
-        ));
-    }
-    Ok(Some(n.clone()))
-}
-
 mod text_plan;
+use text_plan::{negative_prompt, sample_shape};
 
 #[cfg(test)]
 mod tests;

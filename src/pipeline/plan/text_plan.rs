@@ -1,7 +1,8 @@
 //! What a resolved [`TextPlan`] gives the stages: its sample and canvas sizes, and the LIVE and
 //! SDS configurations it runs.
 
-use super::TextPlan;
+use super::{Limits, ModelFacts, PlanRequest, SpecError, TextPlan, check_text};
+use crate::pipeline::canvas::SampleShape;
 use crate::stages::live::{LiveConfig, PathBudget};
 use crate::stages::sds::{ReinitConfig, SdsConfig};
 
@@ -65,4 +66,36 @@ impl TextPlan {
             ..paper
         })
     }
+}
+
+/// The shapes `req` is sampled at on `model`: pixel art draws its square grid.
+pub(super) fn sample_shape(req: &PlanRequest, model: &ModelFacts) -> SampleShape {
+    match req.style {
+        crate::stages::styles::Style::PixelArt => SampleShape::Square,
+        _ => model.sample_shape,
+    }
+}
+
+/// `req`'s negative prompt, checked like a caption and refused for a model whose guidance
+/// has no unconditional branch to put it in.
+pub(super) fn negative_prompt(
+    req: &PlanRequest,
+    model: &ModelFacts,
+    limits: &Limits,
+) -> Result<Option<String>, SpecError> {
+    let Some(n) = &req.negative_prompt else {
+        return Ok(None);
+    };
+    check_text("negative_prompt", n, limits)?;
+    if !model.negative_prompt {
+        return Err(SpecError::new(
+            "negative_prompt",
+            format!(
+                "{} has no classifier-free guidance with an unconditional branch to put a \
+                 negative prompt in",
+                model.name
+            ),
+        ));
+    }
+    Ok(Some(n.clone()))
 }
