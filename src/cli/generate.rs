@@ -71,7 +71,8 @@ pub struct CanvasArgs {
     /// centred on the canvas) [default: the preset's square].
     #[arg(long, value_parser = parse_aspect)]
     pub aspect: Option<Aspect>,
-    /// Canvas width in px (with --height, instead of --aspect; 64 to 2048, at most 4:1).
+    /// Canvas width in px (with --height, instead of --aspect; 64 to 2048; the drawing is
+    /// scaled to fit and centred).
     #[arg(long)]
     pub width: Option<u32>,
     /// Canvas height in px (with --width).
