@@ -320,6 +320,37 @@ async fn idempotency_key_returns_the_same_job() {
     assert_eq!(r3.json()["error"]["code"], "idempotency_conflict");
     let all = get(srv.addr, "/jobs").await.json();
     assert_eq!(all["jobs"].as_array().unwrap().len(), 1);
+    // The canvas and the negative prompt are part of the request: another one conflicts.
+    let text = |extra: Value| {
+        let mut b = json!({"kind": "text", "caption": "a cat", "seed": 1, "aspect": "16:9",
+            "negative_prompt": "blurry"});
+        b.as_object_mut()
+            .unwrap()
+            .extend(extra.as_object().unwrap().clone());
+        serde_json::to_vec(&b).unwrap()
+    };
+    let h = [
+        ("Content-Type", "application/json"),
+        ("Idempotency-Key", "text-1"),
+    ];
+    let first = request(srv.addr, "POST", "/jobs", &h, Some(&text(json!({})))).await;
+    assert_eq!(first.status, 202, "{}", first.text());
+    let again = request(
+        srv.addr,
+        "POST",
+        "/jobs",
+        &h,
+        Some(&text(json!({"width": null}))),
+    )
+    .await;
+    assert_eq!(again.json()["id"], first.json()["id"]);
+    for other in [
+        json!({"aspect": "9:16"}),
+        json!({"negative_prompt": "text"}),
+    ] {
+        let r = request(srv.addr, "POST", "/jobs", &h, Some(&text(other.clone()))).await;
+        assert_eq!(r.status, 409, "{other}: {}", r.text());
+    }
     srv.stop().await;
 }
 
