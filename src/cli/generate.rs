@@ -10,8 +10,8 @@
 use super::request_args::{ModelArgs, RequestArgs, cli_limits, parse_word};
 use super::{CliError, ResultExt};
 use crate::pipeline::{
-    DefaultExecutor, EncoderChoice, Executor, JobContext, Method, ModelDirs, PlanRequest, RunInput,
-    StartKind, default_model_dir,
+    Aspect, CanvasRequest, DefaultExecutor, EncoderChoice, Executor, JobContext, Method, ModelDirs,
+    PlanRequest, RunInput, StartKind, default_model_dir,
 };
 use crate::progress::{CancelToken, Progress, Stage};
 use anyhow::Context;
@@ -50,6 +50,8 @@ pub struct GenerateArgs {
     pub request: RequestArgs,
     #[command(flatten)]
     pub vector: super::vector_args::VectorArgs,
+    #[command(flatten)]
+    pub canvas: CanvasArgs,
     /// Output path: `.svg`, or `.pdf` (vector PDF) / `.png` (render) by extension.
     #[arg(short, long)]
     pub output: PathBuf,
@@ -59,6 +61,31 @@ pub struct GenerateArgs {
     /// Snapshot period of the LIVE and SDS stages [default: the preset's].
     #[arg(long)]
     pub snapshot_every: Option<u32>,
+}
+
+/// The canvas and the negative prompt of a text run.
+#[derive(clap::Args, Debug, Clone, Default)]
+pub struct CanvasArgs {
+    /// Canvas aspect, width:height: 1:1, 4:3, 3:4, 16:9, 9:16, 3:2 or 2:3 (Stable Diffusion
+    /// samples at it; a model that draws squares, like the embedded one, draws its square
+    /// centred on the canvas) [default: the preset's square].
+    #[arg(long, value_parser = parse_aspect)]
+    pub aspect: Option<Aspect>,
+    /// Canvas width in px (with --height, instead of --aspect; 64 to 2048; the drawing is
+    /// scaled to fit and centred).
+    #[arg(long)]
+    pub width: Option<u32>,
+    /// Canvas height in px (with --width).
+    #[arg(long)]
+    pub height: Option<u32>,
+    /// What classifier-free guidance steers away from (sampling and SDS embed it as the
+    /// unconditional prompt instead of "").
+    #[arg(long)]
+    pub negative_prompt: Option<String>,
+}
+
+fn parse_aspect(s: &str) -> Result<Aspect, String> {
+    s.parse()
 }
 
 /// `--model`, else `VECTORFUSION_MODELS_SD_DIR` (and `..._CLIP_DIR` as the scorer), else the
@@ -229,6 +256,12 @@ fn request_and_input(
             ..Default::default()
         },
         tuning: args.request.tuning.tuning(args.snapshot_every),
+        canvas: CanvasRequest {
+            aspect: args.canvas.aspect,
+            width: args.canvas.width,
+            height: args.canvas.height,
+        },
+        negative_prompt: args.canvas.negative_prompt.clone(),
         ..args.request.plan_request(&args.caption, method)
     };
     Ok((request, input))

@@ -18,7 +18,7 @@ use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 
 /// Loaded models per (teacher input size, SDS encoder).
-type ModelCache = HashMap<(u32, EncoderChoice), Arc<Models>>;
+type ModelCache = HashMap<((u32, u32), EncoderChoice), Arc<Models>>;
 
 /// The inputs of a run besides its plan.
 #[derive(Clone, Debug, Default)]
@@ -80,11 +80,11 @@ impl DefaultExecutor {
             .cache
             .lock()
             .map_err(|_| PipelineError::Failed("model cache poisoned".into()))?;
-        let key = (plan.size, encoder);
+        let key = (plan.sample_dims(), encoder);
         if let Some(m) = cache.get(&key) {
             return Ok(m.clone());
         }
-        let m = Arc::new(Models::load(&self.models, plan.size, encoder)?);
+        let m = Arc::new(Models::load(&self.models, key.0, encoder)?);
         cache.insert(key, m.clone());
         Ok(m)
     }
@@ -160,6 +160,8 @@ pub fn request_of(spec: &JobSpec) -> PlanRequest {
         seed: spec.seed,
         retrieval: spec.retrieval,
         vector: spec.vector.clone(),
+        canvas: spec.canvas,
+        negative_prompt: spec.negative_prompt.clone(),
         tuning: Tuning::default(),
     }
 }

@@ -11,8 +11,9 @@
 //! reported in the run's [`RunReport`]. The SDS stage checkpoints through the job context and a
 //! restarted job resumes from it to the identical SVG.
 
+use super::canvas::{kept_inside, map_shape, placed, stretched};
 use super::context::{resume_as, save_checkpoint};
-use super::plan::{MIN_OPACITY, TextPlan, min_area_at, render_size};
+use super::plan::{MIN_OPACITY, TextPlan, min_area_at};
 use super::report::{
     RerankReport, ResumePoint, RetrievalReport, RunMethod, SdsReport, TraceReport,
 };
@@ -151,6 +152,7 @@ pub fn sample_ranked(
         guidance: f64::from(sp.guidance),
         seed: plan.seeds.sample,
         strength: sp.strength,
+        negative_prompt: plan.negative_prompt.clone().unwrap_or_default(),
     };
     sample_and_rerank(
         models.teacher(),
@@ -215,14 +217,45 @@ fn top_up(scene: &mut Scene, plan: &TextPlan) -> Result<usize, PipelineError> {
     let want = spec.min_shapes(plan.paths as usize);
     let mut rng = ChaCha8Rng::seed_from_u64(plan.seeds.top_up);
     let mut added = 0usize;
+    // Drawn on a square of the sample's longer side, stretched to the sample.
+    let (w, h) = plan.sample_dims();
+    let side = w.max(h);
+    let k = (w as f32 / side as f32, h as f32 / side as f32);
     while scene.shapes.len() < want {
         let shape = spec
-            .extra_shape(plan.size, &mut rng)
+            .extra_shape(side, &mut rng)
             .map_err(PipelineError::scene("initial"))?;
-        scene.shapes.push(shape);
+        scene.shapes.push(if w == h {
+            shape
+        } else {
+            map_shape(&shape, k, (0.0, 0.0))
+        });
         added += 1;
     }
     Ok(added)
+}
+
+/// `(width, height)` SDS renders `plan`'s scene at: the sample's, or larger where
+/// augmentation crops.
+fn render_dims(plan: &TextPlan) -> (u32, u32) {
+    plan.sds_config()
+        .and_then(|c| c.augment)
+        .map_or(plan.sample_dims(), |a| a.render_dims())
+}
+
+/// The style's random from-scratch scene at `(w, h)`: drawn on a square of the longer side,
+/// stretched to a non-square canvas.
+fn init_scene(plan: &TextPlan, (w, h): (u32, u32)) -> Result<Scene, PipelineError> {
+    let mut rng = ChaCha8Rng::seed_from_u64(plan.seeds.init);
+    let scene = plan
+        .style
+        .init_scene(w.max(h), plan.paths as usize, &mut rng)
+        .map_err(PipelineError::scene("initial"))?;
+    Ok(if w == h {
+        scene
+    } else {
+        stretched(&scene, w, h)
+    })
 }
 
 /// The starting scene from the best of K samples (`sd_live*`), with the rerank and retrieval
@@ -236,6 +269,7 @@ fn from_samples(
     cancel: &CancelToken,
 ) -> Result<Scene, PipelineError> {
     let size = plan.size;
+    let (width, height) = plan.sample_dims();
     let (ranked, why_not) = sample_ranked(models, plan, caption, sink, cancel)?;
     let (rerank, retrieval) = rerank_reports(models, plan, &ranked, why_not)?;
     let mut ev = Progress::new(Stage::Rerank, 1, 1);
@@ -253,7 +287,7 @@ fn from_samples(
     let (scene, traced) = trace(&best_img, plan, sink, cancel)?;
     report.live = Some(traced);
     let mut scene = spec
-        .restyle_trace(scaled(&scene, size), size)
+        .restyle_trace(scaled(&scene, width), width.min(height))
         .map_err(PipelineError::scene("initial"))?;
     report.topped_up = Some(top_up(&mut scene, plan)?);
     Ok(scene)
@@ -286,7 +320,7 @@ fn start_scene(
     sink: &dyn ProgressSink,
     cancel: &CancelToken,
 ) -> Result<(Scene, Option<SdsState>), PipelineError> {
-    let size = plan.size;
+    let (size, _) = plan.sample_dims();
     let scene = match (resumed, start) {
         (Some(r), _) => {
             *report = r.detail;
@@ -299,13 +333,7 @@ fn start_scene(
             report.live = Some(traced);
             scaled(&scene, size)
         }
-        (None, Start::Method) if plan.sample.is_none() => {
-            let augment = plan.sds.as_ref().is_some_and(|s| s.augment);
-            let mut rng = ChaCha8Rng::seed_from_u64(plan.seeds.init);
-            plan.style
-                .init_scene(render_size(size, augment), plan.paths as usize, &mut rng)
-                .map_err(PipelineError::scene("initial"))?
-        }
+        (None, Start::Method) if plan.sample.is_none() => init_scene(plan, render_dims(plan))?,
         (None, Start::Method) => from_samples(models, plan, caption, report, sink, cancel)?,
     };
     Ok((scene, None))
@@ -328,7 +356,8 @@ fn distil(
     let (Some(sp), Some(cfg)) = (&plan.sds, plan.sds_config()) else {
         return Ok(scene);
     };
-    let render = cfg.render_size(plan.size);
+    let (width, _) = plan.sample_dims();
+    let (render, _) = render_dims(plan);
     let state = match resume_sds {
         Some(s) => s,
         None => SdsState::start(scaled(&scene, render), &cfg),
@@ -354,7 +383,7 @@ fn distil(
         stats: out.stats,
         augment: sp.augment,
     });
-    Ok(scaled(&out.scene, plan.size))
+    Ok(scaled(&out.scene, width))
 }
 
 /// The end of a text run: the style's faint/tiny shapes pruned, then the vector stage's
@@ -411,11 +440,11 @@ pub fn run_text(
     cancel: &CancelToken,
     ctx: Option<&JobContext>,
 ) -> Result<RunOutput, PipelineError> {
-    let size = models.teacher().image_size();
-    if size != plan.size {
+    let dims = models.teacher().image_dims();
+    if dims != plan.sample_dims() {
         return Err(PipelineError::Failed(format!(
-            "models: loaded for {size} px, the plan says {} px",
-            plan.size
+            "models: loaded for {dims:?} px, the plan says {:?} px",
+            plan.sample_dims()
         )));
     }
     let mut report = first_report(models, plan);
@@ -447,8 +476,16 @@ pub fn run_text(
         cancel,
         ctx,
     )?;
-    // 3. Pruning and the vector stage's finish.
+    // 3. Pruning and the vector stage's finish (on a canvas of its own, no shape reaches past
+    // the sample's edge, where the canvas now goes on) ...
+    if plan.canvas.is_some() {
+        kept_inside(&mut scene);
+    }
     finish(&mut scene, plan, &mut report);
+    // 4. ... then the sample fitted and centred on the SVG's canvas.
+    if let Some(c) = plan.canvas {
+        scene = placed(&scene, c.width, c.height);
+    }
     report.seconds = Some(t0.elapsed().as_secs_f64());
     scene.validate().map_err(PipelineError::scene("final"))?;
     let svg = crate::vector::write_svg(&scene, &plan.colors);

@@ -35,6 +35,10 @@ pub const SUBMIT_FIELDS: &[&str] = &[
     "group",
     "target_psnr",
     "max_bytes",
+    "aspect",
+    "width",
+    "height",
+    "negative_prompt",
 ];
 
 /// Fields whose omission means "the preset decides": the job's [`crate::pipeline::RunPlan`]
@@ -215,6 +219,12 @@ fn request_from(obj: &Map<String, Value>, default_seed: u64) -> Result<JobSpec, 
             target_psnr: field(obj, "target_psnr")?,
             max_bytes: field(obj, "max_bytes")?,
         },
+        canvas: crate::pipeline::CanvasRequest {
+            aspect: field(obj, "aspect")?,
+            width: field(obj, "width")?,
+            height: field(obj, "height")?,
+        },
+        negative_prompt: field(obj, "negative_prompt")?,
         plan: None,
     })
 }
@@ -386,6 +396,11 @@ pub struct ParamsView {
     /// Colours, background, grouping and the vectorize stopping rules, as submitted.
     #[serde(flatten)]
     pub vector: VectorOptions,
+    /// Text jobs: the canvas asked for (`aspect`, or `width` and `height`), as submitted.
+    #[serde(flatten)]
+    pub canvas: crate::pipeline::CanvasRequest,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub negative_prompt: Option<String>,
     /// The run plan resolved when the job was accepted: every number the job runs with.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub plan: Option<RunPlan>,
@@ -532,6 +547,8 @@ impl JobView {
                 has_svg: s.svg.is_some(),
                 retrieval: s.retrieval,
                 vector: s.vector,
+                canvas: s.canvas,
+                negative_prompt: s.negative_prompt,
                 plan: s.plan,
             }),
             links: Links {

@@ -82,6 +82,12 @@ pub fn retrieve(
         .map_err(|e| e.to_string())?
         .ok_or("the model's text encoder is not the index's MiniLM")?;
     let side = teacher.image_size();
+    let (w, h) = teacher.image_dims();
+    if w != h {
+        return Err(format!(
+            "the retrieved icons are square and the sample is {w}x{h}"
+        ));
+    }
     index
         .nearest(&q, pick.n, pick.per_caption, pick.seed)
         .map_err(|e| e.to_string())?

@@ -375,16 +375,16 @@ impl Moving {
     }
 }
 
-/// The deterministic resize of a `scene`-sized render to the teacher's `size` when `cfg`
-/// does not augment and the sizes differ.
-fn fixed_resize(cfg: &SdsConfig, scene: &Scene, size: u32) -> Option<Warp> {
+/// The deterministic resize of a `scene`-sized render to the teacher's `(width, height)`
+/// when `cfg` does not augment and the sizes differ.
+fn fixed_resize(cfg: &SdsConfig, scene: &Scene, (width, height): (u32, u32)) -> Option<Warp> {
     let identity = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
-    (cfg.augment.is_none() && (scene.width != size || scene.height != size)).then(|| {
+    (cfg.augment.is_none() && (scene.width != width || scene.height != height)).then(|| {
         Warp::build(
             scene.width,
             scene.height,
-            size,
-            size,
+            width,
+            height,
             &identity,
             0.0,
             0.0,
@@ -569,7 +569,7 @@ fn prepare<'a, B: Backend>(
         teacher,
         cfg,
         cond,
-        resize: fixed_resize(cfg, &scene, teacher.image_size()),
+        resize: fixed_resize(cfg, &scene, teacher.image_dims()),
         reinit_until: cfg
             .reinit
             .as_ref()
