@@ -121,10 +121,7 @@ fn scene64() -> Scene {
 }
 
 fn st(r: f32, g: f32, b: f32, a: f32, width: f32) -> Stroke {
-    Stroke {
-        color: Rgba::new(r, g, b, a),
-        width,
-    }
+    Stroke::round(Rgba::new(r, g, b, a), width)
 }
 
 fn pts(v: &[(f32, f32)]) -> Vec<Point> {
