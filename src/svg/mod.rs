@@ -16,12 +16,13 @@
 //!   renderer); opacities with `max(3, precision)` decimals; attributes equal to the SVG default
 //!   (fill black, opacity 1) left out; shapes that paint nothing (transparent fill, no visible
 //!   stroke) left out;
-//! - strokes are round-capped and round-joined (`stroke-linecap="round"
-//!   stroke-linejoin="round"`), which is exactly what [`crate::raster`] draws (a union of
-//!   capsules), so resvg, browsers and our rasteriser agree. With two or more stroked paths these
-//!   go on one `<g>` around all the shapes, with the stroke width (and, when every shape is
-//!   stroked alike, the stroke colour and opacity; when no shape is filled, `fill="none"`) that
-//!   they share;
+//! - strokes keep their caps, joins and miter limit, written where they differ from SVG's
+//!   defaults: what optimisation creates is round-capped and round-joined
+//!   (`stroke-linecap="round" stroke-linejoin="round"`), exactly what [`crate::raster`] draws
+//!   (a union of capsules), so resvg, browsers and our rasteriser agree. With two or more stroked
+//!   paths the shared ones go on one `<g>` around all the shapes, with the stroke width (and, when
+//!   every shape is stroked alike, the stroke colour and opacity; when no shape is filled,
+//!   `fill="none"`) that they share;
 //! - [`SvgOptions::group_by_color`]: runs of consecutive paths with the same fill in one
 //!   `<g fill="…">`; [`SvgOptions::ids`]: `id="p<k>"` on paths (shape index + 1) and
 //!   `id="c<k>"` on colour groups.
@@ -29,11 +30,14 @@
 //! The background becomes a full-canvas `<rect>` first when it is not fully transparent.
 //! [`crate::vector::export::compact_svg`] picks the fewest decimals that still render the same.
 //!
-//! # Import ([`from_svg`])
+//! # Import ([`from_svg`], [`import_svg`] with warnings; in `import.rs`)
 //! Parsing, CSS/style attributes, `<rect>`/`<circle>`/`<ellipse>`/`<polygon>`/`<line>`, arcs,
-//! `<use>`, groups and transforms are normalised by `usvg`; we then walk its path tree:
-//! - every point is mapped through the path's absolute transform; stroke widths are scaled by
-//!   `sqrt(|det|)` of that transform;
+//! `<use>`, groups and transforms are normalised by `usvg` (after the guard, which breaks
+//! reference cycles and drops entity texts that refer to entities, with a warning each); we then
+//! walk its path tree:
+//! - every point is mapped through its group's absolute transform (a root `background-color`
+//!   lands on the canvas whatever the viewBox origin); stroke widths are scaled by `sqrt(|det|)`
+//!   of that transform;
 //! - lines and quadratics are converted to (exactly equivalent) cubics;
 //! - **fill**: all subpaths of one `<path>` become ONE [`ShapeKind::ClosedCubic`] shape. Extra
 //!   subpaths are joined to the first one by straight "bridge" segments that are walked there and
@@ -44,10 +48,16 @@
 //! - **stroke**: a path with a single subpath keeps its stroke on the same shape (closed subpath)
 //!   or becomes an [`ShapeKind::OpenCubic`] (open subpath, no fill). With several subpaths, each
 //!   subpath gets its own stroke shape (closed ones get a transparent fill) painted after the fill.
-//!   Dashes, caps and joins other than round are drawn round.
+//!   Caps, joins and the miter limit are kept ([`crate::scene::Stroke`]); a dash pattern (with its
+//!   offset) is expanded into one open stroke per dash. Under a transform that is no similarity
+//!   (skew, unequal scales) a stroke has no single width: its outline (dashes, caps and joins
+//!   included, computed by tiny-skia's stroker in the path's own units) is mapped through the
+//!   transform and filled in the stroke's colour.
 //! - gradients and patterns are replaced by the average colour of their stops (patterns: grey);
 //!   group opacity is multiplied into the shape opacities (exact unless children overlap);
-//!   images, text without fonts, clip paths, masks and filters are ignored.
+//!   images, text without fonts, clip paths, masks and filters are ignored, each with a warning
+//!   naming the element (`filter on #id ignored …`; at most 16, then a count): the content is
+//!   drawn as it is, unfiltered, unclipped, unmasked.
 //! - if the first shape is a filled rectangle covering the whole canvas (what [`to_svg`] writes
 //!   for the background) it becomes the scene background.
 
