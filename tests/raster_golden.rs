@@ -317,7 +317,13 @@ fn imported_caps_joins_dashes_and_skewed_strokes_match_resvg() {
     compare("caps_joins_dashes_skew", &ours, &theirs);
     // The export keeps the caps and joins; resvg draws it as we do.
     let exported = to_svg(&scene, &SvgOptions::default());
-    assert!(exported.contains(r#"stroke-linejoin="bevel""#), "{exported}");
-    assert!(exported.contains(r#"stroke-linecap="square""#), "{exported}");
+    assert!(
+        exported.contains(r#"stroke-linejoin="bevel""#),
+        "{exported}"
+    );
+    assert!(
+        exported.contains(r#"stroke-linecap="square""#),
+        "{exported}"
+    );
     compare("caps_joins_export", &ours, &resvg_render(&exported));
 }

@@ -352,13 +352,17 @@ fn break_cycle(from: Node, to: Node, link: &Link) -> Option<Repair> {
         Link::Url(r) => (r.clone(), "none"),
         Link::Sheet => return None,
     };
+    let to = if from == to {
+        "itself".to_string()
+    } else {
+        format!("{}, which refers back to it", describe(to))
+    };
     Some(Repair {
         range,
         with,
         warning: format!(
-            "{} refers to {}, which refers back to it (a reference cycle): that reference was dropped",
-            describe(from),
-            describe(to)
+            "{} refers to {to} (a reference cycle): that reference was dropped",
+            describe(from)
         ),
     })
 }
