@@ -468,23 +468,8 @@ impl<'a, 'i> Expansion<'_, 'a, 'i> {
             layers: 0,
             height: 1,
         };
-        let mut refs: Vec<(Node<'a, 'i>, Link)> = href_target(node, self.ids).into_iter().collect();
+        let refs = self.refs(node);
         if svg_element(node) {
-            for a in node.attributes().filter(|a| read_by_usvg(a.namespace())) {
-                let at = a.range_value().start;
-                refs.extend(url_refs(a.value()).filter_map(|(r, id)| {
-                    let target = self.ids.get(id)?;
-                    Some((*target, Link::Url(at + r.start..at + r.end)))
-                }));
-            }
-            // A sheet's rule charges every element; it need not apply to its own target (usvg
-            // breaks cycles through sheets itself).
-            refs.extend(
-                self.sheet_targets
-                    .iter()
-                    .filter(|t| !self.visiting.contains(&t.id()))
-                    .map(|t| (*t, Link::Sheet)),
-            );
             let tag = node.tag_name().name();
             if self.marker_cost > 0 {
                 let vertices = match tag {
@@ -528,6 +513,30 @@ impl<'a, 'i> Expansion<'_, 'a, 'i> {
         self.visiting.remove(&node.id());
         self.memo.insert(node.id(), c);
         Ok(c)
+    }
+
+    /// The elements `node` refers to, and how.
+    fn refs(&self, node: Node<'a, 'i>) -> Vec<(Node<'a, 'i>, Link)> {
+        let mut refs: Vec<(Node<'a, 'i>, Link)> = href_target(node, self.ids).into_iter().collect();
+        if !svg_element(node) {
+            return refs;
+        }
+        for a in node.attributes().filter(|a| read_by_usvg(a.namespace())) {
+            let at = a.range_value().start;
+            refs.extend(url_refs(a.value()).filter_map(|(r, id)| {
+                let target = self.ids.get(id)?;
+                Some((*target, Link::Url(at + r.start..at + r.end)))
+            }));
+        }
+        // A sheet's rule charges every element; it need not apply to its own target (usvg
+        // breaks cycles through sheets itself).
+        refs.extend(
+            self.sheet_targets
+                .iter()
+                .filter(|t| !self.visiting.contains(&t.id()))
+                .map(|t| (*t, Link::Sheet)),
+        );
+        refs
     }
 
     fn within(&self, c: &Cost) -> Result<(), SvgRejected> {
