@@ -78,8 +78,7 @@ fn piece(p: V, x: [V; 4], r: f64, ed: Edge, st: Style) -> f64 {
     let d = sub(b, a);
     let l = len(d);
     if !(l > 1e-9) {
-        let round = st.cap.is_round() || (ed.start == End::Join && st.join.is_round());
-        return if round { cov(len(sub(p, a)), r) } else { 0.0 };
+        return dot_piece(sub(p, a), r, ed, st);
     }
     let t = scale(d, 1.0 / l);
     let q = sub(p, a);
@@ -115,6 +114,25 @@ fn piece(p: V, x: [V; 4], r: f64, ed: Edge, st: Style) -> f64 {
         }
     } else {
         body()
+    }
+}
+
+/// Coverage by a zero-length edge at offset `q`: alone (a zero-length subpath), a disc for
+/// round caps, a square along the x axis for square caps and nothing for butt caps, as SVG
+/// draws them; inside a polyline (a repeated vertex), a disc for round joins, else nothing.
+fn dot_piece(q: V, r: f64, ed: Edge, st: Style) -> f64 {
+    let alone = ed.start == End::Cap && ed.end == End::Cap;
+    let round = if alone {
+        st.cap.is_round()
+    } else {
+        st.join.is_round()
+    };
+    if round {
+        cov(len(q), r)
+    } else if alone && st.cap == LineCap::Square {
+        cov(q[0].abs(), r) * cov(q[1].abs(), r)
+    } else {
+        0.0
     }
 }
 

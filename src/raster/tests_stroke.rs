@@ -135,3 +135,19 @@ fn shaped_stroke_gradients_match_finite_differences() {
         );
     }
 }
+
+#[test]
+fn zero_length_strokes_draw_their_caps() {
+    let dot = |cap| {
+        let st = styled(cap, LineJoin::Miter, 4.0, 6.0);
+        alpha_sum(&one(20, 20, polyline(&[(10.0, 10.0), (10.0, 10.0)], st))) / 0.8
+    };
+    assert_eq!(dot(LineCap::Butt), 0.0);
+    assert!(
+        (dot(LineCap::Square) - 36.0).abs() < 0.01,
+        "{}",
+        dot(LineCap::Square)
+    );
+    let disc = 9.0 * std::f32::consts::PI;
+    assert!((dot(LineCap::Round) - disc).abs() < 0.02 * disc);
+}
