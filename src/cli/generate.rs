@@ -178,7 +178,10 @@ pub fn run(args: GenerateArgs) -> Result<(), CliError> {
     if !args.request.no_retrieval && method != Method::Scratch {
         install_retrieval(&dirs);
     }
-    let (request, input) = request_and_input(&args, method)?;
+    let (request, input, warnings) = request_and_input(&args, method)?;
+    for w in &warnings {
+        eprintln!("warning: {w}");
+    }
     let exec = DefaultExecutor::with_downloads(dirs);
     let plan = exec.plan(&request, &cli_limits())?;
     let text = plan
@@ -199,7 +202,8 @@ pub fn run(args: GenerateArgs) -> Result<(), CliError> {
         Box::new(|_| Ok(())),
         None,
     );
-    let out = exec.run_plan(&plan, &input, &ctx)?;
+    let mut out = exec.run_plan(&plan, &input, &ctx)?;
+    out.report.import_warnings = warnings;
     bar.finish_and_clear();
     super::write_result(&args.output, &out.svg)?;
     eprintln!("wrote {} ({} paths)", args.output.display(), out.paths);
@@ -231,20 +235,23 @@ fn install_retrieval(dirs: &ModelDirs) {
 }
 
 /// The request of a run by `method` and its input: the caption, and the `--image` or `--svg`
-/// it starts from (a file that cannot be read is bad input).
+/// it starts from (a file that cannot be read is bad input), and the SVG import's warnings.
 fn request_and_input(
     args: &GenerateArgs,
     method: Method,
-) -> Result<(PlanRequest, RunInput), CliError> {
+) -> Result<(PlanRequest, RunInput, Vec<String>), CliError> {
     let mut input = RunInput {
         caption: Some(args.caption.clone()),
         ..RunInput::default()
     };
+    let mut warnings = Vec::new();
     let start = if let Some(p) = &args.image {
         input.image = Some(crate::image::Image::open(p).bad_input(|| p.display().to_string())?);
         StartKind::Image
     } else if let Some(p) = &args.svg {
-        input.svg = Some(crate::svg::load_scene(p).bad_input(|| p.display().to_string())?);
+        let import = crate::svg::load_import(p).bad_input(|| p.display().to_string())?;
+        input.svg = Some(import.scene);
+        warnings = import.warnings;
         StartKind::Svg
     } else {
         StartKind::Method
@@ -264,5 +271,5 @@ fn request_and_input(
         negative_prompt: args.canvas.negative_prompt.clone(),
         ..args.request.plan_request(&args.caption, method)
     };
-    Ok((request, input))
+    Ok((request, input, warnings))
 }

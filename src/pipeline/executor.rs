@@ -187,16 +187,21 @@ impl Executor for DefaultExecutor {
             (Some(bytes), JobKind::Vectorize) => Some(Image::decode(bytes)?),
             _ => None,
         };
-        let svg = match &spec.svg {
-            Some(svg) => Some(crate::svg::from_svg(svg)?),
-            None => None,
+        let (svg, warnings) = match &spec.svg {
+            Some(svg) => {
+                let import = crate::svg::import_svg(svg)?;
+                (Some(import.scene), import.warnings)
+            }
+            None => (None, Vec::new()),
         };
         let input = RunInput {
             caption: spec.caption.clone(),
             image,
             svg,
         };
-        self.run_plan(&plan, &input, ctx)
+        let mut out = self.run_plan(&plan, &input, ctx)?;
+        out.report.import_warnings = warnings;
+        Ok(out)
     }
 
     fn plan(&self, request: &PlanRequest, limits: &Limits) -> Result<RunPlan, SpecError> {

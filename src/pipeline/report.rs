@@ -133,6 +133,10 @@ pub struct RunReport {
     pub seconds: Option<f64>,
     #[serde(flatten, skip_serializing_if = "Option::is_none")]
     pub resumed: Option<ResumePoint>,
+    /// What the import of the input SVG could not keep as drawn (ignored filters, broken
+    /// reference cycles), one sentence each ([`crate::svg::SvgImport::warnings`]).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub import_warnings: Vec<String>,
 }
 
 impl RunReport {
