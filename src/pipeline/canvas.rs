@@ -222,8 +222,8 @@ pub fn map_shape(shape: &Shape, s: (f32, f32), d: (f32, f32)) -> Shape {
         points: shape.points.iter().map(|p| map_point(p, s, d)).collect(),
         fill: shape.fill,
         stroke: shape.stroke.map(|st| Stroke {
-            color: st.color,
             width: st.width * (s.0 * s.1).sqrt(),
+            ..st
         }),
     }
 }
