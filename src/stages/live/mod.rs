@@ -253,7 +253,7 @@ pub fn vectorize_resumable(
     let mut st = match resume {
         Some(mut r) => {
             if r.scene.width == ww {
-                run.to_full(&mut r.scene);
+                run.switch_to_full(&mut r.scene);
             }
             run.step = r.step;
             rng.set_word_pos(u128::from(r.rng_word_pos));

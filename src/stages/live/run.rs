@@ -21,7 +21,7 @@ pub(super) struct Run<'a> {
     pub(super) cfg: &'a LiveConfig,
     /// The target at the current working size (over white).
     pub(super) target: Image,
-    /// Coarse-to-fine: the target at the full working size, until [`Run::to_full`] switches.
+    /// Coarse-to-fine: the target at the full working size, until [`Run::switch_to_full`] switches.
     pub(super) full: Option<Image>,
     /// Width of the full working size.
     pub(super) full_width: u32,
@@ -47,7 +47,7 @@ impl Run<'_> {
 
     /// Switches a coarse-to-fine run to the full working size: `scene` scaled up, the loss on
     /// the full-size target from now on. Does nothing once at full size.
-    pub(super) fn to_full(&mut self, scene: &mut Scene) {
+    pub(super) fn switch_to_full(&mut self, scene: &mut Scene) {
         let Some(full) = self.full.take() else { return };
         if scene.width != full.width {
             let mut up = scene.scaled_to_width(full.width);
@@ -489,7 +489,7 @@ impl Run<'_> {
         }
         for (si, &want) in plan.iter().enumerate().skip(st.next_stage) {
             if si + 1 == plan.len() {
-                self.to_full(&mut st.scene);
+                self.switch_to_full(&mut st.scene);
             }
             match self.add_stage(st, rng, si, want, max_total)? {
                 None => break,
@@ -513,7 +513,7 @@ impl Run<'_> {
         stages: usize,
     ) -> Result<(Scene, usize), LiveError> {
         let cfg = self.cfg;
-        self.to_full(&mut scene);
+        self.switch_to_full(&mut scene);
         // Colours settle before the last pass, which then fits the geometry to them.
         if self.palette.is_some() {
             self.choose_colours(&mut scene);
