@@ -222,7 +222,10 @@ fn live_presets_are_valid_and_ordered_by_effort() {
     assert_eq!(f, LiveConfig::default());
     assert!(d.size < f.size && f.size < b.size && b.size < p.size);
     assert!(d.iters_per_stage < f.iters_per_stage);
-    assert!(f.iters_per_stage < b.iters_per_stage && b.iters_per_stage < p.iters_per_stage);
+    assert!(f.iters_per_stage <= b.iters_per_stage && b.iters_per_stage < p.iters_per_stage);
+    // Balanced: coarse-to-fine (the stages before the last at half its size); the others not.
+    assert_eq!(2 * b.coarse_size, b.size);
+    assert!([d.coarse_size, f.coarse_size, p.coarse_size] == [0; 3]);
     assert_eq!(p.reinit_min_area, 64.0);
     // One vocabulary: the older names still parse.
     assert_eq!("quality".parse::<Preset>(), Ok(Preset::Paper));
