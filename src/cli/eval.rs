@@ -268,6 +268,7 @@ impl MethodRun<'_> {
             mean_paths: 0.0,
             mean_seconds: Some(seconds / self.captions.len().max(1) as f64),
             scorers: results,
+            colour_binding: crate::eval::colour::colour_binding(self.captions, &images),
         })
     }
 
@@ -367,6 +368,14 @@ pub fn format_methods_table(r: &MethodsReport) -> String {
                 "  {:>13.1}%  {:>10.2}",
                 100.0 * x.r_precision,
                 x.mean_similarity
+            ));
+        }
+        if let Some(c) = &m.colour_binding {
+            s.push_str(&format!(
+                "  colour {}/{} ({:.1}%)",
+                c.bound,
+                c.captions,
+                100.0 * c.rate
             ));
         }
         s.push('\n');

@@ -8,6 +8,7 @@ use super::presets::PresetSettings;
 use super::spec::check_range;
 use super::{EncoderChoice, JobKind, Limits, Method, Preset, SpecError, Style};
 use crate::augment::AugmentConfig;
+use crate::caption::CaptionPlan;
 use crate::models::stable_diffusion::ModelHints;
 use crate::stages::live::{CANVAS_SIDES, LiveConfig, PathBudget};
 use crate::stages::sds::{ReinitConfig, SdsConfig, T_MAX, T_MIN};
@@ -261,6 +262,10 @@ pub struct TextPlan {
     /// before it existed take the default (near-equal fills merged).
     #[serde(default)]
     pub colors: ColorPlan,
+    /// The colour and objects the caption names and how far the model steers toward them;
+    /// absent for a caption of one uncoloured thing (and in plans stored before it existed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub caption: Option<CaptionPlan>,
 }
 
 /// The fully numeric plan of a run.
@@ -500,6 +505,10 @@ fn text_plan(
         retrieval_per_caption: model.hints.retrieval_per_caption,
         strength: model.hints.sdedit_strength,
     });
+    // Only a run that samples can be steered toward the caption's colour and objects.
+    let caption_plan = sample
+        .as_ref()
+        .and_then(|_| crate::caption::parse(caption, model.hints.colour_steer));
     let distil = !from_method || req.method != Method::SdLive;
     let augment = from_method && req.method == Method::Scratch && req.tuning.augment != Some(false);
     let sds = distil
@@ -526,6 +535,7 @@ fn text_plan(
             encoder: model.encoder(ps.prefer_taesd),
         },
         colors: req.vector.colors.clone(),
+        caption: caption_plan,
     })
 }
 
