@@ -2,8 +2,9 @@
 //!
 //! `--svgs DIR` scores SVGs generated elsewhere; `--method M` (repeatable) first generates one
 //! SVG per caption with the shared pipeline ([`DefaultExecutor`], exactly what `generate` and
-//! the service run), writing `OUT_DIR/M/0001.svg`…, then scores that directory the same way and
-//! adds the mean generation seconds per SVG. `--method samples` scores the prior's raster
+//! the service run), writing `OUT_DIR/M/0001.svg`… (and each run's report, `0001.json`), then
+//! scores that directory the same way and adds the mean generation seconds per SVG; captions
+//! that name a colour also get its colour binding ([`crate::eval::colour`]). `--method samples` scores the prior's raster
 //! samples themselves (K per caption, the rerank scorer's pick kept, saved as `NNNN.png`): the
 //! raster row of the paper's Table 1, the ceiling the vector methods are measured against.
 
@@ -215,6 +216,8 @@ impl MethodRun<'_> {
             seconds += secs;
             let path = self.dir.join(svg_name(line));
             write(&path, &out.svg)?;
+            // The run's report beside it (what retrieval, rerank and steering did).
+            write(&path.with_extension("json"), &to_json(&out.report)?)?;
             let n = self.captions.len();
             eprintln!(
                 "{name} {line}/{n}: {} paths, {secs:.1} s -> {}",
