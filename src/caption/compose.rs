@@ -58,8 +58,8 @@ fn paste(dst: &mut Image, src: &Image, place: Place) {
             ];
             let k = ink(rgb[0], rgb[1], rgb[2]);
             let d = 4 * (dy as usize * dst.width as usize + dx as usize);
-            for c in 0..3 {
-                dst.data[d + c] = dst.data[d + c] * (1.0 - k) + rgb[c] * k;
+            for (out, v) in dst.data[d..d + 3].iter_mut().zip(rgb) {
+                *out = *out * (1.0 - k) + v * k;
             }
             dst.data[d + 3] = 1.0;
         }
