@@ -18,6 +18,7 @@ use super::report::{
     RerankReport, ResumePoint, RetrievalReport, RunMethod, SdsReport, TraceReport,
 };
 use super::{JobContext, Models, PipelineError, RunOutput, RunReport};
+use crate::caption::ColourSteer;
 use crate::image::Image;
 use crate::image::ops::resize;
 use crate::models::scorer::ImageTextScorer;
@@ -160,6 +161,7 @@ pub fn sample_ranked(
         retrieval,
         &plan.prompt,
         caption,
+        plan.caption.as_ref(),
         &cfg,
         sink,
         cancel,
@@ -277,6 +279,7 @@ fn from_samples(
     sink.report(ev);
     report.rerank = Some(rerank);
     report.retrieval = Some(retrieval);
+    report.caption = ranked.caption().cloned();
     let spec = plan.style.spec();
     if spec.sample_start() == SampleStart::Image {
         return spec
@@ -400,6 +403,7 @@ fn finish(scene: &mut Scene, plan: &TextPlan, report: &mut RunReport) {
             pruned = weak.len();
         }
     }
+    recolour_svg(scene, plan, report);
     let finish = crate::vector::finish_scene(scene, &plan.colors, plan.style.spec().prune_weak());
     report.finish = Some(finish);
     report.editability = Some(crate::vector::check::check(scene));
@@ -408,19 +412,48 @@ fn finish(scene: &mut Scene, plan: &TextPlan, report: &mut RunReport) {
     report.paths_needed = Some(scene.shapes.len());
 }
 
-/// `svg` naming the retrieved icon `origin` it started from and its licence, if any.
-fn with_origin(svg: String, origin: Option<&Hit>, caption: &str) -> String {
-    match origin {
-        Some(h) => crate::svg::with_metadata(
-            &svg,
-            &format!(
-                "Started from the icon \"{}\" of the {} {} icon set ({}, licence {}), redrawn by \
-                 vectorfusion for the caption \"{}\".",
-                h.icon.name, h.icon.set, h.icon.version, h.icon.caption, h.icon.license, caption
-            ),
-        ),
-        None => svg,
+/// The final scene's largest colour family moved into the caption's colour, when the model's
+/// steering goes that far ([`ColourSteer::Svg`]) and the run sampled (one object, one colour).
+fn recolour_svg(scene: &mut Scene, plan: &TextPlan, report: &mut RunReport) {
+    let (Some(cp), Some(r)) = (&plan.caption, report.caption.as_mut()) else {
+        return;
+    };
+    if cp.steer < ColourSteer::Svg || cp.is_pair() {
+        return;
     }
+    if let Some(c) = cp.colour() {
+        r.svg_recoloured = crate::caption::recolour::recolour_scene(scene, c);
+    }
+}
+
+/// A retrieved icon for the SVG's metadata: name, set, version, caption and licence.
+fn icon_credit(h: &Hit) -> String {
+    format!(
+        "the icon \"{}\" of the {} {} icon set ({}, licence {})",
+        h.icon.name, h.icon.set, h.icon.version, h.icon.caption, h.icon.license
+    )
+}
+
+/// `svg` naming the retrieved icon the kept sample started from and its licence (and the
+/// second icon composed into that start, for a caption of two things), if any.
+fn with_origin(svg: String, report: &RunReport, caption: &str) -> String {
+    let Some(h) = report.retrieval.as_ref().and_then(|r| r.chosen.as_ref()) else {
+        return svg;
+    };
+    let chosen = report.rerank.as_ref().map_or(0, |r| r.chosen);
+    let second = report
+        .caption
+        .as_ref()
+        .and_then(|c| c.composed_with.get(chosen))
+        .map(|o| format!(" composed with {}", icon_credit(o)))
+        .unwrap_or_default();
+    crate::svg::with_metadata(
+        &svg,
+        &format!(
+            "Started from {}{second}, redrawn by vectorfusion for the caption \"{caption}\".",
+            icon_credit(h)
+        ),
+    )
 }
 
 /// Runs `plan` (key `key`, [`super::RunPlan::key`]) for `caption` from `start` with `models`:
@@ -489,8 +522,7 @@ pub fn run_text(
     report.seconds = Some(t0.elapsed().as_secs_f64());
     scene.validate().map_err(PipelineError::scene("final"))?;
     let svg = crate::vector::write_svg(&scene, &plan.colors);
-    let origin = report.retrieval.as_ref().and_then(|r| r.chosen.as_ref());
-    let svg = with_origin(svg, origin, caption);
+    let svg = with_origin(svg, &report, caption);
     let mut done = Progress::new(Stage::Done, 1, 1);
     done.svg = Some(svg.clone());
     sink.report(done);

@@ -8,6 +8,7 @@ use super::canvas::{CanvasPlan, CanvasRequest, SampleShape, resolve_canvas};
 use super::presets::PresetSettings;
 use super::spec::{check_range, check_text};
 use super::{EncoderChoice, JobKind, Limits, Method, Preset, SpecError, Style};
+use crate::caption::CaptionPlan;
 use crate::models::stable_diffusion::ModelHints;
 use crate::stages::live::{CANVAS_SIDES, LiveConfig, PathBudget};
 use crate::stages::sds::{T_MAX, T_MIN};
@@ -293,6 +294,10 @@ pub struct TextPlan {
     /// before it existed take the default (near-equal fills merged).
     #[serde(default)]
     pub colors: ColorPlan,
+    /// The colour and objects the caption names and how far the model steers toward them;
+    /// absent for a caption of one uncoloured thing (and in plans stored before it existed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub caption: Option<CaptionPlan>,
 }
 
 /// The fully numeric plan of a run.
@@ -536,6 +541,10 @@ fn text_plan(
         .canvas
         .check(limits.max_canvas_side)?
         .map(|c| resolve_canvas(c, n.size, sample_shape(req, model)));
+    // Only a run that samples can be steered toward the caption's colour and objects.
+    let caption_plan = sample
+        .as_ref()
+        .and_then(|_| crate::caption::parse(caption, model.hints.colour_steer));
     let distil = !from_method || req.method != Method::SdLive;
     let augment = from_method && req.method == Method::Scratch && req.tuning.augment != Some(false);
     let sds = distil
@@ -564,6 +573,7 @@ fn text_plan(
             encoder: model.encoder(ps.prefer_taesd),
         },
         colors: req.vector.colors.clone(),
+        caption: caption_plan,
     })
 }
 

@@ -538,3 +538,33 @@ fn bad_canvases_and_negative_prompts_name_their_field() {
         ""
     );
 }
+
+#[test]
+fn a_caption_colour_is_resolved_into_the_plan_with_the_models_steering() {
+    let mut steered = facts(true);
+    steered.hints.colour_steer = crate::caption::ColourSteer::Svg;
+    let plan = |caption: &str, method, facts: &ModelFacts| {
+        let req = PlanRequest {
+            method,
+            ..PlanRequest::text(caption)
+        };
+        resolve(&req, Some(facts), &Limits::default())
+            .unwrap()
+            .text
+            .unwrap()
+    };
+    let t = plan("a blue cat", Method::SdLiveSds, &steered);
+    let c = t.caption.as_ref().unwrap();
+    assert_eq!(c.colour().map(|c| c.hue), Some(crate::caption::Hue::Blue));
+    assert_eq!(c.objects[0].words, "cat");
+    assert_eq!(c.steer, crate::caption::ColourSteer::Svg);
+    // A caption of one uncoloured thing has none, and its plan's JSON is as before.
+    let t = plan("a crown", Method::SdLiveSds, &steered);
+    assert_eq!(t.caption, None);
+    assert!(!serde_json::to_string(&t).unwrap().contains("\"caption\""));
+    // Stable Diffusion reads colours itself: parsed, not steered. A run that samples nothing
+    // has nothing to steer.
+    let t = plan("a blue cat", Method::SdLiveSds, &facts(false));
+    assert_eq!(t.caption.unwrap().steer, crate::caption::ColourSteer::Off);
+    assert_eq!(plan("a blue cat", Method::Scratch, &steered).caption, None);
+}
