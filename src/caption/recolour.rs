@@ -62,11 +62,18 @@ pub fn recolour_rgb(rgb: [f32; 3], from: Hue, to: ColourName) -> [f32; 3] {
     [r, g, b]
 }
 
+/// The family to move into `to`'s in a picture whose largest drawn family is `largest`: none
+/// when it already is `to`'s, and none for white (the page: a white thing on it is drawn by its
+/// outline and shading, which recolouring would erase).
+fn to_move(largest: Option<Hue>, to: ColourName) -> Option<Hue> {
+    largest.filter(|&d| d != to.hue && to.hue != Hue::White)
+}
+
 /// Recolours `img` (premultiplied RGBA) toward `to`: the pixels of its largest drawn family
 /// move into `to`'s. Returns the family moved; `None` when the picture already is `to`'s
-/// family (or nothing is drawn), and then `img` is unchanged.
+/// family, `to` is white or nothing is drawn, and then `img` is unchanged.
 pub fn recolour_image(img: &mut Image, to: ColourName) -> Option<Hue> {
-    let from = dominant(img).filter(|&d| d != to.hue)?;
+    let from = to_move(dominant(img), to)?;
     for px in img.data.chunks_exact_mut(4) {
         let a = px[3];
         if a <= 1e-6 {
@@ -88,7 +95,10 @@ pub fn recolour_image(img: &mut Image, to: ColourName) -> Option<Hue> {
 /// Recolours `scene` toward `to`: when its render's largest drawn family is another, every
 /// fill and stroke of that family moves into `to`'s (alpha kept). Returns the family moved.
 pub fn recolour_scene(scene: &mut Scene, to: ColourName) -> Option<Hue> {
-    let from = dominant(&crate::raster::render(scene)).filter(|&d| d != to.hue)?;
+    if to.hue == Hue::White {
+        return None;
+    }
+    let from = to_move(dominant(&crate::raster::render(scene)), to)?;
     let moved = |c: Rgba| -> Rgba {
         if family(c.r, c.g, c.b) != from {
             return c;
@@ -164,10 +174,13 @@ mod tests {
             assert_eq!(dominant(&img), Some(hue), "{hue:?}");
             assert_eq!(moved, (hue != Hue::Red).then_some(Hue::Red));
         }
-        let mut img = red_icon();
-        let before = img.clone();
-        assert_eq!(recolour_image(&mut img, name(Hue::Red)), None);
-        assert_eq!(img, before);
+        // The target family, and white (the page), leave the picture as it is.
+        for hue in [Hue::Red, Hue::White] {
+            let mut img = red_icon();
+            let before = img.clone();
+            assert_eq!(recolour_image(&mut img, name(hue)), None);
+            assert_eq!(img, before);
+        }
     }
 
     #[test]

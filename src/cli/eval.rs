@@ -374,12 +374,7 @@ pub fn format_methods_table(r: &MethodsReport) -> String {
             ));
         }
         if let Some(c) = &m.colour_binding {
-            s.push_str(&format!(
-                "  colour {}/{} ({:.1}%)",
-                c.bound,
-                c.captions,
-                100.0 * c.rate
-            ));
+            s.push_str(&format!("  colour {c}"));
         }
         s.push('\n');
     }

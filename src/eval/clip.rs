@@ -369,12 +369,7 @@ pub fn format_table(r: &EvalReport) -> String {
         ));
     }
     if let Some(c) = &r.colour_binding {
-        s.push_str(&format!(
-            "colour binding: {}/{} ({:.1}%)\n",
-            c.bound,
-            c.captions,
-            100.0 * c.rate
-        ));
+        s.push_str(&format!("colour binding: {c}\n"));
     }
     s
 }

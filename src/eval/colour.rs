@@ -30,6 +30,19 @@ pub struct ColourBinding {
     pub rows: Vec<ColourRow>,
 }
 
+impl std::fmt::Display for ColourBinding {
+    /// `bound/captions (rate %)`, as the tables print it.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{}/{} ({:.1}%)",
+            self.bound,
+            self.captions,
+            100.0 * self.rate
+        )
+    }
+}
+
 /// Colour binding of `images[i]` (drawn for `captions[i]`); `None` when no caption names a
 /// colour.
 pub fn colour_binding(captions: &[String], images: &[Image]) -> Option<ColourBinding> {
@@ -81,6 +94,7 @@ mod tests {
         let b = colour_binding(&captions, &images).unwrap();
         assert_eq!((b.captions, b.bound), (2, 1));
         assert_eq!(b.rows[1].got, Some(Hue::Green));
+        assert_eq!(b.to_string(), "1/2 (50.0%)");
         assert!(colour_binding(&captions[2..], &images[2..]).is_none());
     }
 }

@@ -98,9 +98,9 @@ fn recoloured(images: &mut [Image], colour: Option<ColourName>) -> Vec<Option<Hu
 }
 
 /// The retrieved starts for `caption` as `plan` steers them (`plan.steer` at least
-/// [`ColourSteer::Start`]): the whole caption's icons when a training caption names it
-/// ([`KNOWN_NAME`]), else the object's icons (each pair of the two objects' icons composed);
-/// recoloured into each object's colour. Fills `report`.
+/// [`ColourSteer::Start`]): the whole caption's icons, as they are, when a training caption
+/// names it ([`KNOWN_NAME`]); else the object's icons (each pair of the two objects' icons
+/// composed), recoloured into each object's colour. Fills `report`.
 pub fn steered_starts(
     teacher: &dyn Teacher,
     index: &IconIndex,
@@ -112,8 +112,8 @@ pub fn steered_starts(
     let side = teacher.image_size();
     let whole = nearest(teacher, index, caption, pick)?;
     if whole.first().is_some_and(|h| h.similarity >= KNOWN_NAME) || plan.objects.is_empty() {
-        let mut images = render_hits(index, &whole, side)?;
-        report.starts_recoloured = recoloured(&mut images, plan.colour());
+        // Drawings of exactly this caption ("black heart"): started from as they are.
+        let images = render_hits(index, &whole, side)?;
         return Ok(whole.into_iter().zip(images).collect());
     }
     let first = &plan.objects[0];
