@@ -505,10 +505,6 @@ fn text_plan(
         retrieval_per_caption: model.hints.retrieval_per_caption,
         strength: model.hints.sdedit_strength,
     });
-    // Only a run that samples can be steered toward the caption's colour and objects.
-    let caption_plan = sample
-        .as_ref()
-        .and_then(|_| crate::caption::parse(caption, model.hints.colour_steer));
     let distil = !from_method || req.method != Method::SdLive;
     let augment = from_method && req.method == Method::Scratch && req.tuning.augment != Some(false);
     let sds = distil
@@ -521,6 +517,10 @@ fn text_plan(
         prompt: req.style.prompt_with(caption, model.hints.style_suffix),
         size: n.size,
         paths: n.paths,
+        // Only a run that samples is steered toward the caption's colour and objects.
+        caption: sample
+            .as_ref()
+            .and_then(|_| crate::caption::parse(caption, model.hints.colour_steer)),
         sample,
         trace: TracePlan {
             size: if from_method { ps.trace_size } else { n.size },
@@ -535,7 +535,6 @@ fn text_plan(
             encoder: model.encoder(ps.prefer_taesd),
         },
         colors: req.vector.colors.clone(),
-        caption: caption_plan,
     })
 }
 
