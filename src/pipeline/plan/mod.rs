@@ -541,10 +541,6 @@ fn text_plan(
         .canvas
         .check(limits.max_canvas_side)?
         .map(|c| resolve_canvas(c, n.size, sample_shape(req, model)));
-    // Only a run that samples can be steered toward the caption's colour and objects.
-    let caption_plan = sample
-        .as_ref()
-        .and_then(|_| crate::caption::parse(caption, model.hints.colour_steer));
     let distil = !from_method || req.method != Method::SdLive;
     let augment = from_method && req.method == Method::Scratch && req.tuning.augment != Some(false);
     let sds = distil
@@ -559,6 +555,10 @@ fn text_plan(
         canvas,
         negative_prompt: negative_prompt(req, model, limits)?,
         paths: n.paths,
+        // Only a run that samples is steered toward the caption's colour and objects.
+        caption: sample
+            .as_ref()
+            .and_then(|_| crate::caption::parse(caption, model.hints.colour_steer)),
         sample,
         trace: TracePlan {
             size: if from_method { ps.trace_size } else { n.size },
@@ -573,7 +573,6 @@ fn text_plan(
             encoder: model.encoder(ps.prefer_taesd),
         },
         colors: req.vector.colors.clone(),
-        caption: caption_plan,
     })
 }
 
