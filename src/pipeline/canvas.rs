@@ -11,7 +11,7 @@
 //! releases (no [`CanvasPlan`] at all, the same SVG byte for byte).
 
 use super::SpecError;
-use crate::scene::{Point, Scene, Shape, Stroke};
+use crate::scene::{Point, Scene, Shape};
 use serde::{Deserialize, Serialize};
 
 /// Smallest canvas side a caller may ask for (px).
@@ -217,15 +217,7 @@ fn map_point(p: &Point, s: (f32, f32), d: (f32, f32)) -> Point {
 
 /// `shape` scaled by `s` (stroke widths by the geometric mean) and moved by `d`.
 pub fn map_shape(shape: &Shape, s: (f32, f32), d: (f32, f32)) -> Shape {
-    Shape {
-        kind: shape.kind,
-        points: shape.points.iter().map(|p| map_point(p, s, d)).collect(),
-        fill: shape.fill,
-        stroke: shape.stroke.map(|st| Stroke {
-            width: st.width * (s.0 * s.1).sqrt(),
-            ..st
-        }),
-    }
+    shape.mapped(|p| map_point(p, s, d), (s.0 * s.1).sqrt())
 }
 
 /// `scene`'s shapes scaled by `s` and moved by `d`, on a `width x height` canvas.

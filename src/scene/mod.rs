@@ -204,6 +204,20 @@ pub enum SceneError {
 }
 
 impl Shape {
+    /// The shape with every control point moved by `f` and its stroke width multiplied by
+    /// `stroke_k` (kind and paint kept): the one way geometry is rescaled or placed.
+    pub fn mapped(&self, f: impl Fn(&Point) -> Point, stroke_k: f32) -> Shape {
+        Shape {
+            kind: self.kind,
+            points: self.points.iter().map(f).collect(),
+            fill: self.fill,
+            stroke: self.stroke.map(|st| Stroke {
+                width: st.width * stroke_k,
+                ..st
+            }),
+        }
+    }
+
     /// The shape with these parts, if it is valid.
     fn checked(
         kind: ShapeKind,
@@ -429,19 +443,7 @@ impl Scene {
         let shapes = self
             .shapes
             .iter()
-            .map(|sh| Shape {
-                kind: sh.kind,
-                points: sh
-                    .points
-                    .iter()
-                    .map(|p| Point::new(p.x * s, p.y * s))
-                    .collect(),
-                fill: sh.fill,
-                stroke: sh.stroke.map(|st| Stroke {
-                    width: st.width * s,
-                    ..st
-                }),
-            })
+            .map(|sh| sh.mapped(|p| Point::new(p.x * s, p.y * s), s))
             .collect();
         Scene {
             width: new_width,
