@@ -110,7 +110,8 @@ impl GroupSchedules {
     pub fn get(&self, g: ParamGroup) -> &LrSchedule {
         match g {
             ParamGroup::Points => &self.points,
-            ParamGroup::Fill => &self.fill,
+            // Group opacities are colour parameters, trained at the fill rate.
+            ParamGroup::Fill | ParamGroup::Opacity => &self.fill,
             ParamGroup::Stroke => &self.stroke,
             ParamGroup::Width => &self.width,
             ParamGroup::Background => &self.background,

@@ -227,6 +227,9 @@ fn mapped(scene: &Scene, (width, height): (u32, u32), s: (f32, f32), d: (f32, f3
         height,
         background: scene.background,
         shapes: scene.shapes.iter().map(|sh| map_shape(sh, s, d)).collect(),
+        groups: (scene.groups.iter())
+            .map(|g| g.mapped(&|p| map_point(p, s, d), (s.0 * s.1).sqrt()))
+            .collect(),
     }
 }
 

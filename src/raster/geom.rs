@@ -9,8 +9,9 @@
 //!   the polyline (see `stroke`).
 
 use super::real::Real;
+use super::layer::GroupT;
 use super::stroke::Style;
-use crate::scene::{Rgba, Scene, ShapeKind, Stroke};
+use crate::scene::{FillRule, Rgba, Scene, ShapeKind, Stroke};
 
 /// Flattening tolerance in pixels (max distance between curve and polyline, approximately).
 pub(crate) const TOLERANCE: f32 = 0.05;
@@ -44,6 +45,8 @@ pub(crate) struct ShapeT<T> {
     pub style: Style,
     /// Pieces per segment (fixed for the step).
     pub pieces: Vec<u32>,
+    /// Whether the fill uses the even-odd rule.
+    pub even_odd: bool,
 }
 
 /// A scene's parameters in the working precision, plus the fixed flattening plan.
@@ -53,6 +56,8 @@ pub(crate) struct SceneT<T> {
     pub height: u32,
     pub bg: [T; 4],
     pub shapes: Vec<ShapeT<T>>,
+    /// The scene's groups, with their clip and mask drawn (see `layer`).
+    pub groups: Vec<GroupT<T>>,
 }
 
 fn seg_f32(kind: ShapeKind, p: &[[f32; 2]], i: usize) -> [[f32; 2]; 4] {
@@ -86,6 +91,7 @@ impl<T: Real> SceneT<T> {
                     stroke: s.stroke.map(|st| (c4(st.color), T::of(st.width))),
                     style: Style::of(&s.stroke.unwrap_or(Stroke::round(Rgba::BLACK, 0.0))),
                     pieces,
+                    even_odd: s.fill_rule == FillRule::EvenOdd,
                 }
             })
             .collect();
@@ -94,6 +100,7 @@ impl<T: Real> SceneT<T> {
             height: scene.height,
             bg: c4(scene.background),
             shapes,
+            groups: super::layer::groups_t(scene, tol),
         }
     }
 }
@@ -175,7 +182,7 @@ pub(crate) enum LayerKind {
     Stroke,
 }
 
-/// One painted layer: closed contours filled with the nonzero rule, then composited.
+/// One painted layer: closed contours filled (nonzero or even-odd), then composited.
 #[derive(Clone, Debug)]
 pub(crate) struct Layer<T> {
     pub shape: usize,
@@ -192,6 +199,8 @@ pub(crate) struct Layer<T> {
     pub closed: bool,
     pub radius: T,
     pub style: Style,
+    /// Whether a fill layer uses the even-odd rule.
+    pub even_odd: bool,
 }
 
 fn bbox<T: Real>(verts: &[[T; 2]], pad: f32, w: u32, h: u32) -> [i32; 4] {
@@ -238,6 +247,7 @@ pub(crate) fn layers<T: Real>(sc: &SceneT<T>) -> Vec<Layer<T>> {
                 closed,
                 radius: T::zero(),
                 style: s.style,
+                even_odd: s.even_odd,
             });
         }
         if let Some((c, w)) = s.stroke {
@@ -259,6 +269,7 @@ pub(crate) fn layers<T: Real>(sc: &SceneT<T>) -> Vec<Layer<T>> {
                 closed,
                 radius: r,
                 style: s.style,
+                even_odd: false,
             });
         }
     }

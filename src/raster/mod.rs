@@ -35,12 +35,15 @@
 
 mod engine;
 mod geom;
+mod layer;
 mod real;
 mod stroke;
 mod walk;
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_layer;
 #[cfg(test)]
 mod tests_stroke;
 
@@ -69,6 +72,7 @@ impl Tape {
         self.sc.width == scene.width
             && self.sc.height == scene.height
             && self.sc.shapes.len() == scene.shapes.len()
+            && self.sc.groups.len() == scene.groups.len()
             && self.sc.shapes.iter().zip(&scene.shapes).all(|(a, b)| {
                 a.pts.len() == b.points.len()
                     && a.fill.is_some() == b.fill.is_some()
@@ -162,6 +166,7 @@ fn write_grad(out: &mut Params, g: &engine::GradT<f32>) {
     out.get_mut(ParamGroup::Stroke).copy_from_slice(&g.stroke);
     out.get_mut(ParamGroup::Width).copy_from_slice(&g.width);
     out.get_mut(ParamGroup::Background).copy_from_slice(&g.bg);
+    out.get_mut(ParamGroup::Opacity).copy_from_slice(&g.opacity);
 }
 
 /// The polyline(s) of a shape's outline at `tolerance_px` (closed outlines do not repeat their
@@ -172,6 +177,7 @@ pub fn flatten_shape(shape: &Shape, tolerance_px: f32) -> Vec<Vec<Point>> {
         height: 1,
         background: crate::scene::Rgba::TRANSPARENT,
         shapes: vec![shape.clone()],
+        groups: Vec::new(),
     };
     let t = SceneT::<f32>::from_scene(&sc, tolerance_px);
     t.shapes

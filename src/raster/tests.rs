@@ -49,6 +49,7 @@ fn param(sc: &mut SceneT<f64>, g: ParamGroup, k: usize) -> &mut f64 {
     let mut k = k;
     match g {
         ParamGroup::Background => &mut sc.bg[k],
+        ParamGroup::Opacity => &mut sc.groups[k].opacity,
         _ => {
             for s in &mut sc.shapes {
                 let n = match g {
@@ -79,6 +80,7 @@ fn group(g: &GradT<f64>, grp: ParamGroup) -> &[f64] {
         ParamGroup::Stroke => &g.stroke,
         ParamGroup::Width => &g.width,
         ParamGroup::Background => &g.bg,
+        ParamGroup::Opacity => &g.opacity,
     }
 }
 
@@ -116,7 +118,7 @@ pub(super) fn fd_check(scene: &Scene, seed: u64) -> (usize, Vec<String>) {
     (checked, bad)
 }
 
-fn rgba(rng: &mut ChaCha8Rng) -> Rgba {
+pub(super) fn rgba(rng: &mut ChaCha8Rng) -> Rgba {
     Rgba::new(
         rng.random_range(0.0..1.0),
         rng.random_range(0.0..1.0),
@@ -125,7 +127,7 @@ fn rgba(rng: &mut ChaCha8Rng) -> Rgba {
     )
 }
 
-fn random_scene(seed: u64) -> Scene {
+pub(super) fn random_scene(seed: u64) -> Scene {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let (w, h) = (24u32, 20u32);
     let bg = rgba(&mut rng);

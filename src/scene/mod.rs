@@ -12,9 +12,12 @@
 //!   segment; the last segment ends at point 0). An open cubic path with `n >= 1` segments has
 //!   `3n + 1` points. A polygon has `n >= 3` vertices and is always closed.
 //! - A closed shape has a fill; an open shape has a stroke and no fill.
+//! - [`Scene::groups`] obey the invariants of [`group`] (empty for a flat scene).
 
+mod group;
 mod params;
 
+pub use group::{Clip, Content, FillRule, Group, Mask, MaskKind};
 pub use params::{ParamGroup, Params, Trainable};
 
 use serde::{Deserialize, Serialize};
@@ -184,6 +187,9 @@ pub struct Shape {
     pub points: Vec<Point>,
     pub fill: Option<Rgba>,
     pub stroke: Option<Stroke>,
+    /// How the fill covers where the outline overlaps itself (SVG `fill-rule`).
+    #[serde(default, skip_serializing_if = "FillRule::is_nonzero")]
+    pub fill_rule: FillRule,
 }
 
 /// Why a scene or shape is not valid.
@@ -195,6 +201,8 @@ pub enum SceneError {
     Shape { shape: usize, reason: String },
     #[error("background colour must have finite channels in [0, 1]")]
     Background,
+    #[error("{0}")]
+    Group(String),
     #[error("parameter vector for group {group:?} has length {got}, expected {expected}")]
     ParamLength {
         group: ParamGroup,
@@ -215,6 +223,7 @@ impl Shape {
                 width: st.width * stroke_k,
                 ..st
             }),
+            fill_rule: self.fill_rule,
         }
     }
 
@@ -230,6 +239,7 @@ impl Shape {
             points,
             fill,
             stroke,
+            fill_rule: FillRule::NonZero,
         };
         s.validate(0)?;
         Ok(s)
@@ -406,6 +416,9 @@ pub struct Scene {
     pub height: u32,
     pub background: Rgba,
     pub shapes: Vec<Shape>,
+    /// Layers over ranges of `shapes` (opacity, clip, mask); empty for a flat scene.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub groups: Vec<Group>,
 }
 
 impl Scene {
@@ -416,6 +429,7 @@ impl Scene {
             height,
             background,
             shapes: Vec::new(),
+            groups: Vec::new(),
         };
         s.validate()?;
         Ok(s)
@@ -432,7 +446,7 @@ impl Scene {
         for (i, s) in self.shapes.iter().enumerate() {
             s.validate(i)?;
         }
-        Ok(())
+        group::validate_groups(&self.groups, self.shapes.len())
     }
 
     /// Uniformly scales geometry (points and stroke widths) and the canvas to `new_width`
@@ -440,16 +454,13 @@ impl Scene {
     pub fn scaled_to_width(&self, new_width: u32) -> Scene {
         let s = new_width as f32 / self.width as f32;
         let height = ((self.height as f32 * s).round() as u32).max(1);
-        let shapes = self
-            .shapes
-            .iter()
-            .map(|sh| sh.mapped(|p| Point::new(p.x * s, p.y * s), s))
-            .collect();
+        let f = |p: &Point| Point::new(p.x * s, p.y * s);
         Scene {
             width: new_width,
             height,
             background: self.background,
-            shapes,
+            shapes: self.shapes.iter().map(|sh| sh.mapped(f, s)).collect(),
+            groups: self.groups.iter().map(|g| g.mapped(&f, s)).collect(),
         }
     }
 

@@ -6,6 +6,8 @@
 //! - `Stroke`: `r, g, b, a` for every shape with a stroke.
 //! - `Width`: one stroke width for every shape with a stroke.
 //! - `Background`: `r, g, b, a`.
+//! - `Opacity`: the opacity of every group of [`Scene::groups`] (empty for a flat scene); trained
+//!   with the fill colours ([`Trainable::fill`]).
 //!
 //! Gradients from the rasteriser use the same type and layout, so an optimiser can walk the
 //! groups of parameters and gradients side by side.
@@ -22,15 +24,17 @@ pub enum ParamGroup {
     Stroke,
     Width,
     Background,
+    Opacity,
 }
 
 impl ParamGroup {
-    pub const ALL: [ParamGroup; 5] = [
+    pub const ALL: [ParamGroup; 6] = [
         ParamGroup::Points,
         ParamGroup::Fill,
         ParamGroup::Stroke,
         ParamGroup::Width,
         ParamGroup::Background,
+        ParamGroup::Opacity,
     ];
 
     fn index(self) -> usize {
@@ -67,7 +71,7 @@ impl Trainable {
     pub fn contains(&self, g: ParamGroup) -> bool {
         match g {
             ParamGroup::Points => self.points,
-            ParamGroup::Fill => self.fill,
+            ParamGroup::Fill | ParamGroup::Opacity => self.fill,
             ParamGroup::Stroke => self.stroke,
             ParamGroup::Width => self.width,
             ParamGroup::Background => self.background,
@@ -78,7 +82,7 @@ impl Trainable {
 /// Flat parameters (or gradients) of a scene, one vector per group.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Params {
-    groups: [Vec<f32>; 5],
+    groups: [Vec<f32>; 6],
 }
 
 impl Params {
@@ -94,6 +98,7 @@ impl Params {
                 vec![0.0; 4 * n_stroke],
                 vec![0.0; n_stroke],
                 vec![0.0; 4],
+                vec![0.0; scene.groups.len()],
             ],
         }
     }
@@ -101,7 +106,7 @@ impl Params {
     /// Reads the parameters out of `scene`.
     pub fn from_scene(scene: &Scene) -> Self {
         let mut p = Params::zeros_like(scene);
-        let [pts, fill, stroke, width, bg] = &mut p.groups;
+        let [pts, fill, stroke, width, bg, opacity] = &mut p.groups;
         let (mut ip, mut if_, mut is) = (0, 0, 0);
         for sh in &scene.shapes {
             for q in &sh.points {
@@ -120,6 +125,9 @@ impl Params {
             }
         }
         bg.copy_from_slice(&scene.background.to_array());
+        for (o, g) in opacity.iter_mut().zip(&scene.groups) {
+            *o = g.opacity;
+        }
         p
     }
 
@@ -148,7 +156,7 @@ impl Params {
                 reason: format!("point coordinate {i} is not finite"),
             });
         }
-        let [pts, fill, stroke, width, bg] = &self.groups;
+        let [pts, fill, stroke, width, bg, opacity] = &self.groups;
         let (mut ip, mut if_, mut is) = (0, 0, 0);
         let rgba = |s: &[f32]| Rgba::new(s[0], s[1], s[2], s[3]).clamped();
         for sh in &mut scene.shapes {
@@ -168,6 +176,9 @@ impl Params {
             }
         }
         scene.background = rgba(bg);
+        for (g, &o) in scene.groups.iter_mut().zip(opacity) {
+            g.opacity = if o.is_nan() { 0.0 } else { o.clamp(0.0, 1.0) };
+        }
         Ok(())
     }
 

@@ -1,7 +1,10 @@
 //! SVG text → [`Scene`] (the walk over usvg's tree that [`super`]'s module docs describe).
 
+use super::walk::{Mode, Walk};
 use super::{SvgError, parse_usvg_repaired};
-use crate::scene::{LineCap, LineJoin, MAX_SIDE, Point, Rgba, Scene, Shape, ShapeKind, Stroke};
+use crate::scene::{
+    Content, FillRule, LineCap, LineJoin, MAX_SIDE, Point, Rgba, Scene, Shape, ShapeKind, Stroke,
+};
 use resvg::usvg;
 
 /// One subpath as cubic segments `[p1, p2, p3]` after a start point.
@@ -31,58 +34,6 @@ impl SubPath {
         }
         segs
     }
-
-    fn reversed(&self) -> SubPath {
-        let segs = self.closed_segments();
-        let mut out = Vec::with_capacity(segs.len());
-        let mut anchors = vec![self.start];
-        anchors.extend(segs.iter().map(|s| s[2]));
-        for i in (0..segs.len()).rev() {
-            out.push([segs[i][1], segs[i][0], anchors[i]]);
-        }
-        SubPath {
-            start: self.start,
-            segs: out,
-            closed: true,
-        }
-    }
-
-    /// Signed area of the anchor + control polygon (orientation estimate).
-    fn signed_area(&self) -> f32 {
-        let mut pts = vec![self.start];
-        for s in self.closed_segments() {
-            pts.extend_from_slice(&s);
-        }
-        let mut a = 0.0;
-        for i in 0..pts.len() {
-            let (p, q) = (pts[i], pts[(i + 1) % pts.len()]);
-            a += p.x * q.y - q.x * p.y;
-        }
-        a * 0.5
-    }
-
-    fn polygon(&self) -> Vec<Point> {
-        let mut pts = vec![self.start];
-        for s in self.closed_segments() {
-            pts.extend_from_slice(&s);
-        }
-        pts
-    }
-}
-
-fn point_in_polygon(p: Point, poly: &[Point]) -> bool {
-    let mut inside = false;
-    let n = poly.len();
-    for i in 0..n {
-        let (a, b) = (poly[i], poly[(i + 1) % n]);
-        if (a.y > p.y) != (b.y > p.y) {
-            let x = a.x + (p.y - a.y) / (b.y - a.y) * (b.x - a.x);
-            if p.x < x {
-                inside = !inside;
-            }
-        }
-    }
-    inside
 }
 
 /// The subpaths of `data` mapped through `ts` (its path's parent group's absolute transform).
@@ -215,93 +166,15 @@ fn open_points(s: &SubPath) -> Vec<Point> {
     pts
 }
 
-/// Most warnings one import reports; the rest are counted in a last one.
-const MAX_WARNINGS: usize = 16;
-
-/// The walk over usvg's tree: the shapes so far and what could not be drawn.
-#[derive(Default)]
-struct Walk {
-    shapes: Vec<Shape>,
-    warnings: Vec<String>,
-    more_warnings: usize,
-}
-
-impl Walk {
-    fn warn(&mut self, w: String) {
-        if self.warnings.contains(&w) {
-            return;
-        }
-        if self.warnings.len() < MAX_WARNINGS {
-            self.warnings.push(w);
-        } else {
-            self.more_warnings += 1;
-        }
-    }
-
-    fn finish(mut self) -> (Vec<Shape>, Vec<String>) {
-        if self.more_warnings > 0 {
-            let n = self.more_warnings;
-            self.warnings.push(format!("{n} more warnings like these"));
-        }
-        (self.shapes, self.warnings)
-    }
-
-    /// Warns about what `g` asks for that the scene cannot draw.
-    fn unsupported(&mut self, g: &usvg::Group) {
-        // usvg gives the group of a `<g>` or `<use>` its id, and the single path of another
-        // element that needed a group (`<rect filter=…>`) the element's id.
-        let id = match g.children() {
-            _ if !g.id().is_empty() => g.id(),
-            [only] => only.id(),
-            _ => "",
-        };
-        let on = if id.is_empty() {
-            "an element without an id".to_string()
-        } else {
-            format!("#{id}")
-        };
-        if !g.filters().is_empty() {
-            self.warn(format!(
-                "filter on {on} ignored (filters are not drawn): drawn unfiltered"
-            ));
-        }
-        if g.clip_path().is_some() {
-            self.warn(format!("clip-path on {on} ignored: drawn unclipped"));
-        }
-        if g.mask().is_some() {
-            self.warn(format!("mask on {on} ignored: drawn unmasked"));
-        }
-    }
-
-    fn group(&mut self, g: &usvg::Group, opacity: f32) {
-        self.unsupported(g);
-        let opacity = opacity * g.opacity().get();
-        for node in g.children() {
-            match node {
-                usvg::Node::Group(child) => self.group(child, opacity),
-                usvg::Node::Path(p) => {
-                    if p.is_visible() {
-                        // A path's transform is its group's (usvg's own background path for a
-                        // root `background-color` has none of its own).
-                        path_shapes(p, g.abs_transform(), opacity, &mut self.shapes);
-                    }
-                }
-                usvg::Node::Image(i) => {
-                    let id = i.id();
-                    self.warn(if id.is_empty() {
-                        "an <image> ignored (images are not drawn)".to_string()
-                    } else {
-                        format!("<image> #{id} ignored (images are not drawn)")
-                    });
-                }
-                usvg::Node::Text(t) => self.group(t.flattened(), opacity),
-            }
-        }
-    }
-}
-
-fn path_shapes(p: &usvg::Path, ts: usvg::Transform, opacity: f32, shapes: &mut Vec<Shape>) {
-    let mut subs = subpaths(p.data(), ts);
+/// The shapes that draw `p` (in user space `ts`, its opacity times `opacity`), added to
+/// `shapes`.
+pub(super) fn path_shapes(
+    p: &usvg::Path,
+    ts: usvg::Transform,
+    opacity: f32,
+    shapes: &mut Vec<Shape>,
+) {
+    let subs = subpaths(p.data(), ts);
     if subs.is_empty() {
         return;
     }
@@ -312,9 +185,6 @@ fn path_shapes(p: &usvg::Path, ts: usvg::Transform, opacity: f32, shapes: &mut V
         .stroke()
         .map_or(StrokeDraw::Nothing, |s| stroke_draw(p, s, ts, opacity));
     if let Some(f) = fill {
-        if fill_is_evenodd(p) && subs.len() > 1 {
-            orient_even_odd(&mut subs);
-        }
         // A single closed outline keeps its (undashed) stroke on the filled shape.
         let on_fill = match &stroke {
             StrokeDraw::Strokes(st, None) if subs.len() == 1 && subs[0].closed => Some(*st),
@@ -325,6 +195,7 @@ fn path_shapes(p: &usvg::Path, ts: usvg::Transform, opacity: f32, shapes: &mut V
             points: closed_points(&subs),
             fill: Some(f),
             stroke: on_fill,
+            fill_rule: fill_rule(p),
         });
         if on_fill.is_some() {
             return;
@@ -342,6 +213,7 @@ fn path_shapes(p: &usvg::Path, ts: usvg::Transform, opacity: f32, shapes: &mut V
             points: closed_points(&outline),
             fill: Some(color),
             stroke: None,
+            fill_rule: FillRule::NonZero,
         }),
     }
 }
@@ -354,6 +226,7 @@ fn stroke_shape(s: &SubPath, st: Stroke) -> Shape {
             points: open_points(s),
             fill: None,
             stroke: Some(st),
+            fill_rule: FillRule::NonZero,
         };
     }
     let mut pts = Vec::new();
@@ -367,6 +240,7 @@ fn stroke_shape(s: &SubPath, st: Stroke) -> Shape {
         points: pts,
         fill: Some(Rgba::TRANSPARENT),
         stroke: Some(st),
+        fill_rule: FillRule::NonZero,
     }
 }
 
@@ -439,29 +313,28 @@ fn is_similarity(ts: usvg::Transform) -> bool {
     (l0 - l1).abs() <= tol && dot.abs() <= tol
 }
 
-fn fill_is_evenodd(p: &usvg::Path) -> bool {
-    p.fill()
-        .is_some_and(|f| f.rule() == usvg::FillRule::EvenOdd)
+/// The fill rule of `p`'s fill (a clip path's children carry their `clip-rule` there).
+fn fill_rule(p: &usvg::Path) -> FillRule {
+    match p.fill().map(|f| f.rule()) {
+        Some(usvg::FillRule::EvenOdd) => FillRule::EvenOdd,
+        _ => FillRule::NonZero,
+    }
 }
 
-/// Orients every subpath so that its winding contribution alternates with nesting depth.
-fn orient_even_odd(subs: &mut [SubPath]) {
-    let polys: Vec<Vec<Point>> = subs.iter().map(SubPath::polygon).collect();
-    let reference = subs[0].signed_area().signum();
-    for i in 0..subs.len() {
-        let probe = subs[i].start;
-        let depth = (0..subs.len())
-            .filter(|&j| j != i && point_in_polygon(probe, &polys[j]))
-            .count();
-        let want = if depth % 2 == 0 {
-            reference
-        } else {
-            -reference
-        };
-        if subs[i].signed_area().signum() != want {
-            subs[i] = subs[i].reversed();
-        }
+/// The area `p` adds to a clip path (in user space `ts`): its outline filled by its clip rule,
+/// whatever its paint.
+pub(super) fn clip_shape(p: &usvg::Path, ts: usvg::Transform, shapes: &mut Vec<Shape>) {
+    let subs = subpaths(p.data(), ts);
+    if subs.is_empty() {
+        return;
     }
+    shapes.push(Shape {
+        kind: ShapeKind::ClosedCubic,
+        points: closed_points(&subs),
+        fill: Some(Rgba::BLACK),
+        stroke: None,
+        fill_rule: fill_rule(p),
+    });
 }
 
 /// An imported SVG: the scene and what the import could not keep as drawn (dropped links,
@@ -488,25 +361,36 @@ pub fn import_svg(text: &str) -> Result<SvgImport, SvgError> {
     if !(1.0..=MAX_SIDE as f32).contains(&w) || !(1.0..=MAX_SIDE as f32).contains(&h) {
         return Err(SvgError::Size(fw, fh));
     }
-    let mut walk = Walk::default();
+    let mut walk = Walk::new((w, h));
     for w in parsed.warnings {
         walk.warn(w);
     }
-    walk.group(tree.root(), 1.0);
-    let (mut shapes, warnings) = walk.finish();
+    let mut content = Content::default();
+    walk.group(tree.root(), usvg::Transform::identity(), Mode::Draw, &mut content);
+    let warnings = walk.finish();
+    let Content {
+        mut shapes,
+        mut groups,
+    } = content;
     let mut background = Rgba::TRANSPARENT;
     if let Some(first) = shapes.first()
         && is_canvas_rect(first, w, h)
         && let Some(f) = first.fill
+        && groups.iter().all(|g| g.start > 0)
     {
         background = f;
         shapes.remove(0);
+        for g in &mut groups {
+            g.start -= 1;
+            g.end -= 1;
+        }
     }
     let scene = Scene {
         width: w as u32,
         height: h as u32,
         background,
         shapes,
+        groups,
     };
     scene.validate()?;
     Ok(SvgImport { scene, warnings })

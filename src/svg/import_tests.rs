@@ -1,5 +1,6 @@
 //! What the import draws and what it warns about.
 use super::*;
+use crate::svg::walk::MAX_WARNINGS;
 
 #[test]
 fn background_color_covers_the_canvas_whatever_the_view_box_origin() {
@@ -31,7 +32,7 @@ fn background_color_covers_the_canvas_whatever_the_view_box_origin() {
 }
 
 #[test]
-fn filters_clip_paths_masks_and_images_are_named_in_warnings() {
+fn filters_are_named_in_warnings_clip_paths_and_masks_are_kept() {
     let svg = r##"<svg xmlns="http://www.w3.org/2000/svg" width="20" height="20">
         <filter id="f"><feGaussianBlur stdDeviation="2"/></filter>
         <clipPath id="c"><rect width="5" height="5"/></clipPath>
@@ -48,12 +49,11 @@ fn filters_clip_paths_masks_and_images_are_named_in_warnings() {
             .any(|w| w.starts_with("filter on #blurred ignored")),
         "{w:?}"
     );
-    assert!(
-        w.iter().any(|w| w.starts_with("clip-path on #clipped")),
-        "{w:?}"
-    );
-    assert!(w.iter().any(|w| w.starts_with("mask on #masked")), "{w:?}");
-    assert_eq!(w.len(), 3, "{w:?}");
+    assert_eq!(w.len(), 1, "{w:?}");
+    let groups = &import.scene.groups;
+    assert_eq!(groups.len(), 2, "{groups:?}");
+    assert!(groups[0].clip.is_some() && (groups[0].start, groups[0].end) == (1, 2));
+    assert!(groups[1].mask.is_some() && (groups[1].start, groups[1].end) == (2, 3));
     // The content is drawn as it is (unfiltered), nothing else in its place.
     assert_eq!(import.scene.shapes.len(), 4);
     assert_eq!(

@@ -67,6 +67,7 @@ mod guard;
 mod import;
 mod path_data;
 mod profile;
+mod walk;
 
 pub use export::{MAX_PRECISION, SvgOptions, to_svg, with_metadata, written_color};
 

@@ -212,7 +212,9 @@ fn import_handles_primitives_groups_transforms_and_styles() {
     assert_eq!(s.shapes.len(), 6, "{:#?}", s.shapes);
     let rect = &s.shapes[0];
     assert_eq!(rect.fill.unwrap().b, 1.0);
-    assert!((rect.fill.unwrap().a - 0.5).abs() < 1e-6, "group opacity");
+    assert_eq!(rect.fill.unwrap().a, 1.0);
+    // The group's opacity applies to its children as one layer.
+    assert_eq!(s.groups, vec![crate::scene::Group::new(0..6, 0.5)]);
     // viewBox halves, translate(10,5) → rect corner at (5, 2.5).
     let (lo, hi) = rect.control_bounds();
     assert!(

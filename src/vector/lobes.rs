@@ -232,6 +232,7 @@ fn to_shape(segs: &[[P; 4]], template: &Shape) -> Option<Shape> {
         points,
         fill: template.fill,
         stroke: template.stroke,
+        fill_rule: template.fill_rule,
     };
     shape.validate(0).ok().map(|_| shape)
 }

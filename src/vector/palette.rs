@@ -275,6 +275,7 @@ fn coverage(scene: &Scene, i: usize) -> Vec<f32> {
         height: scene.height,
         background: Rgba::TRANSPARENT,
         shapes: vec![sh],
+        groups: Vec::new(),
     };
     crate::raster::render(&one)
         .data

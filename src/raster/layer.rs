@@ -1,0 +1,294 @@
+//! Groups as layers: opacity, clip and mask, forward and backward.
+//!
+//! A group's shapes are painted onto a transparent layer `G` (premultiplied), which is then
+//! composited over the layer below `P` with the per-pixel factor `m = opacity × f`:
+//! `out = P (1 - m G.a) + m G`. `f` is the product of the group's clip chain and mask chain,
+//! drawn once per scene over the whole canvas by this same rasteriser:
+//! - a clip's shapes are filled opaque (each by its fill rule) over transparency and its factor
+//!   is the alpha, i.e. the union `1 - Π(1 - coverage)`; a clip's own clip multiplies it;
+//! - a mask's content is drawn over transparency; its factor is the alpha or the luminance
+//!   `0.2125 r + 0.7154 g + 0.0721 b` of the premultiplied colour (as resvg); a mask's own
+//!   mask multiplies it.
+//!
+//! The backward pass differentiates the compositing exactly: the layer below gets
+//! `g (1 - m G.a)`, the group's layer `m g` (minus `m Σ g P` on its alpha), the opacity
+//! `Σ f Σ_c g_c (G_c - G.a P_c)`. Clip and mask content are constants (not parameters), so the
+//! clipped and masked shapes and the opacity get exact gradients. The tape keeps `P` and `G`
+//! (8 floats per pixel of the group's box) per group and band.
+
+use super::engine::{
+    BandGrad, BandTape, GradScratch, PaintScratch, Rec, RecKind, backward_layer, box_clip,
+    paint_layer,
+};
+use super::geom::{Layer, SceneT};
+use super::real::Real;
+use super::walk::Clip;
+use crate::scene::{Clip as ClipPath, Content, Group, Mask, MaskKind, Rgba, Scene};
+
+/// A group in the working precision, with its clip and mask drawn.
+#[derive(Clone, Debug)]
+pub(crate) struct GroupT<T> {
+    pub start: usize,
+    pub end: usize,
+    pub opacity: T,
+    /// Clip × mask per canvas pixel (row-major, `width × height`); `None` when neither.
+    pub factor: Option<Vec<T>>,
+}
+
+/// The groups of `scene`, their clips and masks drawn at flattening tolerance `tol`.
+pub(crate) fn groups_t<T: Real>(scene: &Scene, tol: f32) -> Vec<GroupT<T>> {
+    let (w, h) = (scene.width, scene.height);
+    scene
+        .groups
+        .iter()
+        .map(|g| GroupT {
+            start: g.start,
+            end: g.end,
+            opacity: T::of(g.opacity),
+            factor: group_factor(g, w, h, tol),
+        })
+        .collect()
+}
+
+fn group_factor<T: Real>(g: &Group, w: u32, h: u32, tol: f32) -> Option<Vec<T>> {
+    let clip = g.clip.as_deref().map(|c| clip_factor(c, w, h, tol));
+    let mask = g.mask.as_deref().map(|m| mask_factor(m, w, h, tol));
+    match (clip, mask) {
+        (Some(mut c), Some(m)) => {
+            c.iter_mut().zip(&m).for_each(|(a, b)| *a *= *b);
+            Some(c)
+        }
+        (c, m) => c.or(m),
+    }
+}
+
+/// Draws `content` over transparency on a `w × h` canvas (premultiplied RGBA).
+fn draw<T: Real>(content: &Content, w: u32, h: u32, tol: f32) -> Vec<T> {
+    let scene = Scene {
+        width: w,
+        height: h,
+        background: Rgba::TRANSPARENT,
+        shapes: content.shapes.clone(),
+        groups: content.groups.clone(),
+    };
+    super::render_t(&SceneT::<T>::from_scene(&scene, tol))
+}
+
+fn clip_factor<T: Real>(c: &ClipPath, w: u32, h: u32, tol: f32) -> Vec<T> {
+    let mut opaque = c.content.clone();
+    for s in &mut opaque.shapes {
+        s.fill = Some(Rgba::BLACK);
+        s.stroke = None;
+    }
+    let mut f: Vec<T> = draw::<T>(&opaque, w, h, tol)
+        .chunks_exact(4)
+        .map(|p| p[3])
+        .collect();
+    if let Some(inner) = &c.clip {
+        let g = clip_factor::<T>(inner, w, h, tol);
+        f.iter_mut().zip(&g).for_each(|(a, b)| *a *= *b);
+    }
+    f
+}
+
+fn mask_factor<T: Real>(m: &Mask, w: u32, h: u32, tol: f32) -> Vec<T> {
+    let img = draw::<T>(&m.content, w, h, tol);
+    let mut f: Vec<T> = match m.kind {
+        MaskKind::Alpha => img.chunks_exact(4).map(|p| p[3]).collect(),
+        MaskKind::Luminance => img
+            .chunks_exact(4)
+            .map(|p| T::c(0.2125) * p[0] + T::c(0.7154) * p[1] + T::c(0.0721) * p[2])
+            .collect(),
+    };
+    if let Some(inner) = &m.mask {
+        let g = mask_factor::<T>(inner, w, h, tol);
+        f.iter_mut().zip(&g).for_each(|(a, b)| *a *= *b);
+    }
+    f
+}
+
+/// One step of painting a scene with groups.
+#[derive(Clone, Copy, Debug)]
+enum Op {
+    Paint(usize),
+    Push(usize),
+    Pop(usize),
+}
+
+/// The steps in paint order, and each group's pixel box (the union of its layers' boxes).
+fn plan<T: Real>(sc: &SceneT<T>, ls: &[Layer<T>]) -> (Vec<Op>, Vec<[i32; 4]>) {
+    let mut ops = Vec::with_capacity(ls.len() + 2 * sc.groups.len());
+    let mut boxes = vec![[i32::MAX, i32::MAX, i32::MIN, i32::MIN]; sc.groups.len()];
+    let mut open: Vec<usize> = Vec::new();
+    let mut next = 0;
+    for (li, l) in ls.iter().enumerate() {
+        while let Some(&gi) = open.last()
+            && sc.groups[gi].end <= l.shape
+        {
+            ops.push(Op::Pop(gi));
+            open.pop();
+        }
+        while next < sc.groups.len() && sc.groups[next].start <= l.shape {
+            // A group whose shapes painted no layer draws nothing.
+            if sc.groups[next].end > l.shape {
+                ops.push(Op::Push(next));
+                open.push(next);
+            }
+            next += 1;
+        }
+        ops.push(Op::Paint(li));
+        for &gi in &open {
+            let b = &mut boxes[gi];
+            b[0] = b[0].min(l.bbox[0]);
+            b[1] = b[1].min(l.bbox[1]);
+            b[2] = b[2].max(l.bbox[2]);
+            b[3] = b[3].max(l.bbox[3]);
+        }
+    }
+    ops.extend(open.iter().rev().map(|&gi| Op::Pop(gi)));
+    (ops, boxes)
+}
+
+const EMPTY: Clip = Clip {
+    x0: 0,
+    x1: 0,
+    y0: 0,
+    y1: 0,
+};
+
+/// The group's factor `m` at canvas pixel `(x, y)`.
+#[inline]
+fn factor<T: Real>(g: &GroupT<T>, width: usize, x: usize, y: usize) -> T {
+    match &g.factor {
+        Some(f) => g.opacity * f[y * width + x],
+        None => g.opacity,
+    }
+}
+
+/// Calls `f(band offset of pixel, m, f)` for every pixel of `clip` (band rows from `y0`).
+fn for_each_px<T: Real>(
+    g: &GroupT<T>,
+    width: usize,
+    clip: Clip,
+    y0: i32,
+    mut f: impl FnMut(usize, T, T),
+) {
+    for y in clip.y0..clip.y1 {
+        for x in clip.x0..clip.x1 {
+            let (xu, yu) = (x as usize, y as usize);
+            let base = 4 * ((y - y0) as usize * width + xu);
+            let raw = g.factor.as_ref().map_or(T::one(), |v| v[yu * width + xu]);
+            f(base, factor(g, width, xu, yu), raw);
+        }
+    }
+}
+
+/// [`super::engine`]'s band painter for a scene with groups.
+pub(crate) fn forward_band<T: Real>(
+    sc: &SceneT<T>,
+    ls: &[Layer<T>],
+    (y0, y1): (i32, i32),
+    img: &mut [T],
+    mut tape: Option<&mut BandTape<T>>,
+    st: &mut PaintScratch<T>,
+) {
+    let w = sc.width as usize;
+    let (ops, boxes) = plan(sc, ls);
+    // Layers of the open groups, innermost last; `img` is below them all.
+    let mut stack: Vec<Vec<T>> = Vec::new();
+    let mut spare: Vec<Vec<T>> = Vec::new();
+    for op in ops {
+        match op {
+            Op::Paint(li) => {
+                let top = stack.last_mut().map_or(&mut *img, |b| &mut b[..]);
+                paint_layer(sc.width, li, &ls[li], (y0, y1), top, tape.as_deref_mut(), st);
+            }
+            Op::Push(gi) => {
+                let clip = box_clip(boxes[gi], y0, y1).unwrap_or(EMPTY);
+                let mut buf = spare.pop().unwrap_or_default();
+                buf.resize(img.len(), T::zero());
+                for_each_px(&sc.groups[gi], w, clip, y0, |i, _, _| {
+                    buf[i..i + 4].fill(T::zero())
+                });
+                stack.push(buf);
+                if let Some(t) = tape.as_deref_mut() {
+                    let kind = RecKind::Push;
+                    t.recs.push(Rec { kind, layer: gi as u32, clip, offset: 0 });
+                }
+            }
+            Op::Pop(gi) => {
+                let Some(buf) = stack.pop() else { continue };
+                let clip = box_clip(boxes[gi], y0, y1).unwrap_or(EMPTY);
+                let below = stack.last_mut().map_or(&mut *img, |b| &mut b[..]);
+                if let Some(t) = tape.as_deref_mut() {
+                    let (kind, offset) = (RecKind::Pop, t.group.len());
+                    t.recs.push(Rec { kind, layer: gi as u32, clip, offset });
+                }
+                let mut rec = tape.as_deref_mut().map(|t| &mut t.group);
+                for_each_px(&sc.groups[gi], w, clip, y0, |i, m, _| {
+                    let (p, g) = (&mut below[i..i + 4], &buf[i..i + 4]);
+                    if let Some(r) = rec.as_deref_mut() {
+                        r.extend_from_slice(p);
+                        r.extend_from_slice(g);
+                    }
+                    let keep = T::one() - m * g[3];
+                    for c in 0..4 {
+                        p[c] = p[c] * keep + m * g[c];
+                    }
+                });
+                spare.push(buf);
+            }
+        }
+    }
+}
+
+/// [`super::engine`]'s band backward pass for a scene with groups: `g` is the gradient of the
+/// band's image on entry and of the background under everything on return.
+pub(crate) fn backward_band<T: Real>(
+    sc: &SceneT<T>,
+    ls: &[Layer<T>],
+    y0: i32,
+    tape: &BandTape<T>,
+    g: &mut Vec<T>,
+    out: &mut BandGrad<T>,
+    st: &mut GradScratch<T>,
+) {
+    let w = sc.width as usize;
+    // Gradients of the layers below the current one, innermost last.
+    let mut stack: Vec<Vec<T>> = Vec::new();
+    let mut spare: Vec<Vec<T>> = Vec::new();
+    for rec in tape.recs.iter().rev() {
+        let gi = rec.layer as usize;
+        match rec.kind {
+            RecKind::Paint => backward_layer(sc.width, ls, y0, tape, rec, g, out, st),
+            RecKind::Pop => {
+                let mut inner = spare.pop().unwrap_or_default();
+                inner.resize(g.len(), T::zero());
+                let mut k = rec.offset;
+                let mut dop = T::zero();
+                for_each_px(&sc.groups[gi], w, rec.clip, y0, |i, m, f| {
+                    let (p, gl) = (&tape.group[k..k + 4], &tape.group[k + 4..k + 8]);
+                    k += 8;
+                    let go = &mut g[i..i + 4];
+                    let (mut dm, mut gp) = (T::zero(), T::zero());
+                    for c in 0..4 {
+                        dm += go[c] * (gl[c] - gl[3] * p[c]);
+                        gp += go[c] * p[c];
+                        inner[i + c] = m * go[c];
+                    }
+                    inner[i + 3] -= m * gp;
+                    dop += dm * f;
+                    let keep = T::one() - m * gl[3];
+                    go.iter_mut().for_each(|v| *v *= keep);
+                });
+                out.dopacity[gi] += dop;
+                stack.push(std::mem::replace(g, inner));
+            }
+            RecKind::Push => {
+                if let Some(below) = stack.pop() {
+                    spare.push(std::mem::replace(g, below));
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,221 @@
+//! The walk over usvg's tree: groups become scene [`Group`]s (opacity, clip, mask) where they
+//! need a layer, paths become shapes (see `import`), and what cannot be drawn is warned about.
+
+use super::import::{clip_shape, path_shapes};
+use crate::scene::{Clip, Content, Group, Mask, MaskKind, Point, Rgba, Shape};
+use resvg::usvg;
+use usvg::Transform;
+
+/// Most warnings one import reports; the rest are counted in a last one.
+pub(super) const MAX_WARNINGS: usize = 16;
+
+/// What a walk collects: drawn content, or the geometry of a clip path.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Mode {
+    Draw,
+    /// A clip path's children: fills only (by their `clip-rule`), no opacity or mask.
+    Clip,
+}
+
+/// What could not be drawn, and the canvas size (a mask region covering it is dropped).
+pub(super) struct Walk {
+    warnings: Vec<String>,
+    more_warnings: usize,
+    canvas: (f32, f32),
+}
+
+impl Walk {
+    pub(super) fn new(canvas: (f32, f32)) -> Self {
+        Walk {
+            warnings: Vec::new(),
+            more_warnings: 0,
+            canvas,
+        }
+    }
+
+    pub(super) fn warn(&mut self, w: String) {
+        if self.warnings.contains(&w) {
+            return;
+        }
+        if self.warnings.len() < MAX_WARNINGS {
+            self.warnings.push(w);
+        } else {
+            self.more_warnings += 1;
+        }
+    }
+
+    pub(super) fn finish(mut self) -> Vec<String> {
+        if self.more_warnings > 0 {
+            let n = self.more_warnings;
+            self.warnings.push(format!("{n} more warnings like these"));
+        }
+        self.warnings
+    }
+
+    /// Warns about what `g` asks for that the scene cannot draw (filters).
+    fn unsupported(&mut self, g: &usvg::Group) {
+        // usvg gives the group of a `<g>` or `<use>` its id, and the single path of another
+        // element that needed a group (`<rect filter=…>`) the element's id.
+        let id = match g.children() {
+            _ if !g.id().is_empty() => g.id(),
+            [only] => only.id(),
+            _ => "",
+        };
+        let on = if id.is_empty() {
+            "an element without an id".to_string()
+        } else {
+            format!("#{id}")
+        };
+        if !g.filters().is_empty() {
+            self.warn(format!(
+                "filter on {on} ignored (filters are not drawn): drawn unfiltered"
+            ));
+        }
+    }
+
+    /// Adds what `g` draws to `out`. `base` maps the content root's coordinates to the canvas
+    /// (usvg's absolute transforms inside a clip path or mask start at their root).
+    pub(super) fn group(&mut self, g: &usvg::Group, base: Transform, mode: Mode, out: &mut Content) {
+        self.unsupported(g);
+        let ts = base.pre_concat(g.abs_transform());
+        let opacity = match mode {
+            Mode::Draw => g.opacity().get(),
+            Mode::Clip => 1.0,
+        };
+        let clip = g.clip_path().map(|c| self.clip(c, ts));
+        let mask = match mode {
+            Mode::Draw => g.mask().map(|m| self.mask(m, ts)),
+            Mode::Clip => None,
+        };
+        let layered = opacity < 1.0 || clip.is_some() || mask.is_some();
+        let (start, gi) = (out.shapes.len(), out.groups.len());
+        if layered {
+            // Reserved now so that it comes before the groups inside it.
+            out.groups.push(Group::new(start..start, opacity));
+        }
+        for node in g.children() {
+            match node {
+                usvg::Node::Group(child) => self.group(child, base, mode, out),
+                usvg::Node::Path(p) if p.is_visible() => match mode {
+                    Mode::Draw => path_shapes(p, ts, 1.0, &mut out.shapes),
+                    Mode::Clip => clip_shape(p, ts, &mut out.shapes),
+                },
+                usvg::Node::Path(_) => {}
+                usvg::Node::Image(i) => {
+                    let id = i.id();
+                    self.warn(if id.is_empty() {
+                        "an <image> ignored (images are not drawn)".to_string()
+                    } else {
+                        format!("<image> #{id} ignored (images are not drawn)")
+                    });
+                }
+                usvg::Node::Text(t) => self.group(t.flattened(), base, mode, out),
+            }
+        }
+        if !layered {
+            return;
+        }
+        let end = out.shapes.len();
+        if end == start {
+            out.groups.truncate(gi);
+        } else if clip.is_none() && mask.is_none() && end - start == 1 {
+            // One shape painting one layer: the opacity is exact on the shape itself.
+            if fold_opacity(&mut out.shapes[start], opacity) {
+                out.groups.remove(gi);
+                return;
+            }
+        }
+        if end > start {
+            out.groups[gi] = Group {
+                start,
+                end,
+                opacity,
+                clip: clip.map(Box::new),
+                mask: mask.map(Box::new),
+            };
+        }
+    }
+
+    /// A clip path applied in user space `ts`: its children (under its own transform) and the
+    /// clip path on it.
+    fn clip(&mut self, c: &usvg::ClipPath, ts: Transform) -> Clip {
+        let mut content = Content::default();
+        self.group(c.root(), ts.pre_concat(c.transform()), Mode::Clip, &mut content);
+        Clip {
+            content,
+            clip: c.clip_path().map(|inner| Box::new(self.clip(inner, ts))),
+        }
+    }
+
+    /// A mask applied in user space `ts`: its children clipped to its region, and the mask on
+    /// it.
+    fn mask(&mut self, m: &usvg::Mask, ts: Transform) -> Mask {
+        let mut content = Content::default();
+        self.group(m.root(), ts, Mode::Draw, &mut content);
+        let region = rect_shape(m.rect(), ts);
+        if !content.shapes.is_empty() && !self.covers_canvas(&region) {
+            let mut g = Group::new(0..content.shapes.len(), 1.0);
+            g.clip = Some(Box::new(Clip {
+                content: Content {
+                    shapes: vec![region],
+                    groups: Vec::new(),
+                },
+                clip: None,
+            }));
+            content.groups.insert(0, g);
+        }
+        Mask {
+            kind: match m.kind() {
+                usvg::MaskType::Luminance => MaskKind::Luminance,
+                usvg::MaskType::Alpha => MaskKind::Alpha,
+            },
+            content,
+            mask: m.mask().map(|inner| Box::new(self.mask(inner, ts))),
+        }
+    }
+
+    /// Whether an axis-aligned rectangle `s` contains the whole canvas.
+    fn covers_canvas(&self, s: &Shape) -> bool {
+        let (lo, hi) = s.control_bounds();
+        let (w, h) = self.canvas;
+        let axis = s
+            .points
+            .iter()
+            .all(|p| (p.x == lo.x || p.x == hi.x) && (p.y == lo.y || p.y == hi.y));
+        axis && lo.x <= 0.0 && lo.y <= 0.0 && hi.x >= w && hi.y >= h
+    }
+}
+
+/// Multiplies `opacity` into the one layer `s` paints; false when it paints two (a visible
+/// fill and a stroke, which overlap).
+fn fold_opacity(s: &mut Shape, opacity: f32) -> bool {
+    match (&mut s.fill, &mut s.stroke) {
+        (Some(f), None) => f.a *= opacity,
+        (None, Some(st)) => st.color.a *= opacity,
+        (Some(f), Some(st)) if f.a == 0.0 => st.color.a *= opacity,
+        _ => return false,
+    }
+    true
+}
+
+/// The rectangle `r` in user space `ts`, as a polygon on the canvas.
+fn rect_shape(r: usvg::NonZeroRect, ts: Transform) -> Shape {
+    let corner = |x: f32, y: f32| {
+        let mut p = usvg::tiny_skia_path::Point::from_xy(x, y);
+        ts.map_point(&mut p);
+        Point::new(p.x, p.y)
+    };
+    let points = vec![
+        corner(r.left(), r.top()),
+        corner(r.right(), r.top()),
+        corner(r.right(), r.bottom()),
+        corner(r.left(), r.bottom()),
+    ];
+    Shape {
+        kind: crate::scene::ShapeKind::Polygon,
+        points,
+        fill: Some(Rgba::BLACK),
+        stroke: None,
+        fill_rule: crate::scene::FillRule::NonZero,
+    }
+}
