@@ -110,7 +110,7 @@ fn hex(c: Rgba) -> String {
     }
 }
 
-fn opacity_decimals(p: usize) -> usize {
+pub(super) fn opacity_decimals(p: usize) -> usize {
     p.max(OPACITY_DECIMALS)
 }
 
@@ -130,12 +130,14 @@ pub fn written_color(c: Rgba, precision: u8) -> Rgba {
 
 /// How a shape is painted, as attribute values.
 #[derive(Clone, Debug, PartialEq)]
-struct Paint {
+pub(super) struct Paint {
     /// `none` or a colour.
     fill: String,
     /// `None` when opaque (the default).
     fill_opacity: Option<String>,
     stroke: Option<StrokePaint>,
+    /// Whether a drawn fill is even-odd (`fill-rule="evenodd"`).
+    even_odd: bool,
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -169,7 +171,7 @@ fn caps_attrs(st: &crate::scene::Stroke) -> String {
 }
 
 impl Paint {
-    fn of(sh: &Shape, p: usize) -> Paint {
+    pub(super) fn of(sh: &Shape, p: usize) -> Paint {
         let op = |a: f32| {
             let s = num(a.clamp(0.0, 1.0), opacity_decimals(p));
             match s.as_str() {
@@ -197,20 +199,21 @@ impl Paint {
             })
         });
         Paint {
+            even_odd: fill != "none" && !sh.fill_rule.is_nonzero(),
             fill,
             fill_opacity,
             stroke,
         }
     }
 
-    fn visible(&self) -> bool {
+    pub(super) fn visible(&self) -> bool {
         self.fill != "none" || self.stroke.is_some()
     }
 }
 
 /// What the enclosing elements already set, so a path leaves those attributes out.
 #[derive(Clone, Debug)]
-struct Inherited {
+pub(super) struct Inherited {
     fill: String,
     fill_opacity: Option<String>,
     stroke: Option<String>,
@@ -221,7 +224,7 @@ struct Inherited {
 }
 
 impl Inherited {
-    fn root() -> Self {
+    pub(super) fn root() -> Self {
         Inherited {
             fill: "#000".into(),
             fill_opacity: None,
@@ -233,11 +236,11 @@ impl Inherited {
     }
 }
 
-fn push_attr(out: &mut String, name: &str, value: &str) {
+pub(super) fn push_attr(out: &mut String, name: &str, value: &str) {
     let _ = write!(out, r#" {name}="{value}""#);
 }
 
-fn push_paint(out: &mut String, paint: &Paint, ctx: &Inherited) {
+pub(super) fn push_paint(out: &mut String, paint: &Paint, ctx: &Inherited) {
     if paint.fill != ctx.fill {
         push_attr(out, "fill", &paint.fill);
     }
@@ -246,6 +249,9 @@ fn push_paint(out: &mut String, paint: &Paint, ctx: &Inherited) {
         && let Some(o) = &paint.fill_opacity
     {
         push_attr(out, "fill-opacity", o);
+    }
+    if paint.even_odd {
+        push_attr(out, "fill-rule", "evenodd");
     }
     if let Some(st) = &paint.stroke {
         if ctx.stroke.as_ref() != Some(&st.color) {
@@ -282,6 +288,9 @@ pub fn to_svg(scene: &Scene, opts: &SvgOptions) -> String {
         groups: 0,
     };
     w.header();
+    if !scene.groups.is_empty() {
+        return super::export_groups::layered(w);
+    }
     let items: Vec<(usize, Paint)> = scene
         .shapes
         .iter()
@@ -303,19 +312,19 @@ pub fn to_svg(scene: &Scene, opts: &SvgOptions) -> String {
 }
 
 /// One scene being written.
-struct Writer<'a> {
-    out: String,
-    scene: &'a Scene,
+pub(super) struct Writer<'a> {
+    pub(super) out: String,
+    pub(super) scene: &'a Scene,
     opts: &'a SvgOptions,
     /// Decimals of coordinates.
-    p: usize,
+    pub(super) p: usize,
     /// Colour groups written so far (their ids count up).
     groups: usize,
 }
 
 impl Writer<'_> {
     /// The `<svg>` element and the background rectangle (when the background shows).
-    fn header(&mut self) {
+    pub(super) fn header(&mut self) {
         let (w, h) = (self.scene.width, self.scene.height);
         let out = &mut self.out;
         let _ = write!(

@@ -324,7 +324,17 @@ fn fill_rule(p: &usvg::Path) -> FillRule {
 /// The area `p` adds to a clip path (in user space `ts`): its outline filled by its clip rule,
 /// whatever its paint.
 pub(super) fn clip_shape(p: &usvg::Path, ts: usvg::Transform, shapes: &mut Vec<Shape>) {
-    let subs = subpaths(p.data(), ts);
+    clip_path_shape(p.data(), ts, fill_rule(p), shapes);
+}
+
+/// The clip shape of outline `data` in user space `ts`, filled by `rule`.
+pub(super) fn clip_path_shape(
+    data: &usvg::tiny_skia_path::Path,
+    ts: usvg::Transform,
+    rule: FillRule,
+    shapes: &mut Vec<Shape>,
+) {
+    let subs = subpaths(data, ts);
     if subs.is_empty() {
         return;
     }
@@ -333,7 +343,7 @@ pub(super) fn clip_shape(p: &usvg::Path, ts: usvg::Transform, shapes: &mut Vec<S
         points: closed_points(&subs),
         fill: Some(Rgba::BLACK),
         stroke: None,
-        fill_rule: fill_rule(p),
+        fill_rule: rule,
     });
 }
 

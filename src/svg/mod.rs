@@ -62,6 +62,7 @@
 //!   for the background) it becomes the scene background.
 
 mod export;
+mod export_groups;
 mod file;
 mod guard;
 mod import;

@@ -1,8 +1,8 @@
 //! The walk over usvg's tree: groups become scene [`Group`]s (opacity, clip, mask) where they
 //! need a layer, paths become shapes (see `import`), and what cannot be drawn is warned about.
 
-use super::import::{clip_shape, path_shapes};
-use crate::scene::{Clip, Content, Group, Mask, MaskKind, Point, Rgba, Shape};
+use super::import::{clip_path_shape, clip_shape, path_shapes};
+use crate::scene::{Clip, Content, Group, Mask, MaskKind, Shape};
 use resvg::usvg;
 use usvg::Transform;
 
@@ -152,8 +152,10 @@ impl Walk {
     fn mask(&mut self, m: &usvg::Mask, ts: Transform) -> Mask {
         let mut content = Content::default();
         self.group(m.root(), ts, Mode::Draw, &mut content);
-        let region = rect_shape(m.rect(), ts);
-        if !content.shapes.is_empty() && !self.covers_canvas(&region) {
+        if let Some(region) = rect_shape(m.rect(), ts)
+            && !content.shapes.is_empty()
+            && !self.covers_canvas(&region)
+        {
             let mut g = Group::new(0..content.shapes.len(), 1.0);
             g.clip = Some(Box::new(Clip {
                 content: Content {
@@ -178,10 +180,12 @@ impl Walk {
     fn covers_canvas(&self, s: &Shape) -> bool {
         let (lo, hi) = s.control_bounds();
         let (w, h) = self.canvas;
-        let axis = s
-            .points
-            .iter()
-            .all(|p| (p.x == lo.x || p.x == hi.x) && (p.y == lo.y || p.y == hi.y));
+        // Every point (anchors and the thirds of the edges) on one of the four sides.
+        let on_side = |p: &crate::scene::Point| {
+            let near = |a: f32, b: f32| (a - b).abs() <= 1e-4 * (1.0 + b.abs());
+            near(p.x, lo.x) || near(p.x, hi.x) || near(p.y, lo.y) || near(p.y, hi.y)
+        };
+        let axis = s.points.iter().all(on_side) && s.points.len() == 12;
         axis && lo.x <= 0.0 && lo.y <= 0.0 && hi.x >= w && hi.y >= h
     }
 }
@@ -198,24 +202,10 @@ fn fold_opacity(s: &mut Shape, opacity: f32) -> bool {
     true
 }
 
-/// The rectangle `r` in user space `ts`, as a polygon on the canvas.
-fn rect_shape(r: usvg::NonZeroRect, ts: Transform) -> Shape {
-    let corner = |x: f32, y: f32| {
-        let mut p = usvg::tiny_skia_path::Point::from_xy(x, y);
-        ts.map_point(&mut p);
-        Point::new(p.x, p.y)
-    };
-    let points = vec![
-        corner(r.left(), r.top()),
-        corner(r.right(), r.top()),
-        corner(r.right(), r.bottom()),
-        corner(r.left(), r.bottom()),
-    ];
-    Shape {
-        kind: crate::scene::ShapeKind::Polygon,
-        points,
-        fill: Some(Rgba::BLACK),
-        stroke: None,
-        fill_rule: crate::scene::FillRule::NonZero,
-    }
+/// The rectangle `r` in user space `ts`, as the clip shape of a `<rect>` there.
+fn rect_shape(r: usvg::NonZeroRect, ts: Transform) -> Option<Shape> {
+    let path = usvg::tiny_skia_path::PathBuilder::from_rect(r.to_rect());
+    let mut shapes = Vec::new();
+    clip_path_shape(&path, ts, crate::scene::FillRule::NonZero, &mut shapes);
+    shapes.pop()
 }
