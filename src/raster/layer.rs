@@ -156,31 +156,20 @@ const EMPTY: Clip = Clip {
     y1: 0,
 };
 
-/// The group's factor `m` at canvas pixel `(x, y)`.
-#[inline]
-fn factor<T: Real>(g: &GroupT<T>, width: usize, x: usize, y: usize) -> T {
-    match &g.factor {
-        Some(f) => g.opacity * f[y * width + x],
-        None => g.opacity,
-    }
-}
-
-/// Calls `f(band offset of pixel, m, f)` for every pixel of `clip` (band rows from `y0`).
-fn for_each_px<T: Real>(
+/// The rows of `clip` as (band offset of the row's first pixel, its factor `f` without the
+/// opacity: `None` for 1).
+fn rows<T: Real>(
     g: &GroupT<T>,
     width: usize,
     clip: Clip,
     y0: i32,
-    mut f: impl FnMut(usize, T, T),
-) {
-    for y in clip.y0..clip.y1 {
-        for x in clip.x0..clip.x1 {
-            let (xu, yu) = (x as usize, y as usize);
-            let base = 4 * ((y - y0) as usize * width + xu);
-            let raw = g.factor.as_ref().map_or(T::one(), |v| v[yu * width + xu]);
-            f(base, factor(g, width, xu, yu), raw);
-        }
-    }
+) -> impl Iterator<Item = (usize, Option<&[T]>)> {
+    let (x0, x1) = (clip.x0.max(0) as usize, clip.x1.max(0) as usize);
+    (clip.y0..clip.y1).map(move |y| {
+        let base = 4 * ((y - y0) as usize * width + x0);
+        let row = y as usize * width;
+        (base, g.factor.as_ref().map(|f| &f[row + x0..row + x1]))
+    })
 }
 
 /// [`super::engine`]'s band painter for a scene with groups.
@@ -207,9 +196,10 @@ pub(crate) fn forward_band<T: Real>(
                 let clip = box_clip(boxes[gi], y0, y1).unwrap_or(EMPTY);
                 let mut buf = spare.pop().unwrap_or_default();
                 buf.resize(img.len(), T::zero());
-                for_each_px(&sc.groups[gi], w, clip, y0, |i, _, _| {
-                    buf[i..i + 4].fill(T::zero())
-                });
+                let cw = 4 * (clip.x1 - clip.x0).max(0) as usize;
+                for (base, _) in rows(&sc.groups[gi], w, clip, y0) {
+                    buf[base..base + cw].fill(T::zero());
+                }
                 stack.push(buf);
                 if let Some(t) = tape.as_deref_mut() {
                     let kind = RecKind::Push;
@@ -225,17 +215,16 @@ pub(crate) fn forward_band<T: Real>(
                     t.recs.push(Rec { kind, layer: gi as u32, clip, offset });
                 }
                 let mut rec = tape.as_deref_mut().map(|t| &mut t.group);
-                for_each_px(&sc.groups[gi], w, clip, y0, |i, m, _| {
-                    let (p, g) = (&mut below[i..i + 4], &buf[i..i + 4]);
+                let group = &sc.groups[gi];
+                let cw = 4 * (clip.x1 - clip.x0).max(0) as usize;
+                for (base, f) in rows(group, w, clip, y0) {
+                    let (p, g) = (&mut below[base..base + cw], &buf[base..base + cw]);
                     if let Some(r) = rec.as_deref_mut() {
                         r.extend_from_slice(p);
                         r.extend_from_slice(g);
                     }
-                    let keep = T::one() - m * g[3];
-                    for c in 0..4 {
-                        p[c] = p[c] * keep + m * g[c];
-                    }
-                });
+                    composite_row(p, g, group.opacity, f);
+                }
                 spare.push(buf);
             }
         }
@@ -264,23 +253,16 @@ pub(crate) fn backward_band<T: Real>(
             RecKind::Pop => {
                 let mut inner = spare.pop().unwrap_or_default();
                 inner.resize(g.len(), T::zero());
+                let group = &sc.groups[gi];
+                let cw = 4 * (rec.clip.x1 - rec.clip.x0).max(0) as usize;
                 let mut k = rec.offset;
                 let mut dop = T::zero();
-                for_each_px(&sc.groups[gi], w, rec.clip, y0, |i, m, f| {
-                    let (p, gl) = (&tape.group[k..k + 4], &tape.group[k + 4..k + 8]);
-                    k += 8;
-                    let go = &mut g[i..i + 4];
-                    let (mut dm, mut gp) = (T::zero(), T::zero());
-                    for c in 0..4 {
-                        dm += go[c] * (gl[c] - gl[3] * p[c]);
-                        gp += go[c] * p[c];
-                        inner[i + c] = m * go[c];
-                    }
-                    inner[i + 3] -= m * gp;
-                    dop += dm * f;
-                    let keep = T::one() - m * gl[3];
-                    go.iter_mut().for_each(|v| *v *= keep);
-                });
+                for (base, f) in rows(group, w, rec.clip, y0) {
+                    let (p, gl) = (&tape.group[k..k + cw], &tape.group[k + cw..k + 2 * cw]);
+                    k += 2 * cw;
+                    let grads = (&mut g[base..base + cw], &mut inner[base..base + cw]);
+                    dop += composite_row_backward(p, gl, group.opacity, f, grads);
+                }
                 out.dopacity[gi] += dop;
                 stack.push(std::mem::replace(g, inner));
             }
@@ -291,4 +273,48 @@ pub(crate) fn backward_band<T: Real>(
             }
         }
     }
+}
+
+/// `p = p (1 - m g.a) + m g` over one row, `m = opacity × f` per pixel.
+fn composite_row<T: Real>(p: &mut [T], g: &[T], opacity: T, f: Option<&[T]>) {
+    for (i, (pp, gp)) in p.chunks_exact_mut(4).zip(g.chunks_exact(4)).enumerate() {
+        if gp[3] == T::zero() {
+            continue;
+        }
+        let m = f.map_or(opacity, |f| opacity * f[i]);
+        let keep = T::one() - m * gp[3];
+        for c in 0..4 {
+            pp[c] = pp[c] * keep + m * gp[c];
+        }
+    }
+}
+
+/// Backward of [`composite_row`] given what lay below (`p`) and the group's layer (`gl`):
+/// `go` (the gradient of the result) becomes the gradient of `p`, `inner` is set to the
+/// gradient of the layer; returns the gradient of the opacity.
+fn composite_row_backward<T: Real>(
+    p: &[T],
+    gl: &[T],
+    opacity: T,
+    f: Option<&[T]>,
+    (go, inner): (&mut [T], &mut [T]),
+) -> T {
+    let mut dop = T::zero();
+    let px = p.chunks_exact(4).zip(gl.chunks_exact(4));
+    let grads = go.chunks_exact_mut(4).zip(inner.chunks_exact_mut(4));
+    for (i, ((p, gl), (go, gi))) in px.zip(grads).enumerate() {
+        let fi = f.map_or(T::one(), |f| f[i]);
+        let m = opacity * fi;
+        let (mut dm, mut gp) = (T::zero(), T::zero());
+        for c in 0..4 {
+            dm += go[c] * (gl[c] - gl[3] * p[c]);
+            gp += go[c] * p[c];
+            gi[c] = m * go[c];
+        }
+        gi[3] -= m * gp;
+        dop += dm * fi;
+        let keep = T::one() - m * gl[3];
+        go.iter_mut().for_each(|v| *v *= keep);
+    }
+    dop
 }
