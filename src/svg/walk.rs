@@ -73,11 +73,19 @@ impl Walk {
         }
     }
 
-    /// Adds what `g` draws to `out`. `base` maps the content root's coordinates to the canvas
-    /// (usvg's absolute transforms inside a clip path or mask start at their root).
-    pub(super) fn group(&mut self, g: &usvg::Group, base: Transform, mode: Mode, out: &mut Content) {
+    /// Adds what `g` draws to `out`. `parent` maps the user space of `g`'s parent to the canvas.
+    /// Transforms are chained here as resvg draws them (usvg's `abs_transform` of a `<use>`
+    /// group leaves out the group's own transform, and inside a clip path or mask it starts at
+    /// the content's root).
+    pub(super) fn group(
+        &mut self,
+        g: &usvg::Group,
+        parent: Transform,
+        mode: Mode,
+        out: &mut Content,
+    ) {
         self.unsupported(g);
-        let ts = base.pre_concat(g.abs_transform());
+        let ts = parent.pre_concat(g.transform());
         let opacity = match mode {
             Mode::Draw => g.opacity().get(),
             Mode::Clip => 1.0,
@@ -95,7 +103,7 @@ impl Walk {
         }
         for node in g.children() {
             match node {
-                usvg::Node::Group(child) => self.group(child, base, mode, out),
+                usvg::Node::Group(child) => self.group(child, ts, mode, out),
                 usvg::Node::Path(p) if p.is_visible() => match mode {
                     Mode::Draw => path_shapes(p, ts, 1.0, &mut out.shapes),
                     Mode::Clip => clip_shape(p, ts, &mut out.shapes),
@@ -109,7 +117,7 @@ impl Walk {
                         format!("<image> #{id} ignored (images are not drawn)")
                     });
                 }
-                usvg::Node::Text(t) => self.group(t.flattened(), base, mode, out),
+                usvg::Node::Text(t) => self.group(t.flattened(), ts, mode, out),
             }
         }
         if !layered {
