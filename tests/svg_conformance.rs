@@ -91,7 +91,12 @@ fn clips_masks_opacity_even_odd_and_viewports_render_as_resvg() {
     for (name, body) in CASES {
         let text = doc(100, 80, body);
         let scene = import(name, &text);
-        compare(name, &raster::render(&scene), &resvg_render(&text), &Tolerance::SUITE);
+        compare(
+            name,
+            &raster::render(&scene),
+            &resvg_render(&text),
+            &Tolerance::SUITE,
+        );
     }
 }
 
@@ -106,10 +111,18 @@ fn the_features_are_kept_in_the_scene() {
     assert!(c.clip.is_some(), "nested clip path kept");
     assert_eq!(c.content.shapes[0].fill_rule, scene::FillRule::EvenOdd);
     let mask = count("mask_luminance_alpha_nested");
-    let kinds: Vec<_> = mask.groups.iter().map(|g| g.mask.as_ref().unwrap().kind).collect();
+    let kinds: Vec<_> = mask
+        .groups
+        .iter()
+        .map(|g| g.mask.as_ref().unwrap().kind)
+        .collect();
     assert!(kinds.contains(&scene::MaskKind::Alpha) && kinds.contains(&scene::MaskKind::Luminance));
     let eo = count("even_odd_self_intersecting");
-    assert!(eo.shapes.iter().all(|s| s.fill_rule == scene::FillRule::EvenOdd));
+    assert!(
+        eo.shapes
+            .iter()
+            .all(|s| s.fill_rule == scene::FillRule::EvenOdd)
+    );
     let op = count("group_opacity_overlaps");
     assert_eq!(op.groups.len(), 3, "{:?}", op.groups);
 }
@@ -117,7 +130,10 @@ fn the_features_are_kept_in_the_scene() {
 /// Points, colours and opacities equal within what the export's decimals keep; the structure
 /// (kinds, fill rules, groups, clips, masks) equal exactly.
 fn same_scene(a: &Scene, b: &Scene) -> Result<(), String> {
-    let (ja, jb) = (serde_json::to_value(a).unwrap(), serde_json::to_value(b).unwrap());
+    let (ja, jb) = (
+        serde_json::to_value(a).unwrap(),
+        serde_json::to_value(b).unwrap(),
+    );
     same_json(&ja, &jb, "scene")
 }
 

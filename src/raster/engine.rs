@@ -384,7 +384,11 @@ pub(crate) fn backward_layer<T: Real>(
             dc[1] += gp[1] * alpha;
             dc[2] += gp[2] * alpha;
             dc[3] += galpha * cov;
-            let slope = if fill { coverage_slope(a, eo) } else { T::one() };
+            let slope = if fill {
+                coverage_slope(a, eo)
+            } else {
+                T::one()
+            };
             let v = galpha * ca * slope;
             any |= v != T::zero();
             *gbv = v;
@@ -404,7 +408,8 @@ pub(crate) fn backward_layer<T: Real>(
             dp.resize(l.poly.len(), [T::zero(); 2]);
         }
         let (poly, closed, style) = (&l.poly, l.closed, l.style);
-        out.dradius[li] += stroke::backward(poly, closed, l.radius, style, clip, gb, dp, &mut st.stroke);
+        out.dradius[li] +=
+            stroke::backward(poly, closed, l.radius, style, clip, gb, dp, &mut st.stroke);
     } else if any {
         let dv = &mut out.dverts[li];
         if dv.is_empty() {

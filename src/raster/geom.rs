@@ -8,8 +8,8 @@
 //! - A stroke layer keeps the polyline and half-width; its coverage comes from the distance to
 //!   the polyline (see `stroke`).
 
-use super::real::Real;
 use super::layer::GroupT;
+use super::real::Real;
 use super::stroke::Style;
 use crate::scene::{FillRule, Rgba, Scene, ShapeKind, Stroke};
 

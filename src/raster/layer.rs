@@ -190,7 +190,15 @@ pub(crate) fn forward_band<T: Real>(
         match op {
             Op::Paint(li) => {
                 let top = stack.last_mut().map_or(&mut *img, |b| &mut b[..]);
-                paint_layer(sc.width, li, &ls[li], (y0, y1), top, tape.as_deref_mut(), st);
+                paint_layer(
+                    sc.width,
+                    li,
+                    &ls[li],
+                    (y0, y1),
+                    top,
+                    tape.as_deref_mut(),
+                    st,
+                );
             }
             Op::Push(gi) => {
                 let clip = box_clip(boxes[gi], y0, y1).unwrap_or(EMPTY);
@@ -203,7 +211,12 @@ pub(crate) fn forward_band<T: Real>(
                 stack.push(buf);
                 if let Some(t) = tape.as_deref_mut() {
                     let kind = RecKind::Push;
-                    t.recs.push(Rec { kind, layer: gi as u32, clip, offset: 0 });
+                    t.recs.push(Rec {
+                        kind,
+                        layer: gi as u32,
+                        clip,
+                        offset: 0,
+                    });
                 }
             }
             Op::Pop(gi) => {
@@ -212,7 +225,12 @@ pub(crate) fn forward_band<T: Real>(
                 let below = stack.last_mut().map_or(&mut *img, |b| &mut b[..]);
                 if let Some(t) = tape.as_deref_mut() {
                     let (kind, offset) = (RecKind::Pop, t.group.len());
-                    t.recs.push(Rec { kind, layer: gi as u32, clip, offset });
+                    t.recs.push(Rec {
+                        kind,
+                        layer: gi as u32,
+                        clip,
+                        offset,
+                    });
                 }
                 let mut rec = tape.as_deref_mut().map(|t| &mut t.group);
                 let group = &sc.groups[gi];

@@ -62,7 +62,11 @@ fn even_odd_leaves_doubly_wound_areas_empty() {
         q.x += 0.5;
     }
     let im = render(&one(half));
-    assert!((im.pixel(5, 8)[3] - 0.5).abs() < 1e-5, "{:?}", im.pixel(5, 8));
+    assert!(
+        (im.pixel(5, 8)[3] - 0.5).abs() < 1e-5,
+        "{:?}",
+        im.pixel(5, 8)
+    );
     let total: f32 = eo.data.chunks(4).map(|p| p[3]).sum();
     assert!((total - (144.0 - 36.0)).abs() < 1e-3, "{total}");
 }
@@ -78,9 +82,15 @@ fn group_opacity_composites_the_children_as_one_layer() {
     let im = render(&s);
     // The overlap shows the blue square at half strength over white, no red through it.
     let p = im.pixel(8, 8);
-    assert!((p[0] - 0.5).abs() < 1e-6 && (p[2] - 1.0).abs() < 1e-6, "{p:?}");
+    assert!(
+        (p[0] - 0.5).abs() < 1e-6 && (p[2] - 1.0).abs() < 1e-6,
+        "{p:?}"
+    );
     let p = im.pixel(3, 3);
-    assert!((p[0] - 1.0).abs() < 1e-6 && (p[1] - 0.5).abs() < 1e-6, "{p:?}");
+    assert!(
+        (p[0] - 1.0).abs() < 1e-6 && (p[1] - 0.5).abs() < 1e-6,
+        "{p:?}"
+    );
 }
 
 #[test]
@@ -90,7 +100,9 @@ fn clips_and_masks_multiply_the_layer() {
         .push(Shape::square(0.0, 0.0, 16.0, Rgba::BLACK).unwrap());
     let mut g = Group::new(0..1, 1.0);
     // Clip: the left half, intersected with (nested clip) the top half.
-    g.clip = Some(clip(vec![Shape::square(0.0, 0.0, 8.0, Rgba::BLACK).unwrap()]));
+    g.clip = Some(clip(vec![
+        Shape::square(0.0, 0.0, 8.0, Rgba::BLACK).unwrap(),
+    ]));
     g.clip.as_mut().unwrap().content.shapes[0].points[1].x = 8.0;
     let mut c = g.clip.take().unwrap();
     c.clip = Some(clip(vec![
@@ -159,7 +171,9 @@ fn layered_scene(seed: u64) -> Scene {
     let mut alpha = Group::new(2..3, 0.8);
     alpha.mask = Some(Box::new(Mask {
         kind: MaskKind::Alpha,
-        content: content(vec![Shape::circle(12.0, 9.0, 7.0, 3, rgba(&mut rng)).unwrap()]),
+        content: content(vec![
+            Shape::circle(12.0, 9.0, 7.0, 3, rgba(&mut rng)).unwrap(),
+        ]),
         mask: None,
     }));
     s.groups = vec![outer, clipped, alpha, Group::new(5..8, 0.5)];
@@ -183,7 +197,10 @@ fn layered_gradients_match_finite_differences() {
         let d = vec![1.0f32; 4 * (s.width * s.height) as usize];
         let g = backward(&s, &tape, &d);
         assert_eq!(g.get(ParamGroup::Opacity).len(), 4);
-        assert!(g.get(ParamGroup::Opacity).iter().all(|v| *v != 0.0), "{g:?}");
+        assert!(
+            g.get(ParamGroup::Opacity).iter().all(|v| *v != 0.0),
+            "{g:?}"
+        );
     }
 }
 

@@ -101,7 +101,8 @@ impl Content {
 
     fn validate(&self, what: &str) -> Result<(), SceneError> {
         for (i, s) in self.shapes.iter().enumerate() {
-            s.validate(i).map_err(|e| SceneError::Group(format!("{what}: {e}")))?;
+            s.validate(i)
+                .map_err(|e| SceneError::Group(format!("{what}: {e}")))?;
         }
         validate_groups(&self.groups, self.shapes.len())
             .map_err(|e| SceneError::Group(format!("{what}: {e}")))
@@ -186,7 +187,10 @@ pub(crate) fn validate_groups(groups: &[Group], n: usize) -> Result<(), SceneErr
     let mut prev_start = 0;
     for (i, g) in groups.iter().enumerate() {
         if !(g.start < g.end && g.end <= n) {
-            return err(i, &format!("range {}..{} is empty or past {n}", g.start, g.end));
+            return err(
+                i,
+                &format!("range {}..{} is empty or past {n}", g.start, g.end),
+            );
         }
         if g.start < prev_start {
             return err(i, "groups must be sorted by their first shape");
@@ -231,7 +235,11 @@ mod tests {
     #[test]
     fn ranges_must_nest_and_be_sorted() {
         let mut s = scene(4);
-        s.groups = vec![Group::new(0..4, 0.5), Group::new(0..2, 1.0), Group::new(2..3, 0.2)];
+        s.groups = vec![
+            Group::new(0..4, 0.5),
+            Group::new(0..2, 1.0),
+            Group::new(2..3, 0.2),
+        ];
         assert_eq!(s.validate(), Ok(()));
         s.groups = vec![Group::new(0..2, 0.5), Group::new(1..3, 1.0)];
         assert!(s.validate().is_err(), "crossing ranges");

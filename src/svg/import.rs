@@ -376,7 +376,12 @@ pub fn import_svg(text: &str) -> Result<SvgImport, SvgError> {
         walk.warn(w);
     }
     let mut content = Content::default();
-    walk.group(tree.root(), usvg::Transform::identity(), Mode::Draw, &mut content);
+    walk.group(
+        tree.root(),
+        usvg::Transform::identity(),
+        Mode::Draw,
+        &mut content,
+    );
     let warnings = walk.finish();
     let Content {
         mut shapes,

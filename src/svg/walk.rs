@@ -148,7 +148,12 @@ impl Walk {
     /// clip path on it.
     fn clip(&mut self, c: &usvg::ClipPath, ts: Transform) -> Clip {
         let mut content = Content::default();
-        self.group(c.root(), ts.pre_concat(c.transform()), Mode::Clip, &mut content);
+        self.group(
+            c.root(),
+            ts.pre_concat(c.transform()),
+            Mode::Clip,
+            &mut content,
+        );
         Clip {
             content,
             clip: c.clip_path().map(|inner| Box::new(self.clip(inner, ts))),

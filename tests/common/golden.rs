@@ -116,4 +116,3 @@ pub fn write_diff(name: &str, ours: &Image, theirs: &Image) -> String {
     out.save_png(&path).unwrap();
     path.display().to_string()
 }
-
