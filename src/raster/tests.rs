@@ -164,24 +164,28 @@ pub(super) fn random_scene(seed: u64) -> Scene {
     s
 }
 
+/// [`fd_check`] on `scene`, failing when more than 1 in 50 parameters disagree. Central
+/// differences straddle the kinks of the coverage (`min(|A|, 1)`, the even-odd fold) and of the
+/// stroke profile in a handful of parameters; everything else must agree to 1e-3 relative.
+pub(super) fn assert_fd(scene: &Scene, seed: u64) {
+    let (checked, bad) = fd_check(scene, seed);
+    assert!(
+        bad.len() * 50 <= checked,
+        "seed {seed}: {} of {checked} mismatched:\n{}",
+        bad.len(),
+        bad.join("\n")
+    );
+    eprintln!(
+        "seed {seed}: {checked} params, {} kink mismatches {:?}",
+        bad.len(),
+        bad
+    );
+}
+
 #[test]
 fn gradients_match_finite_differences_on_random_scenes() {
     for seed in 0..4 {
-        let s = random_scene(seed);
-        let (checked, bad) = fd_check(&s, 100 + seed);
-        // Central differences straddle the kinks of min(|A|, 1) and of the stroke profile in
-        // a handful of parameters; everything else must agree to 1e-3 relative.
-        assert!(
-            bad.len() * 50 <= checked,
-            "seed {seed}: {} of {checked} mismatched:\n{}",
-            bad.len(),
-            bad.join("\n")
-        );
-        eprintln!(
-            "seed {seed}: {checked} params, {} kink mismatches {:?}",
-            bad.len(),
-            bad
-        );
+        assert_fd(&random_scene(seed), 100 + seed);
     }
 }
 
