@@ -1,5 +1,6 @@
-//! Differentiable CPU rasteriser: exact-area anti-aliasing, nonzero fill, round-capped strokes,
-//! premultiplied source-over compositing in `f32`, and an exact backward pass.
+//! Differentiable CPU rasteriser: exact-area anti-aliasing, nonzero and even-odd fills, strokes,
+//! groups as layers (opacity, clip, mask), premultiplied source-over compositing in `f32`, and an
+//! exact backward pass.
 //!
 //! # Model (what is rendered)
 //! - Cubic segments are flattened at fixed parameters `t = k/n`; `n` per segment comes from
@@ -8,19 +9,25 @@
 //! - Coverage of a pixel is `min(|A|, 1)` where `A` is the exact integral of the winding number
 //!   over the pixel square (box filter). For non-overlapping outlines this is the exact
 //!   area coverage and equals the nonzero rule; where an outline overlaps itself it saturates.
+//!   An even-odd fill's coverage is the distance from `A` to the nearest even integer (0 where
+//!   the winding is even, 1 where odd, exact wherever a pixel is crossed by one edge).
 //! - A round-capped, round-joined stroke is the union of one capsule per polyline edge
 //!   ([`crate::svg::to_svg`] writes `stroke-linecap="round" stroke-linejoin="round"` so other
 //!   renderers agree); butt and square caps and miter (with its limit) and bevel joins are
 //!   drawn as SVG draws them, as a union of per-edge pieces (see `stroke`).
 //! - Per shape the fill is painted first, then the stroke. `alpha = coverage * colour.a`,
 //!   `out = colour.rgb * alpha + below * (1 - alpha)` (premultiplied), over the background.
+//! - A scene's groups ([`crate::scene::Group`]) paint their shapes onto a transparent layer,
+//!   composited with `opacity × clip × mask` per pixel (see `layer`); a flat scene takes the
+//!   same path as before, untouched.
 //!
 //! # Backward
 //! [`backward`] is the exact derivative of the forward function above (up to the measure-zero
 //! kinks of `min(|A|, 1)`): the compositing is differentiated pixel by pixel top-down, the
 //! coverage integral by Reynolds transport along each edge (see `walk`), then the chain rule
 //! goes through the stroke outline and the Bernstein weights of the flattening to the control
-//! points. Every group of [`Params`] gets gradients. Edge lengths in the stroke normal are
+//! points. Every group of [`Params`] gets gradients, group opacities included (clip and mask
+//! content is not a parameter: it is drawn once per pass and held constant). Edge lengths in the stroke normal are
 //! smoothed (`sqrt(|d|² + 1e-6)`) so degenerate paths give finite gradients.
 //!
 //! # Invariants and failure
@@ -102,7 +109,10 @@ impl Drop for Tape {
             pool.extend(
                 self.bands
                     .drain(..)
-                    .filter(|b| b.area.capacity() + b.dst.capacity() <= POOL_BAND_MAX_FLOATS)
+                    .filter(|b| {
+                        b.area.capacity() + b.dst.capacity() + b.group.capacity()
+                            <= POOL_BAND_MAX_FLOATS
+                    })
                     .take(room),
             );
         }

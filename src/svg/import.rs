@@ -36,7 +36,7 @@ impl SubPath {
     }
 }
 
-/// The subpaths of `data` mapped through `ts` (its path's parent group's absolute transform).
+/// The subpaths of `data` mapped through `ts` (the user space of the path's parent group).
 fn subpaths(data: &usvg::tiny_skia_path::Path, ts: usvg::Transform) -> Vec<SubPath> {
     let map = |p: usvg::tiny_skia_path::Point| {
         let mut q = p;

@@ -27,7 +27,9 @@
 //!   `<g fill="…">`; [`SvgOptions::ids`]: `id="p<k>"` on paths (shape index + 1) and
 //!   `id="c<k>"` on colour groups.
 //!
-//! The background becomes a full-canvas `<rect>` first when it is not fully transparent.
+//! The background becomes a full-canvas `<rect>` first when it is not fully transparent. A scene
+//! with groups is written by `export_groups` (`<g opacity clip-path mask>`, `<clipPath>` and
+//! `<mask>` in `<defs>` with ids `clip<k>`/`mask<k>`); even-odd fills get `fill-rule="evenodd"`.
 //! [`crate::vector::export::compact_svg`] picks the fewest decimals that still render the same.
 //!
 //! # Import ([`from_svg`], [`import_svg`] with warnings; in `import.rs`)
@@ -35,16 +37,14 @@
 //! `<use>`, groups and transforms are normalised by `usvg` (after the guard, which breaks
 //! reference cycles and drops entity texts that refer to entities, with a warning each); we then
 //! walk its path tree:
-//! - every point is mapped through its group's absolute transform (a root `background-color`
+//! - every point is mapped through its groups' chained transforms (a root `background-color`
 //!   lands on the canvas whatever the viewBox origin); stroke widths are scaled by `sqrt(|det|)`
 //!   of that transform;
 //! - lines and quadratics are converted to (exactly equivalent) cubics;
 //! - **fill**: all subpaths of one `<path>` become ONE [`ShapeKind::ClosedCubic`] shape. Extra
 //!   subpaths are joined to the first one by straight "bridge" segments that are walked there and
-//!   back, so they cancel in the winding number and holes survive exactly under the nonzero rule.
-//!   For `fill-rule="evenodd"` subpaths are re-oriented by nesting depth (odd depth reversed)
-//!   first, which reproduces even-odd for properly nested outlines (the usual case: glyphs,
-//!   donuts); self-overlapping even-odd paths are approximated by nonzero.
+//!   back, so they cancel in the winding number and holes survive exactly; `fill-rule` is kept
+//!   on the shape ([`crate::scene::FillRule`], drawn exactly by the rasteriser).
 //! - **stroke**: a path with a single subpath keeps its stroke on the same shape (closed subpath)
 //!   or becomes an [`ShapeKind::OpenCubic`] (open subpath, no fill). With several subpaths, each
 //!   subpath gets its own stroke shape (closed ones get a transparent fill) painted after the fill.
@@ -53,11 +53,17 @@
 //!   (skew, unequal scales) a stroke has no single width: its outline (dashes, caps and joins
 //!   included, computed by tiny-skia's stroker in the path's own units) is mapped through the
 //!   transform and filled in the stroke's colour.
+//! - **groups**: a group with an opacity below 1, a `clip-path` or a `mask` becomes a
+//!   [`crate::scene::Group`] over the range of shapes its children became (one shape painting one
+//!   layer takes the opacity itself instead). Clip paths (their children by `clip-rule`, a
+//!   `clip-path` on a `<clipPath>` or on its children) and masks (luminance or alpha, a `mask` on
+//!   a `<mask>`, the mask region as a clip when it does not cover the canvas) are kept with their
+//!   units resolved in canvas pixels; nested `<svg>` and `<symbol>` viewports are the clip paths
+//!   usvg gives them. Transforms are chained group by group as resvg draws them.
 //! - gradients and patterns are replaced by the average colour of their stops (patterns: grey);
-//!   group opacity is multiplied into the shape opacities (exact unless children overlap);
-//!   images, text without fonts, clip paths, masks and filters are ignored, each with a warning
-//!   naming the element (`filter on #id ignored …`; at most 16, then a count): the content is
-//!   drawn as it is, unfiltered, unclipped, unmasked.
+//!   images, text without fonts and filters are ignored, each with a warning naming the element
+//!   (`filter on #id ignored …`; at most 16, then a count): the content is drawn as it is,
+//!   unfiltered.
 //! - if the first shape is a filled rectangle covering the whole canvas (what [`to_svg`] writes
 //!   for the background) it becomes the scene background.
 
