@@ -398,7 +398,7 @@ fn finish(scene: &mut Scene, plan: &TextPlan, report: &mut RunReport) {
         let weak = weak_paths(scene, MIN_OPACITY, min_area_at(plan.size));
         if weak.len() < scene.shapes.len() {
             for &i in weak.iter().rev() {
-                scene.shapes.remove(i);
+                scene.remove_shape(i);
             }
             pruned = weak.len();
         }

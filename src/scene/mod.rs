@@ -464,6 +464,20 @@ impl Scene {
         }
     }
 
+    /// Removes shape `i` (if there is one), keeping every group on the shapes it had; a group
+    /// left without shapes is dropped.
+    pub fn remove_shape(&mut self, i: usize) {
+        if i >= self.shapes.len() {
+            return;
+        }
+        self.shapes.remove(i);
+        for g in &mut self.groups {
+            g.start -= (g.start > i) as usize;
+            g.end -= (g.end > i) as usize;
+        }
+        self.groups.retain(|g| g.start < g.end);
+    }
+
     /// Total number of control points over all shapes.
     pub fn num_points(&self) -> usize {
         self.shapes.iter().map(|s| s.points.len()).sum()
@@ -494,6 +508,25 @@ mod tests {
         assert!(Shape::closed_cubic(p, Rgba::new(1.5, 0.0, 0.0, 1.0)).is_err());
         assert!(Scene::new(0, 10, Rgba::WHITE).is_err());
         assert!(Scene::new(10, MAX_SIDE + 1, Rgba::WHITE).is_err());
+    }
+
+    #[test]
+    fn removing_a_shape_keeps_the_groups_on_theirs() {
+        let mut s = Scene::new(8, 8, Rgba::WHITE).unwrap();
+        for i in 0..4 {
+            s.shapes
+                .push(Shape::square(i as f32, 0.0, 1.0, Rgba::BLACK).unwrap());
+        }
+        s.groups = vec![
+            Group::new(0..3, 0.5),
+            Group::new(1..2, 0.5),
+            Group::new(3..4, 1.0),
+        ];
+        s.validate().unwrap();
+        s.remove_shape(1);
+        assert_eq!(s.groups, vec![Group::new(0..2, 0.5), Group::new(2..3, 1.0)]);
+        assert_eq!(s.validate(), Ok(()));
+        assert_eq!(s.shapes[1].points[0].x, 2.0);
     }
 
     #[test]
