@@ -321,6 +321,11 @@ fn render_is_deterministic_and_independent_of_thread_count() {
         .unwrap();
     let b = pool.install(|| render(&s));
     assert_eq!(a, render(&s));
+    assert_same_image(&a, &b);
+}
+
+/// Fails unless `a` and `b` agree to 1e-5 in every channel.
+pub(super) fn assert_same_image(a: &Image, b: &Image) {
     let max = a
         .data
         .iter()
