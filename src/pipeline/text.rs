@@ -27,7 +27,7 @@ use crate::retrieval::Hit;
 use crate::scene::Scene;
 use crate::stages::live;
 use crate::stages::live::prune::weak_paths;
-use crate::stages::sample::{Ranked, RetrievalPick, retrieved_count, sample_and_rerank};
+use crate::stages::sample::{NoStarts, Ranked, RetrievalPick, retrieved_count, sample_and_rerank};
 use crate::stages::sds::{RasterBackend, SdsCheckpoint, SdsState, run_sds_resumable};
 use crate::stages::styles::SampleStart;
 use crate::teacher::SampleConfig;
@@ -130,22 +130,18 @@ pub fn sample_ranked(
     let sp = plan.sample.as_ref().ok_or_else(no_sample_plan)?;
     let n = retrieved_count(sp.samples, sp.retrieval_share);
     let retrieval = if !sp.retrieval {
-        Err("turned off".to_string())
+        Err(&NoStarts::Off)
     } else if n == 0 {
-        Err("the model's _retrieval_share is 0".to_string())
+        Err(&NoStarts::NoShare)
     } else {
-        models
-            .retrieval
-            .as_deref()
-            .map(|i| {
-                let pick = RetrievalPick {
-                    n,
-                    per_caption: sp.retrieval_per_caption as usize,
-                    seed: plan.seeds.sample,
-                };
-                (i, pick)
-            })
-            .map_err(Clone::clone)
+        models.retrieval.as_deref().map(|i| {
+            let pick = RetrievalPick {
+                n,
+                per_caption: sp.retrieval_per_caption as usize,
+                seed: plan.seeds.sample,
+            };
+            (i, pick)
+        })
     };
     let cfg = SampleConfig {
         k: sp.samples,

@@ -9,8 +9,29 @@ use crate::image::Image;
 use crate::models::scorer::{ImageTextScorer, Scorer};
 use crate::progress::{CancelToken, ProgressSink};
 use crate::retrieval::install::CAPTION_TOKENS;
-use crate::retrieval::{Hit, IconIndex};
-use crate::teacher::{SampleConfig, SampleError, Teacher};
+use crate::retrieval::{Hit, IconIndex, RetrievalError};
+use crate::teacher::{SampleConfig, SampleError, Teacher, TeacherError};
+
+/// Why a run starts from no retrieved icon (reported as the retrieval's `unavailable`).
+#[derive(Debug, thiserror::Error)]
+pub enum NoStarts {
+    #[error("turned off")]
+    Off,
+    #[error("the model's _retrieval_share is 0")]
+    NoShare,
+    #[error("the model pins no icon sets")]
+    NoIconSets,
+    #[error("the test teacher has no retrieval index")]
+    TestTeacher,
+    #[error("the model's text encoder is not the index's MiniLM")]
+    NotMiniLm,
+    #[error("the retrieved icons are square and the sample is {w}x{h}")]
+    NotSquare { w: u32, h: u32 },
+    #[error("text embedding: {0}")]
+    Embedding(#[source] TeacherError),
+    #[error(transparent)]
+    Retrieval(#[from] RetrievalError),
+}
 
 /// How many of the K samples start from retrieved images: `share` of them, rounded up (share
 /// 0.5: one of two, two of four), at most K. `share` outside `0..=1` (or NaN) is clamped to it.
@@ -84,41 +105,38 @@ pub fn retrieve(
     index: &IconIndex,
     caption: &str,
     pick: RetrievalPick,
-) -> Result<Vec<(Hit, Image)>, String> {
+) -> Result<Vec<(Hit, Image)>, NoStarts> {
     let q = teacher
         .caption_embedding(caption, CAPTION_TOKENS)
-        .map_err(|e| e.to_string())?
-        .ok_or("the model's text encoder is not the index's MiniLM")?;
+        .map_err(NoStarts::Embedding)?
+        .ok_or(NoStarts::NotMiniLm)?;
     let (w, h) = teacher.image_dims();
     if w != h {
-        return Err(format!(
-            "the retrieved icons are square and the sample is {w}x{h}"
-        ));
+        return Err(NoStarts::NotSquare { w, h });
     }
-    let hits = index
-        .nearest(&q, pick.n, pick.per_caption, pick.seed)
-        .map_err(|e| e.to_string())?;
+    let hits = index.nearest(&q, pick.n, pick.per_caption, pick.seed)?;
     let images = render_hits(index, &hits, teacher.image_size())?;
     Ok(hits.into_iter().zip(images).collect())
 }
 
 /// The icons of `hits` rendered at `side` px.
-pub fn render_hits(index: &IconIndex, hits: &[Hit], side: u32) -> Result<Vec<Image>, String> {
-    hits.iter()
-        .map(|h| index.render(&h.icon, side).map_err(|e| e.to_string()))
-        .collect()
+pub fn render_hits(
+    index: &IconIndex,
+    hits: &[Hit],
+    side: u32,
+) -> Result<Vec<Image>, RetrievalError> {
+    hits.iter().map(|h| index.render(&h.icon, side)).collect()
 }
 
 /// The starts of the retrieved samples: the caption's nearest icons, or as `steer` says
 /// ([`steered_starts`]; steering fills `report`).
 fn starts(
     teacher: &dyn Teacher,
-    retrieval: Result<(&IconIndex, RetrievalPick), String>,
+    (index, pick): (&IconIndex, RetrievalPick),
     caption: &str,
     steer: Option<&CaptionPlan>,
     report: &mut Option<CaptionReport>,
-) -> Result<Vec<(Hit, Image)>, String> {
-    let (index, pick) = retrieval?;
+) -> Result<Vec<(Hit, Image)>, NoStarts> {
     match (steer, report.as_mut()) {
         (Some(plan), Some(r)) if plan.steer >= ColourSteer::Start => {
             steered_starts(teacher, index, caption, plan, pick, r)
@@ -137,7 +155,7 @@ fn starts(
 pub fn sample_and_rerank(
     teacher: &dyn Teacher,
     scorer: Option<&Scorer>,
-    retrieval: Result<(&IconIndex, RetrievalPick), String>,
+    retrieval: Result<(&IconIndex, RetrievalPick), &NoStarts>,
     prompt: &str,
     caption: &str,
     steer: Option<&CaptionPlan>,
@@ -146,9 +164,11 @@ pub fn sample_and_rerank(
     cancel: &CancelToken,
 ) -> Result<(Ranked, Option<String>), SampleError> {
     let mut report = steer.map(|p| CaptionReport::of(p, retrieval.is_ok()));
-    let (hits, why_not) = match starts(teacher, retrieval, caption, steer, &mut report) {
-        Ok(h) => (h, None),
-        Err(e) => (Vec::new(), Some(e)),
+    let found = retrieval.map(|r| starts(teacher, r, caption, steer, &mut report));
+    let (hits, why_not) = match found {
+        Ok(Ok(h)) => (h, None),
+        Ok(Err(e)) => (Vec::new(), Some(e.to_string())),
+        Err(e) => (Vec::new(), Some(e.to_string())),
     };
     let (hits, starts): (Vec<Hit>, Vec<Image>) = hits.into_iter().unzip();
     let mut images = teacher.sample(prompt, &starts, cfg, sink, cancel)?;
