@@ -10,7 +10,7 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use vectorfusion::image::Image;
 use vectorfusion::models::codec::CodecKind;
-use vectorfusion::models::scheduler::SamplerKind;
+use vectorfusion::models::scheduler::{SamplerKind, SamplerRun};
 use vectorfusion::models::stable_diffusion::ModelHints;
 use vectorfusion::models::{LoadOptions, ModelError, StableDiffusion};
 use vectorfusion::stages::sds::{Weighting, sds_image_grad};
@@ -103,8 +103,7 @@ fn squaredcos_schedule_and_four_step_ddim_sample_match_diffusers() {
             &r["text.cond"],
             &r["text.uncond"],
             7.5,
-            4,
-            SamplerKind::Ddim,
+            SamplerRun::plain(SamplerKind::Ddim, 4),
         )
         .unwrap();
     assert_eq!(traj.len(), 4);
@@ -163,7 +162,13 @@ fn sdedit_keeps_its_start_at_strength_zero_and_runs_the_tail_of_the_schedule() {
         .sample_from(&zero, &scaled, 1.0, cond, uncond, 7.5, 4)
         .unwrap();
     let b = sd
-        .sample(init, cond, uncond, 7.5, 4, SamplerKind::Ddim)
+        .sample(
+            init,
+            cond,
+            uncond,
+            7.5,
+            SamplerRun::plain(SamplerKind::Ddim, 4),
+        )
         .unwrap();
     assert_close("strength 1 = sample", &a[3], &b[3], 1e-3);
 }

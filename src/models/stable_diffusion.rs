@@ -4,7 +4,9 @@ use super::bert::BertTextEncoder;
 use super::clip::{ClipTextConfig, ClipTextModel, ClipTokenizer};
 use super::codec::{self, Codec, CodecKind, EncodeTape};
 use super::loader::{self, LoadOptions, ModelSource, Precision, UNET_WEIGHTS};
-use super::scheduler::{PredictionType, Sampler, SamplerKind, SchedulerConfig, split_prediction};
+use super::scheduler::{
+    PredictionType, Sampler, SamplerKind, SamplerRun, SchedulerConfig, split_prediction,
+};
 use super::taesd::Taesd;
 use super::unet::{Unet, UnetConfig};
 use super::vae::{AutoencoderKl, VaeConfig};
@@ -497,34 +499,43 @@ impl StableDiffusion {
         let mut traj = Vec::with_capacity(run);
         for i in start..steps {
             let out = self.guided_raw(&x, s.timesteps[i], text_emb, uncond_emb, guidance)?;
-            x = s.step(&out, i, &x)?;
+            x = s.step(&out, i, &x, None)?;
             traj.push(x.clone());
         }
         Ok(traj)
     }
 
-    /// Samples latents from `init_noise` (standard normal, `[b, 4, h, w]`) with CFG; returns the
-    /// latents after every step (the last one is the result).
+    /// Samples latents from `init_noise` (standard normal, `[b, 4, h, w]`) with CFG as `run`
+    /// says; returns the latents after every step (the last one is the result). As diffusers,
+    /// `guidance ≤ 1` runs the conditional branch alone (SD-Turbo samples with 0).
     pub fn sample(
         &self,
         init_noise: &Tensor,
         text_emb: &Tensor,
         uncond_emb: &Tensor,
         guidance: f64,
-        steps: usize,
-        kind: SamplerKind,
+        run: SamplerRun<'_>,
     ) -> Result<Vec<Tensor>> {
-        let s = Sampler::new(&self.scheduler, kind, steps)?;
+        let s = Sampler::new(&self.scheduler, run.kind, run.steps)?;
         let spacing = matches!(
             self.scheduler.timestep_spacing.as_str(),
             "trailing" | "linspace"
         );
+        let guidance = if guidance <= 1.0 { 1.0 } else { guidance };
         let mut x = (init_noise * s.init_noise_sigma(spacing))?;
-        let mut traj = Vec::with_capacity(steps);
+        let mut traj = Vec::with_capacity(run.steps);
+        let mut noise = run.step_noise.iter();
         for (i, &t) in s.timesteps.iter().enumerate() {
             let inp = s.scale_model_input(&x, i)?;
             let out = self.guided_raw(&inp, t, text_emb, uncond_emb, guidance)?;
-            x = s.step(&out, i, &x)?;
+            let z = if run.kind.adds_noise(i, run.steps) {
+                Some(noise.next().ok_or_else(|| {
+                    ModelError::InvalidInput(format!("no noise given for step {i}"))
+                })?)
+            } else {
+                None
+            };
+            x = s.step(&out, i, &x, z)?;
             traj.push(x.clone());
         }
         Ok(traj)

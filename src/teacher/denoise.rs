@@ -6,7 +6,7 @@
 
 use crate::image::Image;
 use crate::models::StableDiffusion;
-use crate::models::scheduler::SamplerKind;
+use crate::models::scheduler::{SamplerKind, SamplerRun};
 use crate::progress::{CancelToken, Progress, ProgressSink};
 use candle_core::{DType, Tensor};
 use rand::SeedableRng;
@@ -17,7 +17,8 @@ use rand_chacha::ChaCha8Rng;
 pub struct SampleConfig {
     /// Number of samples K.
     pub k: u32,
-    /// Sampler (DDIM) steps for a sample from noise; an SDEdit sample runs `strength` of them.
+    /// Sampler steps for a sample from noise (the model's own sampler, `scheduler_config.json`'s
+    /// `_class_name`); an SDEdit sample runs `strength` of them with DDIM.
     pub steps: usize,
     pub guidance: f64,
     pub seed: u64,
@@ -137,14 +138,21 @@ pub fn draw(
                 cfg.steps,
             )
         } else {
-            sd.sample(
-                &noise,
-                &cond,
-                &uncond,
-                cfg.guidance,
-                cfg.steps,
-                SamplerKind::Ddim,
-            )
+            // the model's own sampler; a stochastic one's step noise follows the start noise
+            let kind = SamplerKind::of(&sd.scheduler);
+            let step_noise = (0..SamplerRun::noise_count(kind, cfg.steps))
+                .map(|_| {
+                    let z: Vec<f32> = (0..c * h * w).map(|_| super::gaussian(r)).collect();
+                    Tensor::from_vec(z, (1, c, h, w), sd.device())
+                })
+                .collect::<Result<Vec<_>, _>>()
+                .map_err(|e| SampleError::failed("noise", e))?;
+            let run = SamplerRun {
+                kind,
+                steps: cfg.steps,
+                step_noise: &step_noise,
+            };
+            sd.sample(&noise, &cond, &uncond, cfg.guidance, run)
         }
         .map_err(|e| SampleError::failed("sampling", e))?;
         let z = traj
