@@ -277,6 +277,7 @@ fn spec(kind: JobKind) -> JobSpec {
         retrieval: true,
         vector: Default::default(),
         plan: None,
+        variations: None,
     }
 }
 

@@ -118,6 +118,7 @@ fn service_executor_runs_a_text_job_on_the_default_pixel_model() {
         retrieval: true,
         vector: Default::default(),
         plan: None,
+        variations: None,
     };
     let out = exec
         .run(&spec, &JobContext::detached(CancelToken::new()))

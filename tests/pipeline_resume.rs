@@ -48,6 +48,7 @@ fn spec(method: Method, style: Style) -> JobSpec {
         retrieval: true,
         vector: Default::default(),
         plan: None,
+        variations: None,
     }
 }
 
@@ -241,6 +242,7 @@ fn vectorize_jobs_checkpoint_each_live_stage_and_resume_exactly() {
         retrieval: true,
         vector: Default::default(),
         plan: None,
+        variations: None,
     };
     let exec = DefaultExecutor::new(ModelDirs::default());
     let full = attempt(&exec, &spec, 100, None, None);

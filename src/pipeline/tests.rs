@@ -19,6 +19,7 @@ fn spec() -> JobSpec {
         retrieval: true,
         vector: Default::default(),
         plan: None,
+        variations: None,
     }
 }
 

@@ -14,7 +14,7 @@
 use super::context::{resume_as, save_checkpoint};
 use super::plan::{MIN_OPACITY, TextPlan, min_area_at, render_size};
 use super::report::{
-    RerankReport, ResumePoint, RetrievalReport, RunMethod, SdsReport, TraceReport,
+    RerankReport, ResumePoint, RetrievalReport, RunMethod, SdsReport, TraceReport, VariationReport,
 };
 use super::{JobContext, Models, PipelineError, RunOutput, RunReport};
 use crate::image::Image;
@@ -52,6 +52,8 @@ fn no_sample_plan() -> PipelineError {
 
 /// What a text run checkpoints (the service stores it with the job): the SDS loop's state and
 /// what the stages before it produced, so a resumed run skips sampling, rerank and tracing.
+/// A run of several variations checkpoints the SDS of the one it is on (the finished ones
+/// and the starts of the later ones with it), and goes on from that one.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct TextCheckpoint {
     /// The plan the state belongs to ([`super::RunPlan::key`]); another plan ignores it.
@@ -59,12 +61,36 @@ pub struct TextCheckpoint {
     /// The run's report when SDS started (rerank scores, LIVE statistics).
     pub detail: RunReport,
     pub sds: SdsState,
+    /// The variations finished before this one.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub done: Vec<RunOutput>,
+    /// The starts of the variations after this one.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub pending: Vec<VariationStart>,
+}
+
+/// Where one variation of a text run starts SDS: its report so far and its scene.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct VariationStart {
+    pub detail: RunReport,
+    pub scene: Scene,
+}
+
+/// A text run between its stages: the variations finished, the one it is on (with its saved
+/// SDS state when resumed) and the starts of the later ones.
+struct Variations {
+    done: Vec<RunOutput>,
+    current: VariationStart,
+    resume_sds: Option<SdsState>,
+    pending: std::collections::VecDeque<VariationStart>,
 }
 
 struct JobCheckpoints<'a> {
     ctx: &'a JobContext,
     key: &'a str,
     detail: &'a RunReport,
+    done: &'a [RunOutput],
+    pending: &'a std::collections::VecDeque<VariationStart>,
 }
 
 impl SdsCheckpoint for JobCheckpoints<'_> {
@@ -79,6 +105,8 @@ impl SdsCheckpoint for JobCheckpoints<'_> {
                 key: self.key.to_string(),
                 detail: self.detail.clone(),
                 sds: state.clone(),
+                done: self.done.to_vec(),
+                pending: self.pending.iter().cloned().collect(),
             },
         )
     }
@@ -225,31 +253,56 @@ fn top_up(scene: &mut Scene, plan: &TextPlan) -> Result<usize, PipelineError> {
     Ok(added)
 }
 
-/// The starting scene from the best of K samples (`sd_live*`), with the rerank and retrieval
-/// in `report`.
+/// The starting scenes from the best [`TextPlan::variations`] of K samples (`sd_live*`), each
+/// with the rerank and retrieval (its own sample chosen) in its report.
 fn from_samples(
     models: &Models,
     plan: &TextPlan,
     caption: &str,
-    report: &mut RunReport,
     sink: &dyn ProgressSink,
     cancel: &CancelToken,
-) -> Result<Scene, PipelineError> {
-    let size = plan.size;
+) -> Result<Vec<VariationStart>, PipelineError> {
     let (ranked, why_not) = sample_ranked(models, plan, caption, sink, cancel)?;
     let (rerank, retrieval) = rerank_reports(models, plan, &ranked, why_not)?;
     let mut ev = Progress::new(Stage::Rerank, 1, 1);
     ev.detail = serde_json::to_value(&rerank).ok();
     sink.report(ev);
-    report.rerank = Some(rerank);
-    report.retrieval = Some(retrieval);
+    let picks = ranked.top(plan.variations as usize);
+    let mut starts = Vec::with_capacity(picks.len());
+    for (i, &chosen) in picks.iter().enumerate() {
+        let mut detail = first_report(models, plan);
+        detail.rerank = Some(RerankReport {
+            chosen,
+            ..rerank.clone()
+        });
+        detail.retrieval = Some(RetrievalReport {
+            chosen: ranked.sources()[chosen].clone(),
+            ..retrieval.clone()
+        });
+        let image = &ranked.images()[chosen];
+        let scene = from_sample(image, &plan.variation(i), &mut detail, sink, cancel)?;
+        starts.push(VariationStart { detail, scene });
+    }
+    Ok(starts)
+}
+
+/// The starting scene of `plan` from the sampled `image`: the style's scene of the image, or
+/// its LIVE trace (restyled, topped up; the statistics in `report`).
+fn from_sample(
+    image: &Image,
+    plan: &TextPlan,
+    report: &mut RunReport,
+    sink: &dyn ProgressSink,
+    cancel: &CancelToken,
+) -> Result<Scene, PipelineError> {
+    let size = plan.size;
     let spec = plan.style.spec();
     if spec.sample_start() == SampleStart::Image {
         return spec
-            .scene_from_image(ranked.best_image(), size)
+            .scene_from_image(image, size)
             .map_err(PipelineError::scene("initial"));
     }
-    let best_img = upscaled(ranked.best_image(), plan.trace.size);
+    let best_img = upscaled(image, plan.trace.size);
     let (scene, traced) = trace(&best_img, plan, sink, cancel)?;
     report.live = Some(traced);
     let mut scene = spec
@@ -273,70 +326,111 @@ fn first_report(models: &Models, plan: &TextPlan) -> RunReport {
     }
 }
 
-/// The scene a text run starts SDS from, and the saved SDS state when `resumed` (an
-/// interrupted attempt's checkpoint of this plan) is given; fills `report`.
-#[allow(clippy::too_many_arguments)]
-fn start_scene(
+/// The scenes a text run starts SDS from, one per variation, each with its report.
+fn start_scenes(
+    models: &Models,
+    plan: &TextPlan,
+    caption: &str,
+    start: &Start,
+    sink: &dyn ProgressSink,
+    cancel: &CancelToken,
+) -> Result<Vec<VariationStart>, PipelineError> {
+    let size = plan.size;
+    let mut detail = first_report(models, plan);
+    let scene = match start {
+        Start::Svg(scene) => scaled(scene, size),
+        Start::Image(image) => {
+            let (scene, traced) = trace(image, plan, sink, cancel)?;
+            detail.live = Some(traced);
+            scaled(&scene, size)
+        }
+        Start::Method if plan.sample.is_some() => {
+            return from_samples(models, plan, caption, sink, cancel);
+        }
+        Start::Method => {
+            let augment = plan.sds.as_ref().is_some_and(|s| s.augment);
+            let side = render_size(size, augment);
+            return (0..plan.variations as usize)
+                .map(|i| {
+                    let mut rng = ChaCha8Rng::seed_from_u64(plan.variation(i).seeds.init);
+                    let scene = plan
+                        .style
+                        .init_scene(side, plan.paths as usize, &mut rng)
+                        .map_err(PipelineError::scene("initial"))?;
+                    Ok(VariationStart {
+                        detail: detail.clone(),
+                        scene,
+                    })
+                })
+                .collect();
+        }
+    };
+    Ok(vec![VariationStart { detail, scene }])
+}
+
+/// Where a text run starts: from `resumed` (an interrupted attempt's checkpoint of this plan)
+/// when given, otherwise from the start scenes of every variation.
+fn begin(
     models: &Models,
     plan: &TextPlan,
     caption: &str,
     start: &Start,
     resumed: Option<TextCheckpoint>,
-    report: &mut RunReport,
     sink: &dyn ProgressSink,
     cancel: &CancelToken,
-) -> Result<(Scene, Option<SdsState>), PipelineError> {
-    let size = plan.size;
-    let scene = match (resumed, start) {
-        (Some(r), _) => {
-            *report = r.detail;
-            report.resumed = Some(ResumePoint::Step(r.sds.step));
-            return Ok((r.sds.scene.clone(), Some(r.sds)));
-        }
-        (None, Start::Svg(scene)) => scaled(scene, size),
-        (None, Start::Image(image)) => {
-            let (scene, traced) = trace(image, plan, sink, cancel)?;
-            report.live = Some(traced);
-            scaled(&scene, size)
-        }
-        (None, Start::Method) if plan.sample.is_none() => {
-            let augment = plan.sds.as_ref().is_some_and(|s| s.augment);
-            let mut rng = ChaCha8Rng::seed_from_u64(plan.seeds.init);
-            plan.style
-                .init_scene(render_size(size, augment), plan.paths as usize, &mut rng)
-                .map_err(PipelineError::scene("initial"))?
-        }
-        (None, Start::Method) => from_samples(models, plan, caption, report, sink, cancel)?,
-    };
-    Ok((scene, None))
+) -> Result<Variations, PipelineError> {
+    if let Some(r) = resumed {
+        let mut detail = r.detail;
+        detail.resumed = Some(ResumePoint::Step(r.sds.step));
+        return Ok(Variations {
+            done: r.done,
+            current: VariationStart {
+                detail,
+                scene: r.sds.scene.clone(),
+            },
+            resume_sds: Some(r.sds),
+            pending: r.pending.into(),
+        });
+    }
+    let mut starts: std::collections::VecDeque<VariationStart> =
+        start_scenes(models, plan, caption, start, sink, cancel)?.into();
+    let current = starts
+        .pop_front()
+        .ok_or_else(|| PipelineError::Failed("plan: a run of no variations".into()))?;
+    Ok(Variations {
+        done: Vec::new(),
+        current,
+        resume_sds: None,
+        pending: starts,
+    })
 }
 
-/// Score distillation of `scene` (or on from `resume_sds`) as `plan` says, checkpointed
-/// through `ctx` with `report` under `key`; the distilled scene at the teacher's size.
-#[allow(clippy::too_many_arguments)]
+/// Score distillation of `run`'s current variation (or on from its saved state) as `plan`
+/// says, checkpointed through `ctx` with the run under `key`; the distilled scene at the
+/// teacher's size, the SDS statistics in the variation's report.
 fn distil(
     models: &Models,
     plan: &TextPlan,
     key: &str,
-    scene: Scene,
-    resume_sds: Option<SdsState>,
-    report: &mut RunReport,
+    run: &mut Variations,
     sink: &dyn ProgressSink,
     cancel: &CancelToken,
     ctx: Option<&JobContext>,
 ) -> Result<Scene, PipelineError> {
     let (Some(sp), Some(cfg)) = (&plan.sds, plan.sds_config()) else {
-        return Ok(scene);
+        return Ok(run.current.scene.clone());
     };
     let render = cfg.render_size(plan.size);
-    let state = match resume_sds {
+    let state = match run.resume_sds.take() {
         Some(s) => s,
-        None => SdsState::start(scaled(&scene, render), &cfg),
+        None => SdsState::start(scaled(&run.current.scene, render), &cfg),
     };
     let checkpoints = ctx.map(|ctx| JobCheckpoints {
         ctx,
         key,
-        detail: report,
+        detail: &run.current.detail,
+        done: &run.done,
+        pending: &run.pending,
     });
     let out = run_sds_resumable(
         &RasterBackend,
@@ -350,7 +444,7 @@ fn distil(
     if out.stats.cancelled {
         return Err(PipelineError::Cancelled);
     }
-    report.sds = Some(SdsReport {
+    run.current.detail.sds = Some(SdsReport {
         stats: out.stats,
         augment: sp.augment,
     });
@@ -394,12 +488,32 @@ fn with_origin(svg: String, origin: Option<&Hit>, caption: &str) -> String {
     }
 }
 
+/// The finished output of a variation distilled to `scene` as `plan` says: pruned and
+/// finished ([`finish`]), validated and written, naming the icon it started from.
+fn output(
+    mut scene: Scene,
+    plan: &TextPlan,
+    mut report: RunReport,
+    caption: &str,
+    t0: std::time::Instant,
+) -> Result<RunOutput, PipelineError> {
+    finish(&mut scene, plan, &mut report);
+    report.seconds = Some(t0.elapsed().as_secs_f64());
+    scene.validate().map_err(PipelineError::scene("final"))?;
+    let svg = crate::vector::write_svg(&scene, &plan.colors);
+    let origin = report.retrieval.as_ref().and_then(|r| r.chosen.as_ref());
+    let svg = with_origin(svg, origin, caption);
+    Ok(RunOutput::new(scene, svg, report))
+}
+
 /// Runs `plan` (key `key`, [`super::RunPlan::key`]) for `caption` from `start` with `models`:
 /// progress (with SVG snapshots) goes to `sink`, `cancel` is polled between steps. With a job
 /// context the SDS stage is checkpointed every `ctx.checkpoint_due` steps (and when cancelled),
 /// and a [`TextCheckpoint`] of the same plan in `ctx.resume_state()` skips the stages before
 /// SDS; a resumed run ends with the same SVG as an uninterrupted one
-/// ([`RunReport::resumed`]).
+/// ([`RunReport::resumed`]). A plan of several variations distils them one after the other
+/// (variation `i` with [`TextPlan::variation`]'s seeds); the output is the first, with the
+/// others in [`RunOutput::variations`] and a summary of all in [`RunReport::variations`].
 #[allow(clippy::too_many_arguments)]
 pub fn run_text(
     models: &Models,
@@ -418,44 +532,39 @@ pub fn run_text(
             plan.size
         )));
     }
-    let mut report = first_report(models, plan);
     let t0 = std::time::Instant::now();
     let resumed = resume_as::<TextCheckpoint>(ctx).filter(|c| c.key == key);
-    // 1. The starting scene (or the saved SDS state of an interrupted attempt).
-    let (scene, resume_sds) = start_scene(
-        models,
-        plan,
-        caption,
-        start,
-        resumed,
-        &mut report,
-        sink,
-        cancel,
-    )?;
-    if cancel.is_cancelled() {
-        return Err(PipelineError::Cancelled);
+    // 1. The starting scenes (or the saved state of an interrupted attempt).
+    let mut run = begin(models, plan, caption, start, resumed, sink, cancel)?;
+    loop {
+        if cancel.is_cancelled() {
+            return Err(PipelineError::Cancelled);
+        }
+        let vplan = plan.variation(run.done.len());
+        // 2. Score distillation.
+        let scene = distil(models, &vplan, key, &mut run, sink, cancel, ctx)?;
+        // 3. Pruning and the vector stage's finish.
+        let detail = std::mem::take(&mut run.current.detail);
+        run.done.push(output(scene, &vplan, detail, caption, t0)?);
+        match run.pending.pop_front() {
+            Some(next) => run.current = next,
+            None => break,
+        }
     }
-    // 2. Score distillation.
-    let mut scene = distil(
-        models,
-        plan,
-        key,
-        scene,
-        resume_sds,
-        &mut report,
-        sink,
-        cancel,
-        ctx,
-    )?;
-    // 3. Pruning and the vector stage's finish.
-    finish(&mut scene, plan, &mut report);
-    report.seconds = Some(t0.elapsed().as_secs_f64());
-    scene.validate().map_err(PipelineError::scene("final"))?;
-    let svg = crate::vector::write_svg(&scene, &plan.colors);
-    let origin = report.retrieval.as_ref().and_then(|r| r.chosen.as_ref());
-    let svg = with_origin(svg, origin, caption);
+    let mut outputs = run.done.into_iter();
+    let mut out = outputs
+        .next()
+        .ok_or_else(|| PipelineError::Failed("plan: a run of no variations".into()))?;
+    out.variations = outputs.collect();
+    if !out.variations.is_empty() {
+        out.report.variations = std::iter::once(&out)
+            .chain(&out.variations)
+            .zip(1..)
+            .map(|(o, n)| VariationReport::of(n, &o.report, o.paths))
+            .collect();
+    }
     let mut done = Progress::new(Stage::Done, 1, 1);
-    done.svg = Some(svg.clone());
+    done.svg = Some(out.svg.clone());
     sink.report(done);
-    Ok(RunOutput::new(scene, svg, report))
+    Ok(out)
 }

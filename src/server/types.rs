@@ -4,7 +4,7 @@ use super::error::ApiError;
 use crate::pipeline::{
     Executor, JobKind, JobSpec, Limits, Method, Preset, RunPlan, SpecError, Style, request_of,
 };
-use crate::pipeline::{RerankReport, RunReport};
+use crate::pipeline::{RerankReport, RunReport, VariationReport};
 use crate::progress::{Progress, Stage};
 use crate::store::{AttemptRow, JobRow, JobStatus};
 use crate::vector::VectorOptions;
@@ -35,6 +35,7 @@ pub const SUBMIT_FIELDS: &[&str] = &[
     "group",
     "target_psnr",
     "max_bytes",
+    "variations",
 ];
 
 /// Fields whose omission means "the preset decides": the job's [`crate::pipeline::RunPlan`]
@@ -205,6 +206,7 @@ fn request_from(obj: &Map<String, Value>, default_seed: u64) -> Result<JobSpec, 
         preset,
         priority: field(obj, "priority")?.unwrap_or(0),
         retrieval: field(obj, "retrieval")?.unwrap_or(true),
+        variations: field(obj, "variations")?,
         vector: VectorOptions {
             colors: ColorPlan {
                 colors: field(obj, "colors")?,
@@ -383,6 +385,8 @@ pub struct ParamsView {
     pub has_image: bool,
     pub has_svg: bool,
     pub retrieval: bool,
+    /// Results the job returns (1 unless a text job asked for more).
+    pub variations: u32,
     /// Colours, background, grouping and the vectorize stopping rules, as submitted.
     #[serde(flatten)]
     pub vector: VectorOptions,
@@ -469,18 +473,54 @@ pub struct ResultView {
     pub paths: i64,
     /// The run's [`RunReport`] as stored (results stored before a field existed lack it).
     pub detail: Value,
+    /// Every result of the job, variation 1 (`result.svg`) first: one unless a text job
+    /// asked for more.
+    pub variations: Vec<VariationView>,
+}
+
+/// One result of a job: its number, sample, score, paths and downloads.
+#[derive(Serialize)]
+pub struct VariationView {
+    #[serde(flatten)]
+    pub report: VariationReport,
+    pub svg: String,
+    pub png: String,
+    pub pdf: String,
+}
+
+impl VariationView {
+    fn new(job_id: &str, report: VariationReport) -> Self {
+        let link = |ext: &str| format!("/jobs/{job_id}/result/{}.{ext}", report.variation);
+        VariationView {
+            svg: link("svg"),
+            png: link("png"),
+            pdf: link("pdf"),
+            report,
+        }
+    }
 }
 
 impl JobView {
     /// Adds the stored result (paths, detail, rerank scores) of a succeeded job.
     pub fn with_result(mut self, result: &crate::store::ResultRow) -> JobView {
         let detail: Value = serde_json::from_str(&result.detail).unwrap_or(Value::Null);
-        self.rerank = RunReport::deserialize(&detail)
-            .ok()
+        let report = RunReport::deserialize(&detail).ok();
+        self.rerank = report
+            .as_ref()
             .and_then(|r| r.rerank.as_ref().map(RerankView::from));
+        let report = report.unwrap_or_default();
+        let mut variations = report.variations.clone();
+        if variations.is_empty() {
+            let paths = usize::try_from(result.paths).unwrap_or(0);
+            variations.push(VariationReport::of(1, &report, paths));
+        }
         self.result = Some(ResultView {
             paths: result.paths,
             detail,
+            variations: variations
+                .into_iter()
+                .map(|v| VariationView::new(&self.id, v))
+                .collect(),
         });
         self
     }
@@ -531,6 +571,10 @@ impl JobView {
                 has_image: s.image.is_some(),
                 has_svg: s.svg.is_some(),
                 retrieval: s.retrieval,
+                variations: s
+                    .plan
+                    .as_ref()
+                    .map_or(s.variations.unwrap_or(1), RunPlan::variations),
                 vector: s.vector,
                 plan: s.plan,
             }),

@@ -59,6 +59,8 @@ pub struct PlanRequest {
     pub samples: Option<u32>,
     pub seed: u64,
     pub retrieval: bool,
+    /// Text runs: how many of the best distinct results to return (1..=[`MAX_VARIATIONS`]).
+    pub variations: u32,
     /// Colours, background, grouping; for vectorize runs the stopping rules too.
     pub vector: VectorOptions,
     /// Settings only the command line exposes (none from HTTP).
@@ -80,6 +82,7 @@ impl PlanRequest {
             samples: None,
             seed: 0,
             retrieval: true,
+            variations: 1,
             vector: VectorOptions::default(),
             tuning: Tuning::default(),
         }
@@ -182,6 +185,15 @@ fn one() -> u32 {
 fn unit_scale() -> f32 {
     1.0
 }
+fn one_variation() -> u32 {
+    1
+}
+fn is_one_variation(n: &u32) -> bool {
+    *n == 1
+}
+
+/// The most variations a text run may return.
+pub const MAX_VARIATIONS: u32 = 6;
 
 /// LIVE tracing of the kept sample (or of a given image).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -233,6 +245,25 @@ impl Seeds {
             sds: seed,
         }
     }
+
+    /// The seeds of variation `i` (0-based) of a run: variation 0 runs with these seeds, every
+    /// other with its own trace, init, top-up and SDS seeds (derived from these, within
+    /// [`super::MAX_SEED`]); the sample seed is shared (the variations are the best of one
+    /// set of samples).
+    pub fn variation(self, i: usize) -> Self {
+        if i == 0 {
+            return self;
+        }
+        let k = (i as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15);
+        let mix = |s: u64| (s ^ k).rotate_left(17) & super::MAX_SEED;
+        Seeds {
+            sample: self.sample,
+            trace: mix(self.trace),
+            init: mix(self.init),
+            top_up: mix(self.top_up),
+            sds: mix(self.sds),
+        }
+    }
 }
 
 /// A caption → SVG run.
@@ -261,6 +292,12 @@ pub struct TextPlan {
     /// before it existed take the default (near-equal fills merged).
     #[serde(default)]
     pub colors: ColorPlan,
+    /// How many results the run returns: the best `variations` distinct samples of the rerank
+    /// (K is at least this), each traced and distilled with its own seeds
+    /// ([`Seeds::variation`]); from-scratch runs start each from its own init. 1 (the plans
+    /// stored before it existed) is left out of the JSON, so the plan's key is unchanged.
+    #[serde(default = "one_variation", skip_serializing_if = "is_one_variation")]
+    pub variations: u32,
 }
 
 /// The fully numeric plan of a run.
@@ -297,6 +334,11 @@ impl RunPlan {
     /// K, the samples of a text run that samples.
     pub fn samples(&self) -> Option<u32> {
         Some(self.text.as_ref()?.sample.as_ref()?.samples)
+    }
+
+    /// How many results the run returns (1 but for text runs asked for more).
+    pub fn variations(&self) -> u32 {
+        self.text.as_ref().map_or(1, |t| t.variations)
     }
 
     /// Identifies the run for its checkpoints: a state saved under another plan is ignored.
@@ -355,6 +397,12 @@ fn vectorize_plan(req: &PlanRequest, limits: &Limits) -> Result<LiveConfig, Spec
     req.vector
         .validate()
         .map_err(|(field, reason)| SpecError::new(field, reason))?;
+    if req.variations != 1 {
+        return Err(SpecError::new(
+            "variations",
+            "only applies to kind \"text\" (a vectorize job has one result)",
+        ));
+    }
     if let Some(cfg) = &req.tuning.live {
         cfg.validate()
             .map_err(|e| SpecError::new("paths", e.to_string()))?;
@@ -491,8 +539,11 @@ fn text_plan(
         JobKind::Text => req.start,
     };
     let from_method = start == StartKind::Method;
-    let sample = (from_method && req.method != Method::Scratch).then_some(SamplePlan {
-        samples: n.samples,
+    let samples = from_method && req.method != Method::Scratch;
+    let variations = check_variations(req, start, samples.then_some(n.samples), limits)?;
+    let sample = samples.then_some(SamplePlan {
+        // K: enough samples for the variations' distinct picks.
+        samples: n.samples.max(variations),
         steps: ps.sample_steps as u32,
         guidance: model.hints.sample_guidance,
         retrieval: req.retrieval,
@@ -526,10 +577,52 @@ fn text_plan(
             encoder: model.encoder(ps.prefer_taesd),
         },
         colors: req.vector.colors.clone(),
+        variations,
     })
 }
 
+/// `req.variations`, within `1..=MAX_VARIATIONS`, for a run that starts from its method (a
+/// given image or SVG has one result), and the sample count of a run that samples (`samples`,
+/// raised to it) within `limits`.
+fn check_variations(
+    req: &PlanRequest,
+    start: StartKind,
+    samples: Option<u32>,
+    limits: &Limits,
+) -> Result<u32, SpecError> {
+    let v = check_range("variations", req.variations, MAX_VARIATIONS)?;
+    if v > 1 && start != StartKind::Method {
+        return Err(SpecError::new(
+            "variations",
+            "only applies to text jobs drawn from the caption (a job started from an image or \
+             an SVG has one result)",
+        ));
+    }
+    if samples.is_some_and(|k| v > k) && v > limits.max_samples {
+        return Err(SpecError::new(
+            "variations",
+            format!(
+                "needs {v} samples, and at most {} are allowed (limits.max_samples)",
+                limits.max_samples
+            ),
+        ));
+    }
+    Ok(v)
+}
+
 impl TextPlan {
+    /// The plan of variation `i` (0-based): this plan for the first, the same plan with the
+    /// variation's seeds ([`Seeds::variation`]) for the others.
+    pub fn variation(&self, i: usize) -> std::borrow::Cow<'_, TextPlan> {
+        if i == 0 {
+            return std::borrow::Cow::Borrowed(self);
+        }
+        std::borrow::Cow::Owned(TextPlan {
+            seeds: self.seeds.variation(i),
+            ..self.clone()
+        })
+    }
+
     /// The LIVE configuration that traces the run's starting image (the kept sample at
     /// [`TracePlan::size`], or a given image at the teacher's size): LIVE's own settings with
     /// the plan's path count, iterations, seed, snapshot period and colours.
