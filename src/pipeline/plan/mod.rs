@@ -8,7 +8,6 @@ use super::presets::PresetSettings;
 use super::spec::check_range;
 use super::{EncoderChoice, JobKind, Limits, Method, Preset, SpecError, Style};
 use crate::augment::AugmentConfig;
-use crate::models::stable_diffusion::ModelHints;
 use crate::stages::live::{CANVAS_SIDES, LiveConfig, PathBudget};
 use crate::stages::sds::{ReinitConfig, SdsConfig, T_MAX, T_MIN};
 use crate::vector::VectorOptions;
@@ -110,40 +109,6 @@ pub struct Tuning {
     pub live: Option<LiveConfig>,
 }
 
-/// What the executor knows about its model before loading it.
-#[derive(Clone, Debug, PartialEq)]
-pub struct ModelFacts {
-    /// What the model is: the model directory's name, or the test teacher (never a path).
-    pub name: String,
-    pub hints: ModelHints,
-    /// The configured SDS encoder.
-    pub encoder_choice: EncoderChoice,
-    /// A TAESD encoder was found for this model.
-    pub taesd_found: bool,
-}
-
-impl ModelFacts {
-    /// A model without a directory of its own (the test teacher, a custom executor): the
-    /// paper's hints, the VAE, no TAESD.
-    pub fn paper(name: impl Into<String>) -> Self {
-        ModelFacts {
-            name: name.into(),
-            hints: ModelHints::default(),
-            encoder_choice: EncoderChoice::Vae,
-            taesd_found: false,
-        }
-    }
-
-    /// The SDS encoder a run uses, `prefer_taesd` being its preset's wish.
-    pub fn encoder(&self, prefer_taesd: bool) -> EncoderChoice {
-        match self.encoder_choice {
-            EncoderChoice::Auto if prefer_taesd && self.taesd_found => EncoderChoice::Taesd,
-            EncoderChoice::Auto => EncoderChoice::Vae,
-            fixed => fixed,
-        }
-    }
-}
-
 /// The model a text plan runs on.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ModelPlan {
@@ -185,15 +150,6 @@ fn one() -> u32 {
 fn unit_scale() -> f32 {
     1.0
 }
-fn one_variation() -> u32 {
-    1
-}
-fn is_one_variation(n: &u32) -> bool {
-    *n == 1
-}
-
-/// The most variations a text run may return.
-pub const MAX_VARIATIONS: u32 = 6;
 
 /// LIVE tracing of the kept sample (or of a given image).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -245,25 +201,6 @@ impl Seeds {
             sds: seed,
         }
     }
-
-    /// The seeds of variation `i` (0-based) of a run: variation 0 runs with these seeds, every
-    /// other with its own trace, init, top-up and SDS seeds (derived from these, within
-    /// [`super::MAX_SEED`]); the sample seed is shared (the variations are the best of one
-    /// set of samples).
-    pub fn variation(self, i: usize) -> Self {
-        if i == 0 {
-            return self;
-        }
-        let k = (i as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15);
-        let mix = |s: u64| (s ^ k).rotate_left(17) & super::MAX_SEED;
-        Seeds {
-            sample: self.sample,
-            trace: mix(self.trace),
-            init: mix(self.init),
-            top_up: mix(self.top_up),
-            sds: mix(self.sds),
-        }
-    }
 }
 
 /// A caption → SVG run.
@@ -296,7 +233,10 @@ pub struct TextPlan {
     /// (K is at least this), each traced and distilled with its own seeds
     /// ([`Seeds::variation`]); from-scratch runs start each from its own init. 1 (the plans
     /// stored before it existed) is left out of the JSON, so the plan's key is unchanged.
-    #[serde(default = "one_variation", skip_serializing_if = "is_one_variation")]
+    #[serde(
+        default = "variations::one",
+        skip_serializing_if = "variations::is_one"
+    )]
     pub variations: u32,
 }
 
@@ -581,48 +521,7 @@ fn text_plan(
     })
 }
 
-/// `req.variations`, within `1..=MAX_VARIATIONS`, for a run that starts from its method (a
-/// given image or SVG has one result), and the sample count of a run that samples (`samples`,
-/// raised to it) within `limits`.
-fn check_variations(
-    req: &PlanRequest,
-    start: StartKind,
-    samples: Option<u32>,
-    limits: &Limits,
-) -> Result<u32, SpecError> {
-    let v = check_range("variations", req.variations, MAX_VARIATIONS)?;
-    if v > 1 && start != StartKind::Method {
-        return Err(SpecError::new(
-            "variations",
-            "only applies to text jobs drawn from the caption (a job started from an image or \
-             an SVG has one result)",
-        ));
-    }
-    if samples.is_some_and(|k| v > k) && v > limits.max_samples {
-        return Err(SpecError::new(
-            "variations",
-            format!(
-                "needs {v} samples, and at most {} are allowed (limits.max_samples)",
-                limits.max_samples
-            ),
-        ));
-    }
-    Ok(v)
-}
-
 impl TextPlan {
-    /// The plan of variation `i` (0-based): this plan for the first, the same plan with the
-    /// variation's seeds ([`Seeds::variation`]) for the others.
-    pub fn variation(&self, i: usize) -> std::borrow::Cow<'_, TextPlan> {
-        if i == 0 {
-            return std::borrow::Cow::Borrowed(self);
-        }
-        std::borrow::Cow::Owned(TextPlan {
-            seeds: self.seeds.variation(i),
-            ..self.clone()
-        })
-    }
-
     /// The LIVE configuration that traces the run's starting image (the kept sample at
     /// [`TracePlan::size`], or a given image at the teacher's size): LIVE's own settings with
     /// the plan's path count, iterations, seed, snapshot period and colours.
@@ -675,6 +574,12 @@ pub fn render_size(size: u32, augment: bool) -> u32 {
         size
     }
 }
+
+mod facts;
+mod variations;
+pub use facts::ModelFacts;
+pub use variations::MAX_VARIATIONS;
+use variations::check_variations;
 
 #[cfg(test)]
 mod tests;

@@ -1,4 +1,5 @@
 use super::*;
+use crate::models::stable_diffusion::ModelHints;
 use crate::scene::MAX_PATHS;
 
 fn facts(small_prior: bool) -> ModelFacts {

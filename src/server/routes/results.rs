@@ -1,5 +1,5 @@
-//! A finished job's output: `result.svg`, the `result.png` preview, `result.pdf` and the
-//! snapshots.
+//! A finished job's output: `result.svg`, the `result.png` preview, `result.pdf`, each
+//! variation's (`result/{i}.svg|png|pdf`) and the snapshots.
 
 use super::jobs::{job_id, load_job};
 use crate::server::AppState;
@@ -103,7 +103,12 @@ pub(in crate::server) async fn result_png(
 ) -> Result<Response, ApiError> {
     let id = job_id(&raw)?;
     let svg = finished_result(&state, &id, &caller).await?.svg;
-    converted(&headers, "image/png", move || {
+    png_response(&headers, svg).await
+}
+
+/// `svg` rendered as the PNG preview.
+async fn png_response(headers: &HeaderMap, svg: String) -> Result<Response, ApiError> {
+    converted(headers, "image/png", move || {
         crate::svg::render_png(&svg, PREVIEW_MAX_SIDE)
             .map_err(|e| ApiError::Internal(format!("rendering the preview failed: {e}")))
     })
@@ -119,12 +124,53 @@ pub(in crate::server) async fn result_pdf(
 ) -> Result<Response, ApiError> {
     let id = job_id(&raw)?;
     let svg = finished_result(&state, &id, &caller).await?.svg;
-    converted(&headers, "application/pdf", move || {
+    pdf_response(&headers, svg).await
+}
+
+/// `svg` as a one-page vector PDF.
+async fn pdf_response(headers: &HeaderMap, svg: String) -> Result<Response, ApiError> {
+    converted(headers, "application/pdf", move || {
         crate::svg::from_svg(&svg)
             .map(|scene| crate::pdf::to_pdf(&scene))
             .map_err(|e| ApiError::Internal(format!("converting the result to PDF failed: {e}")))
     })
     .await
+}
+
+/// `result/{i}.svg|png|pdf`: variation `i` (1-based; 1 is `result.svg`) of a succeeded job.
+pub(in crate::server) async fn result_variation(
+    State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
+    Path((raw, file)): Path<(String, String)>,
+    headers: HeaderMap,
+) -> Result<Response, ApiError> {
+    let id = job_id(&raw)?;
+    let not_found = || ApiError::NotFound {
+        what: "result variation",
+        id: format!(
+            "{id}/result/{file} (variations are named I.svg, I.png or I.pdf, I = 1, 2, ...)"
+        ),
+    };
+    let (n, ext) = file
+        .rsplit_once('.')
+        .and_then(|(n, ext)| Some((n.parse::<i64>().ok().filter(|n| *n >= 1)?, ext)))
+        .filter(|(_, ext)| ["svg", "png", "pdf"].contains(ext))
+        .ok_or_else(not_found)?;
+    let first = finished_result(&state, &id, &caller).await?;
+    let svg = if n == 1 {
+        first.svg
+    } else {
+        state
+            .store
+            .result_variation(&id, n)
+            .await?
+            .ok_or_else(not_found)?
+    };
+    match ext {
+        "png" => png_response(&headers, svg).await,
+        "pdf" => pdf_response(&headers, svg).await,
+        _ => Ok(svg_response(&headers, svg)),
+    }
 }
 
 /// The bytes `convert` makes (CPU work, off the async threads), served as `native` or as
