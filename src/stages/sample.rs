@@ -179,10 +179,11 @@ mod tests {
             sources: vec![None; 4],
         };
         assert_eq!(ranked.top(1), [1]);
-        // Sample 2 scores higher than 3 but equals sample 0: it comes after the distinct ones.
-        assert_eq!(ranked.top(3), [1, 0, 3]);
-        assert_eq!(ranked.top(4), [1, 0, 3, 2]);
-        assert_eq!(ranked.top(9), [1, 0, 3, 2]);
+        // Sample 0 scores higher than 3 but equals sample 2 (picked before it): it comes after
+        // the distinct ones.
+        assert_eq!(ranked.top(3), [1, 2, 3]);
+        assert_eq!(ranked.top(4), [1, 2, 3, 0]);
+        assert_eq!(ranked.top(9), [1, 2, 3, 0]);
         let unscored = Ranked {
             scores: Vec::new(),
             best: 0,

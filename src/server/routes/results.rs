@@ -151,11 +151,7 @@ pub(in crate::server) async fn result_variation(
             "{id}/result/{file} (variations are named I.svg, I.png or I.pdf, I = 1, 2, ...)"
         ),
     };
-    let (n, ext) = file
-        .rsplit_once('.')
-        .and_then(|(n, ext)| Some((n.parse::<i64>().ok().filter(|n| *n >= 1)?, ext)))
-        .filter(|(_, ext)| ["svg", "png", "pdf"].contains(ext))
-        .ok_or_else(not_found)?;
+    let (n, ext) = numbered(&file, &["svg", "png", "pdf"]).ok_or_else(not_found)?;
     let first = finished_result(&state, &id, &caller).await?;
     let svg = if n == 1 {
         first.svg
@@ -171,6 +167,13 @@ pub(in crate::server) async fn result_variation(
         "pdf" => pdf_response(&headers, svg).await,
         _ => Ok(svg_response(&headers, svg)),
     }
+}
+
+/// `N.ext` (N = 1, 2, ...; `ext` one of `exts`) as N and its extension.
+fn numbered<'a>(file: &'a str, exts: &[&str]) -> Option<(i64, &'a str)> {
+    let (n, ext) = file.rsplit_once('.')?;
+    let n = n.parse::<i64>().ok().filter(|n| *n >= 1)?;
+    exts.contains(&ext).then_some((n, ext))
 }
 
 /// The bytes `convert` makes (CPU work, off the async threads), served as `native` or as
@@ -198,14 +201,10 @@ pub(in crate::server) async fn snapshot(
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
     let id = job_id(&raw)?;
-    let n = file
-        .strip_suffix(".svg")
-        .and_then(|s| s.parse::<i64>().ok())
-        .filter(|n| *n >= 1)
-        .ok_or_else(|| ApiError::NotFound {
-            what: "snapshot",
-            id: format!("{id}/{file} (snapshots are named N.svg, N = 1, 2, ...)"),
-        })?;
+    let (n, _) = numbered(&file, &["svg"]).ok_or_else(|| ApiError::NotFound {
+        what: "snapshot",
+        id: format!("{id}/{file} (snapshots are named N.svg, N = 1, 2, ...)"),
+    })?;
     load_job(&state, &id, &caller).await?;
     let snap = state
         .store
