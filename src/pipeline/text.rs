@@ -335,37 +335,33 @@ fn start_scenes(
     sink: &dyn ProgressSink,
     cancel: &CancelToken,
 ) -> Result<Vec<VariationStart>, PipelineError> {
+    if matches!(start, Start::Method) && plan.sample.is_some() {
+        return from_samples(models, plan, caption, sink, cancel);
+    }
     let size = plan.size;
-    let mut detail = first_report(models, plan);
-    let scene = match start {
-        Start::Svg(scene) => scaled(scene, size),
-        Start::Image(image) => {
-            let (scene, traced) = trace(image, plan, sink, cancel)?;
-            detail.live = Some(traced);
-            scaled(&scene, size)
-        }
-        Start::Method if plan.sample.is_some() => {
-            return from_samples(models, plan, caption, sink, cancel);
-        }
-        Start::Method => {
-            let augment = plan.sds.as_ref().is_some_and(|s| s.augment);
-            let side = render_size(size, augment);
-            return (0..plan.variations as usize)
-                .map(|i| {
-                    let mut rng = ChaCha8Rng::seed_from_u64(plan.variation(i).seeds.init);
-                    let scene = plan
-                        .style
-                        .init_scene(side, plan.paths as usize, &mut rng)
-                        .map_err(PipelineError::scene("initial"))?;
-                    Ok(VariationStart {
-                        detail: detail.clone(),
-                        scene,
-                    })
-                })
-                .collect();
-        }
-    };
-    Ok(vec![VariationStart { detail, scene }])
+    let augment = plan.sds.as_ref().is_some_and(|s| s.augment);
+    // Each variation from the same input, with its own seeds (trace, init, SDS).
+    (0..plan.variations as usize)
+        .map(|i| {
+            let vplan = plan.variation(i);
+            let mut detail = first_report(models, plan);
+            let scene = match start {
+                Start::Svg(scene) => scaled(scene, size),
+                Start::Image(image) => {
+                    let (scene, traced) = trace(image, &vplan, sink, cancel)?;
+                    detail.live = Some(traced);
+                    scaled(&scene, size)
+                }
+                Start::Method => {
+                    let mut rng = ChaCha8Rng::seed_from_u64(vplan.seeds.init);
+                    plan.style
+                        .init_scene(render_size(size, augment), plan.paths as usize, &mut rng)
+                        .map_err(PipelineError::scene("initial"))?
+                }
+            };
+            Ok(VariationStart { detail, scene })
+        })
+        .collect()
 }
 
 /// Where a text run starts: from `resumed` (an interrupted attempt's checkpoint of this plan)

@@ -337,12 +337,7 @@ fn vectorize_plan(req: &PlanRequest, limits: &Limits) -> Result<LiveConfig, Spec
     req.vector
         .validate()
         .map_err(|(field, reason)| SpecError::new(field, reason))?;
-    if req.variations != 1 {
-        return Err(SpecError::new(
-            "variations",
-            "only applies to kind \"text\" (a vectorize job has one result)",
-        ));
-    }
+    check_variations(req, None, limits)?;
     if let Some(cfg) = &req.tuning.live {
         cfg.validate()
             .map_err(|e| SpecError::new("paths", e.to_string()))?;
@@ -480,7 +475,7 @@ fn text_plan(
     };
     let from_method = start == StartKind::Method;
     let samples = from_method && req.method != Method::Scratch;
-    let variations = check_variations(req, start, samples.then_some(n.samples), limits)?;
+    let variations = check_variations(req, samples.then_some(n.samples), limits)?;
     let sample = samples.then_some(SamplePlan {
         // K: enough samples for the variations' distinct picks.
         samples: n.samples.max(variations),

@@ -2,7 +2,7 @@
 //! by [`check_variations`]) and the seeds and plan of each ([`Seeds::variation`],
 //! [`TextPlan::variation`]).
 
-use super::{Limits, PlanRequest, Seeds, SpecError, StartKind, TextPlan, check_range};
+use super::{JobKind, Limits, PlanRequest, Seeds, SpecError, TextPlan, check_range};
 
 pub(super) fn one() -> u32 {
     1
@@ -49,21 +49,19 @@ impl TextPlan {
     }
 }
 
-/// `req.variations`, within `1..=MAX_VARIATIONS`, for a run that starts from its method (a
-/// given image or SVG has one result), and the sample count of a run that samples (`samples`,
-/// raised to it) within `limits`.
+/// `req.variations`, within `1..=MAX_VARIATIONS`, for a text job (a vectorize job, even one
+/// fine-tuned to a caption, has one result), and the sample count of a run that samples
+/// (`samples`, raised to it) within `limits`.
 pub(super) fn check_variations(
     req: &PlanRequest,
-    start: StartKind,
     samples: Option<u32>,
     limits: &Limits,
 ) -> Result<u32, SpecError> {
     let v = check_range("variations", req.variations, MAX_VARIATIONS)?;
-    if v > 1 && start != StartKind::Method {
+    if v > 1 && req.kind != JobKind::Text {
         return Err(SpecError::new(
             "variations",
-            "only applies to text jobs drawn from the caption (a job started from an image or \
-             an SVG has one result)",
+            "only applies to kind \"text\" (a vectorize job has one result)",
         ));
     }
     if samples.is_some_and(|k| v > k) && v > limits.max_samples {
@@ -82,7 +80,7 @@ pub(super) fn check_variations(
 mod tests {
     use super::super::{ModelFacts, RunPlan, resolve};
     use super::*;
-    use crate::pipeline::{JobKind, Method};
+    use crate::pipeline::{Method, StartKind};
 
     fn plan(req: &PlanRequest) -> Result<RunPlan, SpecError> {
         resolve(req, Some(&ModelFacts::paper("m")), &Limits::default())
@@ -123,12 +121,12 @@ mod tests {
     }
 
     #[test]
-    fn only_runs_drawn_from_the_caption_take_variations() {
+    fn only_text_runs_take_variations() {
         let svg = PlanRequest {
             start: StartKind::Svg,
             ..asking(2)
         };
-        assert_eq!(plan(&svg).unwrap_err().field, "variations");
+        assert_eq!(plan(&svg).unwrap().variations(), 2);
         let vectorize = PlanRequest {
             kind: JobKind::Vectorize,
             caption: None,
