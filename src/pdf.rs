@@ -199,10 +199,7 @@ mod tests {
                 Point::new(30.0, 18.0),
                 Point::new(38.0, 18.0),
             ],
-            Stroke {
-                color: Rgba::new(0.0, 0.0, 1.0, 1.0),
-                width: 2.0,
-            },
+            Stroke::round(Rgba::new(0.0, 0.0, 1.0, 1.0), 2.0),
         )
         .unwrap();
         line.fill = None;

@@ -398,6 +398,7 @@ fn model_index_style_suffix_switch() {
             guidance: f64::from(t.hints().sample_guidance),
             seed: 7,
             strength: 0.6,
+            negative_prompt: String::new(),
         };
         let sink = vectorfusion::progress::NullSink;
         let cancel = vectorfusion::progress::CancelToken::new();

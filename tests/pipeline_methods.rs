@@ -276,6 +276,8 @@ fn spec(kind: JobKind) -> JobSpec {
         priority: 0,
         retrieval: true,
         vector: Default::default(),
+        canvas: Default::default(),
+        negative_prompt: None,
         plan: None,
         variations: None,
     }

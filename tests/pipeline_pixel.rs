@@ -117,6 +117,8 @@ fn service_executor_runs_a_text_job_on_the_default_pixel_model() {
         priority: 0,
         retrieval: true,
         vector: Default::default(),
+        canvas: Default::default(),
+        negative_prompt: None,
         plan: None,
         variations: None,
     };

@@ -47,6 +47,8 @@ fn spec(method: Method, style: Style) -> JobSpec {
         priority: 0,
         retrieval: true,
         vector: Default::default(),
+        canvas: Default::default(),
+        negative_prompt: None,
         plan: None,
         variations: None,
     }
@@ -241,6 +243,8 @@ fn vectorize_jobs_checkpoint_each_live_stage_and_resume_exactly() {
         priority: 0,
         retrieval: true,
         vector: Default::default(),
+        canvas: Default::default(),
+        negative_prompt: None,
         plan: None,
         variations: None,
     };

@@ -133,6 +133,38 @@ fn served_svg(base: &str, key: Option<&str>) -> Result<String, String> {
     fetch(&format!("{base}/jobs/{id}/result.svg"), key)
 }
 
+/// The canvas select and the negative-prompt field: hidden for an image, sent with a caption.
+fn canvas_controls_reach_a_text_job(b: &Browser, base: &str) -> Result<(), String> {
+    let wait = Duration::from_secs(30);
+    let shown = "return !document.getElementById('text-fields').hidden;";
+    if b.eval(shown, json!([]))? != json!(false) {
+        return Err("the canvas controls show for an image job".into());
+    }
+    b.click(&b.find("#file-clear", wait)?)?;
+    b.wait_for(shown, wait)?;
+    b.eval(
+        "document.getElementById('caption').value = 'a lighthouse'; \
+         document.getElementById('aspect').value = '16:9'; \
+         document.getElementById('negative-prompt').value = 'blurry';",
+        json!([]),
+    )?;
+    b.click(&b.find("#submit", wait)?)?;
+    for _ in 0..100 {
+        let list: serde_json::Value = serde_json::from_str(&fetch(&format!("{base}/jobs"), None)?)
+            .map_err(|e| e.to_string())?;
+        let p = &list["jobs"][0]["params"];
+        if list["jobs"][0]["kind"] == "text" {
+            return if p["aspect"] == "16:9" && p["negative_prompt"] == "blurry" {
+                Ok(())
+            } else {
+                Err(format!("the text job's params: {p}"))
+            };
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    Err("the text job was not submitted".into())
+}
+
 #[test]
 fn playground_page_runs_a_job_in_a_real_browser() {
     with_page(None, |b, base| {
@@ -146,6 +178,7 @@ fn playground_page_runs_a_job_in_a_real_browser() {
                 "download differs from result.svg: {downloaded:.200} vs {served:.200}"
             ));
         }
+        canvas_controls_reach_a_text_job(b, base)?;
         // A bad upload shows the API's message.
         let bad = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("not-an-image.png");
         std::fs::write(&bad, b"this is not a PNG").map_err(|e| e.to_string())?;

@@ -123,3 +123,26 @@ fn bench_raster_prints_json_with_the_documented_keys() {
         .unwrap();
     assert_eq!(o.status.code(), Some(2));
 }
+
+#[test]
+fn render_names_what_the_import_could_not_draw() {
+    let dir = std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR"));
+    let svg = dir.join("cli_filter.svg");
+    std::fs::write(
+        &svg,
+        r##"<svg xmlns="http://www.w3.org/2000/svg" width="20" height="20"><filter id="f"><feGaussianBlur stdDeviation="2"/></filter><g id="soft" filter="url(#f)"><rect width="9" height="9"/></g><g id="a"><use href="#a"/></g></svg>"##,
+    )
+    .unwrap();
+    let out = dir.join("cli_filter.png");
+    let o = bin()
+        .args(["render", svg.to_str().unwrap(), "-o", out.to_str().unwrap()])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("warning: filter on #soft ignored"), "{err}");
+    assert!(err.contains("(a reference cycle)"), "{err}");
+    // The content is drawn, unfiltered.
+    let img = vectorfusion::image::Image::open(&out).unwrap();
+    assert!(img.pixel(4, 4)[3] > 0.99);
+}

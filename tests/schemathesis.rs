@@ -41,6 +41,33 @@ async fn the_server_agrees_with_its_openapi_spec() {
     let spec = concat!(env!("CARGO_MANIFEST_DIR"), "/openapi.yaml");
     let url = format!("http://{}", srv.addr);
     let max_examples = std::env::var("VF_SCHEMATHESIS_EXAMPLES").unwrap_or_else(|_| "30".into());
+    // One worker: with two, Hypothesis parses lambda sources on two threads at once, and
+    // CPython 3.11's AST recursion counter is shared between threads ("AST constructor recursion
+    // depth mismatch", a KeyError in the lambda-source cache). A run that still ends in the
+    // tool's own error (🚫) and no failed check (❌) is the tool crashing, not a finding: it runs
+    // once more. A failed check is never retried.
+    let mut text = String::new();
+    let mut ok = false;
+    for _ in 0..2 {
+        let (success, out) =
+            run_schemathesis(st.clone(), spec, url.clone(), max_examples.clone()).await;
+        text = out;
+        ok = success;
+        if ok || text.contains('❌') || !text.contains('🚫') {
+            break;
+        }
+    }
+    srv.stop().await;
+    assert!(ok, "schemathesis found problems:\n{text}");
+}
+
+/// One schemathesis run against `url`: whether it passed, and its stdout and stderr.
+async fn run_schemathesis(
+    st: String,
+    spec: &'static str,
+    url: String,
+    max_examples: String,
+) -> (bool, String) {
     let out = tokio::task::spawn_blocking(move || {
         Command::new(st)
             .args([
@@ -51,7 +78,7 @@ async fn the_server_agrees_with_its_openapi_spec() {
                 "--checks",
                 "all",
                 "--workers",
-                "2",
+                "1",
             ])
             .args(["--exclude-checks", "use_after_free"])
             .args(["--max-examples", &max_examples, "--seed", "1", "--no-color"])
@@ -75,6 +102,5 @@ async fn the_server_agrees_with_its_openapi_spec() {
         String::from_utf8_lossy(&out.stdout),
         String::from_utf8_lossy(&out.stderr)
     );
-    srv.stop().await;
-    assert!(out.status.success(), "schemathesis found problems:\n{text}");
+    (out.status.success(), text)
 }

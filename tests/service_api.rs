@@ -320,6 +320,37 @@ async fn idempotency_key_returns_the_same_job() {
     assert_eq!(r3.json()["error"]["code"], "idempotency_conflict");
     let all = get(srv.addr, "/jobs").await.json();
     assert_eq!(all["jobs"].as_array().unwrap().len(), 1);
+    // The canvas and the negative prompt are part of the request: another one conflicts.
+    let text = |extra: Value| {
+        let mut b = json!({"kind": "text", "caption": "a cat", "seed": 1, "aspect": "16:9",
+            "negative_prompt": "blurry"});
+        b.as_object_mut()
+            .unwrap()
+            .extend(extra.as_object().unwrap().clone());
+        serde_json::to_vec(&b).unwrap()
+    };
+    let h = [
+        ("Content-Type", "application/json"),
+        ("Idempotency-Key", "text-1"),
+    ];
+    let first = request(srv.addr, "POST", "/jobs", &h, Some(&text(json!({})))).await;
+    assert_eq!(first.status, 202, "{}", first.text());
+    let again = request(
+        srv.addr,
+        "POST",
+        "/jobs",
+        &h,
+        Some(&text(json!({"width": null}))),
+    )
+    .await;
+    assert_eq!(again.json()["id"], first.json()["id"]);
+    for other in [
+        json!({"aspect": "9:16"}),
+        json!({"negative_prompt": "text"}),
+    ] {
+        let r = request(srv.addr, "POST", "/jobs", &h, Some(&text(other.clone()))).await;
+        assert_eq!(r.status, 409, "{other}: {}", r.text());
+    }
     srv.stop().await;
 }
 
@@ -829,6 +860,56 @@ async fn bad_input_gets_clear_4xx_json_never_500() {
             "svg",
         ),
     ]);
+    // The canvas and the negative prompt: each refusal names its field.
+    for (name, body, field) in [
+        ("unknown aspect", json!({"aspect": "5:4"}), "aspect"),
+        (
+            "aspect and size",
+            json!({"aspect": "16:9", "width": 640, "height": 360}),
+            "width",
+        ),
+        ("width alone", json!({"width": 640}), "height"),
+        ("height alone", json!({"height": 640}), "width"),
+        (
+            "narrow canvas",
+            json!({"width": 63, "height": 640}),
+            "width",
+        ),
+        (
+            "huge canvas",
+            json!({"width": 640, "height": 4096}),
+            "height",
+        ),
+        (
+            "blank negative prompt",
+            json!({"negative_prompt": "  "}),
+            "negative_prompt",
+        ),
+        (
+            "long negative prompt",
+            json!({"negative_prompt": "x".repeat(1001)}),
+            "negative_prompt",
+        ),
+    ] {
+        let mut b = json!({"kind": "text", "caption": "a cat"});
+        b.as_object_mut()
+            .unwrap()
+            .extend(body.as_object().unwrap().clone());
+        cases.push(json_case(name, b, "invalid_field", field));
+    }
+    for field in ["aspect", "negative_prompt"] {
+        let v = if field == "aspect" {
+            json!("16:9")
+        } else {
+            json!("blurry")
+        };
+        cases.push(json_case(
+            "canvas on vectorize",
+            json!({"kind": "vectorize", "image": png_b64(4), field: v}),
+            "invalid_field",
+            field,
+        ));
+    }
     for c in &cases {
         let mut headers = Vec::new();
         if let Some(ct) = c.content_type {

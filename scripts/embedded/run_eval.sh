@@ -8,7 +8,7 @@
 #   CAPTION_SET: fluent (docs/embedded/heldout_fluent48.txt vs fluent-emoji-flat), fluentb (a
 #                second, disjoint 48: heldout_fluent48b.txt),
 #                openmoji (heldout_openmoji48.txt vs openmoji), paper (the paper's 128 captions;
-#                IconClip scores only)
+#                IconClip scores only), colour (colour60.txt: colour binding, docs/embedded/COLOUR.md)
 #
 # Needs: a release build (VF overrides the binary), `vectorfusion setup` (MiniLM + retrieval
 # index), data/icons from scripts/embedded/prepare_data.sh and the venv's python (PY) for the
@@ -36,6 +36,7 @@ for s in "${sets[@]}"; do
     fluentb) prompts=docs/embedded/heldout_fluent48b.txt; ref=fluent-emoji-flat ;;
     openmoji) prompts=docs/embedded/heldout_openmoji48.txt; ref=openmoji ;;
     paper) prompts=../shared/bench/svg_bench_prompts.txt; ref= ;;
+    colour) prompts=docs/embedded/colour60.txt; ref= ;;
     *) echo "unknown caption set $s" >&2; exit 2 ;;
   esac
   for mode in ${MODES:-retrieval noise}; do

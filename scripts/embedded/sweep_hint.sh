@@ -7,11 +7,12 @@
 #   scripts/embedded/sweep_hint.sh _sdedit_strength "0.2 0.3 0.4" fluent fluentb   # repo root
 #   scripts/embedded/sweep_hint.sh _retrieval_share "0.5 1" fluent fluentb
 #   HINTS=_retrieval_share=1 TAG_SUFFIX=-pc scripts/embedded/sweep_hint.sh _retrieval_per_caption 2 fluent
+#   METHODS="samples sd_live_sds" MODES="retrieval noise" scripts/embedded/sweep_hint.sh _colour_steer "off svg" colour
 #
 # HINTS="KEY=VALUE ..." fixes other hints in every copy (TAG_SUFFIX then names the variant); VF,
 # PY, EVAL_ARGS as for run_eval.sh; SWEEP (default /tmp/sweep) holds the model copies,
 # outputs and reports (eval_SET_retrieval_balanced_KEYVALUE.json, and pixel R-Precision per
-# method under out/SET-retrieval-KEYVALUE/).
+# method under out/SET-MODE-KEYVALUE/). MODES (default retrieval) as for run_eval.sh.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 key=${1:?usage: sweep_hint.sh KEY "VALUES" [CAPTION_SET...]}
@@ -31,10 +32,13 @@ import json, sys
 m = json.load(open("models/vf-icon/model_index.json"))
 for kv in sys.argv[2:]:
     k, v = kv.split("=", 1)
-    m[k] = int(v) if v.isdigit() else float(v)
+    try:
+        m[k] = int(v) if v.isdigit() else float(v)
+    except ValueError:
+        m[k] = v  # a word (_colour_steer)
 json.dump(m, open(sys.argv[1], "w"), indent=2)
 PY
   echo "== $key $v $(date -u +%T)"
-  VF_DEFAULT_MODEL=$d OUT="$sweep/out" JSON_DIR="$sweep" TAG="$tag" METHODS=${METHODS:-samples} MODES=retrieval \
-    scripts/embedded/run_eval.sh balanced "${@:-fluent}" | grep pixel_r_precision
+  VF_DEFAULT_MODEL=$d OUT="$sweep/out" JSON_DIR="$sweep" TAG="$tag" METHODS=${METHODS:-samples} MODES=${MODES:-retrieval} \
+    scripts/embedded/run_eval.sh balanced "${@:-fluent}" | { grep -E "pixel_r_precision|colour" || true; }
 done

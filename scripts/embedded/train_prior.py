@@ -88,6 +88,9 @@ def model_index(latent, guidance, strength, share, per_caption):
         "_retrieval_per_caption": per_caption,
         # a small prior: the pipeline's presets for small models, not Stable Diffusion's
         "_small_prior": True,
+        # the prior does not bind colour words: steer samples toward the caption's colour
+        # (docs/embedded/COLOUR.md)
+        "_colour_steer": "svg",
     }
     if latent:
         idx["vae"] = ["diffusers", "AutoencoderKL"]

@@ -35,8 +35,11 @@ pub struct AugmentConfig {
     pub perspective_p: f32,
     /// Maximum corner displacement as a fraction of half the side (VectorFusion: 0.5).
     pub distortion: f32,
-    /// Side of the square output (the encoder's input size).
+    /// Width of the output (the encoder's input size) ...
     pub out_size: u32,
+    /// ... and its height when it differs (a non-square canvas); `None`: a square output.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub out_height: Option<u32>,
     /// Crop side as a fraction of the input side, drawn uniformly from this range and resized to
     /// `out_size`. `None` = an unresized crop of exactly `out_size` pixels (the input must be at
     /// least that large), e.g. render 600 px and crop 512 px.
@@ -52,8 +55,35 @@ impl AugmentConfig {
             perspective_p: 0.7,
             distortion: 0.5,
             out_size,
+            out_height: None,
             crop_scale: None,
             fill: [1.0, 1.0, 1.0, 1.0],
+        }
+    }
+
+    /// This config with a `width x height` output (the square one when they are equal).
+    pub fn with_output(self, width: u32, height: u32) -> Self {
+        Self {
+            out_size: width,
+            out_height: (height != width).then_some(height),
+            ..self
+        }
+    }
+
+    /// `(width, height)` of the output.
+    pub fn out_dims(&self) -> (u32, u32) {
+        (self.out_size, self.out_height.unwrap_or(self.out_size))
+    }
+
+    /// `(width, height)` to render at: [`AugmentConfig::render_size`] for each side.
+    pub fn render_dims(&self) -> (u32, u32) {
+        let (w, h) = self.out_dims();
+        match self.crop_scale {
+            None => (
+                ((w as f64) * 600.0 / 512.0).round() as u32,
+                ((h as f64) * 600.0 / 512.0).round() as u32,
+            ),
+            Some(_) => (w, h),
         }
     }
 
@@ -140,7 +170,8 @@ impl Warp {
         in_h: u32,
         rng: &mut R,
     ) -> Result<Warp, AugmentError> {
-        if cfg.out_size == 0 || in_w == 0 || in_h == 0 {
+        let (out, out_h) = cfg.out_dims();
+        if out == 0 || out_h == 0 || in_w == 0 || in_h == 0 {
             return Err(AugmentError::Config("sizes must be positive".into()));
         }
         if !(0.0..=1.0).contains(&cfg.perspective_p) || !(0.0..1.0).contains(&cfg.distortion) {
@@ -169,15 +200,14 @@ impl Warp {
         } else {
             [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
         };
-        let out = cfg.out_size;
         let (cw, ch) = match cfg.crop_scale {
             None => {
-                if out > in_w || out > in_h {
+                if out > in_w || out_h > in_h {
                     return Err(AugmentError::Config(format!(
-                        "crop of {out} px does not fit in a {in_w}x{in_h} render"
+                        "crop of {out}x{out_h} px does not fit in a {in_w}x{in_h} render"
                     )));
                 }
-                (out as f64, out as f64)
+                (out as f64, out_h as f64)
             }
             Some((lo, hi)) => {
                 if !(lo > 0.0 && lo <= hi && hi <= 1.0) {
@@ -200,7 +230,7 @@ impl Warp {
             in_w,
             in_h,
             out,
-            out,
+            out_h,
             &inv,
             x0,
             y0,
@@ -468,5 +498,28 @@ mod tests {
         assert!(w.apply(&Image::new(3, 3)).is_err());
         assert!(w.vjp(&[0.0; 5]).is_err());
         assert_eq!(cfg.render_size(), 19);
+    }
+
+    #[test]
+    fn non_square_outputs_crop_a_non_square_render() {
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let cfg = AugmentConfig::vectorfusion(32).with_output(32, 18);
+        assert_eq!(cfg.out_dims(), (32, 18));
+        assert_eq!(cfg.render_dims(), (38, 21));
+        assert_eq!(
+            AugmentConfig::vectorfusion(16)
+                .with_output(16, 16)
+                .out_height,
+            None
+        );
+        for _ in 0..8 {
+            let w = Warp::sample(&cfg, 38, 21, &mut rng).unwrap();
+            assert_eq!((w.out_w, w.out_h), (32, 18));
+            let out = w
+                .apply(&Image::filled(38, 21, [0.5, 0.5, 0.5, 1.0]))
+                .unwrap();
+            assert_eq!((out.width, out.height), (32, 18));
+        }
+        assert!(Warp::sample(&cfg, 38, 17, &mut rng).is_err());
     }
 }

@@ -2,8 +2,9 @@
 //!
 //! `--svgs DIR` scores SVGs generated elsewhere; `--method M` (repeatable) first generates one
 //! SVG per caption with the shared pipeline ([`DefaultExecutor`], exactly what `generate` and
-//! the service run), writing `OUT_DIR/M/0001.svg`…, then scores that directory the same way and
-//! adds the mean generation seconds per SVG. `--method samples` scores the prior's raster
+//! the service run), writing `OUT_DIR/M/0001.svg`… (and each run's report, `0001.json`), then
+//! scores that directory the same way and adds the mean generation seconds per SVG; captions
+//! that name a colour also get its colour binding ([`crate::eval::colour`]). `--method samples` scores the prior's raster
 //! samples themselves (K per caption, the rerank scorer's pick kept, saved as `NNNN.png`): the
 //! raster row of the paper's Table 1, the ceiling the vector methods are measured against.
 
@@ -215,6 +216,8 @@ impl MethodRun<'_> {
             seconds += secs;
             let path = self.dir.join(svg_name(line));
             write(&path, &out.svg)?;
+            // The run's report beside it (what retrieval, rerank and steering did).
+            write(&path.with_extension("json"), &to_json(&out.report)?)?;
             let n = self.captions.len();
             eprintln!(
                 "{name} {line}/{n}: {} paths, {secs:.1} s -> {}",
@@ -268,6 +271,7 @@ impl MethodRun<'_> {
             mean_paths: 0.0,
             mean_seconds: Some(seconds / self.captions.len().max(1) as f64),
             scorers: results,
+            colour_binding: crate::eval::colour::colour_binding(self.captions, &images),
         })
     }
 
@@ -368,6 +372,9 @@ pub fn format_methods_table(r: &MethodsReport) -> String {
                 100.0 * x.r_precision,
                 x.mean_similarity
             ));
+        }
+        if let Some(c) = &m.colour_binding {
+            s.push_str(&format!("  colour {c}"));
         }
         s.push('\n');
     }

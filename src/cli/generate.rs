@@ -10,8 +10,8 @@
 use super::request_args::{ModelArgs, RequestArgs, cli_limits, parse_word};
 use super::{CliError, ResultExt};
 use crate::pipeline::{
-    DefaultExecutor, EncoderChoice, Executor, JobContext, Method, ModelDirs, PlanRequest, RunInput,
-    StartKind, default_model_dir,
+    Aspect, CanvasRequest, DefaultExecutor, EncoderChoice, Executor, JobContext, Method, ModelDirs,
+    PlanRequest, RunInput, StartKind, default_model_dir,
 };
 use crate::progress::{CancelToken, Progress, Stage};
 use anyhow::Context;
@@ -50,6 +50,8 @@ pub struct GenerateArgs {
     pub request: RequestArgs,
     #[command(flatten)]
     pub vector: super::vector_args::VectorArgs,
+    #[command(flatten)]
+    pub canvas: CanvasArgs,
     /// Output path: `.svg`, or `.pdf` (vector PDF) / `.png` (render) by extension.
     #[arg(short, long)]
     pub output: PathBuf,
@@ -80,6 +82,31 @@ pub fn variation_path(output: &std::path::Path, i: usize, n: usize) -> PathBuf {
         None => format!("{stem}-{i}"),
     };
     output.with_file_name(name)
+}
+
+/// The canvas and the negative prompt of a text run.
+#[derive(clap::Args, Debug, Clone, Default)]
+pub struct CanvasArgs {
+    /// Canvas aspect, width:height: 1:1, 4:3, 3:4, 16:9, 9:16, 3:2 or 2:3 (Stable Diffusion
+    /// samples at it; a model that draws squares, like the embedded one, draws its square
+    /// centred on the canvas) [default: the preset's square].
+    #[arg(long, value_parser = parse_aspect)]
+    pub aspect: Option<Aspect>,
+    /// Canvas width in px (with --height, instead of --aspect; 64 to 2048; the drawing is
+    /// scaled to fit and centred).
+    #[arg(long)]
+    pub width: Option<u32>,
+    /// Canvas height in px (with --width).
+    #[arg(long)]
+    pub height: Option<u32>,
+    /// What classifier-free guidance steers away from (sampling and SDS embed it as the
+    /// unconditional prompt instead of "").
+    #[arg(long)]
+    pub negative_prompt: Option<String>,
+}
+
+fn parse_aspect(s: &str) -> Result<Aspect, String> {
+    s.parse()
 }
 
 /// `--model`, else `VECTORFUSION_MODELS_SD_DIR` (and `..._CLIP_DIR` as the scorer), else the
@@ -172,7 +199,10 @@ pub fn run(args: GenerateArgs) -> Result<(), CliError> {
     if !args.request.no_retrieval && method != Method::Scratch {
         install_retrieval(&dirs);
     }
-    let (request, input) = request_and_input(&args, method)?;
+    let (request, input, warnings) = request_and_input(&args, method)?;
+    for w in &warnings {
+        eprintln!("warning: {w}");
+    }
     let exec = DefaultExecutor::with_downloads(dirs);
     let plan = exec.plan(&request, &cli_limits())?;
     let text = plan
@@ -193,7 +223,8 @@ pub fn run(args: GenerateArgs) -> Result<(), CliError> {
         Box::new(|_| Ok(())),
         None,
     );
-    let out = exec.run_plan(&plan, &input, &ctx)?;
+    let mut out = exec.run_plan(&plan, &input, &ctx)?;
+    out.report.import_warnings = warnings;
     bar.finish_and_clear();
     let n = out.variations.len() + 1;
     let mut outputs = Vec::with_capacity(n);
@@ -238,20 +269,23 @@ fn install_retrieval(dirs: &ModelDirs) {
 }
 
 /// The request of a run by `method` and its input: the caption, and the `--image` or `--svg`
-/// it starts from (a file that cannot be read is bad input).
+/// it starts from (a file that cannot be read is bad input), and the SVG import's warnings.
 fn request_and_input(
     args: &GenerateArgs,
     method: Method,
-) -> Result<(PlanRequest, RunInput), CliError> {
+) -> Result<(PlanRequest, RunInput, Vec<String>), CliError> {
     let mut input = RunInput {
         caption: Some(args.caption.clone()),
         ..RunInput::default()
     };
+    let mut warnings = Vec::new();
     let start = if let Some(p) = &args.image {
         input.image = Some(crate::image::Image::open(p).bad_input(|| p.display().to_string())?);
         StartKind::Image
     } else if let Some(p) = &args.svg {
-        input.svg = Some(crate::svg::load_scene(p).bad_input(|| p.display().to_string())?);
+        let import = crate::svg::load_import(p).bad_input(|| p.display().to_string())?;
+        input.svg = Some(import.scene);
+        warnings = import.warnings;
         StartKind::Svg
     } else {
         StartKind::Method
@@ -264,7 +298,13 @@ fn request_and_input(
         },
         tuning: args.request.tuning.tuning(args.snapshot_every),
         variations: args.variations,
+        canvas: CanvasRequest {
+            aspect: args.canvas.aspect,
+            width: args.canvas.width,
+            height: args.canvas.height,
+        },
+        negative_prompt: args.canvas.negative_prompt.clone(),
         ..args.request.plan_request(&args.caption, method)
     };
-    Ok((request, input))
+    Ok((request, input, warnings))
 }

@@ -1,5 +1,7 @@
 //! `vectorfusion render IN.svg -o OUT.png [--size N]`: renders an SVG (or scene JSON) through
 //! our own import path and forward rasteriser, so it can be compared with resvg or a browser.
+//! What the import could not draw (filters, clip paths, masks, images, broken reference
+//! cycles) is printed on stderr, one `warning: …` line each.
 
 use super::CliError;
 use crate::{raster, svg};
@@ -20,7 +22,11 @@ pub struct RenderArgs {
 pub fn run(args: RenderArgs) -> Result<(), CliError> {
     // The input is the user's: a file that is missing, unreadable or not a valid scene is bad
     // input (2), as README's exit codes say; only writing the output is a runtime failure (1).
-    let scene = svg::load_scene(&args.input).map_err(|e| CliError::Usage(e.to_string()))?;
+    let import = svg::load_import(&args.input).map_err(|e| CliError::Usage(e.to_string()))?;
+    for w in &import.warnings {
+        eprintln!("warning: {w}");
+    }
+    let scene = import.scene;
     let scene = match args.size {
         Some(n) if n == 0 || n > crate::scene::MAX_SIDE => {
             return Err(CliError::Usage(format!(

@@ -8,6 +8,7 @@
 //! scorer's reference preprocessing. Style modifiers appended to prompts for generation are
 //! stripped from the reference text ([`strip_style`]).
 
+use super::colour::{ColourBinding, colour_binding};
 use crate::image::Image;
 use crate::models::clip::ClipError;
 use crate::models::scorer::clip::dot;
@@ -194,6 +195,9 @@ pub fn render_svg(svg: &str, short_side: u32) -> Result<RenderedSvg, RenderError
     })
 }
 
+/// The side (px) SVGs are rendered at for colour binding.
+pub const COLOUR_SIDE: u32 = 64;
+
 /// Reads and renders `dir/0001.svg`… for `n` prompts.
 pub fn render_svg_dir(
     dir: &Path,
@@ -297,6 +301,9 @@ pub struct EvalReport {
     /// Mean generation seconds per SVG, when known (not for pre-generated SVGs).
     pub mean_seconds: Option<f64>,
     pub scorers: Vec<ScorerResult>,
+    /// For captions that name a colour: how many pictures are of it.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub colour_binding: Option<ColourBinding>,
 }
 
 /// Evaluates `dir/0001.svg`… against the captions with every scorer (each renders at its own
@@ -315,17 +322,20 @@ pub fn evaluate_svg_dir<S: ImageTextScorer>(
         let images: Vec<Image> = rendered.into_iter().map(|r| r.image).collect();
         results.push(evaluate(s, captions, &images)?);
     }
+    // Colour binding at the embedded model's side; also the path count without scorers.
+    let rendered = render_svg_dir(dir, captions.len(), COLOUR_SIDE)?;
     if scorers.is_empty() {
-        let rendered = render_svg_dir(dir, captions.len(), 32)?;
         mean_paths =
             rendered.iter().map(|r| r.paths as f64).sum::<f64>() / rendered.len().max(1) as f64;
     }
+    let images: Vec<Image> = rendered.into_iter().map(|r| r.image).collect();
     Ok(EvalReport {
         method: format!("svgs:{}", dir.display()),
         prompts: captions.len(),
         mean_paths,
         mean_seconds: None,
         scorers: results,
+        colour_binding: colour_binding(captions, &images),
     })
 }
 
@@ -357,6 +367,9 @@ pub fn format_table(r: &EvalReport) -> String {
             100.0 * x.r_precision,
             x.mean_similarity
         ));
+    }
+    if let Some(c) = &r.colour_binding {
+        s.push_str(&format!("colour binding: {c}\n"));
     }
     s
 }

@@ -39,6 +39,19 @@ pub fn weighted_l2(
     target: &Image,
     weights: &[f32],
 ) -> Result<(f64, Vec<f32>), LossError> {
+    let mut grad = Vec::new();
+    let loss = weighted_l2_into(render, target, weights, &mut grad)?;
+    Ok((loss, grad))
+}
+
+/// [`weighted_l2`] writing the gradient into `grad` (resized to `4 * w * h`), so an
+/// optimisation loop reuses one buffer.
+pub fn weighted_l2_into(
+    render: &Image,
+    target: &Image,
+    weights: &[f32],
+    grad: &mut Vec<f32>,
+) -> Result<f64, LossError> {
     check_sizes(render, target)?;
     let n = render.len_pixels();
     if weights.len() != n {
@@ -47,31 +60,39 @@ pub fn weighted_l2(
             expected: n,
         });
     }
-    let mut grad = vec![0.0f32; 4 * n];
+    grad.clear();
+    grad.resize(4 * n, 0.0);
+    /// Pixels summed in `f32` before the running total takes them in `f64`.
+    const BLOCK: usize = 64;
     let mut loss = 0.0f64;
-    for (i, ((p, q), g)) in render
+    for (((p, q), g), w) in render
         .data
-        .chunks_exact(4)
-        .zip(target.data.chunks_exact(4))
-        .zip(grad.chunks_exact_mut(4))
-        .enumerate()
+        .chunks(4 * BLOCK)
+        .zip(target.data.chunks(4 * BLOCK))
+        .zip(grad.chunks_mut(4 * BLOCK))
+        .zip(weights.chunks(BLOCK))
     {
-        let w = weights[i];
-        if w == 0.0 {
-            continue;
+        let mut block = 0.0f32;
+        for (((p, q), g), &w) in p
+            .chunks_exact(4)
+            .zip(q.chunks_exact(4))
+            .zip(g.chunks_exact_mut(4))
+            .zip(w)
+        {
+            let mut s = 0.0f32;
+            let mut da = 0.0f32;
+            for c in 0..3 {
+                let d = (p[c] - p[3]) - (q[c] - q[3]);
+                s += d * d;
+                g[c] = 2.0 * w * d;
+                da -= 2.0 * w * d;
+            }
+            g[3] = da;
+            block += w * s;
         }
-        let mut da = 0.0f32;
-        let mut s = 0.0f32;
-        for c in 0..3 {
-            let d = (p[c] + 1.0 - p[3]) - (q[c] + 1.0 - q[3]);
-            s += d * d;
-            g[c] = 2.0 * w * d;
-            da -= 2.0 * w * d;
-        }
-        g[3] = da;
-        loss += (w * s) as f64;
+        loss += block as f64;
     }
-    Ok((loss, grad))
+    Ok(loss)
 }
 
 /// Mean squared error over RGB composited over white (the quantity behind `image::psnr`),

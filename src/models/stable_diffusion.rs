@@ -9,6 +9,7 @@ use super::taesd::Taesd;
 use super::unet::{Unet, UnetConfig};
 use super::vae::{AutoencoderKl, VaeConfig};
 use super::{ConfigIssue, ModelError, Result};
+use crate::caption::ColourSteer;
 use crate::models::serde_defaults::yes;
 use candle_core::{DType, Device, Tensor};
 use std::path::Path;
@@ -180,6 +181,11 @@ pub struct ModelHints {
     /// then the next caption's). At least 1.
     #[serde(rename = "_retrieval_per_caption", default = "one")]
     pub retrieval_per_caption: u32,
+    /// `_colour_steer`: how far the sampler steers toward the colour and the objects a caption
+    /// names (`off`, `start`, `rerank`, `sample`, `svg`; [`ColourSteer`]). A prior that does not
+    /// bind colour words (the embedded `vf-icon`) sets it; Stable Diffusion is `off`.
+    #[serde(rename = "_colour_steer", default)]
+    pub colour_steer: ColourSteer,
 }
 
 fn sample_guidance() -> f32 {
@@ -208,6 +214,7 @@ impl Default for ModelHints {
             sdedit_strength: sdedit_strength(),
             retrieval_share: retrieval_share(),
             retrieval_per_caption: one(),
+            colour_steer: ColourSteer::Off,
         }
     }
 }

@@ -109,12 +109,13 @@ pub trait Executor: Send + Sync {
     /// hints and the limits applied once). The service calls it at submit time and stores the
     /// plan with the job.
     /// The default resolves text requests with the paper's model hints (Stable Diffusion's
-    /// presets), as an executor that is not backed by a model directory would.
+    /// presets and its sample shapes, a negative prompt accepted), as an executor that is not
+    /// backed by a model directory would.
     fn plan(&self, request: &PlanRequest, limits: &Limits) -> Result<RunPlan, SpecError> {
         let facts = self
             .text_ready()
             .is_ok()
-            .then(|| super::ModelFacts::paper("executor"));
+            .then(|| super::ModelFacts::stable_diffusion("executor"));
         super::plan::resolve(request, facts.as_ref(), limits)
     }
 }

@@ -18,7 +18,7 @@ use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 
 /// Loaded models per (teacher input size, SDS encoder).
-type ModelCache = HashMap<(u32, EncoderChoice), Arc<Models>>;
+type ModelCache = HashMap<((u32, u32), EncoderChoice), Arc<Models>>;
 
 /// The inputs of a run besides its plan.
 #[derive(Clone, Debug, Default)]
@@ -80,11 +80,11 @@ impl DefaultExecutor {
             .cache
             .lock()
             .map_err(|_| PipelineError::Failed("model cache poisoned".into()))?;
-        let key = (plan.size, encoder);
+        let key = (plan.sample_dims(), encoder);
         if let Some(m) = cache.get(&key) {
             return Ok(m.clone());
         }
-        let m = Arc::new(Models::load(&self.models, plan.size, encoder)?);
+        let m = Arc::new(Models::load(&self.models, key.0, encoder)?);
         cache.insert(key, m.clone());
         Ok(m)
     }
@@ -161,6 +161,8 @@ pub fn request_of(spec: &JobSpec) -> PlanRequest {
         retrieval: spec.retrieval,
         variations: spec.variations.unwrap_or(1),
         vector: spec.vector.clone(),
+        canvas: spec.canvas,
+        negative_prompt: spec.negative_prompt.clone(),
         tuning: Tuning::default(),
     }
 }
@@ -186,16 +188,21 @@ impl Executor for DefaultExecutor {
             (Some(bytes), JobKind::Vectorize) => Some(Image::decode(bytes)?),
             _ => None,
         };
-        let svg = match &spec.svg {
-            Some(svg) => Some(crate::svg::from_svg(svg)?),
-            None => None,
+        let (svg, warnings) = match &spec.svg {
+            Some(svg) => {
+                let import = crate::svg::import_svg(svg)?;
+                (Some(import.scene), import.warnings)
+            }
+            None => (None, Vec::new()),
         };
         let input = RunInput {
             caption: spec.caption.clone(),
             image,
             svg,
         };
-        self.run_plan(&plan, &input, ctx)
+        let mut out = self.run_plan(&plan, &input, ctx)?;
+        out.report.import_warnings = warnings;
+        Ok(out)
     }
 
     fn plan(&self, request: &PlanRequest, limits: &Limits) -> Result<RunPlan, SpecError> {

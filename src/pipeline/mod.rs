@@ -4,6 +4,7 @@
 //! - [`plan`](RunPlan): a request resolved once into every number of the run (presets, model
 //!   hints, limits), stored with the job and shown to the caller;
 //! - [`presets`](PresetSettings): the preset tables the plan reads;
+//! - [`canvas`]: a text run's canvas (aspect or size) and the shape its model samples at;
 //! - [`models`](Models): finding and loading the models;
 //! - [`executor`](DefaultExecutor): runs plans for the service's workers and the commands;
 //! - `text` and `vectorize`: the two kinds of run, wired from the stages;
@@ -12,6 +13,7 @@
 //! The worker owns queueing, leases, storage and events; an [`Executor`] owns the computation
 //! and talks back only through its [`JobContext`] (progress, cancellation, checkpoints).
 
+pub mod canvas;
 mod context;
 mod error;
 mod executor;
@@ -23,6 +25,7 @@ mod spec;
 mod text;
 mod vectorize;
 
+pub use canvas::{Aspect, CanvasPlan, CanvasRequest};
 pub use context::{Executor, JobContext};
 pub use error::{FailureCode, PipelineError};
 pub use executor::{DefaultExecutor, RunInput, request_of};

@@ -3,6 +3,7 @@
 //! loader ([`Models::load`]) that the executor, `generate`, `eval` and `bench` share.
 
 use super::PipelineError;
+use super::canvas::SampleShape;
 use super::plan::ModelFacts;
 use crate::models::ComputeDevice;
 use crate::models::scorer::{ImageTextScorer, Scorer};
@@ -257,6 +258,14 @@ impl ModelDirs {
                 self.encoder
             },
             taesd_found: find_taesd(sd, self.taesd_dir.as_deref()).is_some(),
+            sample_shape: if hints.small_prior {
+                SampleShape::Square
+            } else {
+                SampleShape::Multiple(sample_multiple(sd))
+            },
+            // Sampling and SDS guide with `embed(prompt)` against `embed(negative prompt)` (the
+            // embedded model too, trained with dropped captions): any such model takes one.
+            negative_prompt: true,
         })
     }
 
@@ -299,6 +308,22 @@ impl ModelDirs {
     }
 }
 
+/// The side multiple (px) a latent model samples at: its autoencoder's downsampling times
+/// its UNet's (`2^(levels - 1)`), read from `vae/config.json` and `unet/config.json`; 64 (Stable
+/// Diffusion 1.x/2.x: 8 × 8) when they cannot be read (the loader then says why).
+pub fn sample_multiple(dir: &Path) -> u32 {
+    let levels = |part: &str| -> Option<u32> {
+        let text = std::fs::read_to_string(dir.join(part).join("config.json")).ok()?;
+        let v: serde_json::Value = serde_json::from_str(&text).ok()?;
+        let n = v.get("block_out_channels")?.as_array()?.len() as u32;
+        (1..=8).contains(&n).then_some(n)
+    };
+    match (levels("vae"), levels("unet")) {
+        (Some(v), Some(u)) => 1 << ((v - 1) + (u - 1)),
+        _ => 64,
+    }
+}
+
 /// Everything a text run needs, loaded once per teacher size and encoder.
 pub struct Models {
     pub teacher: Box<dyn Teacher>,
@@ -322,15 +347,17 @@ impl std::fmt::Debug for Models {
 
 impl Models {
     /// The one loader: the configured diffusion model (Stable Diffusion layout, pixel-space or
-    /// the embedded prior; else the analytic test teacher) for `size` px teacher inputs with
+    /// the embedded prior; else the analytic test teacher) for `(width, height)` px teacher
+    /// inputs (a square for the test teacher and pixel-space models) with
     /// `encoder` as the SDS encoder of a latent model, its retrieval index, and the scorer.
     /// Loading may download the embedded model's MiniLM weights; the service checks
     /// [`ModelDirs::text_ready`] first, which refuses instead.
     pub fn load(
         dirs: &ModelDirs,
-        size: u32,
+        dims: (u32, u32),
         encoder: EncoderChoice,
     ) -> Result<Self, PipelineError> {
+        let size = dims.0;
         let scorer = load_scorer(dirs.clip_dir.as_deref())?;
         let Some(sd_dir) = &dirs.sd_dir else {
             let dir = dirs
@@ -376,7 +403,7 @@ impl Models {
             EncoderChoice::Vae | EncoderChoice::Auto => None,
         };
         let teacher =
-            SdTeacher::load_on(sd_dir, size, taesd.as_deref(), dirs.device).map_err(|e| {
+            SdTeacher::load_on(sd_dir, dims, taesd.as_deref(), dirs.device).map_err(|e| {
                 let what = format!("cannot load Stable Diffusion from {}", sd_dir.display());
                 PipelineError::ModelLoad {
                     what,

@@ -152,8 +152,9 @@ impl Preset {
 
     /// The LIVE configuration of a vectorize run of this preset (its budget, seed and colours
     /// are the request's): LIVE's own settings ([`LiveConfig::default`]) for `fast`, cut to
-    /// 64 px and 20/10 iterations for `draft`, at a larger canvas with more iterations, larger
-    /// new circles and a wider UDF band for `balanced` and `paper`.
+    /// 64 px and 20/10 iterations for `draft`, at a larger canvas, larger new circles and a
+    /// wider UDF band for `balanced` and `paper`; `balanced` runs all stages but the last at
+    /// 80 px (coarse-to-fine), `paper` at 256 px throughout with more iterations.
     pub fn live_config(self) -> LiveConfig {
         let base = LiveConfig::default();
         match self {
@@ -166,7 +167,8 @@ impl Preset {
             Preset::Fast => base,
             Preset::Balanced => LiveConfig {
                 size: 160,
-                iters_per_stage: 200,
+                coarse_size: 80,
+                iters_per_stage: 100,
                 final_iters: 100,
                 init_radius: 4.0,
                 udf_tau: 6.0,

@@ -10,6 +10,7 @@ use crate::retrieval::Hit;
 use crate::scene::Scene;
 use crate::stages::live::{LiveResult, StageReport, null_as_nan};
 use crate::stages::sds::SdsStats;
+use crate::stages::steer::CaptionReport;
 use crate::vector::FinishReport;
 use crate::vector::check::Editability;
 use serde::{Deserialize, Serialize};
@@ -134,6 +135,10 @@ pub struct RunReport {
     pub retrieval: Option<RetrievalReport>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub rerank: Option<RerankReport>,
+    /// What the run did about the colour and the objects the caption names (captions that
+    /// name a colour or two things).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub caption: Option<CaptionReport>,
     /// The LIVE trace a text run started from (a sample or a given image).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub live: Option<TraceReport>,
@@ -174,6 +179,10 @@ pub struct RunReport {
     /// Text runs asked for more than one result: every variation, 1 first (empty otherwise).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub variations: Vec<VariationReport>,
+    /// What the import of the input SVG could not keep as drawn (ignored filters, broken
+    /// reference cycles), one sentence each ([`crate::svg::SvgImport::warnings`]).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub import_warnings: Vec<String>,
 }
 
 impl RunReport {

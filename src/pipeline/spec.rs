@@ -2,6 +2,7 @@
 //! the numbers it gave, and the [`RunPlan`] resolved from them), its vocabularies ([`JobKind`], [`Method`],
 //! [`Preset`]) and the hard [`Limits`] every entry point checks it against.
 
+use super::canvas::CanvasRequest;
 use super::plan::RunPlan;
 use crate::scene::MAX_PATHS;
 pub use crate::stages::styles::Style;
@@ -68,6 +69,9 @@ pub struct Limits {
     pub max_caption_chars: usize,
     pub max_svg_bytes: usize,
     pub max_image_side: u32,
+    /// Largest canvas side a text job may ask for (`width`, `height`; at least
+    /// [`super::canvas::MIN_CANVAS_SIDE`]).
+    pub max_canvas_side: u32,
 }
 
 impl Default for Limits {
@@ -79,6 +83,7 @@ impl Default for Limits {
             max_caption_chars: 1000,
             max_svg_bytes: 2 * 1024 * 1024,
             max_image_side: 4096,
+            max_canvas_side: 2048,
         }
     }
 }
@@ -103,6 +108,13 @@ impl Limits {
             if v == 0 {
                 return Err((key, "must be at least 1".into()));
             }
+        }
+        let min = super::canvas::MIN_CANVAS_SIDE;
+        if self.max_canvas_side < min || self.max_canvas_side > crate::scene::MAX_SIDE {
+            return Err((
+                "limits.max_canvas_side",
+                format!("must be between {min} and {}", crate::scene::MAX_SIDE),
+            ));
         }
         Ok(())
     }
@@ -148,6 +160,12 @@ pub struct JobSpec {
     /// jobs stored before them take the defaults.
     #[serde(default, flatten)]
     pub vector: VectorOptions,
+    /// Text jobs: the canvas (`aspect`, or `width` and `height`); none: the preset's square.
+    #[serde(default, flatten)]
+    pub canvas: CanvasRequest,
+    /// Text jobs: what classifier-free guidance steers away from.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub negative_prompt: Option<String>,
     /// The run, resolved once when the job was accepted ([`RunPlan`]): workers run this and
     /// nothing else, so a queued job runs the same whatever the preset table says later. Jobs
     /// stored before plans existed have none and are resolved when they run.
@@ -248,8 +266,12 @@ impl JobSpec {
             ));
         }
         if let Some(c) = &self.caption {
-            check_caption(c, limits)?;
+            check_text("caption", c, limits)?;
         }
+        if let Some(n) = &self.negative_prompt {
+            check_text("negative_prompt", n, limits)?;
+        }
+        self.canvas.check(limits.max_canvas_side)?;
         if let Some(svg) = &self.svg
             && svg.len() > limits.max_svg_bytes
         {
@@ -271,8 +293,23 @@ impl JobSpec {
                 "image",
                 "is required for kind \"vectorize\" (base64 PNG or JPEG)",
             )),
-            JobKind::Vectorize => Ok(()),
+            JobKind::Vectorize => self.check_vectorize_inputs(),
         }
+    }
+
+    /// A vectorize job has no canvas and no negative prompt (its canvas is its image's).
+    fn check_vectorize_inputs(&self) -> Result<(), SpecError> {
+        for (set, field) in [
+            (self.canvas.aspect.is_some(), "aspect"),
+            (self.canvas.width.is_some(), "width"),
+            (self.canvas.height.is_some(), "height"),
+            (self.negative_prompt.is_some(), "negative_prompt"),
+        ] {
+            if set {
+                return Err(SpecError::new(field, "only applies to kind \"text\""));
+            }
+        }
+        Ok(())
     }
 
     /// A text job has a caption, no image and no vectorize stopping rule.
@@ -301,18 +338,18 @@ impl JobSpec {
     }
 }
 
-/// A caption is not blank, within the length limit and free of control characters (other than
-/// newlines and tabs).
-fn check_caption(c: &str, limits: &Limits) -> Result<(), SpecError> {
+/// A caption (or negative prompt: `field`) is not blank, within the caption length limit and
+/// free of control characters (other than newlines and tabs).
+pub(super) fn check_text(field: &'static str, c: &str, limits: &Limits) -> Result<(), SpecError> {
     if c.trim_matches(|ch: char| ch.is_whitespace() || ch == '\u{feff}')
         .is_empty()
     {
-        return Err(SpecError::new("caption", "must not be empty"));
+        return Err(SpecError::new(field, "must not be empty"));
     }
     let n = c.chars().count();
     if n > limits.max_caption_chars {
         return Err(SpecError::new(
-            "caption",
+            field,
             format!(
                 "is {n} characters, at most {} allowed",
                 limits.max_caption_chars
@@ -322,7 +359,7 @@ fn check_caption(c: &str, limits: &Limits) -> Result<(), SpecError> {
     if c.chars()
         .any(|ch| ch.is_control() && ch != '\n' && ch != '\t')
     {
-        return Err(SpecError::new("caption", "contains control characters"));
+        return Err(SpecError::new(field, "contains control characters"));
     }
     Ok(())
 }

@@ -18,6 +18,8 @@ fn spec() -> JobSpec {
         priority: 0,
         retrieval: true,
         vector: Default::default(),
+        canvas: Default::default(),
+        negative_prompt: None,
         plan: None,
         variations: None,
     }

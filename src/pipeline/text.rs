@@ -11,26 +11,20 @@
 //! reported in the run's [`RunReport`]. The SDS stage checkpoints through the job context and a
 //! restarted job resumes from it to the identical SVG.
 
+use super::canvas::{kept_inside, placed};
 use super::context::{resume_as, save_checkpoint};
-use super::plan::{MIN_OPACITY, TextPlan, min_area_at, render_size};
-use super::report::{
-    RerankReport, ResumePoint, RetrievalReport, RunMethod, SdsReport, TraceReport, VariationReport,
-};
+use super::plan::{MIN_OPACITY, TextPlan, min_area_at};
+use super::report::{ResumePoint, SdsReport, TraceReport, VariationReport};
 use super::{JobContext, Models, PipelineError, RunOutput, RunReport};
+use crate::caption::ColourSteer;
 use crate::image::Image;
 use crate::image::ops::resize;
-use crate::models::scorer::ImageTextScorer;
 use crate::progress::{CancelToken, CheckpointError, Progress, ProgressSink, Stage};
 use crate::retrieval::Hit;
 use crate::scene::Scene;
 use crate::stages::live;
 use crate::stages::live::prune::weak_paths;
-use crate::stages::sample::{Ranked, RetrievalPick, retrieved_count, sample_and_rerank};
 use crate::stages::sds::{RasterBackend, SdsCheckpoint, SdsState, run_sds_resumable};
-use crate::stages::styles::SampleStart;
-use crate::teacher::SampleConfig;
-use rand::SeedableRng;
-use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 /// The input a text run starts from (what [`TextPlan::start`] names).
@@ -144,227 +138,10 @@ fn scaled(scene: &Scene, width: u32) -> Scene {
     }
 }
 
-/// The K samples of `plan` for `caption` and the scorer's pick (the first stage of
-/// `sd_live*`; `eval --method samples` scores the pick as an image).
-pub fn sample_ranked(
-    models: &Models,
-    plan: &TextPlan,
-    caption: &str,
-    sink: &dyn ProgressSink,
-    cancel: &CancelToken,
-) -> Result<(Ranked, Option<String>), PipelineError> {
-    let sp = plan.sample.as_ref().ok_or_else(no_sample_plan)?;
-    let n = retrieved_count(sp.samples, sp.retrieval_share);
-    let retrieval = if !sp.retrieval {
-        Err("turned off".to_string())
-    } else if n == 0 {
-        Err("the model's _retrieval_share is 0".to_string())
-    } else {
-        models
-            .retrieval
-            .as_deref()
-            .map(|i| {
-                let pick = RetrievalPick {
-                    n,
-                    per_caption: sp.retrieval_per_caption as usize,
-                    seed: plan.seeds.sample,
-                };
-                (i, pick)
-            })
-            .map_err(Clone::clone)
-    };
-    let cfg = SampleConfig {
-        k: sp.samples,
-        steps: sp.steps as usize,
-        guidance: f64::from(sp.guidance),
-        seed: plan.seeds.sample,
-        strength: sp.strength,
-    };
-    sample_and_rerank(
-        models.teacher(),
-        models.scorer.as_ref(),
-        retrieval,
-        &plan.prompt,
-        caption,
-        &cfg,
-        sink,
-        cancel,
-    )
-    .map_err(PipelineError::from)
-}
+mod start;
+pub use start::sample_ranked;
+use start::{render_dims, start_scenes};
 
-/// The rerank and retrieval of `ranked`, the samples of `plan` (`why_not`: why none started
-/// from a retrieved icon).
-fn rerank_reports(
-    models: &Models,
-    plan: &TextPlan,
-    ranked: &Ranked,
-    why_not: Option<String>,
-) -> Result<(RerankReport, RetrievalReport), PipelineError> {
-    let sp = plan.sample.as_ref().ok_or_else(no_sample_plan)?;
-    let rerank = RerankReport {
-        scorer: models.scorer.as_ref().map(|s| s.name().to_string()),
-        scores: ranked.scores().iter().map(|&s| f64::from(s)).collect(),
-        chosen: ranked.best(),
-        samples: sp.samples,
-        sources: ranked.sources().to_vec(),
-    };
-    let retrieval = RetrievalReport {
-        strength: sp.strength,
-        share: sp.retrieval_share,
-        per_caption: sp.retrieval_per_caption,
-        starts: ranked.sources().iter().flatten().cloned().collect(),
-        chosen: ranked.best_source().cloned(),
-        unavailable: why_not,
-    };
-    Ok((rerank, retrieval))
-}
-
-/// `image` scaled up so its longer side is `side` (small samples of a 32 px pixel-space prior
-/// are traced on the larger canvas); a large enough image as it is.
-fn upscaled(image: &Image, side: u32) -> std::borrow::Cow<'_, Image> {
-    let longer = image.width.max(image.height);
-    if longer >= side {
-        return std::borrow::Cow::Borrowed(image);
-    }
-    let k = side as f32 / longer as f32;
-    std::borrow::Cow::Owned(resize(
-        image,
-        ((image.width as f32 * k).round() as u32).max(1),
-        ((image.height as f32 * k).round() as u32).max(1),
-    ))
-}
-
-/// Tops `scene` up with the style's random shapes to the style's minimum for `plan` (a flat
-/// sample can trace to (almost) nothing, and SDS needs something to move). Returns how many
-/// were added.
-fn top_up(scene: &mut Scene, plan: &TextPlan) -> Result<usize, PipelineError> {
-    let spec = plan.style.spec();
-    let want = spec.min_shapes(plan.paths as usize);
-    let mut rng = ChaCha8Rng::seed_from_u64(plan.seeds.top_up);
-    let mut added = 0usize;
-    while scene.shapes.len() < want {
-        let shape = spec
-            .extra_shape(plan.size, &mut rng)
-            .map_err(PipelineError::scene("initial"))?;
-        scene.shapes.push(shape);
-        added += 1;
-    }
-    Ok(added)
-}
-
-/// The starting scenes from the best [`TextPlan::variations`] of K samples (`sd_live*`), each
-/// with the rerank and retrieval (its own sample chosen) in its report.
-fn from_samples(
-    models: &Models,
-    plan: &TextPlan,
-    caption: &str,
-    sink: &dyn ProgressSink,
-    cancel: &CancelToken,
-) -> Result<Vec<VariationStart>, PipelineError> {
-    let (ranked, why_not) = sample_ranked(models, plan, caption, sink, cancel)?;
-    let (rerank, retrieval) = rerank_reports(models, plan, &ranked, why_not)?;
-    let mut ev = Progress::new(Stage::Rerank, 1, 1);
-    ev.detail = serde_json::to_value(&rerank).ok();
-    sink.report(ev);
-    let picks = ranked.top(plan.variations as usize);
-    let mut starts = Vec::with_capacity(picks.len());
-    for (i, &chosen) in picks.iter().enumerate() {
-        let mut detail = first_report(models, plan);
-        detail.rerank = Some(RerankReport {
-            chosen,
-            ..rerank.clone()
-        });
-        detail.retrieval = Some(RetrievalReport {
-            chosen: ranked.sources()[chosen].clone(),
-            ..retrieval.clone()
-        });
-        let image = &ranked.images()[chosen];
-        let scene = from_sample(image, &plan.variation(i), &mut detail, sink, cancel)?;
-        starts.push(VariationStart { detail, scene });
-    }
-    Ok(starts)
-}
-
-/// The starting scene of `plan` from the sampled `image`: the style's scene of the image, or
-/// its LIVE trace (restyled, topped up; the statistics in `report`).
-fn from_sample(
-    image: &Image,
-    plan: &TextPlan,
-    report: &mut RunReport,
-    sink: &dyn ProgressSink,
-    cancel: &CancelToken,
-) -> Result<Scene, PipelineError> {
-    let size = plan.size;
-    let spec = plan.style.spec();
-    if spec.sample_start() == SampleStart::Image {
-        return spec
-            .scene_from_image(image, size)
-            .map_err(PipelineError::scene("initial"));
-    }
-    let best_img = upscaled(image, plan.trace.size);
-    let (scene, traced) = trace(&best_img, plan, sink, cancel)?;
-    report.live = Some(traced);
-    let mut scene = spec
-        .restyle_trace(scaled(&scene, size), size)
-        .map_err(PipelineError::scene("initial"))?;
-    report.topped_up = Some(top_up(&mut scene, plan)?);
-    Ok(scene)
-}
-
-/// The report a text run starts with: what runs, with which teacher.
-fn first_report(models: &Models, plan: &TextPlan) -> RunReport {
-    let teacher = models.teacher();
-    RunReport {
-        method: Some(RunMethod::from(plan.method)),
-        style: Some(plan.style),
-        teacher: Some(teacher.name()),
-        encoder: Some(teacher.encoder().to_string()),
-        size: Some(plan.size),
-        prompt: Some(plan.prompt.clone()),
-        ..RunReport::default()
-    }
-}
-
-/// The scenes a text run starts SDS from, one per variation, each with its report.
-fn start_scenes(
-    models: &Models,
-    plan: &TextPlan,
-    caption: &str,
-    start: &Start,
-    sink: &dyn ProgressSink,
-    cancel: &CancelToken,
-) -> Result<Vec<VariationStart>, PipelineError> {
-    if matches!(start, Start::Method) && plan.sample.is_some() {
-        return from_samples(models, plan, caption, sink, cancel);
-    }
-    let size = plan.size;
-    let augment = plan.sds.as_ref().is_some_and(|s| s.augment);
-    // Each variation from the same input, with its own seeds (trace, init, SDS).
-    (0..plan.variations as usize)
-        .map(|i| {
-            let vplan = plan.variation(i);
-            let mut detail = first_report(models, plan);
-            let scene = match start {
-                Start::Svg(scene) => scaled(scene, size),
-                Start::Image(image) => {
-                    let (scene, traced) = trace(image, &vplan, sink, cancel)?;
-                    detail.live = Some(traced);
-                    scaled(&scene, size)
-                }
-                Start::Method => {
-                    let mut rng = ChaCha8Rng::seed_from_u64(vplan.seeds.init);
-                    plan.style
-                        .init_scene(render_size(size, augment), plan.paths as usize, &mut rng)
-                        .map_err(PipelineError::scene("initial"))?
-                }
-            };
-            Ok(VariationStart { detail, scene })
-        })
-        .collect()
-}
-
-/// Where a text run starts: from `resumed` (an interrupted attempt's checkpoint of this plan)
 /// when given, otherwise from the start scenes of every variation.
 fn begin(
     models: &Models,
@@ -416,7 +193,8 @@ fn distil(
     let (Some(sp), Some(cfg)) = (&plan.sds, plan.sds_config()) else {
         return Ok(run.current.scene.clone());
     };
-    let render = cfg.render_size(plan.size);
+    let (width, _) = plan.sample_dims();
+    let (render, _) = render_dims(plan);
     let state = match run.resume_sds.take() {
         Some(s) => s,
         None => SdsState::start(scaled(&run.current.scene, render), &cfg),
@@ -444,7 +222,7 @@ fn distil(
         stats: out.stats,
         augment: sp.augment,
     });
-    Ok(scaled(&out.scene, plan.size))
+    Ok(scaled(&out.scene, width))
 }
 
 /// The end of a text run: the style's faint/tiny shapes pruned, then the vector stage's
@@ -461,6 +239,7 @@ fn finish(scene: &mut Scene, plan: &TextPlan, report: &mut RunReport) {
             pruned = weak.len();
         }
     }
+    recolour_svg(scene, plan, report);
     let finish = crate::vector::finish_scene(scene, &plan.colors, plan.style.spec().prune_weak());
     report.finish = Some(finish);
     report.editability = Some(crate::vector::check::check(scene));
@@ -469,19 +248,48 @@ fn finish(scene: &mut Scene, plan: &TextPlan, report: &mut RunReport) {
     report.paths_needed = Some(scene.shapes.len());
 }
 
-/// `svg` naming the retrieved icon `origin` it started from and its licence, if any.
-fn with_origin(svg: String, origin: Option<&Hit>, caption: &str) -> String {
-    match origin {
-        Some(h) => crate::svg::with_metadata(
-            &svg,
-            &format!(
-                "Started from the icon \"{}\" of the {} {} icon set ({}, licence {}), redrawn by \
-                 vectorfusion for the caption \"{}\".",
-                h.icon.name, h.icon.set, h.icon.version, h.icon.caption, h.icon.license, caption
-            ),
-        ),
-        None => svg,
+/// The final scene's largest colour family moved into the caption's colour, when the model's
+/// steering goes that far ([`ColourSteer::Svg`]) and the run sampled (one object, one colour).
+fn recolour_svg(scene: &mut Scene, plan: &TextPlan, report: &mut RunReport) {
+    let (Some(cp), Some(r)) = (&plan.caption, report.caption.as_mut()) else {
+        return;
+    };
+    if cp.steer < ColourSteer::Svg || cp.is_pair() {
+        return;
     }
+    if let Some(c) = cp.colour() {
+        r.svg_recoloured = crate::caption::recolour::recolour_scene(scene, c);
+    }
+}
+
+/// A retrieved icon for the SVG's metadata: name, set, version, caption and licence.
+fn icon_credit(h: &Hit) -> String {
+    format!(
+        "the icon \"{}\" of the {} {} icon set ({}, licence {})",
+        h.icon.name, h.icon.set, h.icon.version, h.icon.caption, h.icon.license
+    )
+}
+
+/// `svg` naming the retrieved icon the kept sample started from and its licence (and the
+/// second icon composed into that start, for a caption of two things), if any.
+fn with_origin(svg: String, report: &RunReport, caption: &str) -> String {
+    let Some(h) = report.retrieval.as_ref().and_then(|r| r.chosen.as_ref()) else {
+        return svg;
+    };
+    let chosen = report.rerank.as_ref().map_or(0, |r| r.chosen);
+    let second = report
+        .caption
+        .as_ref()
+        .and_then(|c| c.composed_with.get(chosen))
+        .map(|o| format!(" composed with {}", icon_credit(o)))
+        .unwrap_or_default();
+    crate::svg::with_metadata(
+        &svg,
+        &format!(
+            "Started from {}{second}, redrawn by vectorfusion for the caption \"{caption}\".",
+            icon_credit(h)
+        ),
+    )
 }
 
 /// The finished output of a variation distilled to `scene` as `plan` says: pruned and
@@ -493,12 +301,20 @@ fn output(
     caption: &str,
     t0: std::time::Instant,
 ) -> Result<RunOutput, PipelineError> {
+    // On a canvas of its own, no shape reaches past the sample's edge, where the canvas now
+    // goes on ...
+    if plan.canvas.is_some() {
+        kept_inside(&mut scene);
+    }
     finish(&mut scene, plan, &mut report);
+    // ... then the sample fitted and centred on the SVG's canvas.
+    if let Some(c) = plan.canvas {
+        scene = placed(&scene, c.width, c.height);
+    }
     report.seconds = Some(t0.elapsed().as_secs_f64());
     scene.validate().map_err(PipelineError::scene("final"))?;
     let svg = crate::vector::write_svg(&scene, &plan.colors);
-    let origin = report.retrieval.as_ref().and_then(|r| r.chosen.as_ref());
-    let svg = with_origin(svg, origin, caption);
+    let svg = with_origin(svg, &report, caption);
     Ok(RunOutput::new(scene, svg, report))
 }
 
@@ -521,11 +337,11 @@ pub fn run_text(
     cancel: &CancelToken,
     ctx: Option<&JobContext>,
 ) -> Result<RunOutput, PipelineError> {
-    let size = models.teacher().image_size();
-    if size != plan.size {
+    let dims = models.teacher().image_dims();
+    if dims != plan.sample_dims() {
         return Err(PipelineError::Failed(format!(
-            "models: loaded for {size} px, the plan says {} px",
-            plan.size
+            "models: loaded for {dims:?} px, the plan says {:?} px",
+            plan.sample_dims()
         )));
     }
     let t0 = std::time::Instant::now();

@@ -141,7 +141,15 @@ fn forward_band<T: Real>(
                 }
             }
             LayerKind::Stroke => {
-                stroke::coverage(&l.poly, l.closed, l.radius, clip, out, &mut scratch);
+                stroke::coverage(
+                    &l.poly,
+                    l.closed,
+                    l.radius,
+                    l.style,
+                    clip,
+                    out,
+                    &mut scratch,
+                );
             }
         }
         let fill = l.kind == LayerKind::Fill;
@@ -295,6 +303,7 @@ fn backward_band<T: Real>(
                 &l.poly,
                 l.closed,
                 l.radius,
+                l.style,
                 clip,
                 &gbuf[..cw * rows],
                 dp,

@@ -9,7 +9,8 @@
 //!   the polyline (see `stroke`).
 
 use super::real::Real;
-use crate::scene::{Scene, ShapeKind};
+use super::stroke::Style;
+use crate::scene::{Rgba, Scene, ShapeKind, Stroke};
 
 /// Flattening tolerance in pixels (max distance between curve and polyline, approximately).
 pub(crate) const TOLERANCE: f32 = 0.05;
@@ -39,6 +40,8 @@ pub(crate) struct ShapeT<T> {
     pub pts: Vec<[T; 2]>,
     pub fill: Option<[T; 4]>,
     pub stroke: Option<([T; 4], T)>,
+    /// The stroke's caps and joins (round when there is no stroke).
+    pub style: Style,
     /// Pieces per segment (fixed for the step).
     pub pieces: Vec<u32>,
 }
@@ -81,6 +84,7 @@ impl<T: Real> SceneT<T> {
                     pts: p32.iter().map(|p| [T::of(p[0]), T::of(p[1])]).collect(),
                     fill: s.fill.map(c4),
                     stroke: s.stroke.map(|st| (c4(st.color), T::of(st.width))),
+                    style: Style::of(&s.stroke.unwrap_or(Stroke::round(Rgba::BLACK, 0.0))),
                     pieces,
                 }
             })
@@ -187,6 +191,7 @@ pub(crate) struct Layer<T> {
     pub poly: Vec<[T; 2]>,
     pub closed: bool,
     pub radius: T,
+    pub style: Style,
 }
 
 fn bbox<T: Real>(verts: &[[T; 2]], pad: f32, w: u32, h: u32) -> [i32; 4] {
@@ -232,11 +237,17 @@ pub(crate) fn layers<T: Real>(sc: &SceneT<T>) -> Vec<Layer<T>> {
                 poly: Vec::new(),
                 closed,
                 radius: T::zero(),
+                style: s.style,
             });
         }
         if let Some((c, w)) = s.stroke {
             let r = T::c(0.5) * w.max(T::zero());
-            let bb = bbox(&poly, r.as_f32() + 1.0, sc.width, sc.height);
+            let bb = bbox(
+                &poly,
+                r.as_f32() * s.style.reach() + 1.0,
+                sc.width,
+                sc.height,
+            );
             out.push(Layer {
                 shape: si,
                 kind: LayerKind::Stroke,
@@ -247,6 +258,7 @@ pub(crate) fn layers<T: Real>(sc: &SceneT<T>) -> Vec<Layer<T>> {
                 poly,
                 closed,
                 radius: r,
+                style: s.style,
             });
         }
     }

@@ -8,9 +8,10 @@
 //! - Coverage of a pixel is `min(|A|, 1)` where `A` is the exact integral of the winding number
 //!   over the pixel square (box filter). For non-overlapping outlines this is the exact
 //!   area coverage and equals the nonzero rule; where an outline overlaps itself it saturates.
-//! - A stroke is the union of one capsule per polyline edge (quad ± half-width plus a disc
-//!   polygon per polyline vertex), i.e. round joins and round caps; [`crate::svg::to_svg`]
-//!   writes `stroke-linecap="round" stroke-linejoin="round"` so other renderers agree.
+//! - A round-capped, round-joined stroke is the union of one capsule per polyline edge
+//!   ([`crate::svg::to_svg`] writes `stroke-linecap="round" stroke-linejoin="round"` so other
+//!   renderers agree); butt and square caps and miter (with its limit) and bevel joins are
+//!   drawn as SVG draws them, as a union of per-edge pieces (see `stroke`).
 //! - Per shape the fill is painted first, then the stroke. `alpha = coverage * colour.a`,
 //!   `out = colour.rgb * alpha + below * (1 - alpha)` (premultiplied), over the background.
 //!
@@ -40,6 +41,8 @@ mod walk;
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_stroke;
 
 use crate::image::Image;
 use crate::scene::{ParamGroup, Params, Point, Scene, Shape};

@@ -83,7 +83,7 @@ fn group(g: &GradT<f64>, grp: ParamGroup) -> &[f64] {
 }
 
 /// Checks every parameter; returns (checked, mismatches, worst message).
-fn fd_check(scene: &Scene, seed: u64) -> (usize, Vec<String>) {
+pub(super) fn fd_check(scene: &Scene, seed: u64) -> (usize, Vec<String>) {
     scene.validate().unwrap();
     let sc = SceneT::<f64>::from_scene(scene, FLATTEN_TOLERANCE);
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
@@ -151,24 +151,13 @@ fn random_scene(seed: u64) -> Scene {
         rgba(&mut rng),
     )
     .unwrap();
-    poly.stroke = Some(Stroke {
-        color: rgba(&mut rng),
-        width: 1.7,
-    });
+    poly.stroke = Some(Stroke::round(rgba(&mut rng), 1.7));
     s.shapes.push(poly);
     // Open strokes: thin, thick, partly off canvas.
     for wdt in [0.6f32, 2.5, 4.0] {
         let pts = (0..7).map(|_| pt(&mut rng, -4.0, 28.0)).collect();
-        s.shapes.push(
-            Shape::open_cubic(
-                pts,
-                Stroke {
-                    color: rgba(&mut rng),
-                    width: wdt,
-                },
-            )
-            .unwrap(),
-        );
+        s.shapes
+            .push(Shape::open_cubic(pts, Stroke::round(rgba(&mut rng), wdt)).unwrap());
     }
     s
 }
@@ -200,23 +189,12 @@ fn degenerate_scenes_have_finite_gradients() {
     let p = Point::new(4.37, 5.21);
     s.shapes
         .push(Shape::closed_cubic(vec![p; 6], Rgba::new(1.0, 0.0, 0.0, 1.0)).unwrap());
-    s.shapes.push(
-        Shape::open_cubic(
-            vec![p; 4],
-            Stroke {
-                color: Rgba::BLACK,
-                width: 2.0,
-            },
-        )
-        .unwrap(),
-    );
+    s.shapes
+        .push(Shape::open_cubic(vec![p; 4], Stroke::round(Rgba::BLACK, 2.0)).unwrap());
     s.shapes.push(
         Shape::open_cubic(
             vec![Point::new(1.0, 1.0); 4],
-            Stroke {
-                color: Rgba::BLACK,
-                width: 0.0,
-            },
+            Stroke::round(Rgba::BLACK, 0.0),
         )
         .unwrap(),
     );
@@ -307,10 +285,7 @@ fn stroke_area_is_length_times_width_plus_caps() {
                 Point::new(40.0, 16.0),
                 Point::new(50.0, 16.0),
             ],
-            Stroke {
-                color: Rgba::BLACK,
-                width: 4.0,
-            },
+            Stroke::round(Rgba::BLACK, 4.0),
         )
         .unwrap(),
     );

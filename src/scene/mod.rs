@@ -78,12 +78,90 @@ impl Rgba {
     }
 }
 
-/// A stroke: colour and width in pixels. Strokes are drawn (and exported) with round caps and
-/// round joins: the covered area is the union of per-segment capsules, see `raster`.
+/// A stroke: colour, width in pixels, and the shape of its ends and corners (SVG's
+/// `stroke-linecap`, `stroke-linejoin`, `stroke-miterlimit`). What optimisation creates is
+/// round-capped and round-joined ([`Stroke::round`]): the covered area is then the union of
+/// per-segment capsules, see `raster`; imported SVG strokes keep their caps and joins.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Stroke {
     pub color: Rgba,
     pub width: f32,
+    #[serde(default, skip_serializing_if = "LineCap::is_round")]
+    pub cap: LineCap,
+    #[serde(default, skip_serializing_if = "LineJoin::is_round")]
+    pub join: LineJoin,
+    /// Longest miter, in stroke widths, before a miter join is drawn bevelled (`>= 1`).
+    #[serde(
+        default = "Stroke::default_miter_limit",
+        skip_serializing_if = "Stroke::is_default_miter_limit"
+    )]
+    pub miter_limit: f32,
+}
+
+impl Stroke {
+    /// SVG's default `stroke-miterlimit`.
+    pub const DEFAULT_MITER_LIMIT: f32 = 4.0;
+
+    /// A round-capped, round-joined stroke (what the optimisers create and train).
+    pub const fn round(color: Rgba, width: f32) -> Self {
+        Stroke {
+            color,
+            width,
+            cap: LineCap::Round,
+            join: LineJoin::Round,
+            miter_limit: Self::DEFAULT_MITER_LIMIT,
+        }
+    }
+
+    /// Whether caps and joins are both round (the covered area is a union of capsules).
+    pub fn is_round(&self) -> bool {
+        self.cap.is_round() && self.join.is_round()
+    }
+
+    fn default_miter_limit() -> f32 {
+        Self::DEFAULT_MITER_LIMIT
+    }
+
+    fn is_default_miter_limit(v: &f32) -> bool {
+        *v == Self::DEFAULT_MITER_LIMIT
+    }
+}
+
+/// How an open stroke ends (SVG `stroke-linecap`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LineCap {
+    /// A half disc beyond the end.
+    #[default]
+    Round,
+    /// Flat at the end point.
+    Butt,
+    /// Flat, half a width beyond the end point.
+    Square,
+}
+
+impl LineCap {
+    pub fn is_round(&self) -> bool {
+        *self == LineCap::Round
+    }
+}
+
+/// How a stroke turns a corner (SVG `stroke-linejoin`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LineJoin {
+    #[default]
+    Round,
+    /// The outer edges extended until they meet (bevelled past the miter limit).
+    Miter,
+    /// The outer corners joined by a straight edge.
+    Bevel,
+}
+
+impl LineJoin {
+    pub fn is_round(&self) -> bool {
+        *self == LineJoin::Round
+    }
 }
 
 /// What the points of a shape mean.
@@ -126,6 +204,20 @@ pub enum SceneError {
 }
 
 impl Shape {
+    /// The shape with every control point moved by `f` and its stroke width multiplied by
+    /// `stroke_k` (kind and paint kept): the one way geometry is rescaled or placed.
+    pub fn mapped(&self, f: impl Fn(&Point) -> Point, stroke_k: f32) -> Shape {
+        Shape {
+            kind: self.kind,
+            points: self.points.iter().map(f).collect(),
+            fill: self.fill,
+            stroke: self.stroke.map(|st| Stroke {
+                width: st.width * stroke_k,
+                ..st
+            }),
+        }
+    }
+
     /// The shape with these parts, if it is valid.
     fn checked(
         kind: ShapeKind,
@@ -296,6 +388,12 @@ impl Shape {
                     s.width
                 )));
             }
+            if !(s.miter_limit >= 1.0 && s.miter_limit.is_finite()) {
+                return Err(err(format!(
+                    "stroke miter limit must be finite and >= 1, got {}",
+                    s.miter_limit
+                )));
+            }
         }
         Ok(())
     }
@@ -345,19 +443,7 @@ impl Scene {
         let shapes = self
             .shapes
             .iter()
-            .map(|sh| Shape {
-                kind: sh.kind,
-                points: sh
-                    .points
-                    .iter()
-                    .map(|p| Point::new(p.x * s, p.y * s))
-                    .collect(),
-                fill: sh.fill,
-                stroke: sh.stroke.map(|st| Stroke {
-                    color: st.color,
-                    width: st.width * s,
-                }),
-            })
+            .map(|sh| sh.mapped(|p| Point::new(p.x * s, p.y * s), s))
             .collect();
         Scene {
             width: new_width,
@@ -383,10 +469,7 @@ mod tests {
         assert!(Shape::closed_cubic(vec![p; 6], Rgba::BLACK).is_ok());
         assert!(Shape::closed_cubic(vec![p; 5], Rgba::BLACK).is_err());
         assert!(Shape::closed_cubic(vec![], Rgba::BLACK).is_err());
-        let st = Stroke {
-            color: Rgba::BLACK,
-            width: 2.0,
-        };
+        let st = Stroke::round(Rgba::BLACK, 2.0);
         assert!(Shape::open_cubic(vec![p; 7], st).is_ok());
         assert!(Shape::open_cubic(vec![p; 6], st).is_err());
         assert!(Shape::polygon(vec![p; 2], Rgba::BLACK).is_err());

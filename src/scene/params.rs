@@ -232,10 +232,7 @@ mod tests {
         s.shapes.push(
             Shape::open_cubic(
                 vec![Point::new(1.0, 2.0); 4],
-                Stroke {
-                    color: Rgba::BLACK,
-                    width: 3.0,
-                },
+                Stroke::round(Rgba::BLACK, 3.0),
             )
             .unwrap(),
         );

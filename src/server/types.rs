@@ -5,14 +5,18 @@ use crate::pipeline::{
     Executor, JobKind, JobSpec, Limits, Method, Preset, RunPlan, SpecError, Style, request_of,
 };
 use crate::pipeline::{RerankReport, RunReport, VariationReport};
-use crate::progress::{Progress, Stage};
-use crate::store::{AttemptRow, JobRow, JobStatus};
+use crate::progress::Stage;
+use crate::store::JobRow;
 use crate::vector::VectorOptions;
 use crate::vector::palette::ColorPlan;
 use base64::Engine;
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value};
+
+mod views;
+use views::rfc3339;
+pub use views::{AttemptView, ProgressView};
 
 /// Fields accepted by `POST /jobs` (anything else is rejected as unknown).
 pub const SUBMIT_FIELDS: &[&str] = &[
@@ -36,6 +40,10 @@ pub const SUBMIT_FIELDS: &[&str] = &[
     "target_psnr",
     "max_bytes",
     "variations",
+    "aspect",
+    "width",
+    "height",
+    "negative_prompt",
 ];
 
 /// Fields whose omission means "the preset decides": the job's [`crate::pipeline::RunPlan`]
@@ -217,6 +225,12 @@ fn request_from(obj: &Map<String, Value>, default_seed: u64) -> Result<JobSpec, 
             target_psnr: field(obj, "target_psnr")?,
             max_bytes: field(obj, "max_bytes")?,
         },
+        canvas: crate::pipeline::CanvasRequest {
+            aspect: field(obj, "aspect")?,
+            width: field(obj, "width")?,
+            height: field(obj, "height")?,
+        },
+        negative_prompt: field(obj, "negative_prompt")?,
         plan: None,
     })
 }
@@ -279,88 +293,6 @@ pub fn check_svg(svg: &str) -> Result<(), ApiError> {
         .map_err(|e| ApiError::invalid("svg", format!("is not a valid SVG: {e}")))
 }
 
-fn rfc3339(ms: Option<i64>) -> Option<String> {
-    ms.and_then(chrono::DateTime::from_timestamp_millis)
-        .map(|t| t.to_rfc3339_opts(chrono::SecondsFormat::Millis, true))
-}
-
-/// One attempt of a job as the API shows it: times in RFC 3339, as every other time.
-#[derive(Serialize)]
-pub struct AttemptView {
-    pub attempt: i64,
-    pub worker: String,
-    pub outcome: String,
-    pub error: Option<String>,
-    pub started_at: Option<String>,
-    pub finished_at: Option<String>,
-}
-
-impl From<&AttemptRow> for AttemptView {
-    fn from(row: &AttemptRow) -> Self {
-        AttemptView {
-            attempt: row.attempt,
-            worker: row.worker.clone(),
-            outcome: row.outcome.clone(),
-            error: row.error.clone(),
-            started_at: rfc3339(Some(row.started_at)),
-            finished_at: rfc3339(row.finished_at),
-        }
-    }
-}
-
-/// A job's progress as the API shows it: the job's `progress` and the `progress` event.
-#[derive(Serialize)]
-pub struct ProgressView {
-    pub stage: Option<Stage>,
-    pub step: i64,
-    pub total: i64,
-    /// `step / total` in `0..=1` (0 while the total is unknown, 1 for a succeeded job).
-    pub fraction: f64,
-    pub loss: Option<f64>,
-    /// The stage's details (the rerank's scores), on live events only.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub detail: Option<Value>,
-}
-
-impl ProgressView {
-    fn new(stage: Option<Stage>, step: i64, total: i64, loss: Option<f64>) -> Self {
-        let fraction = if total > 0 {
-            (step as f64 / total as f64).clamp(0.0, 1.0)
-        } else {
-            0.0
-        };
-        ProgressView {
-            stage,
-            step,
-            total,
-            fraction,
-            loss,
-            detail: None,
-        }
-    }
-}
-
-impl From<&Progress> for ProgressView {
-    fn from(p: &Progress) -> Self {
-        ProgressView {
-            detail: p.detail.clone(),
-            ..ProgressView::new(Some(p.stage), i64::from(p.step), i64::from(p.total), p.loss)
-        }
-    }
-}
-
-/// The progress stored in the job's row.
-impl From<&JobRow> for ProgressView {
-    fn from(row: &JobRow) -> Self {
-        let stage = row.stage.as_deref().and_then(Stage::from_name);
-        let mut view = ProgressView::new(stage, row.step, row.total, row.loss);
-        if row.total <= 0 && row.status == JobStatus::Succeeded {
-            view.fraction = 1.0;
-        }
-        view
-    }
-}
-
 #[derive(Serialize)]
 pub struct ErrorView {
     pub code: crate::store::FailureCode,
@@ -390,6 +322,11 @@ pub struct ParamsView {
     /// Colours, background, grouping and the vectorize stopping rules, as submitted.
     #[serde(flatten)]
     pub vector: VectorOptions,
+    /// Text jobs: the canvas asked for (`aspect`, or `width` and `height`), as submitted.
+    #[serde(flatten)]
+    pub canvas: crate::pipeline::CanvasRequest,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub negative_prompt: Option<String>,
     /// The run plan resolved when the job was accepted: every number the job runs with.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub plan: Option<RunPlan>,
@@ -576,6 +513,8 @@ impl JobView {
                     .as_ref()
                     .map_or(s.variations.unwrap_or(1), RunPlan::variations),
                 vector: s.vector,
+                canvas: s.canvas,
+                negative_prompt: s.negative_prompt,
                 plan: s.plan,
             }),
             links: Links {

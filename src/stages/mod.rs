@@ -3,4 +3,5 @@
 pub mod live;
 pub mod sample;
 pub mod sds;
+pub mod steer;
 pub mod styles;

@@ -3,6 +3,8 @@
 //! (retrieval, when the model has an index), and the scorer's pick among them (rejection
 //! sampling). Sampling itself is the teacher's ([`Teacher::sample`]).
 
+use super::steer::{CaptionReport, steer_samples, steered_starts};
+use crate::caption::{CaptionPlan, ColourSteer};
 use crate::image::Image;
 use crate::models::scorer::{ImageTextScorer, Scorer};
 use crate::progress::{CancelToken, ProgressSink};
@@ -32,6 +34,8 @@ pub struct Ranked {
     scores: Vec<f32>,
     /// The retrieved icon each sample started from (`None`: from noise); as long as `images`.
     sources: Vec<Option<Hit>>,
+    /// What the stage did about the caption's colour and objects (captions that name any).
+    caption: Option<CaptionReport>,
 }
 
 impl Ranked {
@@ -52,6 +56,10 @@ impl Ranked {
     /// Per sample, the icon it started from (`None`: pure noise).
     pub fn sources(&self) -> &[Option<Hit>] {
         &self.sources
+    }
+    /// What the stage did about the caption's colour and objects.
+    pub fn caption(&self) -> Option<&CaptionReport> {
+        self.caption.as_ref()
     }
     /// The icon the kept sample started from.
     pub fn best_source(&self) -> Option<&Hit> {
@@ -102,23 +110,50 @@ pub fn retrieve(
         .caption_embedding(caption, CAPTION_TOKENS)
         .map_err(|e| e.to_string())?
         .ok_or("the model's text encoder is not the index's MiniLM")?;
-    let side = teacher.image_size();
-    index
+    let (w, h) = teacher.image_dims();
+    if w != h {
+        return Err(format!(
+            "the retrieved icons are square and the sample is {w}x{h}"
+        ));
+    }
+    let hits = index
         .nearest(&q, pick.n, pick.per_caption, pick.seed)
-        .map_err(|e| e.to_string())?
-        .into_iter()
-        .map(|h| {
-            let img = index.render(&h.icon, side).map_err(|e| e.to_string())?;
-            Ok((h, img))
-        })
+        .map_err(|e| e.to_string())?;
+    let images = render_hits(index, &hits, teacher.image_size())?;
+    Ok(hits.into_iter().zip(images).collect())
+}
+
+/// The icons of `hits` rendered at `side` px.
+pub fn render_hits(index: &IconIndex, hits: &[Hit], side: u32) -> Result<Vec<Image>, String> {
+    hits.iter()
+        .map(|h| index.render(&h.icon, side).map_err(|e| e.to_string()))
         .collect()
+}
+
+/// The starts of the retrieved samples: the caption's nearest icons, or as `steer` says
+/// ([`steered_starts`]; steering fills `report`).
+fn starts(
+    teacher: &dyn Teacher,
+    retrieval: Result<(&IconIndex, RetrievalPick), String>,
+    caption: &str,
+    steer: Option<&CaptionPlan>,
+    report: &mut Option<CaptionReport>,
+) -> Result<Vec<(Hit, Image)>, String> {
+    let (index, pick) = retrieval?;
+    match (steer, report.as_mut()) {
+        (Some(plan), Some(r)) if plan.steer >= ColourSteer::Start => {
+            steered_starts(teacher, index, caption, plan, pick, r)
+        }
+        _ => retrieve(teacher, index, caption, pick),
+    }
 }
 
 /// Samples `cfg.k` images of `prompt` and keeps the one `scorer` matches best to `caption`.
 /// With `retrieval` (an index and which of its icons to start from: `n` of them,
 /// [`retrieved_count`]; `Err`: why there is none, or retrieval is off), that many start from the
 /// training icons nearest to `caption` at `cfg.strength`; the second value says why none did,
-/// when none did.
+/// when none did. With `steer` (what the caption names beyond its embedding), the starts, the
+/// pick and the kept sample are steered toward it ([`super::steer`]).
 #[allow(clippy::too_many_arguments)]
 pub fn sample_and_rerank(
     teacher: &dyn Teacher,
@@ -126,26 +161,30 @@ pub fn sample_and_rerank(
     retrieval: Result<(&IconIndex, RetrievalPick), String>,
     prompt: &str,
     caption: &str,
+    steer: Option<&CaptionPlan>,
     cfg: &SampleConfig,
     sink: &dyn ProgressSink,
     cancel: &CancelToken,
 ) -> Result<(Ranked, Option<String>), SampleError> {
-    let (hits, why_not) = match retrieval.and_then(|(i, pick)| retrieve(teacher, i, caption, pick))
-    {
+    let mut report = steer.map(|p| CaptionReport::of(p, retrieval.is_ok()));
+    let (hits, why_not) = match starts(teacher, retrieval, caption, steer, &mut report) {
         Ok(h) => (h, None),
         Err(e) => (Vec::new(), Some(e)),
     };
     let (hits, starts): (Vec<Hit>, Vec<Image>) = hits.into_iter().unzip();
-    let images = teacher.sample(prompt, &starts, cfg, sink, cancel)?;
+    let mut images = teacher.sample(prompt, &starts, cfg, sink, cancel)?;
     if images.is_empty() {
         return Err(SampleError::failed("sampling", "no samples drawn (K = 0)"));
     }
-    let (best, scores) = match scorer {
+    let (mut best, scores) = match scorer {
         Some(scorer) => scorer
             .best_of(&images, caption)
             .map_err(|e| SampleError::failed("CLIP rerank", e))?,
         None => (0, Vec::new()),
     };
+    if let (Some(plan), Some(r)) = (steer, report.as_mut()) {
+        best = steer_samples(&mut images, &scores, best, plan, r);
+    }
     if best >= images.len() {
         return Err(SampleError::failed("rerank", "best index out of range"));
     }
@@ -157,6 +196,7 @@ pub fn sample_and_rerank(
             best,
             scores,
             sources,
+            caption: report,
         },
         why_not,
     ))
@@ -177,6 +217,7 @@ mod tests {
             best: 1,
             scores: vec![0.5, 0.9, 0.8, 0.2],
             sources: vec![None; 4],
+            caption: None,
         };
         assert_eq!(ranked.top(1), [1]);
         // Sample 0 scores higher than 3 but equals sample 2 (picked before it): it comes after

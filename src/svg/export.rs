@@ -143,6 +143,29 @@ struct StrokePaint {
     color: String,
     width: String,
     opacity: Option<String>,
+    /// The cap, join and miter limit attributes (` stroke-linecap="round" …`).
+    caps: String,
+}
+
+/// The attributes of `st`'s caps and joins that differ from SVG's defaults (butt caps, miter
+/// joins, miter limit 4).
+fn caps_attrs(st: &crate::scene::Stroke) -> String {
+    use crate::scene::{LineCap, LineJoin};
+    let mut out = String::new();
+    match st.cap {
+        LineCap::Round => push_attr(&mut out, "stroke-linecap", "round"),
+        LineCap::Square => push_attr(&mut out, "stroke-linecap", "square"),
+        LineCap::Butt => {}
+    }
+    match st.join {
+        LineJoin::Round => push_attr(&mut out, "stroke-linejoin", "round"),
+        LineJoin::Bevel => push_attr(&mut out, "stroke-linejoin", "bevel"),
+        LineJoin::Miter if st.miter_limit != crate::scene::Stroke::DEFAULT_MITER_LIMIT => {
+            push_attr(&mut out, "stroke-miterlimit", &num(st.miter_limit, 3));
+        }
+        LineJoin::Miter => {}
+    }
+    out
 }
 
 impl Paint {
@@ -170,6 +193,7 @@ impl Paint {
                 color: hex(st.color),
                 width,
                 opacity,
+                caps: caps_attrs(&st),
             })
         });
         Paint {
@@ -192,7 +216,8 @@ struct Inherited {
     stroke: Option<String>,
     stroke_width: Option<String>,
     stroke_opacity: Option<String>,
-    caps: bool,
+    /// The cap and join attributes an enclosing group set.
+    caps: Option<String>,
 }
 
 impl Inherited {
@@ -203,7 +228,7 @@ impl Inherited {
             stroke: None,
             stroke_width: None,
             stroke_opacity: None,
-            caps: false,
+            caps: None,
         }
     }
 }
@@ -211,8 +236,6 @@ impl Inherited {
 fn push_attr(out: &mut String, name: &str, value: &str) {
     let _ = write!(out, r#" {name}="{value}""#);
 }
-
-const CAPS: &str = r#" stroke-linecap="round" stroke-linejoin="round""#;
 
 fn push_paint(out: &mut String, paint: &Paint, ctx: &Inherited) {
     if paint.fill != ctx.fill {
@@ -236,8 +259,8 @@ fn push_paint(out: &mut String, paint: &Paint, ctx: &Inherited) {
         {
             push_attr(out, "stroke-opacity", o);
         }
-        if !ctx.caps {
-            out.push_str(CAPS);
+        if ctx.caps.as_ref() != Some(&st.caps) {
+            out.push_str(&st.caps);
         }
     }
 }
@@ -316,8 +339,8 @@ impl Writer<'_> {
     }
 
     /// Opens one outer group with the stroke attributes shared by all stroked paths, when two
-    /// or more are stroked (caps and joins are always round, so two stroked paths already pay
-    /// for it); `ctx` learns what it sets. Returns whether it opened one.
+    /// or more are stroked (their caps and joins are usually round, so two stroked paths
+    /// already pay for it); `ctx` learns what it sets. Returns whether it opened one.
     fn stroke_group(&mut self, items: &[(usize, Paint)], ctx: &mut Inherited) -> bool {
         let stroked: Vec<&StrokePaint> = items
             .iter()
@@ -347,8 +370,10 @@ impl Writer<'_> {
             push_attr(out, "stroke-opacity", o);
             ctx.stroke_opacity = Some(o.clone());
         }
-        out.push_str(CAPS);
-        ctx.caps = true;
+        if let Some(c) = common(stroked.iter().map(|s| &s.caps)) {
+            out.push_str(c);
+            ctx.caps = Some(c.clone());
+        }
         out.push_str(">\n");
         true
     }

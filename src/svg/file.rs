@@ -1,7 +1,7 @@
 //! Scene files: the benchmark scene JSON format, and loading a scene (SVG or JSON) from disk with
 //! a size cap.
 
-use super::{SvgError, from_svg};
+use super::{SvgError, SvgImport, import_svg};
 use crate::scene::{Point, Rgba, Scene, Shape};
 use std::path::Path;
 
@@ -68,14 +68,22 @@ pub fn scene_from_json(text: &str) -> Result<Scene, SvgError> {
 
 /// Loads a scene from a `.json` (bench or serde scene format) or SVG file.
 pub fn load_scene(path: &Path) -> Result<Scene, SvgError> {
+    load_import(path).map(|i| i.scene)
+}
+
+/// [`load_scene`], with the SVG import's warnings (none for JSON).
+pub fn load_import(path: &Path) -> Result<SvgImport, SvgError> {
     let text = read_text_capped(path, SCENE_FILE_MAX_BYTES)?;
     if path
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("json"))
     {
-        scene_from_json(&text)
+        scene_from_json(&text).map(|scene| SvgImport {
+            scene,
+            warnings: Vec::new(),
+        })
     } else {
-        from_svg(&text)
+        import_svg(&text)
     }
 }
 

@@ -1,4 +1,5 @@
 use super::*;
+use crate::scene::{Point, Rgba, Scene, Shape, ShapeKind, Stroke};
 
 fn sample_scene() -> Scene {
     let mut s = Scene::new(64, 48, Rgba::WHITE).unwrap();
@@ -23,10 +24,7 @@ fn sample_scene() -> Scene {
                 Point::new(35.0, 47.0),
                 Point::new(60.0, 35.0),
             ],
-            Stroke {
-                color: Rgba::new(0.0, 0.0, 0.0, 0.75),
-                width: 3.0,
-            },
+            Stroke::round(Rgba::new(0.0, 0.0, 0.0, 0.75), 3.0),
         )
         .unwrap(),
     );
@@ -151,10 +149,7 @@ fn groups_and_ids() {
     assert!(!plain.contains("<g") && !plain.contains("id="), "{plain}");
     // Sketch-like scenes: the shared stroke goes on one group.
     let mut k = Scene::new(64, 64, Rgba::WHITE).unwrap();
-    let st = Stroke {
-        color: Rgba::BLACK,
-        width: 1.5,
-    };
+    let st = Stroke::round(Rgba::BLACK, 1.5);
     for i in 0..3 {
         let y = 5.0 + 10.0 * i as f32;
         let pts = [(5.0, y), (20.0, y + 7.0), (40.0, y - 3.0), (60.0, y)];
@@ -425,10 +420,10 @@ fn random_scene(seed: u64) -> Scene {
                     }
                     prev_c2 = Some(c[1]);
                 }
-                let stroke = Stroke {
-                    color: palette[rng.random_range(0..palette.len())],
-                    width: rng.random_range(1.0..4.0),
-                };
+                let stroke = Stroke::round(
+                    palette[rng.random_range(0..palette.len())],
+                    rng.random_range(1.0..4.0),
+                );
                 let shape = if closed {
                     let mut s = Shape::closed_cubic(pts, color).unwrap();
                     match rng.random_range(0..3) {

@@ -344,12 +344,7 @@ impl Teacher for AnalyticTeacher {
         guidance: f32,
     ) -> Result<Latent, TeacherError> {
         self.check_latent(z_t)?;
-        if t >= self.alphas.len() {
-            return Err(TeacherError::Timestep {
-                t,
-                max: self.alphas.len(),
-            });
-        }
+        super::check_timestep(t, self.alphas.len())?;
         let all: Vec<usize> = (0..self.targets.len()).collect();
         let sel = self.selected(&cond.prompt);
         let eps_u = self.eps_from_x0(&z_t.data, t, &self.posterior_mean(&z_t.data, t, &all));

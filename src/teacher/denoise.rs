@@ -13,7 +13,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
 /// What to draw.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct SampleConfig {
     /// Number of samples K.
     pub k: u32,
@@ -22,6 +22,9 @@ pub struct SampleConfig {
     pub guidance: f64,
     pub seed: u64,
     pub strength: f64,
+    /// What classifier-free guidance steers away from: the unconditional branch embeds it
+    /// (empty: the unconditional prompt "").
+    pub negative_prompt: String,
 }
 
 /// Why sampling stopped.
@@ -89,9 +92,11 @@ pub fn draw(
     sink: &dyn ProgressSink,
     cancel: &CancelToken,
 ) -> Result<Vec<Image>, SampleError> {
-    let (cond, uncond) = sd
-        .text_embeddings(prompt)
-        .map_err(|e| SampleError::failed("text encoder", e))?;
+    let embed = |p: &str| {
+        sd.embed_text(p)
+            .map_err(|e| SampleError::failed("text encoder", e))
+    };
+    let (cond, uncond) = (embed(prompt)?, embed(&cfg.negative_prompt)?);
     let [c, h, w] = latent_shape;
     // noise samples draw from the sampler's historical stream; SDEdit noise from its own
     let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed ^ 0x5a3b_1e00);

@@ -145,6 +145,13 @@ pub trait Teacher: Send + Sync {
     /// Side of the square image the encoder expects, in pixels.
     fn image_size(&self) -> u32;
 
+    /// `(width, height)` of the image the encoder expects: the square of
+    /// [`Teacher::image_size`] unless the teacher was loaded for a non-square canvas.
+    fn image_dims(&self) -> (u32, u32) {
+        let s = self.image_size();
+        (s, s)
+    }
+
     /// Latent shape `[C, H, W]` produced by [`Teacher::encode`].
     fn latent_shape(&self) -> [usize; 3];
 
@@ -154,7 +161,7 @@ pub trait Teacher: Send + Sync {
     /// Prepares text conditioning for a caption (and negative prompt).
     fn condition(&self, prompt: &str, negative_prompt: &str) -> Result<Conditioning, TeacherError>;
 
-    /// Encodes a premultiplied RGBA image of side [`Teacher::image_size`] into a latent.
+    /// Encodes a premultiplied RGBA image of [`Teacher::image_dims`] into a latent.
     fn encode(&self, image: &Image) -> Result<Latent, TeacherError>;
 
     /// Vector-Jacobian product of [`Teacher::encode`] at `image`: returns dL/d(image data)
@@ -181,6 +188,15 @@ pub trait Teacher: Send + Sync {
         cond: &Conditioning,
         guidance: f32,
     ) -> Result<Latent, TeacherError>;
+}
+
+/// `Ok` when `t` indexes a schedule of `len` timesteps, else [`TeacherError::Timestep`].
+pub fn check_timestep(t: usize, len: usize) -> Result<(), TeacherError> {
+    if t < len {
+        Ok(())
+    } else {
+        Err(TeacherError::Timestep { t, max: len })
+    }
 }
 
 /// [`Teacher::encode_linearised`] without a tape: encodes now, and runs

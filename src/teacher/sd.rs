@@ -20,7 +20,9 @@ use std::path::Path;
 /// Stable Diffusion behind the [`Teacher`] interface.
 pub struct SdTeacher {
     sd: StableDiffusion,
-    image_size: u32,
+    /// Encoder input width and height (equal unless loaded for a non-square canvas).
+    width: u32,
+    height: u32,
     latent_shape: [usize; 3],
     alphas: Vec<f32>,
 }
@@ -42,13 +44,14 @@ impl SdTeacher {
         image_size: u32,
         taesd: Option<&Path>,
     ) -> Result<Self, TeacherError> {
-        Self::load_on(dir, image_size, taesd, ComputeDevice::Cpu)
+        Self::load_on(dir, (image_size, image_size), taesd, ComputeDevice::Cpu)
     }
 
-    /// [`SdTeacher::load_with`] on `device` (CUDA needs the `cuda` feature).
+    /// [`SdTeacher::load_with`] on `device` (CUDA needs the `cuda` feature) for `(width,
+    /// height)` px encoder inputs.
     pub fn load_on(
         dir: &Path,
-        image_size: u32,
+        (width, height): (u32, u32),
         taesd: Option<&Path>,
         device: ComputeDevice,
     ) -> Result<Self, TeacherError> {
@@ -59,19 +62,33 @@ impl SdTeacher {
             ..LoadOptions::default()
         };
         let sd = StableDiffusion::load(dir, &opts).map_err(model_err)?;
-        Self::new(sd, image_size)
+        Self::new_shaped(sd, width, height)
     }
 
     /// Wraps an already built model (benchmarks use random weights).
     pub fn new(sd: StableDiffusion, image_size: u32) -> Result<Self, TeacherError> {
-        let s = sd
-            .latent_side(image_size as usize)
-            .map_err(|e| TeacherError::Setup(e.to_string()))?;
-        let latent_shape = [sd.codec.latent_channels(), s, s];
+        Self::new_shaped(sd, image_size, image_size)
+    }
+
+    /// [`SdTeacher::new`] for `width x height` px encoder inputs (a non-square canvas: each
+    /// side must suit the autoencoder; pixel-space models draw their square).
+    pub fn new_shaped(sd: StableDiffusion, width: u32, height: u32) -> Result<Self, TeacherError> {
+        let side = |v: u32| {
+            sd.latent_side(v as usize)
+                .map_err(|e| TeacherError::Setup(e.to_string()))
+        };
+        let (lw, lh) = (side(width)?, side(height)?);
+        if sd.is_pixel_space() && width != height {
+            return Err(TeacherError::Setup(format!(
+                "a pixel-space model draws squares, not {width}x{height}"
+            )));
+        }
+        let latent_shape = [sd.codec.latent_channels(), lh, lw];
         let alphas = sd.alphas_cumprod().iter().map(|&a| a as f32).collect();
         Ok(Self {
             sd,
-            image_size,
+            width,
+            height,
             latent_shape,
             alphas,
         })
@@ -85,7 +102,7 @@ impl SdTeacher {
     /// gradient is minus the sum of the colour gradients.
     fn image_grad(&self, dx: &Tensor) -> Result<Vec<f32>, TeacherError> {
         let (dx, _) = flat(dx)?;
-        let n = (self.image_size * self.image_size) as usize;
+        let n = (self.width * self.height) as usize;
         if dx.len() != 3 * n {
             return Err(TeacherError::Model(format!(
                 "encoder VJP returned {} values, expected {}",
@@ -107,18 +124,18 @@ impl SdTeacher {
     }
 
     fn image_tensor(&self, image: &Image) -> Result<Tensor, TeacherError> {
-        let s = self.image_size;
-        if image.width != s || image.height != s || image.data.len() != 4 * (s * s) as usize {
+        let (w, h) = (self.width, self.height);
+        if image.width != w || image.height != h || image.data.len() != 4 * (w * h) as usize {
             return Err(TeacherError::ImageSize {
                 got_w: image.width,
                 got_h: image.height,
-                want_w: s,
-                want_h: s,
+                want_w: w,
+                want_h: h,
             });
         }
         Tensor::from_vec(
             image.planar_rgb_over_white(),
-            (1, 3, s as usize, s as usize),
+            (1, 3, h as usize, w as usize),
             self.sd.device(),
         )
         .map_err(model_err)
@@ -211,7 +228,11 @@ impl Teacher for SdTeacher {
     }
 
     fn name(&self) -> String {
-        let s = self.image_size;
+        let s = if self.width == self.height {
+            self.width.to_string()
+        } else {
+            format!("{}x{}", self.width, self.height)
+        };
         match self.sd.codec.kind() {
             CodecKind::Pixel => format!(
                 "pixel-space diffusion ({0}x{0} prior, {s} px renders)",
@@ -226,8 +247,13 @@ impl Teacher for SdTeacher {
         self.sd.codec.kind().as_str()
     }
 
+    /// The width (a square teacher's side).
     fn image_size(&self) -> u32 {
-        self.image_size
+        self.width
+    }
+
+    fn image_dims(&self) -> (u32, u32) {
+        (self.width, self.height)
     }
 
     fn latent_shape(&self) -> [usize; 3] {
@@ -290,12 +316,7 @@ impl Teacher for SdTeacher {
         cond: &Conditioning,
         guidance: f32,
     ) -> Result<Latent, TeacherError> {
-        if t >= self.alphas.len() {
-            return Err(TeacherError::Timestep {
-                t,
-                max: self.alphas.len(),
-            });
-        }
+        super::check_timestep(t, self.alphas.len())?;
         let z = self.latent_tensor(z_t)?;
         let c = self.embedding(&cond.cond, &cond.embed_shape)?;
         let u = self.embedding(&cond.uncond, &cond.embed_shape)?;

@@ -158,10 +158,7 @@ mod tests {
                     Point::new(36.0, 62.0 - o),
                     Point::new(60.0 - o, 44.0),
                 ],
-                Stroke {
-                    color: Rgba::BLACK,
-                    width: 2.0,
-                },
+                Stroke::round(Rgba::BLACK, 2.0),
             )
             .unwrap(),
         );

@@ -113,10 +113,7 @@ fn circle_is_simple_and_untouched() {
 
 #[test]
 fn open_and_unfilled_shapes_are_simple() {
-    let st = Stroke {
-        color: RED,
-        width: 2.0,
-    };
+    let st = Stroke::round(RED, 2.0);
     let p = |x, y| Point::new(x, y);
     let open = Shape::open_cubic(
         vec![p(0.0, 0.0), p(100.0, 100.0), p(100.0, 0.0), p(0.0, 100.0)],

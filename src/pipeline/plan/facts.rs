@@ -2,6 +2,7 @@
 
 use super::EncoderChoice;
 use crate::models::stable_diffusion::ModelHints;
+use crate::pipeline::canvas::SampleShape;
 
 /// What the executor knows about its model before loading it.
 #[derive(Clone, Debug, PartialEq)]
@@ -13,6 +14,11 @@ pub struct ModelFacts {
     pub encoder_choice: EncoderChoice,
     /// A TAESD encoder was found for this model.
     pub taesd_found: bool,
+    /// The shapes it samples at (a non-square canvas is sampled at its aspect only by a
+    /// model that takes [`SampleShape::Multiple`]).
+    pub sample_shape: SampleShape,
+    /// Its guidance has an unconditional branch that can embed a negative prompt.
+    pub negative_prompt: bool,
 }
 
 impl ModelFacts {
@@ -24,6 +30,18 @@ impl ModelFacts {
             hints: ModelHints::default(),
             encoder_choice: EncoderChoice::Vae,
             taesd_found: false,
+            sample_shape: SampleShape::Square,
+            negative_prompt: false,
+        }
+    }
+
+    /// [`ModelFacts::paper`] for a model that samples like Stable Diffusion 1.x/2.x: any
+    /// multiple of 64 px, a negative prompt in its guidance (a custom executor's default).
+    pub fn stable_diffusion(name: impl Into<String>) -> Self {
+        ModelFacts {
+            sample_shape: SampleShape::Multiple(64),
+            negative_prompt: true,
+            ..ModelFacts::paper(name)
         }
     }
 

@@ -4,12 +4,13 @@
 //! checkpoints read the plan and nothing else, so a queued job runs the same whatever the preset
 //! table says later, and the CLI and the service cannot disagree.
 
+use super::canvas::{CanvasPlan, CanvasRequest, resolve_canvas};
 use super::presets::PresetSettings;
-use super::spec::check_range;
+use super::spec::{check_range, check_text};
 use super::{EncoderChoice, JobKind, Limits, Method, Preset, SpecError, Style};
-use crate::augment::AugmentConfig;
+use crate::caption::CaptionPlan;
 use crate::stages::live::{CANVAS_SIDES, LiveConfig, PathBudget};
-use crate::stages::sds::{ReinitConfig, SdsConfig, T_MAX, T_MIN};
+use crate::stages::sds::{T_MAX, T_MIN};
 use crate::vector::VectorOptions;
 use crate::vector::palette::ColorPlan;
 use serde::{Deserialize, Serialize};
@@ -62,6 +63,10 @@ pub struct PlanRequest {
     pub variations: u32,
     /// Colours, background, grouping; for vectorize runs the stopping rules too.
     pub vector: VectorOptions,
+    /// Text runs: the canvas asked for (nothing: the preset's square).
+    pub canvas: CanvasRequest,
+    /// Text runs: what classifier-free guidance steers away from.
+    pub negative_prompt: Option<String>,
     /// Settings only the command line exposes (none from HTTP).
     pub tuning: Tuning,
 }
@@ -83,6 +88,8 @@ impl PlanRequest {
             retrieval: true,
             variations: 1,
             vector: VectorOptions::default(),
+            canvas: CanvasRequest::default(),
+            negative_prompt: None,
             tuning: Tuning::default(),
         }
     }
@@ -212,8 +219,17 @@ pub struct TextPlan {
     /// What the diffusion model is conditioned on (the caption, with the style suffix unless
     /// the model was trained on bare captions).
     pub prompt: String,
-    /// Teacher input side in pixels; the SVG is written at this width.
+    /// Teacher input side in pixels (the shorter side of a non-square sample); without a
+    /// [`TextPlan::canvas`] the SVG is written at this width.
     pub size: u32,
+    /// The SVG's canvas and the sample's shape, when the request asked for a canvas; `None`:
+    /// the square `size` canvas.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub canvas: Option<CanvasPlan>,
+    /// What classifier-free guidance steers away from: the unconditional branch of sampling
+    /// and of SDS embeds it instead of the empty prompt.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub negative_prompt: Option<String>,
     /// Paths (iconography, low-poly), strokes (sketch, painting) or cells (pixel art).
     pub paths: u32,
     /// `None`: the start needs no samples.
@@ -238,6 +254,10 @@ pub struct TextPlan {
         skip_serializing_if = "variations::is_one"
     )]
     pub variations: u32,
+    /// The colour and objects the caption names and how far the model steers toward them;
+    /// absent for a caption of one uncoloured thing (and in plans stored before it existed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub caption: Option<CaptionPlan>,
 }
 
 /// The fully numeric plan of a run.
@@ -486,6 +506,10 @@ fn text_plan(
         retrieval_per_caption: model.hints.retrieval_per_caption,
         strength: model.hints.sdedit_strength,
     });
+    let canvas = req
+        .canvas
+        .check(limits.max_canvas_side)?
+        .map(|c| resolve_canvas(c, n.size, sample_shape(req, model)));
     let distil = !from_method || req.method != Method::SdLive;
     let augment = from_method && req.method == Method::Scratch && req.tuning.augment != Some(false);
     let sds = distil
@@ -497,7 +521,13 @@ fn text_plan(
         start,
         prompt: req.style.prompt_with(caption, model.hints.style_suffix),
         size: n.size,
+        canvas,
+        negative_prompt: negative_prompt(req, model, limits)?,
         paths: n.paths,
+        // Only a run that samples is steered toward the caption's colour and objects.
+        caption: sample
+            .as_ref()
+            .and_then(|_| crate::caption::parse(caption, model.hints.colour_steer)),
         sample,
         trace: TracePlan {
             size: if from_method { ps.trace_size } else { n.size },
@@ -516,59 +546,8 @@ fn text_plan(
     })
 }
 
-impl TextPlan {
-    /// The LIVE configuration that traces the run's starting image (the kept sample at
-    /// [`TracePlan::size`], or a given image at the teacher's size): LIVE's own settings with
-    /// the plan's path count, iterations, seed, snapshot period and colours.
-    pub fn trace_config(&self) -> LiveConfig {
-        LiveConfig {
-            size: self.trace.size,
-            budget: PathBudget::fixed(self.paths as usize),
-            iters_per_stage: self.trace.iters,
-            final_iters: self.trace.iters,
-            seed: self.seeds.trace,
-            snapshot_every: self.snapshot_every,
-            colors: self.colors.clone(),
-            ..LiveConfig::default()
-        }
-    }
-
-    /// The score distillation this plan runs (`None`: `sd_live`, no distillation): the
-    /// paper's settings for the style ([`SdsConfig::for_style`]) with the plan's prompt,
-    /// guidance, timestep range, clipping, learning-rate scale, augmentation, re-init area,
-    /// snapshot period and seed.
-    pub fn sds_config(&self) -> Option<SdsConfig> {
-        let sp = self.sds.as_ref()?;
-        let paper = SdsConfig::for_style(self.style, "", sp.steps, self.size);
-        Some(SdsConfig {
-            prompt: self.prompt.clone(),
-            t_min: sp.t_min,
-            t_max: sp.t_max,
-            t_max_end: sp.t_max_end,
-            guidance: sp.guidance,
-            grad_clip: sp.grad_clip,
-            augment: paper.augment.filter(|_| sp.augment),
-            schedules: paper.schedules.scaled(sp.lr_scale),
-            reinit: paper.reinit.map(|r| ReinitConfig {
-                min_area: sp.reinit_min_area,
-                ..r
-            }),
-            snapshot_every: self.snapshot_every,
-            seed: self.seeds.sds,
-            ..paper
-        })
-    }
-}
-
-/// The render size of an SDS run with `augment` at a `size` px teacher (augmentation renders
-/// larger and crops).
-pub fn render_size(size: u32, augment: bool) -> u32 {
-    if augment {
-        AugmentConfig::vectorfusion(size).render_size()
-    } else {
-        size
-    }
-}
+mod text_plan;
+use text_plan::{negative_prompt, sample_shape};
 
 mod facts;
 mod variations;

@@ -1,6 +1,8 @@
 use super::*;
 use crate::models::stable_diffusion::ModelHints;
+use crate::pipeline::canvas::SampleShape;
 use crate::scene::MAX_PATHS;
+use crate::stages::sds::SdsConfig;
 
 fn facts(small_prior: bool) -> ModelFacts {
     ModelFacts {
@@ -11,6 +13,12 @@ fn facts(small_prior: bool) -> ModelFacts {
         },
         encoder_choice: EncoderChoice::Auto,
         taesd_found: false,
+        sample_shape: if small_prior {
+            SampleShape::Square
+        } else {
+            SampleShape::Multiple(64)
+        },
+        negative_prompt: true,
     }
 }
 
@@ -215,7 +223,10 @@ fn live_presets_are_valid_and_ordered_by_effort() {
     assert_eq!(f, LiveConfig::default());
     assert!(d.size < f.size && f.size < b.size && b.size < p.size);
     assert!(d.iters_per_stage < f.iters_per_stage);
-    assert!(f.iters_per_stage < b.iters_per_stage && b.iters_per_stage < p.iters_per_stage);
+    assert!(f.iters_per_stage <= b.iters_per_stage && b.iters_per_stage < p.iters_per_stage);
+    // Balanced: coarse-to-fine (the stages before the last at half its size); the others not.
+    assert_eq!(2 * b.coarse_size, b.size);
+    assert!([d.coarse_size, f.coarse_size, p.coarse_size] == [0; 3]);
     assert_eq!(p.reinit_min_area, 64.0);
     // One vocabulary: the older names still parse.
     assert_eq!("quality".parse::<Preset>(), Ok(Preset::Paper));
@@ -430,4 +441,131 @@ fn the_sds_learning_rate_scale_reaches_the_plan_within_its_range() {
         let e = with(Some(bad)).unwrap_err();
         assert_eq!(e.field, "lr_scale", "{bad}: {e}");
     }
+}
+
+fn wide(req: PlanRequest) -> PlanRequest {
+    PlanRequest {
+        canvas: CanvasRequest {
+            aspect: Some(crate::pipeline::Aspect::Wide16x9),
+            ..CanvasRequest::default()
+        },
+        ..req
+    }
+}
+
+#[test]
+fn a_canvas_resolves_once_into_the_plan() {
+    // Nothing asked: no canvas in the plan or its JSON (stored plans and SVGs as before).
+    let t = text(PlanRequest::text("a crown"), false);
+    assert_eq!(t.canvas, None);
+    assert_eq!(t.sample_dims(), (t.size, t.size));
+    let json = serde_json::to_value(&t).unwrap();
+    assert!(json.get("canvas").is_none() && json.get("negative_prompt").is_none());
+    // Stable Diffusion (balanced, 256 px) samples at the aspect; the SVG is exactly 16:9.
+    let t = text(wide(PlanRequest::text("a crown")), false);
+    let c = t.canvas.unwrap();
+    assert_eq!(
+        (c.width, c.height, c.sample_width, c.sample_height),
+        (464, 261, 448, 256)
+    );
+    assert_eq!((t.sample_dims(), t.canvas_dims()), ((448, 256), (464, 261)));
+    // The small prior draws its 64 px square on a 16:9 canvas.
+    let t = text(wide(PlanRequest::text("a crown")), true);
+    assert_eq!((t.sample_dims(), t.canvas_dims()), ((64, 64), (128, 72)));
+    // From scratch, augmentation crops the sample's shape from a larger render.
+    let t = text(
+        wide(PlanRequest {
+            method: Method::Scratch,
+            preset: Preset::Fast,
+            ..PlanRequest::text("a crown")
+        }),
+        false,
+    );
+    let aug = t.sds_config().unwrap().augment.unwrap();
+    assert_eq!(t.sample_dims(), (128, 64));
+    assert_eq!((aug.out_dims(), aug.render_dims()), ((128, 64), (150, 75)));
+}
+
+#[test]
+fn bad_canvases_and_negative_prompts_name_their_field() {
+    let err = |req: PlanRequest, f: &ModelFacts| {
+        resolve(&req, Some(f), &Limits::default())
+            .unwrap_err()
+            .field
+    };
+    let sd = facts(false);
+    let both = PlanRequest {
+        canvas: CanvasRequest {
+            width: Some(640),
+            height: Some(360),
+            ..wide(PlanRequest::text("x")).canvas
+        },
+        ..PlanRequest::text("x")
+    };
+    assert_eq!(err(both, &sd), "width");
+    let size = |w, h| PlanRequest {
+        canvas: CanvasRequest {
+            aspect: None,
+            width: Some(w),
+            height: Some(h),
+        },
+        ..PlanRequest::text("x")
+    };
+    assert_eq!(err(size(64, 2049), &sd), "height");
+    assert_eq!(err(size(10, 100), &sd), "width");
+    let t = text(size(1920, 1080), false);
+    assert_eq!(t.canvas_dims(), (1920, 1080));
+    assert_eq!(t.sample_dims(), (448, 256));
+    let neg = |n: &str| PlanRequest {
+        negative_prompt: Some(n.into()),
+        ..PlanRequest::text("x")
+    };
+    assert_eq!(err(neg(""), &sd), "negative_prompt");
+    assert_eq!(err(neg(&"x".repeat(1001)), &sd), "negative_prompt");
+    assert_eq!(err(neg("a\u{7}b"), &sd), "negative_prompt");
+    // The analytic test teacher has no unconditional branch to put it in.
+    assert_eq!(
+        err(neg("blurry"), &ModelFacts::paper("test")),
+        "negative_prompt"
+    );
+    let t = text(neg("blurry"), true);
+    assert_eq!(t.negative_prompt.as_deref(), Some("blurry"));
+    assert_eq!(t.sds_config().unwrap().negative_prompt, "blurry");
+    assert_eq!(
+        text(PlanRequest::text("x"), true)
+            .sds_config()
+            .unwrap()
+            .negative_prompt,
+        ""
+    );
+}
+
+#[test]
+fn a_caption_colour_is_resolved_into_the_plan_with_the_models_steering() {
+    let mut steered = facts(true);
+    steered.hints.colour_steer = crate::caption::ColourSteer::Svg;
+    let plan = |caption: &str, method, facts: &ModelFacts| {
+        let req = PlanRequest {
+            method,
+            ..PlanRequest::text(caption)
+        };
+        resolve(&req, Some(facts), &Limits::default())
+            .unwrap()
+            .text
+            .unwrap()
+    };
+    let t = plan("a blue cat", Method::SdLiveSds, &steered);
+    let c = t.caption.as_ref().unwrap();
+    assert_eq!(c.colour().map(|c| c.hue), Some(crate::caption::Hue::Blue));
+    assert_eq!(c.objects[0].words, "cat");
+    assert_eq!(c.steer, crate::caption::ColourSteer::Svg);
+    // A caption of one uncoloured thing has none, and its plan's JSON is as before.
+    let t = plan("a crown", Method::SdLiveSds, &steered);
+    assert_eq!(t.caption, None);
+    assert!(!serde_json::to_string(&t).unwrap().contains("\"caption\""));
+    // Stable Diffusion reads colours itself: parsed, not steered. A run that samples nothing
+    // has nothing to steer.
+    let t = plan("a blue cat", Method::SdLiveSds, &facts(false));
+    assert_eq!(t.caption.unwrap().steer, crate::caption::ColourSteer::Off);
+    assert_eq!(plan("a blue cat", Method::Scratch, &steered).caption, None);
 }

@@ -19,7 +19,8 @@
   // The form control an API error's `field` names.
   const FIELD_INPUT = { caption: 'caption', style: 'style', preset: 'preset', method: 'method',
     paths: 'paths', seed: 'seed', steps: 'steps', samples: 'samples', priority: 'priority',
-    retrieval: 'retrieval', image: 'file', svg: 'file' };
+    retrieval: 'retrieval', image: 'file', svg: 'file', aspect: 'aspect', width: 'aspect',
+    height: 'aspect', negative_prompt: 'negative-prompt' };
 
   const state = {
     apiKey: sessionStorage.getItem(KEY_STORAGE) || '',
@@ -193,6 +194,7 @@
     el.submit.textContent = state.submitting ? 'Submitting…' : label;
     el.method.disabled = kind === 'image'; // the API refuses `method` on vectorize jobs
     el.methodHint.hidden = kind !== 'image';
+    el.textFields.hidden = el.aspectHint.hidden = kind === 'image'; // canvas + negative prompt: text jobs
     el.captionCount.textContent = String([...el.caption.value].length); // characters, as the API counts
   }
 
@@ -286,6 +288,9 @@
     const priority = intField('priority', -100, 100);
     if (priority) body.priority = priority;
     if (kind === 'text' && !f && !el.retrieval.checked) body.retrieval = false;
+    if (kind === 'text' && el.aspect.value) body.aspect = el.aspect.value;
+    const negative = el.negativePrompt.value.trim();
+    if (kind === 'text' && negative) body.negative_prompt = negative;
     const template = toJson(body, readSeed());
     const json = f ? template.split(`"${f.kind === 'svg' ? SVG_MARK : IMAGE_MARK}"`).join(JSON.stringify(f.data)) : template;
     return { json, template, files: f ? { [f.kind]: f.name, svgText: f.kind === 'svg' ? f.data : null } : {} };
@@ -327,6 +332,8 @@
     el.preset.value = p.preset;
     if (p.method) el.method.value = p.method;
     for (const k of ['paths', 'steps', 'samples', 'seed']) el[k].value = p[k] ?? '';
+    el.aspect.value = p.aspect ?? '';
+    el.negativePrompt.value = p.negative_prompt ?? '';
     el.priority.value = job.priority || '';
     updateMode();
     announce('Settings copied into the form.');
@@ -369,7 +376,7 @@
     if (p.caption != null) body.caption = p.caption;
     if (p.has_image) body.image = IMAGE_MARK;
     if (p.has_svg) body.svg = SVG_MARK;
-    for (const k of ['style', 'preset', 'method', 'paths', 'steps']) if (p[k] != null) body[k] = p[k];
+    for (const k of ['style', 'preset', 'method', 'paths', 'steps', 'aspect', 'width', 'height', 'negative_prompt']) if (p[k] != null) body[k] = p[k];
     if (job.kind === 'text' && p.samples != null) body.samples = p.samples;
     if (job.priority) body.priority = job.priority;
     return { template: toJson(body, p.seed != null ? String(p.seed) : null),
@@ -525,7 +532,9 @@
       // The run plan the job runs with (every number, resolved when it was accepted).
       const t = p.plan && p.plan.text, v = p.plan && p.plan.vectorize;
       if (t) {
-        rows.push(['Size', `${t.size} px`], ['Model', `${t.model.name} (${t.model.encoder})`]);
+        rows.push(['Size', t.canvas ? `${t.canvas.width}×${t.canvas.height} px (sampled at ${t.canvas.sample_width}×${t.canvas.sample_height})` : `${t.size} px`],
+          ['Model', `${t.model.name} (${t.model.encoder})`]);
+        if (t.negative_prompt) rows.push(['Negative prompt', t.negative_prompt]);
         if (t.sample) rows.push(['Sampler', `K=${t.sample.samples}, ${t.sample.steps} steps, retrieval ${t.sample.retrieval ? 'on' : 'off'}`]);
         if (t.sds) rows.push(['SDS', `${t.sds.steps} steps, guidance ${t.sds.guidance}, t ${t.sds.t_min}–${t.sds.t_max}`]);
       }

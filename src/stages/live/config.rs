@@ -151,6 +151,11 @@ pub struct LiveConfig {
     /// existed) runs every step.
     #[serde(default)]
     pub converge_tol: f32,
+    /// Coarse-to-fine: the working side (pixels) of every stage but the last; the last stage
+    /// and the final pass run at `size`. 0 (and plans stored before it existed) or a side not
+    /// below `size` works at `size` throughout.
+    #[serde(default)]
+    pub coarse_size: u32,
 }
 
 impl LiveConfig {
@@ -214,6 +219,13 @@ impl LiveConfig {
         if let Some(v) = self.max_bytes {
             check_max_bytes(v).map_err(|e| LiveError::Config(format!("max_bytes: {e}")))?;
         }
+        if self.coarse_size != 0 && !CANVAS_SIDES.contains(&self.coarse_size) {
+            return Err(LiveError::Config(format!(
+                "coarse_size must be 0 or in {}..={}",
+                CANVAS_SIDES.start(),
+                CANVAS_SIDES.end()
+            )));
+        }
         if self.iters_per_stage > MAX_ITERS || self.final_iters > MAX_ITERS {
             return bad("iterations per stage must be at most 100000");
         }
@@ -250,6 +262,7 @@ impl Default for LiveConfig {
             target_psnr: None,
             max_bytes: None,
             converge_tol: 0.0,
+            coarse_size: 0,
         }
     }
 }

@@ -209,10 +209,19 @@ pub fn vectorize_resumable(
     check_target(target)?;
     let (tw, th) = (target.width, target.height);
     let (ww, wh) = working_size(cfg.size, tw, th);
-    let work = resize(&target.over([1.0, 1.0, 1.0]), ww, wh);
+    let over = target.over([1.0, 1.0, 1.0]);
+    let work = resize(&over, ww, wh);
     let palette = cfg.colors.resolve(|k| palette::palette_of_image(&work, k));
     let (background, background_free) = start_background(cfg, target, &work, palette.is_some());
-    let mut scene = Scene::new(ww, wh, background)?;
+    // Coarse-to-fine: the stages before the last work on a smaller copy of the target.
+    let (cw, ch) = working_size(cfg.coarse_size, tw, th);
+    let coarse = cfg.coarse_size > 0 && cw < ww;
+    let (first, full) = if coarse {
+        (resize(&over, cw, ch), Some(work))
+    } else {
+        (work, None)
+    };
+    let mut scene = Scene::new(first.width, first.height, background)?;
     if let (Some(p), Background::Auto) = (&palette, cfg.colors.background) {
         palette::snap_background(&mut scene, p);
     }
@@ -222,7 +231,9 @@ pub fn vectorize_resumable(
         cfg.iters_per_stage * (stages_plan.len() as u32 + vtracer_stage as u32) + cfg.final_iters;
     let mut run = Run {
         cfg,
-        target: work,
+        target: first,
+        full,
+        full_width: ww,
         sink,
         cancel,
         step: 0,
@@ -234,13 +245,16 @@ pub fn vectorize_resumable(
     };
     let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);
     let resume = resume.filter(|r| {
-        r.scene.width == ww
-            && r.scene.height == wh
+        let size = (r.scene.width, r.scene.height);
+        (size == (ww, wh) || (coarse && size == (cw, ch)))
             && r.next_stage <= stages_plan.len()
             && r.scene.validate().is_ok()
     });
     let mut st = match resume {
-        Some(r) => {
+        Some(mut r) => {
+            if r.scene.width == ww {
+                run.switch_to_full(&mut r.scene);
+            }
             run.step = r.step;
             rng.set_word_pos(u128::from(r.rng_word_pos));
             r

@@ -8,7 +8,7 @@ use super::{
 };
 use crate::image::Image;
 use crate::image::ops::resize;
-use crate::losses::{outline, udf_weights, weighted_l2, xing_loss};
+use crate::losses::{outline, udf_weights, weighted_l2_into, xing_loss};
 use crate::optim::{Adam, AdamConfig, GroupSchedules, LrSchedule};
 use crate::progress::{CancelToken, Progress, ProgressSink, Stage};
 use crate::scene::{ParamGroup, Params, Rgba, Scene, Trainable};
@@ -19,7 +19,12 @@ use std::ops::Range;
 
 pub(super) struct Run<'a> {
     pub(super) cfg: &'a LiveConfig,
+    /// The target at the current working size (over white).
     pub(super) target: Image,
+    /// Coarse-to-fine: the target at the full working size, until [`Run::switch_to_full`] switches.
+    pub(super) full: Option<Image>,
+    /// Width of the full working size.
+    pub(super) full_width: u32,
     pub(super) sink: &'a dyn ProgressSink,
     pub(super) cancel: &'a CancelToken,
     pub(super) step: u32,
@@ -34,6 +39,24 @@ pub(super) struct Run<'a> {
 }
 
 impl Run<'_> {
+    /// Pixels of the current working size per pixel of the full one (1 once at full size):
+    /// the lengths of the configuration, given at the full size, scale by it.
+    fn px(&self) -> f32 {
+        self.target.width as f32 / self.full_width as f32
+    }
+
+    /// Switches a coarse-to-fine run to the full working size: `scene` scaled up, the loss on
+    /// the full-size target from now on. Does nothing once at full size.
+    pub(super) fn switch_to_full(&mut self, scene: &mut Scene) {
+        let Some(full) = self.full.take() else { return };
+        if scene.width != full.width {
+            let mut up = scene.scaled_to_width(full.width);
+            up.height = full.height;
+            *scene = up;
+        }
+        self.target = full;
+    }
+
     fn schedules(&self, iters: u32) -> GroupSchedules {
         let sched = |lr: f32| LrSchedule::WarmupCosine {
             start: 0.2 * lr,
@@ -43,7 +66,7 @@ impl Run<'_> {
             total: iters,
         };
         GroupSchedules {
-            points: sched(self.cfg.lr_points),
+            points: sched(self.cfg.lr_points * self.px()),
             fill: sched(self.cfg.lr_fill),
             stroke: LrSchedule::Constant { lr: 0.0 },
             width: LrSchedule::Constant { lr: 0.0 },
@@ -82,13 +105,17 @@ impl Run<'_> {
             .collect();
         let mut window: Vec<f64> = Vec::with_capacity(CONVERGE_WINDOW);
         let mut previous: Option<f64> = None;
+        let mut weights = Vec::new();
+        let mut d_image = Vec::new();
         for it in 0..iters {
             if self.cancel.is_cancelled() {
                 return Err(LiveError::Cancelled);
             }
             let (img, tape) = crate::raster::render_tape(scene);
-            let weights = self.loss_weights(scene, &in_focus);
-            let (loss, d_image) = weighted_l2(&img, &self.target, &weights)?;
+            if it % UDF_EVERY == 0 {
+                weights = self.loss_weights(scene, &in_focus);
+            }
+            let loss = weighted_l2_into(&img, &self.target, &weights, &mut d_image)?;
             let mut grad = crate::raster::backward(scene, &tape, &d_image);
             let xing = if self.cfg.xing_weight > 0.0 {
                 xing_loss(
@@ -135,7 +162,8 @@ impl Run<'_> {
                 .filter(|(_, f)| **f)
                 .map(|(s, _)| outline(s, 8))
                 .collect();
-            let udf = udf_weights(scene.width, scene.height, &outlines, self.cfg.udf_tau);
+            let tau = self.cfg.udf_tau * self.px();
+            let udf = udf_weights(scene.width, scene.height, &outlines, tau);
             let k = self.cfg.udf_weight / 3.0;
             for (w, u) in weights.iter_mut().zip(&udf) {
                 *w += k * u;
@@ -204,7 +232,8 @@ impl Run<'_> {
 
     /// Replaces faint or tiny paths by circles at the current high-error regions.
     fn reinit_weak(&self, scene: &mut Scene, rng: &mut ChaCha8Rng) -> usize {
-        let weak = prune::weak_paths(scene, self.cfg.reinit_min_opacity, self.cfg.reinit_min_area);
+        let min_area = self.cfg.reinit_min_area * self.px() * self.px();
+        let weak = prune::weak_paths(scene, self.cfg.reinit_min_opacity, min_area);
         if weak.is_empty() {
             return 0;
         }
@@ -219,7 +248,7 @@ impl Run<'_> {
 
     fn init_cfg(&self) -> init::InitConfig {
         init::InitConfig {
-            radius: self.cfg.init_radius,
+            radius: self.cfg.init_radius * self.px(),
             segments: self.cfg.init_segments,
             fit_region: self.cfg.init_fit_region,
             ..init::InitConfig::default()
@@ -243,6 +272,10 @@ impl Run<'_> {
         crate::vector::make_simple(scene, crate::vector::SIMPLE_MIN_AREA)
     }
 }
+
+/// Steps between two updates of the loss weights (the UDF band around the newest paths moves
+/// little in a few steps; untwisting, which happens on multiples of this, updates them anyway).
+const UDF_EVERY: u32 = 5;
 
 /// Steps per window of the early stop ([`LiveConfig::converge_tol`]).
 const CONVERGE_WINDOW: usize = 20;
@@ -455,6 +488,9 @@ impl Run<'_> {
             return Ok(());
         }
         for (si, &want) in plan.iter().enumerate().skip(st.next_stage) {
+            if si + 1 == plan.len() {
+                self.switch_to_full(&mut st.scene);
+            }
             match self.add_stage(st, rng, si, want, max_total)? {
                 None => break,
                 Some(stop) => {
@@ -477,6 +513,7 @@ impl Run<'_> {
         stages: usize,
     ) -> Result<(Scene, usize), LiveError> {
         let cfg = self.cfg;
+        self.switch_to_full(&mut scene);
         // Colours settle before the last pass, which then fits the geometry to them.
         if self.palette.is_some() {
             self.choose_colours(&mut scene);

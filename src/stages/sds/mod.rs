@@ -27,7 +27,7 @@ use crate::image::Image;
 use crate::optim::{Adam, StepOutcome};
 use crate::progress::{CancelToken, CheckpointError, Progress, ProgressSink, Stage};
 use crate::scene::{ParamGroup, Params, Scene};
-use crate::teacher::{Conditioning, Latent, Teacher, TeacherError};
+use crate::teacher::{Conditioning, Latent, Teacher};
 use rand::{Rng, RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
@@ -152,13 +152,9 @@ pub fn sds_latent_grad(
     guidance: f32,
     weighting: Weighting,
 ) -> Result<(Latent, f64), SdsError> {
-    let ab = *teacher
-        .alphas_cumprod()
-        .get(t)
-        .ok_or(TeacherError::Timestep {
-            t,
-            max: teacher.alphas_cumprod().len(),
-        })?;
+    let alphas = teacher.alphas_cumprod();
+    crate::teacher::check_timestep(t, alphas.len())?;
+    let ab = alphas[t];
     if noise.len() != z.len() {
         return Err(SdsError::Config("noise length differs from latent".into()));
     }
@@ -379,16 +375,16 @@ impl Moving {
     }
 }
 
-/// The deterministic resize of a `scene`-sized render to the teacher's `size` when `cfg`
-/// does not augment and the sizes differ.
-fn fixed_resize(cfg: &SdsConfig, scene: &Scene, size: u32) -> Option<Warp> {
+/// The deterministic resize of a `scene`-sized render to the teacher's `(width, height)`
+/// when `cfg` does not augment and the sizes differ.
+fn fixed_resize(cfg: &SdsConfig, scene: &Scene, (width, height): (u32, u32)) -> Option<Warp> {
     let identity = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
-    (cfg.augment.is_none() && (scene.width != size || scene.height != size)).then(|| {
+    (cfg.augment.is_none() && (scene.width != width || scene.height != height)).then(|| {
         Warp::build(
             scene.width,
             scene.height,
-            size,
-            size,
+            width,
+            height,
             &identity,
             0.0,
             0.0,
@@ -573,7 +569,7 @@ fn prepare<'a, B: Backend>(
         teacher,
         cfg,
         cond,
-        resize: fixed_resize(cfg, &scene, teacher.image_size()),
+        resize: fixed_resize(cfg, &scene, teacher.image_dims()),
         reinit_until: cfg
             .reinit
             .as_ref()

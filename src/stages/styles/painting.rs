@@ -38,9 +38,11 @@ impl StyleSpec for Painting {
     }
 
     fn restyle_trace(&self, traced: Scene, size: u32) -> Result<Scene, SceneError> {
-        outlines_as_strokes(&traced, |s| Stroke {
-            color: s.fill.map_or(Rgba::BLACK, |f| Rgba { a: 1.0, ..f }),
-            width: brush_width(size, 2.0),
+        outlines_as_strokes(&traced, |s| {
+            Stroke::round(
+                s.fill.map_or(Rgba::BLACK, |f| Rgba { a: 1.0, ..f }),
+                brush_width(size, 2.0),
+            )
         })
     }
 
@@ -52,6 +54,6 @@ impl StyleSpec for Painting {
         let pts = random_walk(size, rng);
         let color = Rgba::new(rng.random(), rng.random(), rng.random(), 1.0);
         let width = brush_width(size, rng.random_range(1.0..=3.0));
-        Shape::open_cubic(pts, Stroke { color, width })
+        Shape::open_cubic(pts, Stroke::round(color, width))
     }
 }

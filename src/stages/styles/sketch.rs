@@ -35,9 +35,8 @@ impl StyleSpec for Sketch {
     }
 
     fn restyle_trace(&self, traced: Scene, size: u32) -> Result<Scene, SceneError> {
-        outlines_as_strokes(&traced, |_| Stroke {
-            color: Rgba::BLACK,
-            width: Style::stroke_width(size),
+        outlines_as_strokes(&traced, |_| {
+            Stroke::round(Rgba::BLACK, Style::stroke_width(size))
         })
     }
 
@@ -88,9 +87,6 @@ pub(super) fn random_walk<R: rand::Rng + ?Sized>(size: u32, rng: &mut R) -> Vec<
 pub fn random_stroke<R: rand::Rng + ?Sized>(size: u32, rng: &mut R) -> Result<Shape, SceneError> {
     Shape::open_cubic(
         random_walk(size, rng),
-        Stroke {
-            color: Rgba::BLACK,
-            width: Style::stroke_width(size),
-        },
+        Stroke::round(Rgba::BLACK, Style::stroke_width(size)),
     )
 }

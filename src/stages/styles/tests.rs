@@ -90,7 +90,7 @@ fn painting_scenes_are_coloured_strokes_with_trainable_width() {
         .shapes
         .push(Shape::circle(20.0, 30.0, 8.0, 4, Rgba::new(0.9, 0.1, 0.1, 0.8)).unwrap());
     let p = Style::Painting.spec().restyle_trace(traced, 64).unwrap();
-    let Stroke { color, width } = p.shapes[0].stroke.unwrap();
+    let Stroke { color, width, .. } = p.shapes[0].stroke.unwrap();
     assert_eq!(color, Rgba::new(0.9, 0.1, 0.1, 1.0));
     assert_eq!(width, 2.0 * Style::stroke_width(64));
     assert_eq!(Style::Painting.spec().min_shapes(7), 7);

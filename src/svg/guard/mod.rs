@@ -4,9 +4,10 @@
 //! worker, `render`, `vectorize`, evaluation, retrieval); it runs [`parse`] with
 //! [`SvgLimits::DEFAULT`], so the CLI and the server refuse the same inputs. In order:
 //! 1. at most [`SvgLimits::max_bytes`] of text;
-//! 2. DTD entities only as plain text (no markup, no references, not external, no parameter
-//!    entities), expanding to at most `max_bytes` in all: billion laughs and external entities
-//!    are refused, Illustrator's `<!ENTITY ns_svg "http://…">` lines are fine;
+//! 2. DTD entities internal and not parameter entities (external ones are refused), expanding to
+//!    at most `max_bytes` in all; an entity whose text refers to other entities (the start of a
+//!    billion laughs) has its text dropped, with a warning. Illustrator's
+//!    `<!ENTITY ns_svg "http://…">` lines and entities holding markup are fine;
 //! 3. at most [`SvgLimits::max_nodes`] XML nodes (elements, text, comments: roxmltree stops
 //!    parsing there);
 //! 4. at most [`SvgLimits::max_path_numbers`] numbers in all `d` and `points` attributes, and
@@ -16,7 +17,9 @@
 //! 5. once `<use>`, `href` and `url(#…)` references and markers are expanded (as usvg and resvg
 //!    expand them): at most [`SvgLimits::max_expanded`] elements, nesting at most
 //!    [`SvgLimits::max_depth`] deep, at most [`SvgLimits::max_layers`] clip-path, mask, filter
-//!    and pattern uses (each costs the renderer a layer), and no reference cycles;
+//!    and pattern uses (each costs the renderer a layer). A reference cycle is broken where it
+//!    closes, as usvg breaks it: that `href` is dropped, that `url(#…)` becomes `none`, with a
+//!    warning, and the text is checked again (at most [`MAX_REPAIRS`] times);
 //! 6. after conversion, the drawing's layer bounding box (strokes and filter regions included,
 //!    through every transform) and every pattern tile within ±[`SvgLimits::max_coord_ratio`] ×
 //!    the canvas size.
@@ -27,6 +30,13 @@
 use resvg::usvg;
 use resvg::usvg::roxmltree::{self, Node, NodeId};
 use std::collections::{HashMap, HashSet};
+use std::ops::Range;
+
+mod numbers;
+use numbers::{in_range, scan_numbers};
+
+/// Most repairs (dropped entity texts and cycle links) one document gets before it is refused.
+pub const MAX_REPAIRS: usize = 32;
 
 const SVG_NS: &str = "http://www.w3.org/2000/svg";
 const XLINK: &str = "http://www.w3.org/1999/xlink";
@@ -84,8 +94,6 @@ pub enum SvgRejected {
     MalformedEntity,
     #[error("declares the external entity {0:?}, which is not allowed")]
     ExternalEntity(String),
-    #[error("declares the entity {0:?} with markup or references in it, which is not allowed")]
-    EntityMarkup(String),
     #[error("expands entities to more than {max} bytes")]
     EntityExpansion { max: usize },
     #[error("has more than {max} XML nodes")]
@@ -107,8 +115,10 @@ pub enum SvgRejected {
     },
     #[error("nests elements (through references) more than {max} deep")]
     TooDeep { max: usize },
-    #[error("has references that form a cycle")]
-    Cycle,
+    #[error("needs more than {max} repairs (reference cycles, entities referring to entities)")]
+    Cycle { max: usize },
+    #[error("has a reference cycle or entity written so that it cannot be repaired")]
+    Unrepairable,
     #[error("expands (through references and markers) to more than {max} elements")]
     TooManyElements { max: u64 },
     #[error("uses clip paths, masks, filters or patterns more than {max} times")]
@@ -119,19 +129,71 @@ pub enum SvgRejected {
     PatternTile { side: f64, range: f64 },
 }
 
-/// Parses `text` within `limits`, then converts it with usvg (`opts`).
-pub fn parse(
+/// A converted SVG and what the guard changed so that it could be drawn.
+pub struct Parsed {
+    pub tree: usvg::Tree,
+    /// One sentence per repair (a dropped entity text, a broken reference cycle).
+    pub warnings: Vec<String>,
+}
+
+/// One change to the text: `range` becomes `with`.
+struct Repair {
+    range: Range<usize>,
+    with: &'static str,
+    warning: String,
+}
+
+/// Parses `text` within `limits`, then converts it with usvg (`opts`), repairing what usvg
+/// would repair (see the module docs) and saying what it did.
+pub fn parse_repaired(
     text: &str,
     limits: &SvgLimits,
     opts: &usvg::Options,
-) -> Result<usvg::Tree, SvgRejected> {
+) -> Result<Parsed, SvgRejected> {
     if text.len() > limits.max_bytes {
         return Err(SvgRejected::TooLarge {
             bytes: text.len(),
             max: limits.max_bytes,
         });
     }
-    check_entities(text, limits.max_bytes)?;
+    let mut text = std::borrow::Cow::Borrowed(text);
+    let mut warnings = Vec::new();
+    for _ in 0..=MAX_REPAIRS {
+        let repair = match check_entities(&text, limits.max_bytes)? {
+            Some(r) => r,
+            None => match convert(&text, limits, opts)? {
+                Ok(tree) => return Ok(Parsed { tree, warnings }),
+                Err(r) => r,
+            },
+        };
+        // A range that does not name the link in the text (an attribute written through an
+        // entity or a character reference) cannot be repaired.
+        let names_link = text
+            .get(repair.range.clone())
+            .is_some_and(|t| match repair.with {
+                "none" => t.starts_with("url("),
+                "" => t.contains("href") || !t.contains('<'),
+                _ => false,
+            });
+        if !names_link {
+            return Err(SvgRejected::Unrepairable);
+        }
+        let mut fixed = String::with_capacity(text.len());
+        fixed.push_str(&text[..repair.range.start]);
+        fixed.push_str(repair.with);
+        fixed.push_str(&text[repair.range.end..]);
+        text = std::borrow::Cow::Owned(fixed);
+        warnings.push(repair.warning);
+    }
+    Err(SvgRejected::Cycle { max: MAX_REPAIRS })
+}
+
+/// Steps 3–6 on text whose entities passed: the tree, or the repair a reference cycle needs.
+fn convert(
+    text: &str,
+    limits: &SvgLimits,
+    opts: &usvg::Options,
+) -> Result<Result<usvg::Tree, Repair>, SvgRejected> {
     let xml = roxmltree::ParsingOptions {
         allow_dtd: true,
         nodes_limit: limits.max_nodes,
@@ -143,15 +205,18 @@ pub fn parse(
         },
         e => SvgRejected::Xml(e),
     })?;
-    check_document(&doc, limits)?;
+    if let Some(repair) = check_document(&doc, limits)? {
+        return Ok(Err(repair));
+    }
     let tree = usvg::Tree::from_xmltree(&doc, opts).map_err(SvgRejected::Usvg)?;
     check_extent(&tree, limits)?;
-    Ok(tree)
+    Ok(Ok(tree))
 }
 
-/// Step 2: every `<!ENTITY` is a plain internal general entity, and all uses together expand to
-/// at most `max_bytes`.
-fn check_entities(text: &str, max_bytes: usize) -> Result<(), SvgRejected> {
+/// Step 2: every `<!ENTITY` is an internal general entity, and all uses together expand to at
+/// most `max_bytes`. The first entity whose text refers to other entities comes back as the
+/// repair that empties its text.
+fn check_entities(text: &str, max_bytes: usize) -> Result<Option<Repair>, SvgRejected> {
     let mut total = 0usize;
     let mut rest = text;
     while let Some(p) = rest.find("<!ENTITY") {
@@ -170,8 +235,13 @@ fn check_entities(text: &str, max_bytes: usize) -> Result<(), SvgRejected> {
         let body = &rest[1..];
         let end = body.find(quote).ok_or(SvgRejected::MalformedEntity)?;
         let value = &body[..end];
-        if value.contains('&') || value.contains('<') || value.contains('%') {
-            return Err(SvgRejected::EntityMarkup(name.to_string()));
+        if value.contains('&') || value.contains('%') {
+            let start = text.len() - body.len();
+            return Ok(Some(Repair {
+                range: start..start + end,
+                with: "",
+                warning: format!("entity {name:?} refers to other entities: its text was dropped"),
+            }));
         }
         let uses = text.matches(&format!("&{name};")).count();
         total = total.saturating_add(uses.saturating_mul(value.len()));
@@ -180,11 +250,14 @@ fn check_entities(text: &str, max_bytes: usize) -> Result<(), SvgRejected> {
         }
         rest = &body[end..];
     }
-    Ok(())
+    Ok(None)
 }
 
-/// Steps 4–5, on the parsed XML.
-fn check_document(doc: &roxmltree::Document, limits: &SvgLimits) -> Result<(), SvgRejected> {
+/// Steps 4–5, on the parsed XML; the repair of the first reference cycle found, if any.
+fn check_document(
+    doc: &roxmltree::Document,
+    limits: &SvgLimits,
+) -> Result<Option<Repair>, SvgRejected> {
     let mut ids: HashMap<&str, Node> = HashMap::new();
     let mut path_numbers = 0usize;
     let mut uses_markers = false;
@@ -236,18 +309,65 @@ fn check_document(doc: &roxmltree::Document, limits: &SvgLimits) -> Result<(), S
         visiting: HashSet::new(),
         limits,
         marker_cost: 0,
+        cycle: None,
     };
-    if uses_markers {
-        let markers: Vec<Node> = doc
-            .descendants()
-            .filter(|n| n.is_element() && n.tag_name().name() == "marker")
-            .collect();
-        for m in markers {
-            e.marker_cost = e.marker_cost.max(e.cost(m, 1)?.elements);
+    let result = (|| {
+        if uses_markers {
+            let markers: Vec<Node> = doc
+                .descendants()
+                .filter(|n| n.is_element() && n.tag_name().name() == "marker")
+                .collect();
+            for m in markers {
+                e.marker_cost = e.marker_cost.max(e.cost(m, 1)?.elements);
+            }
         }
+        e.cost(doc.root_element(), 1).map(|_| ())
+    })();
+    match (result, e.cycle.take()) {
+        (Err(SvgRejected::Cycle { .. }), Some(repair)) => Ok(Some(repair)),
+        (r, _) => r.map(|()| None),
     }
-    e.cost(doc.root_element(), 1)?;
-    Ok(())
+}
+
+/// How an element refers to another.
+#[derive(Clone)]
+enum Link {
+    /// Its `href` attribute (this byte range of the text).
+    Href(Range<usize>),
+    /// A `url(#…)` at this byte range of the text.
+    Url(Range<usize>),
+    /// A rule of a `<style>` sheet.
+    Sheet,
+}
+
+/// `<tag id="…">` for warnings.
+fn describe(node: Node) -> String {
+    match node.attribute("id") {
+        Some(id) => format!("<{} id={id:?}>", node.tag_name().name()),
+        None => format!("<{}>", node.tag_name().name()),
+    }
+}
+
+/// The repair that drops `link` from `from` to `to`, which closes a reference cycle.
+fn break_cycle(from: Node, to: Node, link: &Link) -> Option<Repair> {
+    let (range, with) = match link {
+        Link::Href(r) => (r.clone(), ""),
+        Link::Url(r) => (r.clone(), "none"),
+        Link::Sheet => return None,
+    };
+    let to = if from == to {
+        "itself".to_string()
+    } else {
+        format!("{}, which refers back to it", describe(to))
+    };
+    Some(Repair {
+        range,
+        with,
+        warning: format!(
+            "{} refers to {to} (a reference cycle): that reference was dropped",
+            describe(from)
+        ),
+    })
 }
 
 /// Elements usvg reads: the SVG namespace, or none (a file without `xmlns`).
@@ -269,122 +389,39 @@ fn skipped(name: &str) -> bool {
         || name.starts_with("aria-")
 }
 
-fn in_range(v: f64, limits: &SvgLimits, tag: &str, attr: &str) -> Result<(), SvgRejected> {
-    if v.is_finite() && v.abs() <= limits.max_number {
-        Ok(())
-    } else {
-        Err(SvgRejected::Number {
-            tag: tag.to_string(),
-            attr: attr.to_string(),
-            value: v,
-            max: limits.max_number,
-        })
-    }
-}
-
 /// The ids of the `url(#id)` references in `s`.
 fn url_ids(s: &str) -> impl Iterator<Item = &str> {
+    url_refs(s).map(|(_, id)| id)
+}
+
+/// The `url(#id)` references in `s`: the byte range of each `url(…)` and its id.
+fn url_refs(s: &str) -> impl Iterator<Item = (Range<usize>, &str)> {
     s.match_indices("url(").filter_map(move |(p, _)| {
         let inner = &s[p + 4..];
-        let inner = &inner[..inner.find(')')?];
+        let close = inner.find(')')?;
+        let inner = &inner[..close];
         let inner = inner.trim().trim_matches(|c| c == '"' || c == '\'').trim();
-        inner.strip_prefix('#')
+        Some((p..p + 4 + close + 1, inner.strip_prefix('#')?))
     })
 }
 
-/// The element an `href` names (usvg: the plain attribute first, then `xlink:href`).
+/// The element an `href` names (usvg: the plain attribute first, then `xlink:href`), and the
+/// attribute's byte range.
 fn href_target<'a, 'i>(
     node: Node<'a, 'i>,
     ids: &HashMap<&str, Node<'a, 'i>>,
-) -> Option<Node<'a, 'i>> {
+) -> Option<(Node<'a, 'i>, Link)> {
     // roxmltree's `attribute("href")` matches the local name in any namespace: look for the
     // unprefixed one explicitly, as usvg does.
-    let plain = node
+    let attr = node
         .attributes()
         .find(|a| a.namespace().is_none() && a.name() == "href")
-        .map(|a| a.value());
-    let h = plain.or_else(|| node.attribute((XLINK, "href")))?;
-    ids.get(h.trim().strip_prefix('#')?.trim()).copied()
-}
-
-/// Calls `f` on every number in `s`; returns how many there were. `path_like` (path data and
-/// point lists) reads a letter before a digit as a command; elsewhere a digit glued to a name
-/// (`cls1e5`, `#1e3838`) belongs to the name, and `url(…)` and quoted strings are skipped.
-fn scan_numbers(
-    s: &str,
-    path_like: bool,
-    mut f: impl FnMut(f64) -> Result<(), SvgRejected>,
-) -> Result<usize, SvgRejected> {
-    let b = s.as_bytes();
-    let name_char = |c: u8| c.is_ascii_alphanumeric() || c == b'_' || c == b'-';
-    let mut i = 0;
-    let mut n = 0;
-    while i < b.len() {
-        let c = b[i];
-        if !path_like {
-            if b[i..].starts_with(b"url(") {
-                i += b[i..]
-                    .iter()
-                    .position(|&x| x == b')')
-                    .unwrap_or(b.len() - i);
-                continue;
-            }
-            if c == b'"' || c == b'\'' {
-                i += 1;
-                i += b[i..]
-                    .iter()
-                    .position(|&x| x == c)
-                    .map_or(b.len() - i, |p| p + 1);
-                continue;
-            }
-            if c == b'#' || c.is_ascii_alphabetic() || c == b'_' {
-                i += 1;
-                while i < b.len() && name_char(b[i]) {
-                    i += 1;
-                }
-                continue;
-            }
-        }
-        let digit_at = |j: usize| b.get(j).is_some_and(u8::is_ascii_digit);
-        let starts = c.is_ascii_digit()
-            || (c == b'.' && digit_at(i + 1))
-            || ((c == b'+' || c == b'-')
-                && (digit_at(i + 1) || (b.get(i + 1) == Some(&b'.') && digit_at(i + 2))));
-        if !starts {
-            i += 1;
-            continue;
-        }
-        let start = i;
-        if c == b'+' || c == b'-' {
-            i += 1;
-        }
-        while digit_at(i) {
-            i += 1;
-        }
-        if b.get(i) == Some(&b'.') {
-            i += 1;
-            while digit_at(i) {
-                i += 1;
-            }
-        }
-        if matches!(b.get(i), Some(b'e' | b'E')) {
-            let mut j = i + 1;
-            if matches!(b.get(j), Some(b'+' | b'-')) {
-                j += 1;
-            }
-            if digit_at(j) {
-                i = j;
-                while digit_at(i) {
-                    i += 1;
-                }
-            }
-        }
-        // The slice is ASCII digits, signs, '.', 'e': it always parses (overflow gives ±inf).
-        let v = s[start..i].parse::<f64>().unwrap_or(f64::INFINITY);
-        f(v)?;
-        n += 1;
-    }
-    Ok(n)
+        .or_else(|| {
+            node.attributes()
+                .find(|a| a.namespace() == Some(XLINK) && a.name() == "href")
+        })?;
+    let target = ids.get(attr.value().trim().strip_prefix('#')?.trim())?;
+    Some((*target, Link::Href(attr.range())))
 }
 
 /// What one element costs once its references are expanded.
@@ -405,6 +442,8 @@ struct Expansion<'d, 'a, 'i> {
     limits: &'d SvgLimits,
     /// Elements of the largest marker, charged per vertex of every drawn shape.
     marker_cost: u64,
+    /// The repair of the cycle [`SvgRejected::Cycle`] reports.
+    cycle: Option<Repair>,
 }
 
 impl<'a, 'i> Expansion<'_, 'a, 'i> {
@@ -420,20 +459,17 @@ impl<'a, 'i> Expansion<'_, 'a, 'i> {
         if depth > l.max_depth {
             return Err(deep());
         }
+        let cycle = || SvgRejected::Cycle { max: MAX_REPAIRS };
         if !self.visiting.insert(node.id()) {
-            return Err(SvgRejected::Cycle);
+            return Err(cycle());
         }
         let mut c = Cost {
             elements: 1,
             layers: 0,
             height: 1,
         };
-        let mut refs: Vec<Node<'a, 'i>> = href_target(node, self.ids).into_iter().collect();
+        let refs = self.refs(node);
         if svg_element(node) {
-            for a in node.attributes().filter(|a| read_by_usvg(a.namespace())) {
-                refs.extend(url_ids(a.value()).filter_map(|id| self.ids.get(id).copied()));
-            }
-            refs.extend(self.sheet_targets.iter().copied());
             let tag = node.tag_name().name();
             if self.marker_cost > 0 {
                 let vertices = match tag {
@@ -451,7 +487,11 @@ impl<'a, 'i> Expansion<'_, 'a, 'i> {
                     .saturating_add((vertices as u64).saturating_mul(self.marker_cost));
             }
         }
-        for r in refs {
+        for (r, link) in refs {
+            if self.visiting.contains(&r.id()) {
+                self.cycle = break_cycle(node, r, &link);
+                return Err(cycle());
+            }
             let layer = matches!(
                 r.tag_name().name(),
                 "clipPath" | "mask" | "filter" | "pattern"
@@ -473,6 +513,30 @@ impl<'a, 'i> Expansion<'_, 'a, 'i> {
         self.visiting.remove(&node.id());
         self.memo.insert(node.id(), c);
         Ok(c)
+    }
+
+    /// The elements `node` refers to, and how.
+    fn refs(&self, node: Node<'a, 'i>) -> Vec<(Node<'a, 'i>, Link)> {
+        let mut refs: Vec<(Node<'a, 'i>, Link)> = href_target(node, self.ids).into_iter().collect();
+        if !svg_element(node) {
+            return refs;
+        }
+        for a in node.attributes().filter(|a| read_by_usvg(a.namespace())) {
+            let at = a.range_value().start;
+            refs.extend(url_refs(a.value()).filter_map(|(r, id)| {
+                let target = self.ids.get(id)?;
+                Some((*target, Link::Url(at + r.start..at + r.end)))
+            }));
+        }
+        // A sheet's rule charges every element; it need not apply to its own target (usvg
+        // breaks cycles through sheets itself).
+        refs.extend(
+            self.sheet_targets
+                .iter()
+                .filter(|t| !self.visiting.contains(&t.id()))
+                .map(|t| (*t, Link::Sheet)),
+        );
+        refs
     }
 
     fn within(&self, c: &Cost) -> Result<(), SvgRejected> {

@@ -1,0 +1,101 @@
+//! What a resolved [`TextPlan`] gives the stages: its sample and canvas sizes, and the LIVE and
+//! SDS configurations it runs.
+
+use super::{Limits, ModelFacts, PlanRequest, SpecError, TextPlan, check_text};
+use crate::pipeline::canvas::SampleShape;
+use crate::stages::live::{LiveConfig, PathBudget};
+use crate::stages::sds::{ReinitConfig, SdsConfig};
+
+impl TextPlan {
+    /// `(width, height)` of the image the model samples, LIVE traces and SDS distils.
+    pub fn sample_dims(&self) -> (u32, u32) {
+        self.canvas.map_or((self.size, self.size), |c| {
+            (c.sample_width, c.sample_height)
+        })
+    }
+
+    /// `(width, height)` of the SVG's canvas.
+    pub fn canvas_dims(&self) -> (u32, u32) {
+        self.canvas
+            .map_or((self.size, self.size), |c| (c.width, c.height))
+    }
+
+    /// The LIVE configuration that traces the run's starting image (the kept sample at
+    /// [`TracePlan::size`], or a given image at the teacher's size): LIVE's own settings with
+    /// the plan's path count, iterations, seed, snapshot period and colours.
+    pub fn trace_config(&self) -> LiveConfig {
+        LiveConfig {
+            size: self.trace.size,
+            budget: PathBudget::fixed(self.paths as usize),
+            iters_per_stage: self.trace.iters,
+            final_iters: self.trace.iters,
+            seed: self.seeds.trace,
+            snapshot_every: self.snapshot_every,
+            colors: self.colors.clone(),
+            ..LiveConfig::default()
+        }
+    }
+
+    /// The score distillation this plan runs (`None`: `sd_live`, no distillation): the
+    /// paper's settings for the style ([`SdsConfig::for_style`]) with the plan's prompt,
+    /// guidance, timestep range, clipping, learning-rate scale, augmentation, re-init area,
+    /// snapshot period and seed.
+    pub fn sds_config(&self) -> Option<SdsConfig> {
+        let sp = self.sds.as_ref()?;
+        let paper = SdsConfig::for_style(self.style, "", sp.steps, self.size);
+        let (w, h) = self.sample_dims();
+        Some(SdsConfig {
+            prompt: self.prompt.clone(),
+            negative_prompt: self.negative_prompt.clone().unwrap_or_default(),
+            t_min: sp.t_min,
+            t_max: sp.t_max,
+            t_max_end: sp.t_max_end,
+            guidance: sp.guidance,
+            grad_clip: sp.grad_clip,
+            augment: paper
+                .augment
+                .filter(|_| sp.augment)
+                .map(|a| a.with_output(w, h)),
+            schedules: paper.schedules.scaled(sp.lr_scale),
+            reinit: paper.reinit.map(|r| ReinitConfig {
+                min_area: sp.reinit_min_area,
+                ..r
+            }),
+            snapshot_every: self.snapshot_every,
+            seed: self.seeds.sds,
+            ..paper
+        })
+    }
+}
+
+/// The shapes `req` is sampled at on `model`: pixel art draws its square grid.
+pub(super) fn sample_shape(req: &PlanRequest, model: &ModelFacts) -> SampleShape {
+    match req.style {
+        crate::stages::styles::Style::PixelArt => SampleShape::Square,
+        _ => model.sample_shape,
+    }
+}
+
+/// `req`'s negative prompt, checked like a caption and refused for a model whose guidance
+/// has no unconditional branch to put it in.
+pub(super) fn negative_prompt(
+    req: &PlanRequest,
+    model: &ModelFacts,
+    limits: &Limits,
+) -> Result<Option<String>, SpecError> {
+    let Some(n) = &req.negative_prompt else {
+        return Ok(None);
+    };
+    check_text("negative_prompt", n, limits)?;
+    if !model.negative_prompt {
+        return Err(SpecError::new(
+            "negative_prompt",
+            format!(
+                "{} has no classifier-free guidance with an unconditional branch to put a \
+                 negative prompt in",
+                model.name
+            ),
+        ));
+    }
+    Ok(Some(n.clone()))
+}

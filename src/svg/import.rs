@@ -1,0 +1,538 @@
+//! SVG text → [`Scene`] (the walk over usvg's tree that [`super`]'s module docs describe).
+
+use super::{SvgError, parse_usvg_repaired};
+use crate::scene::{LineCap, LineJoin, MAX_SIDE, Point, Rgba, Scene, Shape, ShapeKind, Stroke};
+use resvg::usvg;
+
+/// One subpath as cubic segments `[p1, p2, p3]` after a start point.
+#[derive(Clone, Debug)]
+struct SubPath {
+    start: Point,
+    segs: Vec<[Point; 3]>,
+    closed: bool,
+}
+
+impl SubPath {
+    fn end(&self) -> Point {
+        self.segs.last().map_or(self.start, |s| s[2])
+    }
+
+    fn line(a: Point, b: Point) -> [Point; 3] {
+        let l = |t: f32| Point::new(a.x + (b.x - a.x) * t, a.y + (b.y - a.y) * t);
+        [l(1.0 / 3.0), l(2.0 / 3.0), b]
+    }
+
+    /// Adds the closing straight segment if the subpath does not end at its start.
+    fn closed_segments(&self) -> Vec<[Point; 3]> {
+        let mut segs = self.segs.clone();
+        let e = self.end();
+        if e != self.start || segs.is_empty() {
+            segs.push(Self::line(e, self.start));
+        }
+        segs
+    }
+
+    fn reversed(&self) -> SubPath {
+        let segs = self.closed_segments();
+        let mut out = Vec::with_capacity(segs.len());
+        let mut anchors = vec![self.start];
+        anchors.extend(segs.iter().map(|s| s[2]));
+        for i in (0..segs.len()).rev() {
+            out.push([segs[i][1], segs[i][0], anchors[i]]);
+        }
+        SubPath {
+            start: self.start,
+            segs: out,
+            closed: true,
+        }
+    }
+
+    /// Signed area of the anchor + control polygon (orientation estimate).
+    fn signed_area(&self) -> f32 {
+        let mut pts = vec![self.start];
+        for s in self.closed_segments() {
+            pts.extend_from_slice(&s);
+        }
+        let mut a = 0.0;
+        for i in 0..pts.len() {
+            let (p, q) = (pts[i], pts[(i + 1) % pts.len()]);
+            a += p.x * q.y - q.x * p.y;
+        }
+        a * 0.5
+    }
+
+    fn polygon(&self) -> Vec<Point> {
+        let mut pts = vec![self.start];
+        for s in self.closed_segments() {
+            pts.extend_from_slice(&s);
+        }
+        pts
+    }
+}
+
+fn point_in_polygon(p: Point, poly: &[Point]) -> bool {
+    let mut inside = false;
+    let n = poly.len();
+    for i in 0..n {
+        let (a, b) = (poly[i], poly[(i + 1) % n]);
+        if (a.y > p.y) != (b.y > p.y) {
+            let x = a.x + (p.y - a.y) / (b.y - a.y) * (b.x - a.x);
+            if p.x < x {
+                inside = !inside;
+            }
+        }
+    }
+    inside
+}
+
+/// The subpaths of `data` mapped through `ts` (its path's parent group's absolute transform).
+fn subpaths(data: &usvg::tiny_skia_path::Path, ts: usvg::Transform) -> Vec<SubPath> {
+    let map = |p: usvg::tiny_skia_path::Point| {
+        let mut q = p;
+        ts.map_point(&mut q);
+        Point::new(q.x, q.y)
+    };
+    let mut out: Vec<SubPath> = Vec::new();
+    let mut cur: Option<SubPath> = None;
+    use usvg::tiny_skia_path::PathSegment as S;
+    for seg in data.segments() {
+        match seg {
+            S::MoveTo(p) => {
+                if let Some(c) = cur.take() {
+                    out.push(c);
+                }
+                cur = Some(SubPath {
+                    start: map(p),
+                    segs: Vec::new(),
+                    closed: false,
+                });
+            }
+            S::LineTo(p) => {
+                if let Some(c) = cur.as_mut() {
+                    let a = c.end();
+                    c.segs.push(SubPath::line(a, map(p)));
+                }
+            }
+            S::QuadTo(p1, p2) => {
+                if let Some(c) = cur.as_mut() {
+                    let a = c.end();
+                    let (q, b) = (map(p1), map(p2));
+                    let k = 2.0 / 3.0;
+                    let c1 = Point::new(a.x + k * (q.x - a.x), a.y + k * (q.y - a.y));
+                    let c2 = Point::new(b.x + k * (q.x - b.x), b.y + k * (q.y - b.y));
+                    c.segs.push([c1, c2, b]);
+                }
+            }
+            S::CubicTo(p1, p2, p3) => {
+                if let Some(c) = cur.as_mut() {
+                    c.segs.push([map(p1), map(p2), map(p3)]);
+                }
+            }
+            S::Close => {
+                if let Some(mut c) = cur.take() {
+                    c.closed = true;
+                    let start = c.start;
+                    out.push(c);
+                    // A segment after Z without MoveTo starts again at the subpath start.
+                    cur = Some(SubPath {
+                        start,
+                        segs: Vec::new(),
+                        closed: false,
+                    });
+                }
+            }
+        }
+    }
+    if let Some(c) = cur.take() {
+        out.push(c);
+    }
+    out.retain(|s| !s.segs.is_empty());
+    let finite = |p: &Point| p.x.is_finite() && p.y.is_finite();
+    out.retain(|s| finite(&s.start) && s.segs.iter().flatten().all(finite));
+    out
+}
+
+fn paint_color(paint: &usvg::Paint, opacity: f32) -> Rgba {
+    let c8 = |c: usvg::Color| {
+        [
+            c.red as f32 / 255.0,
+            c.green as f32 / 255.0,
+            c.blue as f32 / 255.0,
+        ]
+    };
+    let avg = |stops: &[usvg::Stop]| {
+        if stops.is_empty() {
+            return ([0.0; 3], 1.0);
+        }
+        let mut s = [0.0f32; 4];
+        for st in stops {
+            let c = c8(st.color());
+            s[0] += c[0];
+            s[1] += c[1];
+            s[2] += c[2];
+            s[3] += st.opacity().get();
+        }
+        let n = stops.len() as f32;
+        ([s[0] / n, s[1] / n, s[2] / n], s[3] / n)
+    };
+    let (rgb, a) = match paint {
+        usvg::Paint::Color(c) => (c8(*c), 1.0),
+        usvg::Paint::LinearGradient(g) => avg(g.stops()),
+        usvg::Paint::RadialGradient(g) => avg(g.stops()),
+        usvg::Paint::Pattern(_) => ([0.5; 3], 1.0),
+    };
+    Rgba::new(rgb[0], rgb[1], rgb[2], a * opacity).clamped()
+}
+
+fn closed_points(subs: &[SubPath]) -> Vec<Point> {
+    // Points of a closed cubic path: anchor, ctrl, ctrl per segment.
+    let mut pts = Vec::new();
+    let push_loop = |pts: &mut Vec<Point>, s: &SubPath| {
+        let mut a = s.start;
+        for seg in s.closed_segments() {
+            pts.extend_from_slice(&[a, seg[0], seg[1]]);
+            a = seg[2];
+        }
+    };
+    let first = subs[0].start;
+    push_loop(&mut pts, &subs[0]);
+    for s in &subs[1..] {
+        // Bridge first → s.start, the loop of s, and back: the bridges cancel in the winding.
+        let [c1, c2, _] = SubPath::line(first, s.start);
+        pts.extend_from_slice(&[first, c1, c2]);
+        push_loop(&mut pts, s);
+        let [c1, c2, _] = SubPath::line(s.start, first);
+        pts.extend_from_slice(&[s.start, c1, c2]);
+    }
+    pts
+}
+
+fn open_points(s: &SubPath) -> Vec<Point> {
+    let mut pts = vec![s.start];
+    for seg in &s.segs {
+        pts.extend_from_slice(seg);
+    }
+    pts
+}
+
+/// Most warnings one import reports; the rest are counted in a last one.
+const MAX_WARNINGS: usize = 16;
+
+/// The walk over usvg's tree: the shapes so far and what could not be drawn.
+#[derive(Default)]
+struct Walk {
+    shapes: Vec<Shape>,
+    warnings: Vec<String>,
+    more_warnings: usize,
+}
+
+impl Walk {
+    fn warn(&mut self, w: String) {
+        if self.warnings.contains(&w) {
+            return;
+        }
+        if self.warnings.len() < MAX_WARNINGS {
+            self.warnings.push(w);
+        } else {
+            self.more_warnings += 1;
+        }
+    }
+
+    fn finish(mut self) -> (Vec<Shape>, Vec<String>) {
+        if self.more_warnings > 0 {
+            let n = self.more_warnings;
+            self.warnings.push(format!("{n} more warnings like these"));
+        }
+        (self.shapes, self.warnings)
+    }
+
+    /// Warns about what `g` asks for that the scene cannot draw.
+    fn unsupported(&mut self, g: &usvg::Group) {
+        // usvg gives the group of a `<g>` or `<use>` its id, and the single path of another
+        // element that needed a group (`<rect filter=…>`) the element's id.
+        let id = match g.children() {
+            _ if !g.id().is_empty() => g.id(),
+            [only] => only.id(),
+            _ => "",
+        };
+        let on = if id.is_empty() {
+            "an element without an id".to_string()
+        } else {
+            format!("#{id}")
+        };
+        if !g.filters().is_empty() {
+            self.warn(format!(
+                "filter on {on} ignored (filters are not drawn): drawn unfiltered"
+            ));
+        }
+        if g.clip_path().is_some() {
+            self.warn(format!("clip-path on {on} ignored: drawn unclipped"));
+        }
+        if g.mask().is_some() {
+            self.warn(format!("mask on {on} ignored: drawn unmasked"));
+        }
+    }
+
+    fn group(&mut self, g: &usvg::Group, opacity: f32) {
+        self.unsupported(g);
+        let opacity = opacity * g.opacity().get();
+        for node in g.children() {
+            match node {
+                usvg::Node::Group(child) => self.group(child, opacity),
+                usvg::Node::Path(p) => {
+                    if p.is_visible() {
+                        // A path's transform is its group's (usvg's own background path for a
+                        // root `background-color` has none of its own).
+                        path_shapes(p, g.abs_transform(), opacity, &mut self.shapes);
+                    }
+                }
+                usvg::Node::Image(i) => {
+                    let id = i.id();
+                    self.warn(if id.is_empty() {
+                        "an <image> ignored (images are not drawn)".to_string()
+                    } else {
+                        format!("<image> #{id} ignored (images are not drawn)")
+                    });
+                }
+                usvg::Node::Text(t) => self.group(t.flattened(), opacity),
+            }
+        }
+    }
+}
+
+fn path_shapes(p: &usvg::Path, ts: usvg::Transform, opacity: f32, shapes: &mut Vec<Shape>) {
+    let mut subs = subpaths(p.data(), ts);
+    if subs.is_empty() {
+        return;
+    }
+    let fill = p
+        .fill()
+        .map(|f| paint_color(f.paint(), f.opacity().get() * opacity));
+    let stroke = p
+        .stroke()
+        .map_or(StrokeDraw::Nothing, |s| stroke_draw(p, s, ts, opacity));
+    if let Some(f) = fill {
+        if fill_is_evenodd(p) && subs.len() > 1 {
+            orient_even_odd(&mut subs);
+        }
+        // A single closed outline keeps its (undashed) stroke on the filled shape.
+        let on_fill = match &stroke {
+            StrokeDraw::Strokes(st, None) if subs.len() == 1 && subs[0].closed => Some(*st),
+            _ => None,
+        };
+        shapes.push(Shape {
+            kind: ShapeKind::ClosedCubic,
+            points: closed_points(&subs),
+            fill: Some(f),
+            stroke: on_fill,
+        });
+        if on_fill.is_some() {
+            return;
+        }
+    }
+    match stroke {
+        StrokeDraw::Nothing => {}
+        StrokeDraw::Strokes(st, dashes) => {
+            for s in dashes.as_ref().unwrap_or(&subs) {
+                shapes.push(stroke_shape(s, st));
+            }
+        }
+        StrokeDraw::Outline(color, outline) => shapes.push(Shape {
+            kind: ShapeKind::ClosedCubic,
+            points: closed_points(&outline),
+            fill: Some(color),
+            stroke: None,
+        }),
+    }
+}
+
+/// One subpath stroked: open, or closed with a transparent fill.
+fn stroke_shape(s: &SubPath, st: Stroke) -> Shape {
+    if !s.closed {
+        return Shape {
+            kind: ShapeKind::OpenCubic,
+            points: open_points(s),
+            fill: None,
+            stroke: Some(st),
+        };
+    }
+    let mut pts = Vec::new();
+    let mut a = s.start;
+    for seg in s.closed_segments() {
+        pts.extend_from_slice(&[a, seg[0], seg[1]]);
+        a = seg[2];
+    }
+    Shape {
+        kind: ShapeKind::ClosedCubic,
+        points: pts,
+        fill: Some(Rgba::TRANSPARENT),
+        stroke: Some(st),
+    }
+}
+
+/// How a path's stroke is drawn.
+enum StrokeDraw {
+    Nothing,
+    /// As strokes of the scene: along the path's subpaths, or along these dashes.
+    Strokes(Stroke, Option<Vec<SubPath>>),
+    /// Under a transform that is no similarity (skew, unequal scales) a stroke of one width
+    /// cannot be drawn: its outline (computed in the path's own units, dashes, caps and joins
+    /// included) is filled in this colour instead.
+    Outline(Rgba, Vec<SubPath>),
+}
+
+fn stroke_draw(p: &usvg::Path, s: &usvg::Stroke, ts: usvg::Transform, opacity: f32) -> StrokeDraw {
+    let color = paint_color(s.paint(), s.opacity().get() * opacity);
+    let scale = (ts.sx * ts.sy - ts.kx * ts.ky).abs().sqrt();
+    let width = s.width().get() * scale;
+    if !(width.is_finite() && width > 0.0) {
+        return StrokeDraw::Nothing;
+    }
+    // Dashes and outlines are flattened finely enough for the canvas.
+    let res = scale.max(1.0);
+    let dashed = s
+        .dasharray()
+        .and_then(|a| usvg::tiny_skia_path::StrokeDash::new(a.to_vec(), s.dashoffset()))
+        .map(|d| p.data().dash(&d, res));
+    if !is_similarity(ts) {
+        let mut outline_stroke = s.to_tiny_skia();
+        outline_stroke.dash = None;
+        let data = match &dashed {
+            Some(Some(d)) => d,
+            Some(None) => return StrokeDraw::Nothing,
+            None => p.data(),
+        };
+        return match data.stroke(&outline_stroke, res) {
+            Some(o) => StrokeDraw::Outline(color, subpaths(&o, ts)),
+            None => StrokeDraw::Nothing,
+        };
+    }
+    let st = Stroke {
+        color,
+        width,
+        cap: match s.linecap() {
+            usvg::LineCap::Butt => LineCap::Butt,
+            usvg::LineCap::Round => LineCap::Round,
+            usvg::LineCap::Square => LineCap::Square,
+        },
+        join: match s.linejoin() {
+            usvg::LineJoin::Miter | usvg::LineJoin::MiterClip => LineJoin::Miter,
+            usvg::LineJoin::Round => LineJoin::Round,
+            usvg::LineJoin::Bevel => LineJoin::Bevel,
+        },
+        miter_limit: s.miterlimit().get().max(1.0),
+    };
+    match dashed {
+        // A dash pattern that draws nothing.
+        Some(None) => StrokeDraw::Nothing,
+        Some(Some(d)) => StrokeDraw::Strokes(st, Some(subpaths(&d, ts))),
+        None => StrokeDraw::Strokes(st, None),
+    }
+}
+
+/// Whether `ts` keeps angles and scales every direction alike (so a stroke keeps one width).
+fn is_similarity(ts: usvg::Transform) -> bool {
+    let (c0, c1) = ((ts.sx, ts.ky), (ts.kx, ts.sy));
+    let (l0, l1) = (c0.0 * c0.0 + c0.1 * c0.1, c1.0 * c1.0 + c1.1 * c1.1);
+    let dot = c0.0 * c1.0 + c0.1 * c1.1;
+    let tol = 1e-4 * l0.max(l1);
+    (l0 - l1).abs() <= tol && dot.abs() <= tol
+}
+
+fn fill_is_evenodd(p: &usvg::Path) -> bool {
+    p.fill()
+        .is_some_and(|f| f.rule() == usvg::FillRule::EvenOdd)
+}
+
+/// Orients every subpath so that its winding contribution alternates with nesting depth.
+fn orient_even_odd(subs: &mut [SubPath]) {
+    let polys: Vec<Vec<Point>> = subs.iter().map(SubPath::polygon).collect();
+    let reference = subs[0].signed_area().signum();
+    for i in 0..subs.len() {
+        let probe = subs[i].start;
+        let depth = (0..subs.len())
+            .filter(|&j| j != i && point_in_polygon(probe, &polys[j]))
+            .count();
+        let want = if depth % 2 == 0 {
+            reference
+        } else {
+            -reference
+        };
+        if subs[i].signed_area().signum() != want {
+            subs[i] = subs[i].reversed();
+        }
+    }
+}
+
+/// An imported SVG: the scene and what the import could not keep as drawn (dropped links,
+/// ignored filters), one sentence each.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SvgImport {
+    pub scene: Scene,
+    pub warnings: Vec<String>,
+}
+
+/// Parses SVG text into a scene (see the module docs for what is kept). Bad SVG gives an error,
+/// never a panic.
+pub fn from_svg(text: &str) -> Result<Scene, SvgError> {
+    import_svg(text).map(|i| i.scene)
+}
+
+/// [`from_svg`], with the import's warnings.
+pub fn import_svg(text: &str) -> Result<SvgImport, SvgError> {
+    let parsed = parse_usvg_repaired(text).map_err(SvgError::Parse)?;
+    let tree = parsed.tree;
+    let size = tree.size();
+    let (fw, fh) = (size.width(), size.height());
+    let (w, h) = (fw.round(), fh.round());
+    if !(1.0..=MAX_SIDE as f32).contains(&w) || !(1.0..=MAX_SIDE as f32).contains(&h) {
+        return Err(SvgError::Size(fw, fh));
+    }
+    let mut walk = Walk::default();
+    for w in parsed.warnings {
+        walk.warn(w);
+    }
+    walk.group(tree.root(), 1.0);
+    let (mut shapes, warnings) = walk.finish();
+    let mut background = Rgba::TRANSPARENT;
+    if let Some(first) = shapes.first()
+        && is_canvas_rect(first, w, h)
+        && let Some(f) = first.fill
+    {
+        background = f;
+        shapes.remove(0);
+    }
+    let scene = Scene {
+        width: w as u32,
+        height: h as u32,
+        background,
+        shapes,
+    };
+    scene.validate()?;
+    Ok(SvgImport { scene, warnings })
+}
+
+fn is_canvas_rect(s: &Shape, w: f32, h: f32) -> bool {
+    if s.stroke.is_some() || s.kind != ShapeKind::ClosedCubic || s.points.len() != 12 {
+        return false;
+    }
+    // Four straight segments along the canvas border.
+    let corners = [
+        Point::new(0.0, 0.0),
+        Point::new(w, 0.0),
+        Point::new(w, h),
+        Point::new(0.0, h),
+    ];
+    let near = |a: Point, b: Point| (a.x - b.x).abs() < 1e-3 && (a.y - b.y).abs() < 1e-3;
+    let anchors: Vec<Point> = (0..4).map(|i| s.points[3 * i]).collect();
+    let straight = (0..4).all(|i| {
+        let seg = s.segment(i);
+        let l = SubPath::line(seg[0], seg[3]);
+        near(l[0], seg[1]) && near(l[1], seg[2])
+    });
+    straight && corners.iter().all(|c| anchors.iter().any(|a| near(*a, *c)))
+}
+
+#[cfg(test)]
+#[path = "import_tests.rs"]
+mod tests;
