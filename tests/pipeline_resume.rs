@@ -229,7 +229,11 @@ fn a_job_of_several_variations_resumes_from_the_one_it_was_distilling() {
     assert!(matches!(stopped.out, Err(PipelineError::Cancelled)));
     let last = stopped.checkpoints.last().expect("checkpoint on cancel");
     assert_eq!(step_of(last), 5);
-    assert_eq!(last["done"].as_array().map(Vec::len), Some(1), "{last:.300}");
+    assert_eq!(
+        last["done"].as_array().map(Vec::len),
+        Some(1),
+        "{last:.300}"
+    );
     assert_eq!(last["pending"].as_array().map(Vec::len), Some(1));
     let resumed = attempt(&exec, &spec, 100, Some(last.clone()), None);
     assert!(

@@ -70,6 +70,24 @@ async fn three_variations_are_distinct_and_the_first_is_the_single_result() {
         get(a, &format!("/jobs/{id}/result/4.svg")).await.status,
         404
     );
+    // `?size=N`: the PNG's longest side (enlarged or reduced); out of range, unknown or on an
+    // SVG, a 400 naming the parameter.
+    for (url, side) in [("result.png?size=300", 300), ("result/2.png?size=40", 40)] {
+        let r = get(a, &format!("/jobs/{id}/{url}")).await;
+        assert_eq!(r.status, 200, "{}", r.text());
+        let dim = |at: usize| u32::from_be_bytes(r.body[at..at + 4].try_into().unwrap());
+        assert_eq!(dim(16).max(dim(20)), side, "{url}");
+    }
+    for (url, field) in [
+        ("result.png?size=8", "size"),
+        ("result/2.png?size=big", "size"),
+        ("result/2.svg?size=100", "size"),
+        ("result.png?scale=2", "scale"),
+    ] {
+        let r = get(a, &format!("/jobs/{id}/{url}")).await;
+        assert_eq!(r.status, 400, "{url}: {}", r.text());
+        assert_eq!(r.json()["error"]["field"], field, "{url}: {}", r.text());
+    }
     assert_eq!(
         get(a, &format!("/jobs/{id}/result/1.gif")).await.status,
         404
