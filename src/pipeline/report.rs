@@ -43,6 +43,21 @@ impl RunOutput {
         }
     }
 
+    /// This output (variation 1) with `others` as variations 2, 3, ...: each in
+    /// [`RunOutput::variations`] and all summed up in [`RunReport::variations`] (left empty
+    /// when there are no others).
+    pub fn with_variations(mut self, others: Vec<RunOutput>) -> Self {
+        self.variations = others;
+        if !self.variations.is_empty() {
+            self.report.variations = std::iter::once(&self)
+                .chain(&self.variations)
+                .zip(1..)
+                .map(|(o, n)| VariationReport::of(n, &o.report, o.paths))
+                .collect();
+        }
+        self
+    }
+
     /// The SVGs of every variation, variation 1 (this output's) first.
     pub fn svgs(&self) -> impl Iterator<Item = &str> {
         std::iter::once(self.svg.as_str()).chain(self.variations.iter().map(|v| v.svg.as_str()))

@@ -14,7 +14,7 @@
 use super::canvas::{kept_inside, placed};
 use super::context::{resume_as, save_checkpoint};
 use super::plan::{MIN_OPACITY, TextPlan, min_area_at};
-use super::report::{ResumePoint, SdsReport, TraceReport, VariationReport};
+use super::report::{ResumePoint, SdsReport, TraceReport};
 use super::{JobContext, Models, PipelineError, RunOutput, RunReport};
 use crate::caption::ColourSteer;
 use crate::image::Image;
@@ -364,17 +364,10 @@ pub fn run_text(
         }
     }
     let mut outputs = run.done.into_iter();
-    let mut out = outputs
+    let out = outputs
         .next()
-        .ok_or_else(|| PipelineError::Failed("plan: a run of no variations".into()))?;
-    out.variations = outputs.collect();
-    if !out.variations.is_empty() {
-        out.report.variations = std::iter::once(&out)
-            .chain(&out.variations)
-            .zip(1..)
-            .map(|(o, n)| VariationReport::of(n, &o.report, o.paths))
-            .collect();
-    }
+        .ok_or_else(|| PipelineError::Failed("plan: a run of no variations".into()))?
+        .with_variations(outputs.collect());
     let mut done = Progress::new(Stage::Done, 1, 1);
     done.svg = Some(out.svg.clone());
     sink.report(done);
