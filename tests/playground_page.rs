@@ -274,7 +274,7 @@ fn variations_and_colours_reach_the_job(b: &Browser, base: &str) -> Result<(), S
         return Err(format!("the PNG link holds {png}"));
     }
     b.eval(
-        "document.getElementById('result-view').scrollIntoView({block: 'center'});",
+        "document.getElementById('variation-picker').scrollIntoView({block: 'center'});",
         json!([]),
     )?;
     save(b, "playground-variations.png");
