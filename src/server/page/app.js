@@ -196,7 +196,8 @@
     el.submit.textContent = state.submitting ? 'Submitting…' : label;
     el.method.disabled = kind === 'image'; // the API refuses `method` on vectorize jobs
     el.methodHint.hidden = kind !== 'image';
-    el.textFields.hidden = el.aspectHint.hidden = kind === 'image'; // canvas + negative prompt: text jobs
+    // canvas, negative prompt, variations: text jobs only
+    el.textFields.hidden = el.aspectHint.hidden = el.variationsHint.hidden = kind === 'image';
     el.captionCount.textContent = String([...el.caption.value].length); // characters, as the API counts
   }
 
