@@ -118,31 +118,36 @@ async fn three_variations_are_distinct_and_the_first_is_the_single_result() {
     server.stop().await;
 }
 
+/// `generate "a crown"` on the tiny fixtures (draft, 2 steps, 4 paths, K = 2) into `out`, with
+/// `extra` arguments.
+fn generate(out: &std::path::Path, extra: &[&str]) -> std::process::Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_vectorfusion"))
+        .args(["generate", "a crown", "--model"])
+        .arg(fixture("sd-tiny"))
+        .arg("--scorer")
+        .arg(fixture("clip-tiny"))
+        .args([
+            "--preset",
+            "draft",
+            "--steps",
+            "2",
+            "--paths",
+            "4",
+            "--samples",
+            "2",
+        ])
+        .args(extra)
+        .arg("-o")
+        .arg(out)
+        .output()
+        .unwrap()
+}
+
 #[test]
 fn generate_writes_one_file_per_variation_and_refuses_a_bad_count() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("out.svg");
-    let run = |n: &str| {
-        std::process::Command::new(env!("CARGO_BIN_EXE_vectorfusion"))
-            .args(["generate", "a crown", "--model"])
-            .arg(fixture("sd-tiny"))
-            .arg("--scorer")
-            .arg(fixture("clip-tiny"))
-            .args([
-                "--preset",
-                "draft",
-                "--steps",
-                "2",
-                "--paths",
-                "4",
-                "--samples",
-                "2",
-            ])
-            .args(["--variations", n, "-o"])
-            .arg(&out)
-            .output()
-            .unwrap()
-    };
+    let run = |n: &str| generate(&out, &["--variations", n]);
     let st = run("2");
     assert!(st.status.success(), "{st:?}");
     for i in 1..=2 {
@@ -157,5 +162,29 @@ fn generate_writes_one_file_per_variation_and_refuses_a_bad_count() {
         let st = run(bad);
         assert_eq!(st.status.code(), Some(2), "{st:?}");
         assert!(String::from_utf8_lossy(&st.stderr).contains("variations"));
+    }
+}
+
+/// Every variation of a 16:9 job is placed on the 16:9 canvas, each its own drawing.
+#[test]
+fn variations_on_a_16_9_canvas_are_each_placed_on_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("wide.svg");
+    let st = generate(&out, &["--variations", "2", "--aspect", "16:9"]);
+    assert!(st.status.success(), "{st:?}");
+    let svgs: Vec<String> = (1..=2)
+        .map(|i| std::fs::read_to_string(dir.path().join(format!("wide-{i}.svg"))).unwrap())
+        .collect();
+    assert_ne!(svgs[0], svgs[1]);
+    for svg in &svgs {
+        let vb = svg.split("viewBox=\"").nth(1).unwrap();
+        let v: Vec<f64> = vb
+            .split('"')
+            .next()
+            .unwrap()
+            .split(' ')
+            .map(|x| x.parse().unwrap())
+            .collect();
+        assert!((v[2] / v[3] - 16.0 / 9.0).abs() < 1e-9, "viewBox {v:?}");
     }
 }
