@@ -1,6 +1,7 @@
 //! `variations`: a text job returns the N best distinct results on the tiny Stable Diffusion and
 //! CLIP fixtures, each served at `result/{i}.svg|png|pdf`; variation 1 is the SVG of the same
-//! job without variations; bad counts are a 400 naming the field and a CLI usage error.
+//! job without variations; `?size=N` sets a PNG's longest side; on a 16:9 canvas each variation
+//! is placed on it; bad counts are a 400 naming the field and a CLI usage error.
 
 mod common;
 
