@@ -86,6 +86,27 @@ impl Ranked {
     pub fn best_source(&self) -> Option<&Hit> {
         self.sources.get(self.best).and_then(Option::as_ref)
     }
+
+    /// The indices of the `n` best samples, best first: the kept one, then the others by
+    /// score (highest first; in sampling order without a scorer), skipping a sample equal to
+    /// one already picked while enough others are left. At most K.
+    pub fn top(&self, n: usize) -> Vec<usize> {
+        let score = |i: usize| self.scores.get(i).copied().unwrap_or(0.0);
+        let mut rest: Vec<usize> = (0..self.images.len()).filter(|&i| i != self.best).collect();
+        rest.sort_by(|&a, &b| score(b).total_cmp(&score(a)));
+        let mut picks = vec![self.best];
+        let mut same = Vec::new();
+        for i in rest {
+            if picks.iter().any(|&p| self.images[p] == self.images[i]) {
+                same.push(i);
+            } else {
+                picks.push(i);
+            }
+        }
+        picks.extend(same);
+        picks.truncate(n.max(1));
+        picks
+    }
 }
 
 /// Which icons of an index a run starts from: how many, at most how many drawings of one
@@ -204,6 +225,33 @@ pub fn sample_and_rerank(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn flat(v: f32) -> Image {
+        Image::filled(2, 2, [v, v, v, 1.0])
+    }
+
+    #[test]
+    fn the_top_samples_are_the_kept_one_then_by_score_and_distinct() {
+        let ranked = Ranked {
+            images: vec![flat(0.1), flat(0.2), flat(0.1), flat(0.3)],
+            best: 1,
+            scores: vec![0.5, 0.9, 0.8, 0.2],
+            sources: vec![None; 4],
+            caption: None,
+        };
+        assert_eq!(ranked.top(1), [1]);
+        // Sample 0 scores higher than 3 but equals sample 2 (picked before it): it comes after
+        // the distinct ones.
+        assert_eq!(ranked.top(3), [1, 2, 3]);
+        assert_eq!(ranked.top(4), [1, 2, 3, 0]);
+        assert_eq!(ranked.top(9), [1, 2, 3, 0]);
+        let unscored = Ranked {
+            scores: Vec::new(),
+            best: 0,
+            ..ranked
+        };
+        assert_eq!(unscored.top(3), [0, 1, 3]);
+    }
 
     #[test]
     fn a_share_of_the_samples_start_from_retrieval() {

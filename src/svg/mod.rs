@@ -122,10 +122,21 @@ pub fn pixmap(width: u32, height: u32) -> Result<resvg::tiny_skia::Pixmap, Rende
 /// Renders `svg` to PNG with resvg at its own size, scaled down so the longest side is at most
 /// `max_side` (the service's `result.png`, the command line's `-o out.png`).
 pub fn render_png(svg: &str, max_side: f32) -> Result<Vec<u8>, RenderError> {
+    render_png_scaled(svg, |longer| (max_side / longer).min(1.0))
+}
+
+/// Renders `svg` to PNG with resvg scaled (up or down) so its longest side is `side` px (the
+/// service's `result.png?size=N`).
+pub fn render_png_at(svg: &str, side: u32) -> Result<Vec<u8>, RenderError> {
+    render_png_scaled(svg, |longer| side as f32 / longer)
+}
+
+/// Renders `svg` to PNG at the scale `scale(its longest side)` gives.
+fn render_png_scaled(svg: &str, scale: impl Fn(f32) -> f32) -> Result<Vec<u8>, RenderError> {
     use resvg::tiny_skia;
     let tree = parse_usvg(svg)?;
     let size = tree.size();
-    let scale = (max_side / size.width().max(size.height())).min(1.0);
+    let scale = scale(size.width().max(size.height()));
     let w = (size.width() * scale).ceil().max(1.0) as u32;
     let h = (size.height() * scale).ceil().max(1.0) as u32;
     let mut pixmap = pixmap(w, h)?;
