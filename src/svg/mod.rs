@@ -65,6 +65,7 @@ mod export;
 mod file;
 mod guard;
 mod import;
+mod import_paint;
 mod path_data;
 mod profile;
 
