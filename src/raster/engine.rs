@@ -157,7 +157,16 @@ fn forward_band<T: Real>(
         let at = Area { clip, y0, w, fill };
         let dst = dst_buf.as_deref_mut();
         match l.paint {
-            None => composite(&at, out, img, dst, &Flat { c: l.color, dc: [T::zero(); 4] }),
+            None => composite(
+                &at,
+                out,
+                img,
+                dst,
+                &Flat {
+                    c: l.color,
+                    dc: [T::zero(); 4],
+                },
+            ),
             Some(pi) => composite(&at, out, img, dst, &GradientShade::new(&sc.paints[pi])),
         }
     }
@@ -404,7 +413,11 @@ fn composite_back<T: Real, S: Shade<T>>(
                 + gp[1] * (cg - d[1])
                 + gp[2] * (cb - d[2])
                 + gp[3] * (T::one() - d[3]);
-            shade.grad(x, y, [gp[0] * alpha, gp[1] * alpha, gp[2] * alpha, galpha * cov]);
+            shade.grad(
+                x,
+                y,
+                [gp[0] * alpha, gp[1] * alpha, gp[2] * alpha, galpha * cov],
+            );
             if !fill || a.abs() < T::one() {
                 let dcov = galpha * ca;
                 let v = if fill && a < T::zero() { -dcov } else { dcov };

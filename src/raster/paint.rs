@@ -54,7 +54,14 @@ impl<T: Real> PaintT<T> {
     pub fn of(g: &Gradient) -> Self {
         let [a, b, c, d, e, f] = g.transform.0.map(f64::from);
         let det = a * d - b * c;
-        let inv = [d / det, -b / det, -c / det, a / det, (c * f - d * e) / det, (b * e - a * f) / det];
+        let inv = [
+            d / det,
+            -b / det,
+            -c / det,
+            a / det,
+            (c * f - d * e) / det,
+            (b * e - a * f) / det,
+        ];
         let mut geom = [T::zero(); 6];
         for (k, v) in g.geometry.values().into_iter().enumerate() {
             geom[k] = T::of(v);
@@ -65,7 +72,11 @@ impl<T: Real> PaintT<T> {
             inv: inv.map(T::c),
             spread: g.spread,
             offsets: g.stops.iter().map(|s| T::of(s.offset)).collect(),
-            colors: g.stops.iter().map(|s| s.color.to_array().map(T::of)).collect(),
+            colors: g
+                .stops
+                .iter()
+                .map(|s| s.color.to_array().map(T::of))
+                .collect(),
         }
     }
 
@@ -172,29 +183,31 @@ impl<T: Real> PaintT<T> {
         [dc(0), dc(1), d_r, df(0), df(1), d_fr]
     }
 
-    /// Where `s` (after spreading) falls among the stops: `(i, w)` means
-    /// `colour = colors[i] (1 - w) + colors[i + 1] w`; `w = 0` outside the stops.
-    fn segment(&self, s: T) -> (usize, T) {
+    /// Where `s` (after spreading) falls among the stops: `(i, Some(w))` means
+    /// `colour = colors[i] (1 - w) + colors[i + 1] w`; `(i, None)` is stop `i`'s colour held
+    /// before the first or after the last stop. On an offset of exactly the first or last stop
+    /// the colour holds (the one-sided derivative into the held region: zero).
+    fn segment(&self, s: T) -> (usize, Option<T>) {
         let o = &self.offsets;
         let n = o.len();
         if n < 2 || s <= o[0] {
-            return (0, T::zero());
+            return (0, None);
         }
         if s >= o[n - 1] {
-            return (n - 1, T::zero());
+            return (n - 1, None);
         }
         let mut i = 0;
         while i + 2 < n && s >= o[i + 1] {
             i += 1;
         }
-        (i, (s - o[i]) / (o[i + 1] - o[i]))
+        (i, Some((s - o[i]) / (o[i + 1] - o[i])))
     }
 
-    fn mix(&self, i: usize, w: T) -> [T; 4] {
+    fn mix(&self, i: usize, w: Option<T>) -> [T; 4] {
         let a = self.colors[i];
-        if w == T::zero() {
+        let Some(w) = w else {
             return a;
-        }
+        };
         let b = self.colors[i + 1];
         std::array::from_fn(|c| a[c] + (b[c] - a[c]) * w)
     }
@@ -203,7 +216,11 @@ impl<T: Real> PaintT<T> {
 /// `c - f`, `q - f` and `r - fr` of a radial geometry.
 #[inline]
 fn conic<T: Real>(g: &[T; 6], q: [T; 2]) -> ([T; 2], [T; 2], T) {
-    ([g[0] - g[3], g[1] - g[4]], [q[0] - g[3], q[1] - g[4]], g[2] - g[5])
+    (
+        [g[0] - g[3], g[1] - g[4]],
+        [q[0] - g[3], q[1] - g[4]],
+        g[2] - g[5],
+    )
 }
 
 /// `t` after the spread method, and its derivative.
@@ -216,7 +233,11 @@ fn spread<T: Real>(mode: Spread, t: T) -> (T, T) {
         Spread::Repeat => (t - t.floor(), one),
         Spread::Reflect => {
             let m = t - T::c(2.0) * (t * T::c(0.5)).floor();
-            if m <= one { (m, one) } else { (T::c(2.0) - m, -one) }
+            if m <= one {
+                (m, one)
+            } else {
+                (T::c(2.0) - m, -one)
+            }
         }
     }
 }
@@ -259,12 +280,12 @@ impl<T: Real> Shade<T> for GradientShade<'_, T> {
         let ng = p.n_geom();
         let d = &mut self.d;
         let col = |k: usize| ng + 5 * k + 1;
-        if w == T::zero() {
+        let Some(w) = w else {
             for c in 0..4 {
                 d[col(i) + c] += dc[c];
             }
             return;
-        }
+        };
         let (a, b) = (p.colors[i], p.colors[i + 1]);
         let mut gw = T::zero();
         for c in 0..4 {

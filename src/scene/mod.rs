@@ -15,8 +15,8 @@
 //! - A fill or stroke painted with a gradient ([`Shape::gradients`]) keeps its flat colour as
 //!   the gradient's stand-in; the gradient's own invariants are in [`paint`].
 
-mod params;
 pub mod paint;
+mod params;
 
 pub use paint::{Affine, Gradient, GradientGeometry, GradientStop, Gradients, Spread};
 pub use params::{ParamGroup, Params, Trainable};

@@ -259,7 +259,9 @@ impl Gradient {
             }
             lo = s.offset;
             if !s.color.is_valid() {
-                return Err(format!("gradient stop {i}: colour must be finite and in [0, 1]"));
+                return Err(format!(
+                    "gradient stop {i}: colour must be finite and in [0, 1]"
+                ));
             }
         }
         if !self.geometry.values().iter().all(|v| v.is_finite()) {
@@ -268,7 +270,9 @@ impl Gradient {
         if let GradientGeometry::Radial { r, fr, .. } = self.geometry
             && !(r > 0.0 && fr >= 0.0)
         {
-            return Err(format!("radial gradient needs r > 0 and fr >= 0, got {r}, {fr}"));
+            return Err(format!(
+                "radial gradient needs r > 0 and fr >= 0, got {r}, {fr}"
+            ));
         }
         if !self.transform.is_valid() {
             return Err("gradient transform must be finite and invertible".into());

@@ -95,6 +95,9 @@ pub(super) fn painted(paint: &usvg::Paint, opacity: f32, ts: usvg::Transform) ->
 }
 
 /// The shape's gradients, or `None` when both paints are flat.
-pub(super) fn gradients(fill: Option<Gradient>, stroke: Option<Gradient>) -> Option<Box<Gradients>> {
+pub(super) fn gradients(
+    fill: Option<Gradient>,
+    stroke: Option<Gradient>,
+) -> Option<Box<Gradients>> {
     (fill.is_some() || stroke.is_some()).then(|| Box::new(Gradients { fill, stroke }))
 }
