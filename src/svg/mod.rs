@@ -62,6 +62,7 @@
 //!   for the background) it becomes the scene background.
 
 mod export;
+mod export_paint;
 mod file;
 mod guard;
 mod import;
@@ -163,3 +164,5 @@ pub fn parse_usvg_repaired(text: &str) -> Result<Parsed, SvgRejected> {
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_gradient;
