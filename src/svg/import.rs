@@ -471,6 +471,9 @@ pub fn import_svg(text: &str) -> Result<SvgImport, SvgError> {
     for w in parsed.warnings {
         walk.warn(w);
     }
+    for w in super::import_paint::dangling_paint_warnings(text) {
+        walk.warn(w);
+    }
     walk.group(tree.root(), 1.0);
     let (mut shapes, warnings) = walk.finish();
     let mut background = Rgba::TRANSPARENT;

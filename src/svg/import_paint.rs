@@ -101,3 +101,62 @@ pub(super) fn gradients(
 ) -> Option<Box<Gradients>> {
     (fill.is_some() || stroke.is_some()).then(|| Box::new(Gradients { fill, stroke }))
 }
+
+/// One warning per `fill` or `stroke` (attribute or `style` declaration) that refers to no
+/// gradient or pattern: usvg draws its fallback colour, or nothing, silently. `text` already
+/// passed the guard (its size and node count are bounded).
+pub(super) fn dangling_paint_warnings(text: &str) -> Vec<String> {
+    use resvg::usvg::roxmltree;
+    let opts = roxmltree::ParsingOptions {
+        allow_dtd: true,
+        ..Default::default()
+    };
+    let Ok(doc) = roxmltree::Document::parse_with_options(text, opts) else {
+        return Vec::new();
+    };
+    let servers: std::collections::HashSet<&str> = doc
+        .descendants()
+        .filter(|n| {
+            matches!(
+                n.tag_name().name(),
+                "linearGradient" | "radialGradient" | "pattern"
+            )
+        })
+        .filter_map(|n| n.attribute("id"))
+        .collect();
+    let mut out = Vec::new();
+    for node in doc.descendants().filter(|n| n.is_element()) {
+        let style = node.attribute("style").unwrap_or("");
+        let declared = style.split(';').filter_map(|d| d.split_once(':'));
+        let attrs = ["fill", "stroke"]
+            .into_iter()
+            .filter_map(|p| node.attribute(p).map(|v| (p, v)));
+        for (prop, value) in attrs.chain(declared.map(|(p, v)| (p.trim(), v))) {
+            let Some(rest) = value.trim().strip_prefix("url(") else {
+                continue;
+            };
+            let Some((link, fallback)) = rest.split_once(')') else {
+                continue;
+            };
+            let id = link
+                .trim()
+                .trim_matches(['"', '\''])
+                .trim_start_matches('#');
+            if servers.contains(id) || !matches!(prop, "fill" | "stroke") {
+                continue;
+            }
+            let on = match node.attribute("id") {
+                Some(own) => format!("<{} id=\"{own}\">", node.tag_name().name()),
+                None => format!("<{}>", node.tag_name().name()),
+            };
+            let drawn = match fallback.trim() {
+                "" => "not painted".to_string(),
+                f => format!("painted {f}"),
+            };
+            out.push(format!(
+                "{prop} of {on} refers to #{id}, which is no gradient or pattern: {drawn}"
+            ));
+        }
+    }
+    out
+}

@@ -89,6 +89,26 @@ fn gradients_import_with_usvg_rules() {
 }
 
 #[test]
+fn dangling_paint_references_are_named_in_warnings() {
+    let w = import_svg(SVG).unwrap().warnings;
+    assert_eq!(
+        w,
+        ["fill of <rect> refers to #missing, which is no gradient or pattern: painted #00ff00"],
+        "{w:?}"
+    );
+    let svg = r#"<svg xmlns="http://www.w3.org/2000/svg" width="8" height="8"><g id="g"/><rect id="r" width="8" height="8" style="stroke: url('#nope')" fill="url(#g)"/></svg>"#;
+    let w = import_svg(svg).unwrap().warnings;
+    assert_eq!(w.len(), 2, "{w:?}");
+    assert!(
+        w[0].starts_with(r#"fill of <rect id="r"> refers to #g"#) && w[0].ends_with("not painted")
+    );
+    assert!(
+        w[1].starts_with("stroke of") && w[1].contains("#nope"),
+        "{w:?}"
+    );
+}
+
+#[test]
 fn gradients_round_trip_through_export() {
     let s = from_svg(SVG).unwrap();
     let opts = SvgOptions {
