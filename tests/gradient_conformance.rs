@@ -132,6 +132,13 @@ fn cases() -> Vec<(&'static str, String)> {
             ),
         ),
         (
+            "stroke_under_skew_as_outline",
+            doc(
+                &lin(r#"x1="0" y1="0" x2="1" y2="1""#),
+                r#"<g transform="skewX(25) scale(1 0.8)"><path d="M5 20 L40 90 L70 15" fill="none" stroke="url(#g)" stroke-width="9" stroke-linejoin="round"/></g>"#,
+            ),
+        ),
+        (
             "group_transform",
             doc(
                 &lin(r#"x1="0" y1="0" x2="1" y2="1""#),

@@ -91,19 +91,19 @@ pub fn shader(g: &Gradient) -> Option<tiny_skia::Shader<'static>> {
     };
     let [a, b, c, d, e, f] = g.transform.0;
     let ts = tiny_skia::Transform::from_row(a, b, c, d, e, f);
+    let v = g.geometry.values();
     match g.geometry {
-        GradientGeometry::Linear { x1, y1, x2, y2 } => {
-            tiny_skia::LinearGradient::new((x1, y1).into(), (x2, y2).into(), stops, mode, ts)
-        }
-        GradientGeometry::Radial {
-            cx,
-            cy,
-            r,
-            fx,
-            fy,
-            fr,
-        } => {
-            tiny_skia::RadialGradient::new((fx, fy).into(), fr, (cx, cy).into(), r, stops, mode, ts)
+        GradientGeometry::Linear { .. } => tiny_skia::LinearGradient::new(
+            (v[0], v[1]).into(),
+            (v[2], v[3]).into(),
+            stops,
+            mode,
+            ts,
+        ),
+        // Focal circle (fx, fy, fr) to end circle (cx, cy, r).
+        GradientGeometry::Radial { .. } => {
+            let (start, end) = ((v[3], v[4]).into(), (v[0], v[1]).into());
+            tiny_skia::RadialGradient::new(start, v[5], end, v[2], stops, mode, ts)
         }
     }
 }

@@ -108,7 +108,7 @@ fn forward_band<T: Real>(
         // Per-pixel value the coverage is a function of: the winding integral A for fills
         // (coverage min(|A|, 1)), the coverage itself for strokes. Written straight into the
         // tape when there is one.
-        let (buf, mut dst_buf) = match tape.as_deref_mut() {
+        let (buf, dst_buf) = match tape.as_deref_mut() {
             Some(t) => {
                 t.recs.push(Rec {
                     layer: li as u32,
@@ -155,7 +155,7 @@ fn forward_band<T: Real>(
         }
         let fill = l.kind == LayerKind::Fill;
         let at = Area { clip, y0, w, fill };
-        let dst = dst_buf.as_deref_mut();
+        let dst = dst_buf;
         match l.paint {
             None => composite(
                 &at,

@@ -3,6 +3,17 @@
 use super::*;
 use crate::scene::{Affine, GradientGeometry, Rgba, Spread};
 
+/// The fill gradient of shape `i`.
+fn fill_gradient(s: &crate::scene::Scene, i: usize) -> &crate::scene::Gradient {
+    s.shapes[i]
+        .gradients
+        .as_ref()
+        .unwrap()
+        .fill
+        .as_ref()
+        .unwrap()
+}
+
 const SVG: &str = r##"<svg xmlns="http://www.w3.org/2000/svg" xmlns:xlink="http://www.w3.org/1999/xlink" width="100" height="80">
 <defs>
   <linearGradient id="base" x1="0" y1="0" x2="1" y2="0">
@@ -28,13 +39,7 @@ const SVG: &str = r##"<svg xmlns="http://www.w3.org/2000/svg" xmlns:xlink="http:
 fn gradients_import_with_usvg_rules() {
     let s = from_svg(SVG).unwrap();
     assert_eq!(s.shapes.len(), 5);
-    let g = s.shapes[0]
-        .gradients
-        .as_ref()
-        .unwrap()
-        .fill
-        .as_ref()
-        .unwrap();
+    let g = fill_gradient(&s, 0);
     // Inherited stops; offsets clamped into [0, 1] and made non-decreasing; opacity folded in.
     // (usvg nudges an equal offset down by an ulp or so.)
     let offsets: Vec<f32> = g.stops.iter().map(|s| s.offset).collect();
@@ -134,20 +139,8 @@ fn gradients_round_trip_through_export() {
 fn scaled_scenes_move_their_gradients() {
     let s = from_svg(SVG).unwrap();
     let big = s.scaled_to_width(200);
-    let g0 = s.shapes[1]
-        .gradients
-        .as_ref()
-        .unwrap()
-        .fill
-        .as_ref()
-        .unwrap();
-    let g1 = big.shapes[1]
-        .gradients
-        .as_ref()
-        .unwrap()
-        .fill
-        .as_ref()
-        .unwrap();
+    let g0 = fill_gradient(&s, 1);
+    let g1 = fill_gradient(&big, 1);
     let p = crate::scene::Point::new(3.0, 4.0);
     let (a, b) = (g0.transform.apply(p), g1.transform.apply(p));
     assert!((2.0 * a.x - b.x).abs() < 1e-4 && (2.0 * a.y - b.y).abs() < 1e-4);
