@@ -2,7 +2,9 @@
 //! On failure a side-by-side PNG (ours | resvg | 8x amplified difference) is written to
 //! `$CARGO_TARGET_TMPDIR/golden_<name>.png`.
 
-use resvg::{tiny_skia, usvg};
+mod common;
+
+use common::golden::{mean_abs_diff, resvg_render, share_off_by, write_triptych};
 use vectorfusion::image::Image;
 use vectorfusion::scene::{Point, Rgba, Scene, Shape, Stroke};
 use vectorfusion::svg::{SvgOptions, scene_from_json, to_svg};
@@ -17,38 +19,9 @@ const LARGE: f32 = 128.0 / 255.0;
 /// pixels, well inside the mean tolerance) still fails.
 const MAX_LARGE_SHARE: f64 = 0.0005;
 
-fn resvg_render(svg_text: &str) -> Image {
-    let tree = usvg::Tree::from_str(svg_text, &usvg::Options::default()).unwrap();
-    let size = tree.size().to_int_size();
-    let mut pm = tiny_skia::Pixmap::new(size.width(), size.height()).unwrap();
-    resvg::render(&tree, tiny_skia::Transform::default(), &mut pm.as_mut());
-    Image {
-        width: size.width(),
-        height: size.height(),
-        data: pm.data().iter().map(|&b| b as f32 / 255.0).collect(),
-    }
-}
-
-fn mean_abs_diff(a: &Image, b: &Image) -> f64 {
-    assert_eq!((a.width, a.height), (b.width, b.height));
-    let s: f64 = a
-        .data
-        .iter()
-        .zip(&b.data)
-        .map(|(x, y)| (*x as f64 - *y as f64).abs())
-        .sum();
-    s / a.data.len() as f64
-}
-
 /// The share of pixels whose largest channel difference exceeds [`LARGE`].
 fn large_share(a: &Image, b: &Image) -> f64 {
-    let n = a
-        .data
-        .chunks_exact(4)
-        .zip(b.data.chunks_exact(4))
-        .filter(|(p, q)| p.iter().zip(q.iter()).any(|(x, y)| (x - y).abs() > LARGE))
-        .count();
-    n as f64 / (a.width as f64 * a.height as f64)
+    share_off_by(a, b, LARGE)
 }
 
 /// Fails (with a diff image) when the mean difference or the share of very different pixels is
@@ -62,7 +35,7 @@ fn compare(name: &str, ours: &Image, theirs: &Image) -> f64 {
         large * 100.0
     );
     if d > TOL || large > MAX_LARGE_SHARE {
-        let p = write_diff(name, ours, theirs);
+        let p = write_triptych(name, ours, theirs);
         panic!(
             "{name}: mean abs diff {:.3}/255 (at most 1.5/255), {:.3}% of pixels differ by more \
              than 128/255 (at most {:.2}%), diff image at {p}",
@@ -72,29 +45,6 @@ fn compare(name: &str, ours: &Image, theirs: &Image) -> f64 {
         );
     }
     d
-}
-
-fn write_diff(name: &str, ours: &Image, theirs: &Image) -> String {
-    let (w, h) = (ours.width, ours.height);
-    let mut out = Image::new(3 * w, h);
-    for y in 0..h {
-        for x in 0..w {
-            let (p, q) = (ours.pixel(x, y), theirs.pixel(x, y));
-            let row = (y * 3 * w) as usize;
-            for c in 0..4 {
-                out.data[4 * (row + x as usize) + c] = p[c];
-                out.data[4 * (row + (w + x) as usize) + c] = q[c];
-            }
-            let d = (0..4).map(|c| (p[c] - q[c]).abs()).fold(0.0, f32::max);
-            let v = (8.0 * d).min(1.0);
-            let i = 4 * (row + (2 * w + x) as usize);
-            out.data[i..i + 4].copy_from_slice(&[v, v, v, 1.0]);
-        }
-    }
-    let dir = std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR"));
-    let path = dir.join(format!("golden_{name}.png"));
-    out.save_png(&path).unwrap();
-    path.display().to_string()
 }
 
 fn check(name: &str, scene: &Scene) -> f64 {

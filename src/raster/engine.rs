@@ -4,6 +4,7 @@
 //! band, layers are painted in order, each only over its bounding box ∩ band.
 
 use super::geom::{Layer, LayerKind, SceneT, polyline_backward};
+use super::paint::{Flat, GradientShade, Shade};
 use super::real::Real;
 use super::stroke;
 use super::walk::{Clip, deposit, edge_grad};
@@ -107,7 +108,7 @@ fn forward_band<T: Real>(
         // Per-pixel value the coverage is a function of: the winding integral A for fills
         // (coverage min(|A|, 1)), the coverage itself for strokes. Written straight into the
         // tape when there is one.
-        let (buf, mut dst_buf) = match tape.as_deref_mut() {
+        let (buf, dst_buf) = match tape.as_deref_mut() {
             Some(t) => {
                 t.recs.push(Rec {
                     layer: li as u32,
@@ -153,25 +154,67 @@ fn forward_band<T: Real>(
             }
         }
         let fill = l.kind == LayerKind::Fill;
-        let [r, g, b, ca] = l.color;
-        for row in 0..rows {
-            let vrow = &out[row * cw..(row + 1) * cw];
-            let iy = (clip.y0 - y0) as usize + row;
-            let base = 4 * (iy * w + clip.x0 as usize);
-            let prow = &mut img[base..base + 4 * cw];
-            if let Some(d) = dst_buf.as_deref_mut() {
-                d.extend_from_slice(prow);
+        let at = Area { clip, y0, w, fill };
+        let dst = dst_buf;
+        match l.paint {
+            None => composite(
+                &at,
+                out,
+                img,
+                dst,
+                &Flat {
+                    c: l.color,
+                    dc: [T::zero(); 4],
+                },
+            ),
+            Some(pi) => composite(&at, out, img, dst, &GradientShade::new(&sc.paints[pi])),
+        }
+    }
+}
+
+/// Where a layer is composited within a band: its clip, the band's first row and the canvas
+/// width, and whether `out` holds winding integrals (fills) or coverages (strokes).
+struct Area {
+    clip: Clip,
+    y0: i32,
+    w: usize,
+    fill: bool,
+}
+
+/// Source-over of one layer's per-pixel values `out` onto the band `img`, recording the colour
+/// underneath into `dst` when taping.
+#[inline(always)]
+fn composite<T: Real, S: Shade<T>>(
+    at: &Area,
+    out: &[T],
+    img: &mut [T],
+    mut dst: Option<&mut Vec<T>>,
+    shade: &S,
+) {
+    let clip = at.clip;
+    let cw = (clip.x1 - clip.x0) as usize;
+    for row in 0..(clip.y1 - clip.y0) as usize {
+        let vrow = &out[row * cw..(row + 1) * cw];
+        let iy = (clip.y0 - at.y0) as usize + row;
+        let base = 4 * (iy * at.w + clip.x0 as usize);
+        let prow = &mut img[base..base + 4 * cw];
+        if let Some(d) = dst.as_deref_mut() {
+            d.extend_from_slice(prow);
+        }
+        let y = clip.y0 + row as i32;
+        for (ix, (&v, p)) in vrow.iter().zip(prow.chunks_exact_mut(4)).enumerate() {
+            let cov = if at.fill { coverage(v) } else { v };
+            if cov == T::zero() {
+                continue;
             }
-            for (&v, p) in vrow.iter().zip(prow.chunks_exact_mut(4)) {
-                let cov = if fill { coverage(v) } else { v };
-                let alpha = cov * ca;
-                if alpha > T::zero() {
-                    let keep = T::one() - alpha;
-                    p[0] = r * alpha + p[0] * keep;
-                    p[1] = g * alpha + p[1] * keep;
-                    p[2] = b * alpha + p[2] * keep;
-                    p[3] = alpha + p[3] * keep;
-                }
+            let [r, g, b, ca] = shade.color(clip.x0 + ix as i32, y);
+            let alpha = cov * ca;
+            if alpha > T::zero() {
+                let keep = T::one() - alpha;
+                p[0] = r * alpha + p[0] * keep;
+                p[1] = g * alpha + p[1] * keep;
+                p[2] = b * alpha + p[2] * keep;
+                p[3] = alpha + p[3] * keep;
             }
         }
     }
@@ -216,6 +259,8 @@ struct BandGrad<T> {
     dcolor: Vec<[T; 4]>,
     /// Per layer, stroke half-width.
     dradius: Vec<T>,
+    /// Per gradient of the scene, its parameters (empty until touched).
+    dpaint: Vec<Vec<T>>,
     dbg: [T; 4],
 }
 
@@ -232,6 +277,7 @@ fn backward_band<T: Real>(
         dverts: vec![Vec::new(); ls.len()],
         dcolor: vec![[T::zero(); 4]; ls.len()],
         dradius: vec![T::zero(); ls.len()],
+        dpaint: vec![Vec::new(); sc.paints.len()],
         dbg: [T::zero(); 4],
     };
     let mut gbuf: Vec<T> = Vec::new();
@@ -246,54 +292,34 @@ fn backward_band<T: Real>(
         if gbuf.len() < cw * rows {
             gbuf.resize(cw * rows, T::zero());
         }
-        let [cr, cg, cb, ca] = l.color;
         let fill = l.kind == LayerKind::Fill;
-        let mut dc = [T::zero(); 4];
-        let mut any = false;
-        for row in 0..rows {
-            let iy = (clip.y0 - y0) as usize + row;
-            let base = 4 * (iy * w + clip.x0 as usize);
-            let grow = &mut g[base..base + 4 * cw];
-            let off = rec.offset + row * cw;
-            let arow = &tape.area[off..off + cw];
-            let drow = &tape.dst[4 * off..4 * (off + cw)];
-            let gb = &mut gbuf[row * cw..(row + 1) * cw];
-            for (((&a, d), gp), gbv) in arow
-                .iter()
-                .zip(drow.chunks_exact(4))
-                .zip(grow.chunks_exact_mut(4))
-                .zip(gb.iter_mut())
-            {
-                *gbv = T::zero();
-                if a == T::zero() {
-                    // No coverage and no edge inside: nothing flows through this layer here.
-                    continue;
+        let at = Area { clip, y0, w, fill };
+        let gb = &mut gbuf[..cw * rows];
+        let any = match l.paint {
+            None => {
+                let mut flat = Flat {
+                    c: l.color,
+                    dc: [T::zero(); 4],
+                };
+                let any = composite_back(&at, rec.offset, tape, &mut g, gb, &mut flat);
+                for c in 0..4 {
+                    out.dcolor[li][c] += flat.dc[c];
                 }
-                let cov = if fill { coverage(a) } else { a };
-                let alpha = cov * ca;
-                let galpha = gp[0] * (cr - d[0])
-                    + gp[1] * (cg - d[1])
-                    + gp[2] * (cb - d[2])
-                    + gp[3] * (T::one() - d[3]);
-                dc[0] += gp[0] * alpha;
-                dc[1] += gp[1] * alpha;
-                dc[2] += gp[2] * alpha;
-                dc[3] += galpha * cov;
-                if !fill || a.abs() < T::one() {
-                    let dcov = galpha * ca;
-                    let v = if fill && a < T::zero() { -dcov } else { dcov };
-                    any |= v != T::zero();
-                    *gbv = v;
-                }
-                let keep = T::one() - alpha;
-                for c in gp.iter_mut() {
-                    *c *= keep;
-                }
+                any
             }
-        }
-        for c in 0..4 {
-            out.dcolor[li][c] += dc[c];
-        }
+            Some(pi) => {
+                let mut sh = GradientShade::new(&sc.paints[pi]);
+                let any = composite_back(&at, rec.offset, tape, &mut g, gb, &mut sh);
+                let dp = &mut out.dpaint[pi];
+                if dp.is_empty() {
+                    dp.resize(sh.d.len(), T::zero());
+                }
+                for (acc, v) in dp.iter_mut().zip(&sh.d) {
+                    *acc += *v;
+                }
+                any
+            }
+        };
         if any && !fill {
             let dp = &mut out.dverts[li];
             if dp.is_empty() {
@@ -342,6 +368,71 @@ fn backward_band<T: Real>(
     out
 }
 
+/// The backward of [`composite`] for one layer: takes `dL/d out` of the band (`g`, updated to
+/// `dL/d below`), gives the colour source its gradients and writes `dL/d value` per pixel into
+/// `gbuf` (the winding integral for fills, the coverage for strokes). Returns whether any of
+/// those is non-zero.
+#[inline(always)]
+fn composite_back<T: Real, S: Shade<T>>(
+    at: &Area,
+    offset: usize,
+    tape: &BandTape<T>,
+    g: &mut [T],
+    gbuf: &mut [T],
+    shade: &mut S,
+) -> bool {
+    let (clip, fill) = (at.clip, at.fill);
+    let cw = (clip.x1 - clip.x0) as usize;
+    let mut any = false;
+    for row in 0..(clip.y1 - clip.y0) as usize {
+        let iy = (clip.y0 - at.y0) as usize + row;
+        let base = 4 * (iy * at.w + clip.x0 as usize);
+        let grow = &mut g[base..base + 4 * cw];
+        let off = offset + row * cw;
+        let arow = &tape.area[off..off + cw];
+        let drow = &tape.dst[4 * off..4 * (off + cw)];
+        let gb = &mut gbuf[row * cw..(row + 1) * cw];
+        let y = clip.y0 + row as i32;
+        for (ix, (((&a, d), gp), gbv)) in arow
+            .iter()
+            .zip(drow.chunks_exact(4))
+            .zip(grow.chunks_exact_mut(4))
+            .zip(gb.iter_mut())
+            .enumerate()
+        {
+            *gbv = T::zero();
+            if a == T::zero() {
+                // No coverage and no edge inside: nothing flows through this layer here.
+                continue;
+            }
+            let x = clip.x0 + ix as i32;
+            let [cr, cg, cb, ca] = shade.color(x, y);
+            let cov = if fill { coverage(a) } else { a };
+            let alpha = cov * ca;
+            let galpha = gp[0] * (cr - d[0])
+                + gp[1] * (cg - d[1])
+                + gp[2] * (cb - d[2])
+                + gp[3] * (T::one() - d[3]);
+            shade.grad(
+                x,
+                y,
+                [gp[0] * alpha, gp[1] * alpha, gp[2] * alpha, galpha * cov],
+            );
+            if !fill || a.abs() < T::one() {
+                let dcov = galpha * ca;
+                let v = if fill && a < T::zero() { -dcov } else { dcov };
+                any |= v != T::zero();
+                *gbv = v;
+            }
+            let keep = T::one() - alpha;
+            for c in gp.iter_mut() {
+                *c *= keep;
+            }
+        }
+    }
+    any
+}
+
 /// Gradients in the layout of [`crate::scene::Params`], in the working precision.
 #[derive(Clone, Debug)]
 pub(crate) struct GradT<T> {
@@ -350,6 +441,23 @@ pub(crate) struct GradT<T> {
     pub stroke: Vec<T>,
     pub width: Vec<T>,
     pub bg: [T; 4],
+    /// Every gradient parameter, in [`crate::scene::paint::scene_gradient_params`] order.
+    pub paint: Vec<T>,
+}
+
+/// The bands' gradient-parameter gradients, summed and concatenated in parameter order.
+fn reduce_paint<T: Real>(sc: &SceneT<T>, parts: &[BandGrad<T>]) -> Vec<T> {
+    let mut out = Vec::new();
+    for (pi, p) in sc.paints.iter().enumerate() {
+        let start = out.len();
+        out.resize(start + p.num_params(), T::zero());
+        for part in parts {
+            for (acc, v) in out[start..].iter_mut().zip(&part.dpaint[pi]) {
+                *acc += *v;
+            }
+        }
+    }
+    out
 }
 
 /// Backward over all bands, then the chain rule back to scene parameters.
@@ -393,6 +501,7 @@ pub(crate) fn backward<T: Real>(
             dbg[c] += p.dbg[c];
         }
     }
+    let paint = reduce_paint(sc, &parts);
     // Parameter layout offsets.
     let mut pt_off = Vec::with_capacity(sc.shapes.len());
     let mut fill_idx = Vec::with_capacity(sc.shapes.len());
@@ -416,6 +525,7 @@ pub(crate) fn backward<T: Real>(
         stroke: vec![T::zero(); 4 * ns],
         width: vec![T::zero(); ns],
         bg: dbg,
+        paint,
     };
     for (li, l) in ls.iter().enumerate() {
         let s = &sc.shapes[l.shape];

@@ -8,6 +8,7 @@
 //! - A stroke layer keeps the polyline and half-width; its coverage comes from the distance to
 //!   the polyline (see `stroke`).
 
+use super::paint::PaintT;
 use super::real::Real;
 use super::stroke::Style;
 use crate::scene::{Rgba, Scene, ShapeKind, Stroke};
@@ -44,6 +45,9 @@ pub(crate) struct ShapeT<T> {
     pub style: Style,
     /// Pieces per segment (fixed for the step).
     pub pieces: Vec<u32>,
+    /// Indices into [`SceneT::paints`] of the fill's and the stroke's gradient.
+    pub fill_paint: Option<usize>,
+    pub stroke_paint: Option<usize>,
 }
 
 /// A scene's parameters in the working precision, plus the fixed flattening plan.
@@ -53,6 +57,9 @@ pub(crate) struct SceneT<T> {
     pub height: u32,
     pub bg: [T; 4],
     pub shapes: Vec<ShapeT<T>>,
+    /// Every gradient, shape by shape, fill before stroke (the parameter order of
+    /// [`crate::scene::paint::scene_gradient_params`]).
+    pub paints: Vec<PaintT<T>>,
 }
 
 fn seg_f32(kind: ShapeKind, p: &[[f32; 2]], i: usize) -> [[f32; 2]; 4] {
@@ -67,6 +74,13 @@ fn seg_f32(kind: ShapeKind, p: &[[f32; 2]], i: usize) -> [[f32; 2]; 4] {
 impl<T: Real> SceneT<T> {
     pub fn from_scene(scene: &Scene, tol: f32) -> Self {
         let c4 = |c: crate::scene::Rgba| c.to_array().map(T::of);
+        let mut paints = Vec::new();
+        let mut add = |g: Option<&crate::scene::Gradient>| {
+            g.map(|g| {
+                paints.push(PaintT::of(g));
+                paints.len() - 1
+            })
+        };
         let shapes = scene
             .shapes
             .iter()
@@ -86,6 +100,8 @@ impl<T: Real> SceneT<T> {
                     stroke: s.stroke.map(|st| (c4(st.color), T::of(st.width))),
                     style: Style::of(&s.stroke.unwrap_or(Stroke::round(Rgba::BLACK, 0.0))),
                     pieces,
+                    fill_paint: add(s.gradients.as_ref().and_then(|g| g.fill.as_ref())),
+                    stroke_paint: add(s.gradients.as_ref().and_then(|g| g.stroke.as_ref())),
                 }
             })
             .collect();
@@ -94,6 +110,7 @@ impl<T: Real> SceneT<T> {
             height: scene.height,
             bg: c4(scene.background),
             shapes,
+            paints,
         }
     }
 }
@@ -182,6 +199,8 @@ pub(crate) struct Layer<T> {
     pub kind: LayerKind,
     /// Straight RGBA.
     pub color: [T; 4],
+    /// The gradient painted instead of `color` (index into [`SceneT::paints`]).
+    pub paint: Option<usize>,
     pub verts: Vec<[T; 2]>,
     /// `(start, len)` of each closed contour in `verts`.
     pub contours: Vec<(u32, u32)>,
@@ -231,6 +250,7 @@ pub(crate) fn layers<T: Real>(sc: &SceneT<T>) -> Vec<Layer<T>> {
                 shape: si,
                 kind: LayerKind::Fill,
                 color: c,
+                paint: s.fill_paint,
                 contours: vec![(0, poly.len() as u32)],
                 verts: poly.clone(),
                 bbox: bb,
@@ -252,6 +272,7 @@ pub(crate) fn layers<T: Real>(sc: &SceneT<T>) -> Vec<Layer<T>> {
                 shape: si,
                 kind: LayerKind::Stroke,
                 color: c,
+                paint: s.stroke_paint,
                 verts: Vec::new(),
                 contours: Vec::new(),
                 bbox: bb,

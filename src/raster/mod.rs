@@ -14,6 +14,7 @@
 //!   drawn as SVG draws them, as a union of per-edge pieces (see `stroke`).
 //! - Per shape the fill is painted first, then the stroke. `alpha = coverage * colour.a`,
 //!   `out = colour.rgb * alpha + below * (1 - alpha)` (premultiplied), over the background.
+//!   The colour is the flat one, or a gradient's colour at the pixel centre (`paint`).
 //!
 //! # Backward
 //! [`backward`] is the exact derivative of the forward function above (up to the measure-zero
@@ -35,12 +36,15 @@
 
 mod engine;
 mod geom;
+mod paint;
 mod real;
 mod stroke;
 mod walk;
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_paint;
 #[cfg(test)]
 mod tests_stroke;
 
@@ -74,6 +78,8 @@ impl Tape {
                     && a.fill.is_some() == b.fill.is_some()
                     && a.stroke.is_some() == b.stroke.is_some()
             })
+            && self.sc.paints.iter().map(|p| p.num_params()).sum::<usize>()
+                == crate::scene::paint::scene_gradient_params(scene).len()
     }
 }
 
@@ -145,15 +151,23 @@ pub fn render_tape(scene: &Scene) -> (Image, Tape) {
 /// structure, or `d_image` has the wrong length, all gradients are zero (and a warning is
 /// logged) rather than a panic.
 pub fn backward(scene: &Scene, tape: &Tape, d_image: &[f32]) -> Params {
+    backward_with_gradients(scene, tape, d_image).0
+}
+
+/// [`backward`], plus the gradients of every gradient paint's parameters in the order of
+/// [`crate::scene::paint::scene_gradient_params`] (geometry, stop offsets, stop colours). A
+/// fill or stroke painted with a gradient gets zero gradient for its flat stand-in colour.
+pub fn backward_with_gradients(scene: &Scene, tape: &Tape, d_image: &[f32]) -> (Params, Vec<f32>) {
     let mut out = Params::zeros_like(scene);
     let n = 4 * scene.width as usize * scene.height as usize;
     if !tape.matches(scene) || d_image.len() != n {
         tracing::warn!("raster::backward: tape or d_image does not match the scene");
-        return out;
+        let np = crate::scene::paint::scene_gradient_params(scene).len();
+        return (out, vec![0.0; np]);
     }
     let g = engine::backward(&tape.sc, &tape.layers, &tape.bands, d_image);
     write_grad(&mut out, &g);
-    out
+    (out, g.paint)
 }
 
 fn write_grad(out: &mut Params, g: &engine::GradT<f32>) {
@@ -171,7 +185,10 @@ pub fn flatten_shape(shape: &Shape, tolerance_px: f32) -> Vec<Vec<Point>> {
         width: 1,
         height: 1,
         background: crate::scene::Rgba::TRANSPARENT,
-        shapes: vec![shape.clone()],
+        shapes: vec![Shape {
+            gradients: None,
+            ..shape.clone()
+        }],
     };
     let t = SceneT::<f32>::from_scene(&sc, tolerance_px);
     t.shapes

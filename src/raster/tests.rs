@@ -34,11 +34,11 @@ use crate::scene::{Point, Stroke};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-fn loss_f64(sc: &SceneT<f64>, w: &[f64]) -> f64 {
+pub(super) fn loss_f64(sc: &SceneT<f64>, w: &[f64]) -> f64 {
     render_t(sc).iter().zip(w).map(|(a, b)| a * b).sum()
 }
 
-fn grad_f64(sc: &SceneT<f64>, w: &[f64]) -> GradT<f64> {
+pub(super) fn grad_f64(sc: &SceneT<f64>, w: &[f64]) -> GradT<f64> {
     let ls = geom::layers(sc);
     let (_, tapes) = engine::forward(sc, &ls, true, Vec::new());
     engine::backward(sc, &ls, &tapes, w)

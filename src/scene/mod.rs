@@ -12,9 +12,13 @@
 //!   segment; the last segment ends at point 0). An open cubic path with `n >= 1` segments has
 //!   `3n + 1` points. A polygon has `n >= 3` vertices and is always closed.
 //! - A closed shape has a fill; an open shape has a stroke and no fill.
+//! - A fill or stroke painted with a gradient ([`Shape::gradients`]) keeps its flat colour as
+//!   the gradient's stand-in; the gradient's own invariants are in [`paint`].
 
+pub mod paint;
 mod params;
 
+pub use paint::{Affine, Gradient, GradientGeometry, GradientStop, Gradients, Spread};
 pub use params::{ParamGroup, Params, Trainable};
 
 use serde::{Deserialize, Serialize};
@@ -184,6 +188,11 @@ pub struct Shape {
     pub points: Vec<Point>,
     pub fill: Option<Rgba>,
     pub stroke: Option<Stroke>,
+    /// Gradient paint of the fill and/or stroke (imported SVG); `None` (the common case) paints
+    /// the flat colours. With a gradient, `fill` / `stroke.color` is its flat stand-in (the
+    /// mean stop colour, see [`paint`]), read by colour-only code and ignored when drawing.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gradients: Option<Box<Gradients>>,
 }
 
 /// Why a scene or shape is not valid.
@@ -205,8 +214,16 @@ pub enum SceneError {
 
 impl Shape {
     /// The shape with every control point moved by `f` and its stroke width multiplied by
-    /// `stroke_k` (kind and paint kept): the one way geometry is rescaled or placed.
+    /// `stroke_k` (kind and paint kept): the one way geometry is rescaled or placed. `f` must be
+    /// affine; gradients move with the shape.
     pub fn mapped(&self, f: impl Fn(&Point) -> Point, stroke_k: f32) -> Shape {
+        let gradients = self.gradients.as_ref().map(|g| {
+            let m = Affine::fit(&f);
+            Box::new(Gradients {
+                fill: g.fill.as_ref().map(|g| g.mapped(&m)),
+                stroke: g.stroke.as_ref().map(|g| g.mapped(&m)),
+            })
+        });
         Shape {
             kind: self.kind,
             points: self.points.iter().map(f).collect(),
@@ -215,6 +232,7 @@ impl Shape {
                 width: st.width * stroke_k,
                 ..st
             }),
+            gradients,
         }
     }
 
@@ -230,6 +248,7 @@ impl Shape {
             points,
             fill,
             stroke,
+            gradients: None,
         };
         s.validate(0)?;
         Ok(s)
@@ -394,6 +413,25 @@ impl Shape {
                     s.miter_limit
                 )));
             }
+        }
+        self.validate_gradients().map_err(err)
+    }
+
+    fn validate_gradients(&self) -> Result<(), String> {
+        let Some(g) = self.gradients.as_deref() else {
+            return Ok(());
+        };
+        if let Some(f) = &g.fill {
+            if self.fill.is_none() {
+                return Err("fill gradient on a shape without a fill".into());
+            }
+            f.validate().map_err(|e| format!("fill {e}"))?;
+        }
+        if let Some(s) = &g.stroke {
+            if self.stroke.is_none() {
+                return Err("stroke gradient on a shape without a stroke".into());
+            }
+            s.validate().map_err(|e| format!("stroke {e}"))?;
         }
         Ok(())
     }

@@ -101,7 +101,7 @@ fn byte(v: f32) -> u8 {
 }
 
 /// `#rgb` when every channel's two hex digits are equal, else `#rrggbb`.
-fn hex(c: Rgba) -> String {
+pub(super) fn hex(c: Rgba) -> String {
     let b = [byte(c.r), byte(c.g), byte(c.b)];
     if b.iter().all(|v| v >> 4 == v & 15) {
         format!("#{:x}{:x}{:x}", b[0] & 15, b[1] & 15, b[2] & 15)
@@ -169,7 +169,9 @@ fn caps_attrs(st: &crate::scene::Stroke) -> String {
 }
 
 impl Paint {
-    fn of(sh: &Shape, p: usize) -> Paint {
+    /// The shape's paint attributes; `ids` names its gradients (`url(#id)` replaces the flat
+    /// stand-in colour, whose opacity the gradient's stops already carry).
+    fn of(sh: &Shape, p: usize, ids: &(Option<String>, Option<String>)) -> Paint {
         let op = |a: f32| {
             let s = num(a.clamp(0.0, 1.0), opacity_decimals(p));
             match s.as_str() {
@@ -179,6 +181,10 @@ impl Paint {
             }
         };
         let (fill, fill_opacity) = match sh.fill {
+            Some(_) if sh.is_closed() && ids.0.is_some() => (
+                format!("url(#{})", ids.0.as_deref().unwrap_or_default()),
+                None,
+            ),
             Some(f) if sh.is_closed() => match op(f.a) {
                 Some(o) => (hex(f), o),
                 None => ("none".to_string(), None),
@@ -188,9 +194,12 @@ impl Paint {
         let stroke = sh.stroke.and_then(|st| {
             let width = num(st.width, p);
             let visible = st.width > 0.0 && width != "0";
-            let opacity = op(st.color.a)?;
+            let (color, opacity) = match &ids.1 {
+                Some(id) => (format!("url(#{id})"), None),
+                None => (hex(st.color), op(st.color.a)?),
+            };
             visible.then(|| StrokePaint {
-                color: hex(st.color),
+                color,
                 width,
                 opacity,
                 caps: caps_attrs(&st),
@@ -233,7 +242,7 @@ impl Inherited {
     }
 }
 
-fn push_attr(out: &mut String, name: &str, value: &str) {
+pub(super) fn push_attr(out: &mut String, name: &str, value: &str) {
     let _ = write!(out, r#" {name}="{value}""#);
 }
 
@@ -282,11 +291,14 @@ pub fn to_svg(scene: &Scene, opts: &SvgOptions) -> String {
         groups: 0,
     };
     w.header();
+    super::export_paint::push_defs(&mut w.out, scene);
+    let ids = super::export_paint::gradient_ids(scene);
     let items: Vec<(usize, Paint)> = scene
         .shapes
         .iter()
+        .zip(&ids)
         .enumerate()
-        .map(|(i, sh)| (i, Paint::of(sh, w.p)))
+        .map(|(i, (sh, id))| (i, Paint::of(sh, w.p, id)))
         .filter(|(_, paint)| paint.visible())
         .collect();
     let mut ctx = Inherited::root();

@@ -1,7 +1,10 @@
 //! SVG text → [`Scene`] (the walk over usvg's tree that [`super`]'s module docs describe).
 
+use super::import_paint::{Painted, gradients, painted};
 use super::{SvgError, parse_usvg_repaired};
-use crate::scene::{LineCap, LineJoin, MAX_SIDE, Point, Rgba, Scene, Shape, ShapeKind, Stroke};
+use crate::scene::{
+    Gradient, LineCap, LineJoin, MAX_SIDE, Point, Rgba, Scene, Shape, ShapeKind, Stroke,
+};
 use resvg::usvg;
 
 /// One subpath as cubic segments `[p1, p2, p3]` after a start point.
@@ -152,38 +155,6 @@ fn subpaths(data: &usvg::tiny_skia_path::Path, ts: usvg::Transform) -> Vec<SubPa
     out
 }
 
-fn paint_color(paint: &usvg::Paint, opacity: f32) -> Rgba {
-    let c8 = |c: usvg::Color| {
-        [
-            c.red as f32 / 255.0,
-            c.green as f32 / 255.0,
-            c.blue as f32 / 255.0,
-        ]
-    };
-    let avg = |stops: &[usvg::Stop]| {
-        if stops.is_empty() {
-            return ([0.0; 3], 1.0);
-        }
-        let mut s = [0.0f32; 4];
-        for st in stops {
-            let c = c8(st.color());
-            s[0] += c[0];
-            s[1] += c[1];
-            s[2] += c[2];
-            s[3] += st.opacity().get();
-        }
-        let n = stops.len() as f32;
-        ([s[0] / n, s[1] / n, s[2] / n], s[3] / n)
-    };
-    let (rgb, a) = match paint {
-        usvg::Paint::Color(c) => (c8(*c), 1.0),
-        usvg::Paint::LinearGradient(g) => avg(g.stops()),
-        usvg::Paint::RadialGradient(g) => avg(g.stops()),
-        usvg::Paint::Pattern(_) => ([0.5; 3], 1.0),
-    };
-    Rgba::new(rgb[0], rgb[1], rgb[2], a * opacity).clamped()
-}
-
 fn closed_points(subs: &[SubPath]) -> Vec<Point> {
     // Points of a closed cubic path: anchor, ctrl, ctrl per segment.
     let mut pts = Vec::new();
@@ -307,7 +278,7 @@ fn path_shapes(p: &usvg::Path, ts: usvg::Transform, opacity: f32, shapes: &mut V
     }
     let fill = p
         .fill()
-        .map(|f| paint_color(f.paint(), f.opacity().get() * opacity));
+        .map(|f| painted(f.paint(), f.opacity().get() * opacity, ts));
     let stroke = p
         .stroke()
         .map_or(StrokeDraw::Nothing, |s| stroke_draw(p, s, ts, opacity));
@@ -317,14 +288,18 @@ fn path_shapes(p: &usvg::Path, ts: usvg::Transform, opacity: f32, shapes: &mut V
         }
         // A single closed outline keeps its (undashed) stroke on the filled shape.
         let on_fill = match &stroke {
-            StrokeDraw::Strokes(st, None) if subs.len() == 1 && subs[0].closed => Some(*st),
+            StrokeDraw::Strokes(st, sg, None) if subs.len() == 1 && subs[0].closed => {
+                Some((*st, sg.clone()))
+            }
             _ => None,
         };
+        let (st, sg) = on_fill.clone().unzip();
         shapes.push(Shape {
             kind: ShapeKind::ClosedCubic,
             points: closed_points(&subs),
-            fill: Some(f),
-            stroke: on_fill,
+            fill: Some(f.color),
+            stroke: st,
+            gradients: gradients(f.gradient, sg.flatten()),
         });
         if on_fill.is_some() {
             return;
@@ -332,28 +307,30 @@ fn path_shapes(p: &usvg::Path, ts: usvg::Transform, opacity: f32, shapes: &mut V
     }
     match stroke {
         StrokeDraw::Nothing => {}
-        StrokeDraw::Strokes(st, dashes) => {
+        StrokeDraw::Strokes(st, sg, dashes) => {
             for s in dashes.as_ref().unwrap_or(&subs) {
-                shapes.push(stroke_shape(s, st));
+                shapes.push(stroke_shape(s, st, sg.clone()));
             }
         }
-        StrokeDraw::Outline(color, outline) => shapes.push(Shape {
+        StrokeDraw::Outline(paint, outline) => shapes.push(Shape {
             kind: ShapeKind::ClosedCubic,
             points: closed_points(&outline),
-            fill: Some(color),
+            fill: Some(paint.color),
             stroke: None,
+            gradients: gradients(paint.gradient, None),
         }),
     }
 }
 
 /// One subpath stroked: open, or closed with a transparent fill.
-fn stroke_shape(s: &SubPath, st: Stroke) -> Shape {
+fn stroke_shape(s: &SubPath, st: Stroke, gradient: Option<Gradient>) -> Shape {
     if !s.closed {
         return Shape {
             kind: ShapeKind::OpenCubic,
             points: open_points(s),
             fill: None,
             stroke: Some(st),
+            gradients: gradients(None, gradient),
         };
     }
     let mut pts = Vec::new();
@@ -367,22 +344,24 @@ fn stroke_shape(s: &SubPath, st: Stroke) -> Shape {
         points: pts,
         fill: Some(Rgba::TRANSPARENT),
         stroke: Some(st),
+        gradients: gradients(None, gradient),
     }
 }
 
 /// How a path's stroke is drawn.
 enum StrokeDraw {
     Nothing,
-    /// As strokes of the scene: along the path's subpaths, or along these dashes.
-    Strokes(Stroke, Option<Vec<SubPath>>),
+    /// As strokes of the scene (with the stroke's gradient): along the path's subpaths, or
+    /// along these dashes.
+    Strokes(Stroke, Option<Gradient>, Option<Vec<SubPath>>),
     /// Under a transform that is no similarity (skew, unequal scales) a stroke of one width
     /// cannot be drawn: its outline (computed in the path's own units, dashes, caps and joins
-    /// included) is filled in this colour instead.
-    Outline(Rgba, Vec<SubPath>),
+    /// included) is filled in this paint instead.
+    Outline(Painted, Vec<SubPath>),
 }
 
 fn stroke_draw(p: &usvg::Path, s: &usvg::Stroke, ts: usvg::Transform, opacity: f32) -> StrokeDraw {
-    let color = paint_color(s.paint(), s.opacity().get() * opacity);
+    let paint = painted(s.paint(), s.opacity().get() * opacity, ts);
     let scale = (ts.sx * ts.sy - ts.kx * ts.ky).abs().sqrt();
     let width = s.width().get() * scale;
     if !(width.is_finite() && width > 0.0) {
@@ -403,12 +382,12 @@ fn stroke_draw(p: &usvg::Path, s: &usvg::Stroke, ts: usvg::Transform, opacity: f
             None => p.data(),
         };
         return match data.stroke(&outline_stroke, res) {
-            Some(o) => StrokeDraw::Outline(color, subpaths(&o, ts)),
+            Some(o) => StrokeDraw::Outline(paint, subpaths(&o, ts)),
             None => StrokeDraw::Nothing,
         };
     }
     let st = Stroke {
-        color,
+        color: paint.color,
         width,
         cap: match s.linecap() {
             usvg::LineCap::Butt => LineCap::Butt,
@@ -425,8 +404,8 @@ fn stroke_draw(p: &usvg::Path, s: &usvg::Stroke, ts: usvg::Transform, opacity: f
     match dashed {
         // A dash pattern that draws nothing.
         Some(None) => StrokeDraw::Nothing,
-        Some(Some(d)) => StrokeDraw::Strokes(st, Some(subpaths(&d, ts))),
-        None => StrokeDraw::Strokes(st, None),
+        Some(Some(d)) => StrokeDraw::Strokes(st, paint.gradient, Some(subpaths(&d, ts))),
+        None => StrokeDraw::Strokes(st, paint.gradient, None),
     }
 }
 
@@ -492,6 +471,9 @@ pub fn import_svg(text: &str) -> Result<SvgImport, SvgError> {
     for w in parsed.warnings {
         walk.warn(w);
     }
+    for w in super::import_paint::dangling_paint_warnings(text) {
+        walk.warn(w);
+    }
     walk.group(tree.root(), 1.0);
     let (mut shapes, warnings) = walk.finish();
     let mut background = Rgba::TRANSPARENT;
@@ -513,7 +495,11 @@ pub fn import_svg(text: &str) -> Result<SvgImport, SvgError> {
 }
 
 fn is_canvas_rect(s: &Shape, w: f32, h: f32) -> bool {
-    if s.stroke.is_some() || s.kind != ShapeKind::ClosedCubic || s.points.len() != 12 {
+    if s.stroke.is_some()
+        || s.gradients.is_some()
+        || s.kind != ShapeKind::ClosedCubic
+        || s.points.len() != 12
+    {
         return false;
     }
     // Four straight segments along the canvas border.

@@ -28,6 +28,8 @@
 //!   `id="c<k>"` on colour groups.
 //!
 //! The background becomes a full-canvas `<rect>` first when it is not fully transparent.
+//! Gradients are written once each in a `<defs>` after it (`export_paint`: user-space
+//! coordinates, exact numbers, ids `g1, g2, …` in scene order) and referenced as `url(#gK)`.
 //! [`crate::vector::export::compact_svg`] picks the fewest decimals that still render the same.
 //!
 //! # Import ([`from_svg`], [`import_svg`] with warnings; in `import.rs`)
@@ -53,7 +55,10 @@
 //!   (skew, unequal scales) a stroke has no single width: its outline (dashes, caps and joins
 //!   included, computed by tiny-skia's stroker in the path's own units) is mapped through the
 //!   transform and filled in the stroke's colour.
-//! - gradients and patterns are replaced by the average colour of their stops (patterns: grey);
+//! - **gradients**: linear and radial gradients (fill and stroke) become [`crate::scene::Gradient`]s
+//!   in canvas pixels, as usvg resolved them (`href` inheritance, units, stop clamping; see
+//!   `import_paint`), the flat colour beside them being the mean stop colour; a stroke drawn as
+//!   a filled outline keeps its gradient as the outline's fill. Patterns become grey;
 //!   group opacity is multiplied into the shape opacities (exact unless children overlap);
 //!   images, text without fonts, clip paths, masks and filters are ignored, each with a warning
 //!   naming the element (`filter on #id ignored …`; at most 16, then a count): the content is
@@ -62,9 +67,11 @@
 //!   for the background) it becomes the scene background.
 
 mod export;
+mod export_paint;
 mod file;
 mod guard;
 mod import;
+mod import_paint;
 mod path_data;
 mod profile;
 
@@ -173,3 +180,5 @@ pub fn parse_usvg_repaired(text: &str) -> Result<Parsed, SvgRejected> {
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_gradient;

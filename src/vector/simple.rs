@@ -462,6 +462,7 @@ fn fit_piece(ring: &[P], template: &Shape, tolerance: f64) -> Option<Shape> {
         points,
         fill: template.fill,
         stroke: template.stroke,
+        gradients: template.gradients.clone(),
     };
     let mut path = BezPath::new();
     path.move_to(kp(ring[0]));

@@ -1,6 +1,7 @@
 //! Helpers shared by the integration tests (`mod common;`): service clients, fixtures, tensors.
 #![allow(dead_code)]
 
+pub mod golden;
 pub mod http;
 pub mod runs;
 pub mod server;
