@@ -264,15 +264,15 @@ struct BandGrad<T> {
     dbg: [T; 4],
 }
 
+/// The backward pass over one band; `g` holds dL/d(output) of the band's rows and is used up.
 fn backward_band<T: Real>(
     sc: &SceneT<T>,
     ls: &[Layer<T>],
     y0: i32,
     tape: &BandTape<T>,
-    dimg: &[T],
+    mut g: Vec<T>,
 ) -> BandGrad<T> {
     let w = sc.width as usize;
-    let mut g: Vec<T> = dimg.to_vec();
     let mut out = BandGrad {
         dverts: vec![Vec::new(); ls.len()],
         dcolor: vec![[T::zero(); 4]; ls.len()],
@@ -475,10 +475,57 @@ pub(crate) fn backward<T: Real>(
         .map(|(&(y0, y1), tape)| {
             let lo = 4 * w * y0 as usize;
             let hi = 4 * w * y1 as usize;
-            backward_band(sc, ls, y0, tape, &dimg[lo..hi])
+            backward_band(sc, ls, y0, tape, dimg[lo..hi].to_vec())
         })
         .collect();
-    // Reduce over bands.
+    reduce(sc, ls, &parts)
+}
+
+/// A loss of one band: given the band's pixel range (indices into the image, row-major), its
+/// rendered premultiplied RGBA and a zeroed buffer of the same length, writes
+/// dL/d(rendered RGBA) into the buffer and returns the band's share of the loss.
+pub(crate) type BandLoss<'a, T> = dyn Fn(std::ops::Range<usize>, &[T], &mut [T]) -> f64 + Sync + 'a;
+
+/// [`forward`] with a tape, `loss` and [`backward`] fused band by band: one parallel pass, with
+/// the loss computed in parallel too. The gradients are those of [`backward`] given the
+/// per-band loss gradients; returns the loss (the band shares summed in band order), the
+/// gradients and the band tapes for reuse.
+pub(crate) fn forward_backward<T: Real>(
+    sc: &SceneT<T>,
+    ls: &[Layer<T>],
+    mut recycled: Vec<BandTape<T>>,
+    loss: &BandLoss<'_, T>,
+) -> (f64, GradT<T>, Vec<BandTape<T>>) {
+    let w = sc.width as usize;
+    let bs = bands(sc.height);
+    recycled.resize_with(bs.len(), BandTape::default);
+    recycled.truncate(bs.len());
+    let done: Vec<(f64, BandGrad<T>, BandTape<T>)> = bs
+        .par_iter()
+        .zip(recycled.into_par_iter())
+        .map(|(&(y0, y1), mut tape)| {
+            let px = w * y0 as usize..w * y1 as usize;
+            let mut img = vec![T::zero(); 4 * px.len()];
+            forward_band(sc, ls, (y0, y1), &mut img, Some(&mut tape));
+            let mut g = vec![T::zero(); img.len()];
+            let l = loss(px, &img, &mut g);
+            let grad = backward_band(sc, ls, y0, &tape, g);
+            (l, grad, tape)
+        })
+        .collect();
+    let mut total = 0.0;
+    let mut parts = Vec::with_capacity(done.len());
+    let mut tapes = Vec::with_capacity(done.len());
+    for (l, g, t) in done {
+        total += l;
+        parts.push(g);
+        tapes.push(t);
+    }
+    (total, reduce(sc, ls, &parts), tapes)
+}
+
+/// Sums the bands' partial gradients (in band order) and takes them back to the parameters.
+fn reduce<T: Real>(sc: &SceneT<T>, ls: &[Layer<T>], parts: &[BandGrad<T>]) -> GradT<T> {
     let mut dverts: Vec<Vec<[T; 2]>> = ls
         .iter()
         .map(|l| vec![[T::zero(); 2]; l.verts.len().max(l.poly.len())])
@@ -486,7 +533,7 @@ pub(crate) fn backward<T: Real>(
     let mut dcolor = vec![[T::zero(); 4]; ls.len()];
     let mut dradius = vec![T::zero(); ls.len()];
     let mut dbg = [T::zero(); 4];
-    for p in &parts {
+    for p in parts {
         for (li, dv) in p.dverts.iter().enumerate() {
             for (acc, v) in dverts[li].iter_mut().zip(dv) {
                 acc[0] += v[0];

@@ -96,18 +96,23 @@ const POOL_BAND_MAX_FLOATS: usize = 16 << 20;
 
 impl Drop for Tape {
     fn drop(&mut self) {
-        if let Ok(mut pool) = POOL.lock()
-            && pool.len() < POOL_MAX
-        {
-            let room = POOL_MAX - pool.len();
-            // Do not keep the buffers of unusually large renders alive.
-            pool.extend(
-                self.bands
-                    .drain(..)
-                    .filter(|b| b.area.capacity() + b.dst.capacity() <= POOL_BAND_MAX_FLOATS)
-                    .take(room),
-            );
-        }
+        recycle(std::mem::take(&mut self.bands));
+    }
+}
+
+/// Returns band buffers to [`POOL`] for the next render with a tape.
+fn recycle(bands: Vec<engine::BandTape<f32>>) {
+    if let Ok(mut pool) = POOL.lock()
+        && pool.len() < POOL_MAX
+    {
+        let room = POOL_MAX - pool.len();
+        // Do not keep the buffers of unusually large renders alive.
+        pool.extend(
+            bands
+                .into_iter()
+                .filter(|b| b.area.capacity() + b.dst.capacity() <= POOL_BAND_MAX_FLOATS)
+                .take(room),
+        );
     }
 }
 
@@ -168,6 +173,29 @@ pub fn backward_with_gradients(scene: &Scene, tape: &Tape, d_image: &[f32]) -> (
     let g = engine::backward(&tape.sc, &tape.layers, &tape.bands, d_image);
     write_grad(&mut out, &g);
     (out, g.paint)
+}
+
+/// A per-pixel loss on the rendered image, for [`render_loss_backward`]: called once per band
+/// of rows with the band's pixel range (indices `y0 * width .. y1 * width`), its premultiplied
+/// RGBA and a zeroed buffer of the same length, it writes dL/d(premultiplied RGBA) into the
+/// buffer and returns the band's share of the loss.
+pub type BandLoss<'a> = dyn Fn(std::ops::Range<usize>, &[f32], &mut [f32]) -> f64 + Sync + 'a;
+
+/// One optimisation step's forward and backward in a single parallel pass over the row bands:
+/// each band is painted, `loss` gives its gradient, and the band's backward runs at once (the
+/// loss runs in parallel, and the pass waits on its threads once instead of twice). The
+/// gradients equal [`backward`]'s given the same per-pixel loss gradient; the loss is the sum
+/// of the bands' shares in band order. Returns the loss and the gradients in the layout of
+/// [`Params::from_scene`].
+pub fn render_loss_backward(scene: &Scene, loss: &BandLoss<'_>) -> (f64, Params) {
+    let sc = SceneT::<f32>::from_scene(scene, FLATTEN_TOLERANCE);
+    let layers = geom::layers(&sc);
+    let recycled = take_pooled(engine::bands(scene.height).len());
+    let (value, g, bands) = engine::forward_backward(&sc, &layers, recycled, loss);
+    recycle(bands);
+    let mut out = Params::zeros_like(scene);
+    write_grad(&mut out, &g);
+    (value, out)
 }
 
 fn write_grad(out: &mut Params, g: &engine::GradT<f32>) {

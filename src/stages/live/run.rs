@@ -8,7 +8,7 @@ use super::{
 };
 use crate::image::Image;
 use crate::image::ops::resize;
-use crate::losses::{outline, udf_weights, weighted_l2_into, xing_loss};
+use crate::losses::{LossError, outline, udf_weights, weighted_l2_slices, xing_loss};
 use crate::optim::{Adam, AdamConfig, GroupSchedules, LrSchedule};
 use crate::progress::{CancelToken, Progress, ProgressSink, Stage};
 use crate::scene::{ParamGroup, Params, Rgba, Scene, Trainable};
@@ -106,17 +106,14 @@ impl Run<'_> {
         let mut window: Vec<f64> = Vec::with_capacity(CONVERGE_WINDOW);
         let mut previous: Option<f64> = None;
         let mut weights = Vec::new();
-        let mut d_image = Vec::new();
         for it in 0..iters {
             if self.cancel.is_cancelled() {
                 return Err(LiveError::Cancelled);
             }
-            let (img, tape) = crate::raster::render_tape(scene);
             if it % UDF_EVERY == 0 {
                 weights = self.loss_weights(scene, &in_focus);
             }
-            let loss = weighted_l2_into(&img, &self.target, &weights, &mut d_image)?;
-            let mut grad = crate::raster::backward(scene, &tape, &d_image);
+            let (loss, mut grad) = self.loss_and_grad(scene, &weights)?;
             let xing = if self.cfg.xing_weight > 0.0 {
                 xing_loss(
                     scene,
@@ -146,6 +143,28 @@ impl Run<'_> {
             }
         }
         Ok(last)
+    }
+
+    /// The weighted L2 loss of `scene`'s render against the target and its gradient, in one
+    /// fused forward, loss and backward pass over the rasteriser's row bands.
+    fn loss_and_grad(&self, scene: &Scene, weights: &[f32]) -> Result<(f64, Params), LiveError> {
+        let t = &self.target;
+        if (scene.width, scene.height) != (t.width, t.height) {
+            let e = LossError::SizeMismatch(scene.width, scene.height, t.width, t.height);
+            return Err(e.into());
+        }
+        if weights.len() != t.len_pixels() {
+            let e = LossError::WeightLength {
+                got: weights.len(),
+                expected: t.len_pixels(),
+            };
+            return Err(e.into());
+        }
+        let band = |px: Range<usize>, img: &[f32], grad: &mut [f32]| {
+            let target = &t.data[4 * px.start..4 * px.end];
+            weighted_l2_slices(img, target, &weights[px], grad)
+        };
+        Ok(crate::raster::render_loss_backward(scene, &band))
     }
 
     /// Per-pixel weights of the L2 loss: uniform, plus LIVE's unsigned-distance term around
