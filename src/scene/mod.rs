@@ -184,6 +184,11 @@ pub struct Shape {
     pub points: Vec<Point>,
     pub fill: Option<Rgba>,
     pub stroke: Option<Stroke>,
+    /// The LIVE stage that added the shape (0: the vtracer start), kept by every edit that
+    /// replaces it (splits, merges, scaling); `None` for shapes from anywhere else. The SVG
+    /// groups by it on request ([`crate::svg::SvgOptions::group_by_stage`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stage: Option<u16>,
 }
 
 /// Why a scene or shape is not valid.
@@ -215,6 +220,7 @@ impl Shape {
                 width: st.width * stroke_k,
                 ..st
             }),
+            stage: self.stage,
         }
     }
 
@@ -230,6 +236,7 @@ impl Shape {
             points,
             fill,
             stroke,
+            stage: None,
         };
         s.validate(0)?;
         Ok(s)

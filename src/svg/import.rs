@@ -325,6 +325,7 @@ fn path_shapes(p: &usvg::Path, ts: usvg::Transform, opacity: f32, shapes: &mut V
             points: closed_points(&subs),
             fill: Some(f),
             stroke: on_fill,
+            stage: None,
         });
         if on_fill.is_some() {
             return;
@@ -342,6 +343,7 @@ fn path_shapes(p: &usvg::Path, ts: usvg::Transform, opacity: f32, shapes: &mut V
             points: closed_points(&outline),
             fill: Some(color),
             stroke: None,
+            stage: None,
         }),
     }
 }
@@ -354,6 +356,7 @@ fn stroke_shape(s: &SubPath, st: Stroke) -> Shape {
             points: open_points(s),
             fill: None,
             stroke: Some(st),
+            stage: None,
         };
     }
     let mut pts = Vec::new();
@@ -367,6 +370,7 @@ fn stroke_shape(s: &SubPath, st: Stroke) -> Shape {
         points: pts,
         fill: Some(Rgba::TRANSPARENT),
         stroke: Some(st),
+        stage: None,
     }
 }
 

@@ -232,6 +232,7 @@ fn to_shape(segs: &[[P; 4]], template: &Shape) -> Option<Shape> {
         points,
         fill: template.fill,
         stroke: template.stroke,
+        stage: template.stage,
     };
     shape.validate(0).ok().map(|_| shape)
 }

@@ -41,11 +41,29 @@ pub fn trim_to_bytes(
     max: usize,
     bytes: impl Fn(&Scene) -> usize,
 ) -> usize {
+    trim_cheapest(scene, target, |s| {
+        let (size, n) = (bytes(s), s.shapes.len());
+        if size <= max {
+            return 0;
+        }
+        (size - max).div_ceil((size / n.max(1)).max(1)).clamp(1, n)
+    })
+}
+
+/// Removes the paths whose removal costs least (as [`trim_to_bytes`]) until at most
+/// `max_paths` are left. Returns how many paths were removed.
+pub fn trim_to_count(scene: &mut Scene, target: &Image, max_paths: usize) -> usize {
+    trim_cheapest(scene, target, |s| s.shapes.len().saturating_sub(max_paths))
+}
+
+/// Rounds of: rank every path by the cost of its removal (MSE against `target`, over white)
+/// and remove the `excess(scene)` cheapest, until the excess is 0 or no path is left.
+fn trim_cheapest(scene: &mut Scene, target: &Image, excess: impl Fn(&Scene) -> usize) -> usize {
     let mut removed = 0;
     loop {
-        let size = bytes(scene);
         let n = scene.shapes.len();
-        if size <= max || n == 0 {
+        let k = excess(scene).min(n);
+        if k == 0 {
             return removed;
         }
         let mut cost: Vec<(f64, usize)> = (0..n)
@@ -57,8 +75,6 @@ pub fn trim_to_bytes(
             })
             .collect();
         cost.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-        let per_path = (size / n).max(1);
-        let k = (size - max).div_ceil(per_path).clamp(1, n);
         let mut drop: Vec<usize> = cost[..k].iter().map(|c| c.1).collect();
         drop.sort_unstable();
         for &i in drop.iter().rev() {
