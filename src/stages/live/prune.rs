@@ -153,6 +153,29 @@ mod tests {
     }
 
     #[test]
+    fn trim_to_count_drops_the_cheapest_paths() {
+        let mut scene = Scene::new(32, 32, Rgba::WHITE).unwrap();
+        let red = Rgba::new(1.0, 0.0, 0.0, 1.0);
+        scene
+            .shapes
+            .push(Shape::square(2.0, 2.0, 20.0, red).unwrap());
+        scene
+            .shapes
+            .push(Shape::square(24.0, 24.0, 2.0, Rgba::BLACK).unwrap());
+        scene
+            .shapes
+            .push(Shape::square(24.0, 4.0, 6.0, Rgba::BLACK).unwrap());
+        let target = crate::raster::render(&scene);
+        let big = scene.shapes[0].clone();
+        let mid = scene.shapes[2].clone();
+        assert_eq!(trim_to_count(&mut scene.clone(), &target, 3), 0);
+        assert_eq!(trim_to_count(&mut scene, &target, 2), 1);
+        assert_eq!(scene.shapes, vec![big.clone(), mid]);
+        assert_eq!(trim_to_count(&mut scene, &target, 0), 2);
+        assert!(scene.shapes.is_empty());
+    }
+
+    #[test]
     fn weak_paths_finds_faint_and_tiny() {
         let mut scene = Scene::new(64, 64, Rgba::WHITE).unwrap();
         scene
