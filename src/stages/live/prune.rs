@@ -41,29 +41,11 @@ pub fn trim_to_bytes(
     max: usize,
     bytes: impl Fn(&Scene) -> usize,
 ) -> usize {
-    trim_cheapest(scene, target, |s| {
-        let (size, n) = (bytes(s), s.shapes.len());
-        if size <= max {
-            return 0;
-        }
-        (size - max).div_ceil((size / n.max(1)).max(1)).clamp(1, n)
-    })
-}
-
-/// Removes the paths whose removal costs least (as [`trim_to_bytes`]) until at most
-/// `max_paths` are left. Returns how many paths were removed.
-pub fn trim_to_count(scene: &mut Scene, target: &Image, max_paths: usize) -> usize {
-    trim_cheapest(scene, target, |s| s.shapes.len().saturating_sub(max_paths))
-}
-
-/// Rounds of: rank every path by the cost of its removal (MSE against `target`, over white)
-/// and remove the `excess(scene)` cheapest, until the excess is 0 or no path is left.
-fn trim_cheapest(scene: &mut Scene, target: &Image, excess: impl Fn(&Scene) -> usize) -> usize {
     let mut removed = 0;
     loop {
+        let size = bytes(scene);
         let n = scene.shapes.len();
-        let k = excess(scene).min(n);
-        if k == 0 {
+        if size <= max || n == 0 {
             return removed;
         }
         let mut cost: Vec<(f64, usize)> = (0..n)
@@ -75,6 +57,8 @@ fn trim_cheapest(scene: &mut Scene, target: &Image, excess: impl Fn(&Scene) -> u
             })
             .collect();
         cost.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        let per_path = (size / n).max(1);
+        let k = (size - max).div_ceil(per_path).clamp(1, n);
         let mut drop: Vec<usize> = cost[..k].iter().map(|c| c.1).collect();
         drop.sort_unstable();
         for &i in drop.iter().rev() {
@@ -150,29 +134,6 @@ mod tests {
         let mut s2 = scene.clone();
         let removed = prune_paths(&mut s2, 1.0, boxes);
         assert_eq!(removed.len(), 2);
-    }
-
-    #[test]
-    fn trim_to_count_drops_the_cheapest_paths() {
-        let mut scene = Scene::new(32, 32, Rgba::WHITE).unwrap();
-        let red = Rgba::new(1.0, 0.0, 0.0, 1.0);
-        scene
-            .shapes
-            .push(Shape::square(2.0, 2.0, 20.0, red).unwrap());
-        scene
-            .shapes
-            .push(Shape::square(24.0, 24.0, 2.0, Rgba::BLACK).unwrap());
-        scene
-            .shapes
-            .push(Shape::square(24.0, 4.0, 6.0, Rgba::BLACK).unwrap());
-        let target = crate::raster::render(&scene);
-        let big = scene.shapes[0].clone();
-        let mid = scene.shapes[2].clone();
-        assert_eq!(trim_to_count(&mut scene.clone(), &target, 3), 0);
-        assert_eq!(trim_to_count(&mut scene, &target, 2), 1);
-        assert_eq!(scene.shapes, vec![big.clone(), mid]);
-        assert_eq!(trim_to_count(&mut scene, &target, 0), 2);
-        assert!(scene.shapes.is_empty());
     }
 
     #[test]

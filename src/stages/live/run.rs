@@ -518,7 +518,7 @@ impl Run<'_> {
 
     /// The end of a trace after `stages` stages: colours settled, the final pass, then faint,
     /// unseen paths dropped, overlapping paths of one fill merged ([`crate::vector::merge`]),
-    /// paths past the budget's count or bytes and hidden paths dropped, outlines made simple.
+    /// paths past `max_bytes` and hidden paths dropped, outlines made simple.
     /// Returns the scene at the target's size, the number of paths pruned and of merges.
     pub(super) fn finish(
         &mut self,
@@ -555,8 +555,6 @@ impl Run<'_> {
         {
             pruned += prune::prune_paths(&mut scene, prune_tolerance, crate::raster::render).len();
         }
-        // The budget bounds the paths written, pieces of split outlines included.
-        pruned += prune::trim_to_count(&mut scene, &self.target, cfg.budget.max_paths());
         if let Some(max) = cfg.max_bytes {
             pruned += prune::trim_to_bytes(&mut scene, &self.target, max, |s| {
                 svg_bytes(s, tw, th, &cfg.colors)
