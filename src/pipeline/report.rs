@@ -183,6 +183,9 @@ pub struct RunReport {
     /// Paths pruned as weak (text) or unseen, over budget or hidden (vectorize).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub paths_pruned: Option<usize>,
+    /// Vectorize: paths merged into a touching path of the same fill.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub paths_merged: Option<usize>,
     /// Paths in the SVG.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub paths_needed: Option<usize>,
@@ -208,6 +211,7 @@ impl RunReport {
             psnr: Some(r.psnr),
             paths_needed: Some(r.paths),
             paths_pruned: Some(r.pruned),
+            paths_merged: Some(r.merged),
             steps: Some(r.steps),
             stages: r.stages.clone(),
             editability: Some(r.editability.clone()),

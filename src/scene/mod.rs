@@ -193,6 +193,11 @@ pub struct Shape {
     /// mean stop colour, see [`paint`]), read by colour-only code and ignored when drawing.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub gradients: Option<Box<Gradients>>,
+    /// The LIVE stage that added the shape (0: the vtracer start), kept by every edit that
+    /// replaces it (splits, merges, scaling); `None` for shapes from anywhere else. The SVG
+    /// groups by it on request ([`crate::svg::SvgOptions::group_by_stage`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stage: Option<u16>,
 }
 
 /// Why a scene or shape is not valid.
@@ -233,6 +238,7 @@ impl Shape {
                 ..st
             }),
             gradients,
+            stage: self.stage,
         }
     }
 
@@ -249,6 +255,7 @@ impl Shape {
             fill,
             stroke,
             gradients: None,
+            stage: None,
         };
         s.validate(0)?;
         Ok(s)

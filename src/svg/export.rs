@@ -23,6 +23,10 @@ pub struct SvgOptions {
     /// paint order and stay the same for the same scene) and every colour group `c<k>`
     /// (`k` = 1, 2, … in document order).
     pub ids: bool,
+    /// Wraps runs of consecutive shapes added by one LIVE stage ([`Shape::stage`]) in one `<g>`
+    /// with the id `s<k>` (`k` = the stage; a later run of the same stage `s<k>-<n>`, `n` = 2,
+    /// 3, …); shapes without a stage stay outside any group.
+    pub group_by_stage: bool,
 }
 
 impl Default for SvgOptions {
@@ -31,6 +35,7 @@ impl Default for SvgOptions {
             precision: 2,
             group_by_color: false,
             ids: false,
+            group_by_stage: false,
         }
     }
 }
@@ -289,6 +294,7 @@ pub fn to_svg(scene: &Scene, opts: &SvgOptions) -> String {
         opts,
         p: opts.precision.min(MAX_PRECISION) as usize,
         groups: 0,
+        stage_runs: std::collections::BTreeMap::new(),
     };
     w.header();
     super::export_paint::push_defs(&mut w.out, scene);
@@ -305,7 +311,11 @@ pub fn to_svg(scene: &Scene, opts: &SvgOptions) -> String {
     let outer = w.stroke_group(&items, &mut ctx);
     let mut i = 0;
     while i < items.len() {
-        i = w.fill_run(&items, i, &ctx);
+        i = if opts.group_by_stage {
+            w.stage_run(&items, i, &ctx)
+        } else {
+            w.fill_run(&items, i, &ctx)
+        };
     }
     if outer {
         w.out.push_str("</g>\n");
@@ -323,6 +333,8 @@ struct Writer<'a> {
     p: usize,
     /// Colour groups written so far (their ids count up).
     groups: usize,
+    /// Stage groups written so far, per stage.
+    stage_runs: std::collections::BTreeMap<u16, usize>,
 }
 
 impl Writer<'_> {
@@ -388,6 +400,37 @@ impl Writer<'_> {
         }
         out.push_str(">\n");
         true
+    }
+
+    /// The paths from `items[i]` on that one LIVE stage added, in one `<g id="s<k>">` (see
+    /// [`SvgOptions::group_by_stage`]); paths without a stage one by one. Returns where the
+    /// next run starts.
+    fn stage_run(&mut self, items: &[(usize, Paint)], i: usize, ctx: &Inherited) -> usize {
+        let stage_of = |k: usize| self.scene.shapes[items[k].0].stage;
+        let stage = stage_of(i);
+        let mut j = i + 1;
+        while j < items.len() && stage_of(j) == stage {
+            j += 1;
+        }
+        let Some(s) = stage else {
+            return self.fill_run(items, i, ctx);
+        };
+        let n = self.stage_runs.entry(s).or_insert(0);
+        *n += 1;
+        let id = match *n {
+            1 => format!("s{s}"),
+            n => format!("s{s}-{n}"),
+        };
+        self.out.push_str("<g");
+        push_attr(&mut self.out, "id", &id);
+        self.out.push_str(">\n");
+        let run = &items[i..j];
+        let mut k = 0;
+        while k < run.len() {
+            k = self.fill_run(run, k, ctx);
+        }
+        self.out.push_str("</g>\n");
+        j
     }
 
     /// The paths from `items[i]` on: a run of two or more with one fill in a colour group

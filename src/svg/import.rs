@@ -300,6 +300,7 @@ fn path_shapes(p: &usvg::Path, ts: usvg::Transform, opacity: f32, shapes: &mut V
             fill: Some(f.color),
             stroke: st,
             gradients: gradients(f.gradient, sg.flatten()),
+            stage: None,
         });
         if on_fill.is_some() {
             return;
@@ -318,6 +319,7 @@ fn path_shapes(p: &usvg::Path, ts: usvg::Transform, opacity: f32, shapes: &mut V
             fill: Some(paint.color),
             stroke: None,
             gradients: gradients(paint.gradient, None),
+            stage: None,
         }),
     }
 }
@@ -331,6 +333,7 @@ fn stroke_shape(s: &SubPath, st: Stroke, gradient: Option<Gradient>) -> Shape {
             fill: None,
             stroke: Some(st),
             gradients: gradients(None, gradient),
+            stage: None,
         };
     }
     let mut pts = Vec::new();
@@ -345,6 +348,7 @@ fn stroke_shape(s: &SubPath, st: Stroke, gradient: Option<Gradient>) -> Shape {
         fill: Some(Rgba::TRANSPARENT),
         stroke: Some(st),
         gradients: gradients(None, gradient),
+        stage: None,
     }
 }
 
