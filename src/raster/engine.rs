@@ -548,7 +548,7 @@ fn reduce<T: Real>(sc: &SceneT<T>, ls: &[Layer<T>], parts: &[BandGrad<T>]) -> Gr
             dbg[c] += p.dbg[c];
         }
     }
-    let paint = reduce_paint(sc, &parts);
+    let paint = reduce_paint(sc, parts);
     // Parameter layout offsets.
     let mut pt_off = Vec::with_capacity(sc.shapes.len());
     let mut fill_idx = Vec::with_capacity(sc.shapes.len());
