@@ -3,7 +3,7 @@
 //! encoder against its diffusers reference, and the loader's pixel-space detection.
 
 mod common;
-use common::{abs_max, fixture, max_abs};
+use common::{assert_close, fixture, max_abs};
 
 use candle_core::{DType, Device, Tensor};
 use std::collections::HashMap;
@@ -22,17 +22,6 @@ fn refs(path: PathBuf) -> HashMap<String, Tensor> {
 
 fn pixel_refs() -> HashMap<String, Tensor> {
     refs(fixture("sd-tiny-pixel").join("refs.safetensors"))
-}
-
-fn assert_close(name: &str, got: &Tensor, want: &Tensor, tol: f32) {
-    assert_eq!(got.dims(), want.dims(), "{name}: shape");
-    let e = abs_max(&(got.to_dtype(DType::F32).unwrap() - want).unwrap());
-    assert!(
-        e <= tol,
-        "{name}: max abs err {e} > {tol} (ref scale {})",
-        abs_max(want)
-    );
-    assert!(abs_max(want) > 1e-3, "{name}: reference is trivially small");
 }
 
 fn pixel() -> StableDiffusion {

@@ -2,7 +2,7 @@
 //! produced by `scripts/make_sd_fixtures.py` (fp32, max abs error ≤ 1e-4).
 
 mod common;
-use common::{abs_max, fixture, max_abs};
+use common::{abs_max, assert_close, fixture, max_abs};
 
 use candle_core::{DType, Device, Tensor};
 use std::collections::HashMap;
@@ -13,16 +13,6 @@ use vectorfusion::models::{LoadOptions, ModelError, Precision, StableDiffusion};
 
 fn refs(name: &str) -> HashMap<String, Tensor> {
     candle_core::safetensors::load(fixture(name).join("refs.safetensors"), &Device::Cpu).unwrap()
-}
-
-fn assert_close(name: &str, got: &Tensor, want: &Tensor, tol: f32) {
-    let e = max_abs(got, want);
-    assert!(
-        e <= tol,
-        "{name}: max abs err {e} > {tol} (ref scale {})",
-        abs_max(want)
-    );
-    assert!(abs_max(want) > 1e-3, "{name}: reference is trivially small");
 }
 
 fn sd() -> StableDiffusion {
