@@ -42,8 +42,8 @@ pub(crate) fn bands(height: u32) -> Vec<(i32, i32)> {
     out
 }
 
-fn premul_bg<T: Real>(bg: [T; 4]) -> [T; 4] {
-    [bg[0] * bg[3], bg[1] * bg[3], bg[2] * bg[3], bg[3]]
+fn premul_bg<T: Real>([r, g, b, a]: [T; 4]) -> [T; 4] {
+    [r * a, g * a, b * a, a]
 }
 
 #[inline]
@@ -52,14 +52,9 @@ fn coverage<T: Real>(a: T) -> T {
 }
 
 fn layer_clip<T>(l: &Layer<T>, y0: i32, y1: i32) -> Option<Clip> {
-    let [bx0, by0, bx1, by1] = l.bbox;
-    let c = Clip {
-        x0: bx0,
-        x1: bx1,
-        y0: by0.max(y0),
-        y1: by1.min(y1),
-    };
-    (c.x0 < c.x1 && c.y0 < c.y1).then_some(c)
+    let [x0, by0, x1, by1] = l.bbox;
+    let (y0, y1) = (by0.max(y0), by1.min(y1));
+    (x0 < x1 && y0 < y1).then_some(Clip { x0, x1, y0, y1 })
 }
 
 fn for_each_edge<T: Real>(l: &Layer<T>, mut f: impl FnMut(usize, usize)) {
