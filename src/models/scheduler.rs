@@ -446,10 +446,7 @@ impl Sampler {
                 };
                 let (x0, eps) = split_prediction(self.prediction_type, model_out, x, a)?;
                 // As diffusers: the clamped x̂₀ is used, ε̂ stays the model's.
-                let x0 = match self.clip_x0 {
-                    Some(r) => x0.clamp(-r, r)?,
-                    None => x0,
-                };
+                let x0 = self.clipped(x0)?;
                 Ok(((x0 * a_prev.sqrt())? + (eps * (1.0 - a_prev).sqrt())?)?)
             }
             SamplerKind::Euler | SamplerKind::EulerAncestral => {
@@ -477,6 +474,14 @@ impl Sampler {
         }
     }
 
+    /// `x̂₀` clamped to `±clip_sample_range` when the config asks (diffusers `clip_sample`).
+    fn clipped(&self, x0: Tensor) -> Result<Tensor> {
+        Ok(match self.clip_x0 {
+            Some(r) => x0.clamp(-r, r)?,
+            None => x0,
+        })
+    }
+
     /// LCM: the clean latent by the boundary condition `c_skip·x + c_out·x̂₀`, re-noised to the
     /// next timestep (the last step returns it as it is).
     fn lcm_step(
@@ -489,10 +494,7 @@ impl Sampler {
         let t = self.timesteps[i];
         let a = self.alphas_cumprod[t as usize];
         let (x0, _) = split_prediction(self.prediction_type, model_out, x, a)?;
-        let x0 = match self.clip_x0 {
-            Some(r) => x0.clamp(-r, r)?,
-            None => x0,
-        };
+        let x0 = self.clipped(x0)?;
         // diffusers' boundary condition with σ_data = 0.5 on the scaled timestep
         let st = t * self.timestep_scaling;
         let c_skip = 0.25 / (st * st + 0.25);

@@ -549,13 +549,12 @@ impl StableDiffusion {
         for (i, &t) in s.timesteps.iter().enumerate() {
             let inp = s.scale_model_input(&x, i)?;
             let out = self.guided_raw(&inp, t, text_emb, uncond_emb, guidance)?;
-            let z = if run.kind.adds_noise(i, run.steps) {
-                Some(noise.next().ok_or_else(|| {
-                    ModelError::InvalidInput(format!("no noise given for step {i}"))
-                })?)
-            } else {
-                None
-            };
+            // a missing noise is refused by the step
+            let z = run
+                .kind
+                .adds_noise(i, run.steps)
+                .then(|| noise.next())
+                .flatten();
             x = s.step(&out, i, &x, z)?;
             traj.push(x.clone());
         }

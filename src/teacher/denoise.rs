@@ -103,6 +103,8 @@ pub fn draw(
     let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed ^ 0x5a3b_1e00);
     let mut start_rng = ChaCha8Rng::seed_from_u64(cfg.seed ^ 0x5de0_17a1);
     let n_starts = starts.len().min(cfg.k as usize);
+    // samples from noise run the model's own sampler
+    let kind = SamplerKind::of(&sd.scheduler);
     let mut out = Vec::with_capacity(cfg.k as usize);
     for i in 0..cfg.k as usize {
         let start = starts.get(i).filter(|_| i < n_starts);
@@ -114,9 +116,7 @@ pub fn draw(
         } else {
             &mut rng
         };
-        let noise: Vec<f32> = (0..c * h * w).map(|_| super::gaussian(r)).collect();
-        let noise = Tensor::from_vec(noise, (1, c, h, w), sd.device())
-            .map_err(|e| SampleError::failed("noise", e))?;
+        let noise = latent_noise(r, latent_shape, sd)?;
         let traj = if let Some(start) = start {
             let x = image_tensor(start, sd.device())?;
             let z = sd
@@ -138,15 +138,10 @@ pub fn draw(
                 cfg.steps,
             )
         } else {
-            // the model's own sampler; a stochastic one's step noise follows the start noise
-            let kind = SamplerKind::of(&sd.scheduler);
+            // a stochastic sampler's step noise follows the start noise
             let step_noise = (0..SamplerRun::noise_count(kind, cfg.steps))
-                .map(|_| {
-                    let z: Vec<f32> = (0..c * h * w).map(|_| super::gaussian(r)).collect();
-                    Tensor::from_vec(z, (1, c, h, w), sd.device())
-                })
-                .collect::<Result<Vec<_>, _>>()
-                .map_err(|e| SampleError::failed("noise", e))?;
+                .map(|_| latent_noise(r, latent_shape, sd))
+                .collect::<Result<Vec<_>, _>>()?;
             let run = SamplerRun {
                 kind,
                 steps: cfg.steps,
@@ -167,6 +162,16 @@ pub fn draw(
         ));
     }
     Ok(out)
+}
+
+/// Standard-normal noise of `[1, c, h, w]` from `r`.
+fn latent_noise(
+    r: &mut ChaCha8Rng,
+    [c, h, w]: [usize; 3],
+    sd: &StableDiffusion,
+) -> Result<Tensor, SampleError> {
+    let z: Vec<f32> = (0..c * h * w).map(|_| super::gaussian(r)).collect();
+    Tensor::from_vec(z, (1, c, h, w), sd.device()).map_err(|e| SampleError::failed("noise", e))
 }
 
 #[cfg(test)]
