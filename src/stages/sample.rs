@@ -127,17 +127,27 @@ pub fn retrieve(
     caption: &str,
     pick: RetrievalPick,
 ) -> Result<Vec<(Hit, Image)>, NoStarts> {
-    let q = teacher
-        .caption_embedding(caption, CAPTION_TOKENS)
-        .map_err(NoStarts::Embedding)?
-        .ok_or(NoStarts::NotMiniLm)?;
+    let hits = nearest(teacher, index, caption, pick)?;
     let (w, h) = teacher.image_dims();
     if w != h {
         return Err(NoStarts::NotSquare { w, h });
     }
-    let hits = index.nearest(&q, pick.n, pick.per_caption, pick.seed)?;
     let images = render_hits(index, &hits, teacher.image_size())?;
     Ok(hits.into_iter().zip(images).collect())
+}
+
+/// The icons of `index` nearest to `text` (by the teacher's MiniLM embedding), unrendered.
+pub(super) fn nearest(
+    teacher: &dyn Teacher,
+    index: &IconIndex,
+    text: &str,
+    pick: RetrievalPick,
+) -> Result<Vec<Hit>, NoStarts> {
+    let q = teacher
+        .caption_embedding(text, CAPTION_TOKENS)
+        .map_err(NoStarts::Embedding)?
+        .ok_or(NoStarts::NotMiniLm)?;
+    Ok(index.nearest(&q, pick.n, pick.per_caption, pick.seed)?)
 }
 
 /// The icons of `hits` rendered at `side` px.

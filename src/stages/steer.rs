@@ -4,13 +4,12 @@
 //! ranked first, the kept sample recoloured. How far is the model's `_colour_steer`
 //! ([`ColourSteer`]); the run's [`CaptionReport`] says what was done.
 
-use super::sample::{NoStarts, RetrievalPick, render_hits};
+use super::sample::{NoStarts, RetrievalPick, nearest, render_hits};
 use crate::caption::colour::dominant;
 use crate::caption::compose::compose;
 use crate::caption::recolour::recolour_image;
 use crate::caption::{CaptionPlan, ColourName, ColourSteer, Hue};
 use crate::image::Image;
-use crate::retrieval::install::CAPTION_TOKENS;
 use crate::retrieval::{Hit, IconIndex};
 use crate::teacher::Teacher;
 use serde::{Deserialize, Serialize};
@@ -71,20 +70,6 @@ impl CaptionReport {
             ..CaptionReport::default()
         }
     }
-}
-
-/// The icons nearest to `text`, unrendered.
-fn nearest(
-    teacher: &dyn Teacher,
-    index: &IconIndex,
-    text: &str,
-    pick: RetrievalPick,
-) -> Result<Vec<Hit>, NoStarts> {
-    let q = teacher
-        .caption_embedding(text, CAPTION_TOKENS)
-        .map_err(NoStarts::Embedding)?
-        .ok_or(NoStarts::NotMiniLm)?;
-    Ok(index.nearest(&q, pick.n, pick.per_caption, pick.seed)?)
 }
 
 /// `images` recoloured toward `colour` (when there is one); the family each moved.
