@@ -104,7 +104,7 @@ fn main() {
                 &SvgOptions {
                     precision,
                     group_by_color,
-                    ids: false,
+                    ..SvgOptions::default()
                 },
             )
         };

@@ -116,7 +116,7 @@ fn guided_ddim_with_the_shipped_scheduler_matches_diffusers() {
             let eu = unet.forward(&x, t, uncond).unwrap();
             let ec = unet.forward(&x, t, &cond).unwrap();
             let guided = (&eu + ((ec - &eu).unwrap() * g).unwrap()).unwrap();
-            x = s.step(&guided, i, &x).unwrap();
+            x = s.step(&guided, i, &x, None).unwrap();
             out.push(x.clone());
         }
         out

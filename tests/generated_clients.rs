@@ -2,7 +2,8 @@
 //!
 //! - Python: openapi-python-client (0 warnings allowed) generates a package, and
 //!   `scripts/clients/python_e2e.py` submits a vectorize and a text job with it, follows their
-//!   events with httpx-sse and downloads the SVG, the PNG preview and a snapshot. It needs a
+//!   events with httpx-sse and downloads the SVG, the PNG preview, a PNG at a chosen size, the
+//!   PDF and a snapshot, and the SVG, PNG and PDF of the text job's second variation. It needs a
 //!   virtual environment with `openapi-python-client`, `httpx-sse` and `python-dateutil`, named
 //!   by `VF_CLIENT_VENV` (`.ci/run` makes one).
 //! - TypeScript: openapi-typescript (`--default-non-nullable false`, so fields with a default
@@ -105,6 +106,7 @@ async fn a_generated_python_client_submits_follows_and_downloads() {
     let log = text(&out);
     assert!(out.status.success(), "the generated client failed:\n{log}");
     assert_eq!(log.matches(" events, svg ").count(), 2, "{log}");
+    assert!(log.contains("variation 2 of "), "{log}");
 }
 
 /// The TypeScript project in `dir` with its pinned packages installed, or why not.
@@ -155,4 +157,5 @@ async fn a_generated_typescript_client_type_checks_submits_follows_and_downloads
     srv.stop().await;
     let log = out.unwrap_or_else(|e| panic!("the generated client failed: {e}"));
     assert_eq!(log.matches(" events, svg ").count(), 2, "{log}");
+    assert!(log.contains("variation 2 of "), "{log}");
 }

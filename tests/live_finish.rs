@@ -200,3 +200,42 @@ fn the_early_stop_takes_fewer_steps_and_still_fits() {
     );
     assert_eq!(early.editability.self_intersecting, 0);
 }
+
+#[test]
+fn paths_carry_their_stage_and_the_svg_groups_by_it() {
+    let c = cfg(ColorPlan {
+        group: vectorfusion::vector::palette::Grouping::Stage,
+        ..ColorPlan::default()
+    });
+    let r = run(&c);
+    // Every path was added by one of the three stages (splits and merges keep the tag).
+    assert!(
+        r.scene
+            .shapes
+            .iter()
+            .all(|s| s.stage.is_some_and(|k| (1..=3).contains(&k))),
+        "{:?}",
+        r.scene.shapes.iter().map(|s| s.stage).collect::<Vec<_>>()
+    );
+    let svg = vectorfusion::vector::write_svg(&r.scene, &c.colors);
+    let first = r.scene.shapes[0].stage.unwrap();
+    assert!(svg.contains(&format!(r#"<g id="s{first}">"#)), "{svg}");
+    assert_eq!(svg.matches("<path").count(), r.paths, "{svg}");
+    // The grouping changes the text, not the picture.
+    let plain = vectorfusion::vector::write_svg(&r.scene, &ColorPlan::default());
+    let render = |t: &str| raster::render(&vectorfusion::svg::from_svg(t).unwrap());
+    assert_eq!(render(&svg).data, render(&plain).data);
+}
+
+#[test]
+fn touching_paths_of_one_fill_are_merged_once_and_for_all() {
+    let r = run(&cfg(ColorPlan {
+        colors: Some(3),
+        ..ColorPlan::default()
+    }));
+    // What the finish left has no pair that still merges.
+    let mut again = r.scene.clone();
+    let more = vectorfusion::vector::merge::merge_touching(&mut again, Default::default());
+    assert_eq!(more, 0);
+    assert!(r.scene.shapes.iter().all(is_simple));
+}

@@ -83,21 +83,27 @@ fn config_weight_mismatch_and_unsupported_configs() {
         "{e}"
     );
 
-    let mut cfg: serde_json::Value = serde_json::from_str(&orig).unwrap();
-    cfg["addition_embed_type"] = "text_time".into();
-    std::fs::write(&cfg_path, cfg.to_string()).unwrap();
-    let e = load(&d).unwrap_err();
-    assert!(
-        matches!(
-            e,
-            ModelError::Unsupported {
-                component: "unet",
-                ..
-            }
-        ),
-        "{e}"
-    );
-    assert!(e.to_string().contains("addition_embed_type"), "{e}");
+    // an added-conditioning kind that is not implemented, and SDXL's without its widths
+    for (kind, says) in [
+        ("text_image", "addition_embed_type"),
+        ("text_time", "addition_time_embed_dim"),
+    ] {
+        let mut cfg: serde_json::Value = serde_json::from_str(&orig).unwrap();
+        cfg["addition_embed_type"] = kind.into();
+        std::fs::write(&cfg_path, cfg.to_string()).unwrap();
+        let e = load(&d).unwrap_err();
+        assert!(
+            matches!(
+                e,
+                ModelError::Unsupported {
+                    component: "unet",
+                    ..
+                }
+            ),
+            "{e}"
+        );
+        assert!(e.to_string().contains(says), "{e}");
+    }
 
     std::fs::write(&cfg_path, "{ not json").unwrap();
     assert!(matches!(load(&d).unwrap_err(), ModelError::Config { .. }));

@@ -3,14 +3,14 @@
 //! encoder against its diffusers reference, and the loader's pixel-space detection.
 
 mod common;
-use common::{abs_max, fixture, max_abs};
+use common::{assert_close, fixture, max_abs};
 
 use candle_core::{DType, Device, Tensor};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use vectorfusion::image::Image;
 use vectorfusion::models::codec::CodecKind;
-use vectorfusion::models::scheduler::SamplerKind;
+use vectorfusion::models::scheduler::{SamplerKind, SamplerRun};
 use vectorfusion::models::stable_diffusion::ModelHints;
 use vectorfusion::models::{LoadOptions, ModelError, StableDiffusion};
 use vectorfusion::stages::sds::{Weighting, sds_image_grad};
@@ -22,17 +22,6 @@ fn refs(path: PathBuf) -> HashMap<String, Tensor> {
 
 fn pixel_refs() -> HashMap<String, Tensor> {
     refs(fixture("sd-tiny-pixel").join("refs.safetensors"))
-}
-
-fn assert_close(name: &str, got: &Tensor, want: &Tensor, tol: f32) {
-    assert_eq!(got.dims(), want.dims(), "{name}: shape");
-    let e = abs_max(&(got.to_dtype(DType::F32).unwrap() - want).unwrap());
-    assert!(
-        e <= tol,
-        "{name}: max abs err {e} > {tol} (ref scale {})",
-        abs_max(want)
-    );
-    assert!(abs_max(want) > 1e-3, "{name}: reference is trivially small");
 }
 
 fn pixel() -> StableDiffusion {
@@ -103,8 +92,7 @@ fn squaredcos_schedule_and_four_step_ddim_sample_match_diffusers() {
             &r["text.cond"],
             &r["text.uncond"],
             7.5,
-            4,
-            SamplerKind::Ddim,
+            SamplerRun::plain(SamplerKind::Ddim, 4),
         )
         .unwrap();
     assert_eq!(traj.len(), 4);
@@ -163,7 +151,13 @@ fn sdedit_keeps_its_start_at_strength_zero_and_runs_the_tail_of_the_schedule() {
         .sample_from(&zero, &scaled, 1.0, cond, uncond, 7.5, 4)
         .unwrap();
     let b = sd
-        .sample(init, cond, uncond, 7.5, 4, SamplerKind::Ddim)
+        .sample(
+            init,
+            cond,
+            uncond,
+            7.5,
+            SamplerRun::plain(SamplerKind::Ddim, 4),
+        )
         .unwrap();
     assert_close("strength 1 = sample", &a[3], &b[3], 1e-3);
 }

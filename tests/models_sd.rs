@@ -2,27 +2,17 @@
 //! produced by `scripts/make_sd_fixtures.py` (fp32, max abs error ≤ 1e-4).
 
 mod common;
-use common::{abs_max, fixture, max_abs};
+use common::{abs_max, assert_close, fixture, max_abs};
 
 use candle_core::{DType, Device, Tensor};
 use std::collections::HashMap;
-use vectorfusion::models::scheduler::SamplerKind;
+use vectorfusion::models::scheduler::{SamplerKind, SamplerRun};
 use vectorfusion::models::stable_diffusion::{load_scheduler, load_unet};
 use vectorfusion::models::taesd::Taesd;
 use vectorfusion::models::{LoadOptions, ModelError, Precision, StableDiffusion};
 
 fn refs(name: &str) -> HashMap<String, Tensor> {
     candle_core::safetensors::load(fixture(name).join("refs.safetensors"), &Device::Cpu).unwrap()
-}
-
-fn assert_close(name: &str, got: &Tensor, want: &Tensor, tol: f32) {
-    let e = max_abs(got, want);
-    assert!(
-        e <= tol,
-        "{name}: max abs err {e} > {tol} (ref scale {})",
-        abs_max(want)
-    );
-    assert!(abs_max(want) > 1e-3, "{name}: reference is trivially small");
 }
 
 fn sd() -> StableDiffusion {
@@ -176,8 +166,7 @@ fn ddim_trajectory_matches_diffusers() {
             &r["text.cond"],
             &r["text.uncond"],
             7.5,
-            3,
-            SamplerKind::Ddim,
+            SamplerRun::plain(SamplerKind::Ddim, 3),
         )
         .unwrap();
     assert_eq!(traj.len(), 3);
@@ -220,8 +209,7 @@ fn euler_trailing_trajectory_matches_diffusers() {
             &r["text.cond"],
             &r["text.uncond"],
             7.5,
-            2,
-            SamplerKind::Euler,
+            SamplerRun::plain(SamplerKind::Euler, 2),
         )
         .unwrap();
     for (i, x) in traj.iter().enumerate() {
@@ -383,4 +371,74 @@ fn text_embeddings_from_prompt_match_transformers_and_drive_the_unet() {
         .predict_noise(&r["unet.z"], 500, &cond, &uncond, 7.5)
         .unwrap();
     assert_close("prompt-guided t=500", &g, &r["unet.guided.t500"], 1e-4);
+}
+
+/// The few-step samplers a model's `scheduler_config.json` names, replayed with diffusers' own
+/// step noise (`scripts/make_fewstep_fixtures.py`): Euler ancestral with trailing spacing and
+/// no guidance (SD-Turbo, SDXL-Turbo) and LCM with guidance 1.5.
+#[test]
+fn few_step_samplers_match_diffusers() {
+    let r = candle_core::safetensors::load(
+        fixture("sd-tiny").join("refs_fewstep.safetensors"),
+        &Device::Cpu,
+    )
+    .unwrap();
+    let cases = [
+        (
+            "ea",
+            "EulerAncestralDiscreteScheduler",
+            SamplerKind::EulerAncestral,
+            2,
+            0.0,
+        ),
+        ("lcm", "LCMScheduler", SamplerKind::Lcm, 4, 1.5),
+    ];
+    for (name, class, kind, steps, guidance) in cases {
+        let mut sd = sd();
+        sd.scheduler.class_name = class.into();
+        if kind == SamplerKind::EulerAncestral {
+            sd.scheduler.timestep_spacing = "trailing".into();
+        }
+        assert_eq!(SamplerKind::of(&sd.scheduler), kind);
+        let s = vectorfusion::models::scheduler::Sampler::new(&sd.scheduler, kind, steps).unwrap();
+        let want_t: Vec<f32> = r[&format!("{name}.timesteps")].to_vec1().unwrap();
+        let got_t: Vec<f32> = s.timesteps.iter().map(|&t| t as f32).collect();
+        assert_eq!(got_t, want_t, "{name} timesteps");
+        let noise: Vec<Tensor> = (0..SamplerRun::noise_count(kind, steps))
+            .map(|i| r[&format!("{name}.noise{i}")].clone())
+            .collect();
+        assert!(!r.contains_key(&format!("{name}.noise{}", noise.len())));
+        let run = SamplerRun {
+            kind,
+            steps,
+            step_noise: &noise,
+        };
+        let traj = sd
+            .sample(
+                &r[&format!("{name}.init")],
+                &refs("sd-tiny")["text.cond"],
+                &refs("sd-tiny")["text.uncond"],
+                guidance,
+                run,
+            )
+            .unwrap();
+        assert_eq!(traj.len(), steps);
+        for (i, x) in traj.iter().enumerate() {
+            let want = &r[&format!("{name}.step{i}")];
+            let tol = 1e-5 * abs_max(want).max(10.0);
+            assert_close(&format!("{name} step {i}"), x, want, tol);
+        }
+        // a stochastic run without its noise is refused, not sampled deterministically
+        let bare = SamplerRun::plain(kind, steps);
+        let e = sd
+            .sample(
+                &r[&format!("{name}.init")],
+                &refs("sd-tiny")["text.cond"],
+                &refs("sd-tiny")["text.uncond"],
+                guidance,
+                bare,
+            )
+            .unwrap_err();
+        assert!(e.to_string().contains("noise"), "{e}");
+    }
 }

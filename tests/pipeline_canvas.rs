@@ -251,7 +251,7 @@ fn a_negative_prompt_reaches_sampling_and_sds() {
             seen: seen.clone(),
         }),
         scorer: None,
-        retrieval: Err("none".into()),
+        retrieval: Err(vectorfusion::stages::sample::NoStarts::NoIconSets),
     };
     let cancel = CancelToken::new();
     let out = run_text(

@@ -279,6 +279,7 @@ fn spec(kind: JobKind) -> JobSpec {
         canvas: Default::default(),
         negative_prompt: None,
         plan: None,
+        variations: None,
     }
 }
 

@@ -120,6 +120,7 @@ fn service_executor_runs_a_text_job_on_the_default_pixel_model() {
         canvas: Default::default(),
         negative_prompt: None,
         plan: None,
+        variations: None,
     };
     let out = exec
         .run(&spec, &JobContext::detached(CancelToken::new()))

@@ -50,6 +50,7 @@ fn spec(method: Method, style: Style) -> JobSpec {
         canvas: Default::default(),
         negative_prompt: None,
         plan: None,
+        variations: None,
     }
 }
 
@@ -69,15 +70,30 @@ fn attempt(
     resume: Option<Value>,
     cancel_at: Option<(Stage, u32)>,
 ) -> Attempt {
+    attempt_until(exec, spec, every, resume, move |p, _| {
+        cancel_at.is_some_and(|(stage, step)| p.stage == stage && p.step >= step)
+    })
+}
+
+/// [`attempt`], cancelled at the first report for which `stop(report, reports before it)`
+/// holds.
+fn attempt_until(
+    exec: &DefaultExecutor,
+    spec: &JobSpec,
+    every: u32,
+    resume: Option<Value>,
+    stop: impl Fn(&Progress, &[Progress]) -> bool + Send + Sync + 'static,
+) -> Attempt {
     let events = Arc::new(Mutex::new(Vec::new()));
     let saved = Arc::new(Mutex::new(Vec::new()));
     let cancel = CancelToken::new();
     let (ev, tok) = (events.clone(), cancel.clone());
     let sink = move |p: Progress| {
-        if cancel_at.is_some_and(|(stage, step)| p.stage == stage && p.step >= step) {
+        let mut seen = ev.lock().unwrap();
+        if stop(&p, &seen) {
             tok.cancel();
         }
-        ev.lock().unwrap().push(p);
+        seen.push(p);
     };
     let s2 = saved.clone();
     let ctx = JobContext::new(
@@ -182,6 +198,57 @@ fn cancellation_saves_a_checkpoint_that_resumes_exactly() {
     }
 }
 
+/// A text job of 3 variations stopped in the SDS of its second: the checkpoint holds the
+/// finished first and the start of the third, and the restart skips sampling, rerank and
+/// tracing, goes on from that step and ends with the 3 distinct SVGs of an uninterrupted run.
+#[test]
+fn a_job_of_several_variations_resumes_from_the_one_it_was_distilling() {
+    let exec = exec();
+    let spec = JobSpec {
+        variations: Some(3),
+        ..spec(Method::SdLiveSds, Style::Iconography)
+    };
+    let full = attempt(&exec, &spec, 100, None, None).out.unwrap();
+    let svgs = |o: &RunOutput| {
+        std::iter::once(&o.svg)
+            .chain(o.variations.iter().map(|v| &v.svg))
+            .cloned()
+            .collect::<Vec<_>>()
+    };
+    let want = svgs(&full);
+    assert_eq!(want.len(), 3);
+    assert!(want[0] != want[1] && want[1] != want[2] && want[0] != want[2]);
+    // Each variation's SDS counts from step 1: stop at step 5 of the second.
+    let stopped = attempt_until(&exec, &spec, 100, None, |p, seen| {
+        let sds_starts = seen
+            .iter()
+            .filter(|e| e.stage == Stage::Sds && e.step == 1)
+            .count();
+        p.stage == Stage::Sds && p.step >= 5 && sds_starts == 2
+    });
+    assert!(matches!(stopped.out, Err(PipelineError::Cancelled)));
+    let last = stopped.checkpoints.last().expect("checkpoint on cancel");
+    assert_eq!(step_of(last), 5);
+    assert_eq!(
+        last["done"].as_array().map(Vec::len),
+        Some(1),
+        "{last:.300}"
+    );
+    assert_eq!(last["pending"].as_array().map(Vec::len), Some(1));
+    let resumed = attempt(&exec, &spec, 100, Some(last.clone()), None);
+    assert!(
+        resumed
+            .events
+            .iter()
+            .all(|p| ![Stage::Sample, Stage::Rerank, Stage::Live].contains(&p.stage)),
+        "{:?}",
+        resumed.events.iter().map(|p| &p.stage).collect::<Vec<_>>()
+    );
+    let out = resumed.out.unwrap();
+    assert_eq!(svgs(&out), want, "the resumed variations differ");
+    assert_eq!(out.report.variations.len(), 3);
+}
+
 #[test]
 fn a_checkpoint_of_another_request_is_ignored() {
     let exec = exec();
@@ -245,6 +312,7 @@ fn vectorize_jobs_checkpoint_each_live_stage_and_resume_exactly() {
         canvas: Default::default(),
         negative_prompt: None,
         plan: None,
+        variations: None,
     };
     let exec = DefaultExecutor::new(ModelDirs::default());
     let full = attempt(&exec, &spec, 100, None, None);

@@ -1,6 +1,7 @@
 //! The playground page in a real browser (headless Chromium through chromedriver): a vectorize
 //! job of a committed image draws live and ends with a download of exactly `result.svg`; a bad
-//! upload shows the API's message; on a server with an API key the page asks for it, and with
+//! upload shows the API's message; a text job's canvas, colours and 3 variations go from the
+//! form to the job, one variation is picked among thumbnails and exported as SVG, PDF and PNG; on a server with an API key the page asks for it, and with
 //! the key typed in, runs the same job. Screenshots go to `target/tmp/playground/` (and to
 //! `$VF_PAGE_SCREENSHOTS` when set, e.g. `docs/img`). `.ci/run` installs chromium and
 //! chromium-driver when it can; without them the test prints SKIP (and
@@ -165,6 +166,121 @@ fn canvas_controls_reach_a_text_job(b: &Browser, base: &str) -> Result<(), Strin
     Err("the text job was not submitted".into())
 }
 
+/// The newest job of `kind` in the list, once there is one (polled for 10 s).
+fn newest_job(base: &str, kind: &str, after: Option<&str>) -> Result<serde_json::Value, String> {
+    for _ in 0..100 {
+        let list: serde_json::Value = serde_json::from_str(&fetch(&format!("{base}/jobs"), None)?)
+            .map_err(|e| e.to_string())?;
+        let job = &list["jobs"][0];
+        if job["kind"] == kind && job["id"].as_str() != after {
+            return Ok(job.clone());
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    Err(format!("no new {kind} job was submitted"))
+}
+
+/// The bytes of the page's download link `id` (a blob: URL): `[length, first 4 bytes as text,
+/// PNG width, PNG height]`.
+fn downloaded_head(b: &Browser, id: &str) -> Result<serde_json::Value, String> {
+    b.eval_async(
+        "const done = arguments[arguments.length - 1]; \
+         fetch(document.getElementById(arguments[0]).href).then(r => r.arrayBuffer()).then(buf => { \
+           const d = new DataView(buf); \
+           done([buf.byteLength, String.fromCharCode(...new Uint8Array(buf.slice(0, 4))), \
+                 buf.byteLength > 24 ? d.getUint32(16) : 0, buf.byteLength > 24 ? d.getUint32(20) : 0]); \
+         }, e => done('ERR ' + e));",
+        json!([id]),
+    )
+}
+
+/// Colours, background, grouping and 3 variations from the form: a bad palette is refused on
+/// the page (naming the field), a good one reaches the job's params; the finished job shows 3
+/// thumbnails, picking the third shows it, and its SVG, PDF and PNG (at the chosen size)
+/// download links hold variation 3's files.
+fn variations_and_colours_reach_the_job(b: &Browser, base: &str) -> Result<(), String> {
+    let wait = Duration::from_secs(30);
+    let before = newest_job(base, "text", None)?;
+    let before_id = before["id"].as_str();
+    b.eval(
+        "const set = (id, v) => { document.getElementById(id).value = v; }; \
+         set('variations', '3'); set('colors', '4'); set('palette', '#e63946, #1d3557 red'); \
+         set('background', 'color'); document.getElementById('background').dispatchEvent(new Event('change')); \
+         set('background-color', '#ffeecc'); set('group', 'color');",
+        json!([]),
+    )?;
+    b.click(&b.find("#submit", wait)?)?;
+    let msg = b.wait_for(
+        "const e = document.getElementById('error'); return e && e.textContent.trim();",
+        wait,
+    )?;
+    if !msg
+        .as_str()
+        .unwrap_or("")
+        .starts_with("palette: red is not a colour")
+    {
+        return Err(format!("a bad palette shows {msg}"));
+    }
+    b.eval(
+        "document.getElementById('palette').value = '#e63946, #1d3557 #FFF';",
+        json!([]),
+    )?;
+    b.click(&b.find("#submit", wait)?)?;
+    let job = newest_job(base, "text", before_id)?;
+    let p = &job["params"];
+    let want = json!({"variations": 3, "colors": 4, "palette": ["#e63946", "#1d3557", "#ffffff"],
+        "background": "#ffeecc", "group": "color"});
+    for (k, v) in want.as_object().ok_or("want")? {
+        if &p[k] != v {
+            return Err(format!("params.{k} is {} (want {v}): {p}", p[k]));
+        }
+    }
+    let id = job["id"].as_str().ok_or("id")?;
+    b.wait_for(
+        "return [...document.querySelectorAll('#variation-list img')].filter(i => i.src.startsWith('blob:')).length === 3;",
+        Duration::from_secs(60),
+    )?;
+    b.click(&b.find("#variation-list button[data-i='3']", wait)?)?;
+    b.wait_for(
+        "return document.getElementById('result-paths').textContent.startsWith('Variation 3 of 3') \
+         && document.getElementById('download-pdf').href.startsWith('blob:') \
+         && document.getElementById('download-png').href.startsWith('blob:');",
+        wait,
+    )?;
+    let svg = b.eval_async(
+        "const done = arguments[arguments.length - 1]; \
+         fetch(document.getElementById('download-svg').href).then(r => r.text()).then(done, e => done('ERR ' + e));",
+        json!([]),
+    )?;
+    let served = fetch(&format!("{base}/jobs/{id}/result/3.svg"), None)?;
+    let first = fetch(&format!("{base}/jobs/{id}/result/1.svg"), None)?;
+    if svg.as_str() != Some(served.as_str()) || served == first {
+        return Err(format!("the picked SVG is not variation 3's: {svg:.200}"));
+    }
+    let pdf = downloaded_head(b, "download-pdf")?;
+    if pdf[1] != "%PDF" {
+        return Err(format!("the PDF link holds {pdf}"));
+    }
+    b.eval(
+        "const s = document.getElementById('png-size'); s.value = '512'; s.dispatchEvent(new Event('change'));",
+        json!([]),
+    )?;
+    b.wait_for(
+        "const a = document.getElementById('download-png'); return a.href.startsWith('blob:') && a.download.endsWith('-3-512px.png');",
+        wait,
+    )?;
+    let png = downloaded_head(b, "download-png")?;
+    if png[1] != "\u{89}PNG" || png[2].as_u64().max(png[3].as_u64()) != Some(512) {
+        return Err(format!("the PNG link holds {png}"));
+    }
+    b.eval(
+        "document.getElementById('variation-picker').scrollIntoView({block: 'center'});",
+        json!([]),
+    )?;
+    save(b, "playground-variations.png");
+    Ok(())
+}
+
 #[test]
 fn playground_page_runs_a_job_in_a_real_browser() {
     with_page(None, |b, base| {
@@ -179,6 +295,7 @@ fn playground_page_runs_a_job_in_a_real_browser() {
             ));
         }
         canvas_controls_reach_a_text_job(b, base)?;
+        variations_and_colours_reach_the_job(b, base)?;
         // A bad upload shows the API's message.
         let bad = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("not-an-image.png");
         std::fs::write(&bad, b"this is not a PNG").map_err(|e| e.to_string())?;

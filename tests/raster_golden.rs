@@ -112,11 +112,11 @@ fn a_missing_thin_stroke_fails_the_golden_check_by_its_share() {
     );
     let theirs = resvg_render(&to_svg(&s, &SvgOptions::default()));
     let t = Tolerance::GOLDEN;
-    assert!(golden::large_share(&raster::render(&s), &theirs, t.large) <= t.max_share);
+    assert!(golden::share_off_by(&raster::render(&s), &theirs, t.large) <= t.max_share);
     s.shapes.clear();
     let lost = raster::render(&s);
     let mean = golden::mean_abs_diff(&lost, &theirs);
-    let large = golden::large_share(&lost, &theirs, t.large);
+    let large = golden::share_off_by(&lost, &theirs, t.large);
     assert!(mean <= t.mean, "mean {:.3}/255", mean * 255.0);
     assert!(large > t.max_share, "share {large}");
 }

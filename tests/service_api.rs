@@ -687,7 +687,7 @@ async fn bad_input_gets_clear_4xx_json_never_500() {
         ),
         json_case(
             "bad group",
-            json!({"kind": "vectorize", "image": png_b64(8), "group": "stage"}),
+            json!({"kind": "vectorize", "image": png_b64(8), "group": "layers"}),
             "invalid_field",
             "group",
         ),
@@ -1154,6 +1154,13 @@ async fn vector_options_are_stored_and_reach_the_plan() {
     let p = get(srv.addr, &format!("/jobs/{id}")).await.json()["params"].clone();
     assert_eq!(p["background"], json!("auto"));
     assert_eq!(p["group"], json!("none"));
+    // Grouping by LIVE stage is the other grouping.
+    let body = json!({"kind": "vectorize", "image": png_b64(8), "group": "stage"});
+    let r = post_json(srv.addr, "/jobs", &body).await;
+    assert_eq!(r.status, 202, "{}", r.text());
+    let id = r.json()["id"].as_str().unwrap().to_string();
+    let p = get(srv.addr, &format!("/jobs/{id}")).await.json()["params"].clone();
+    assert_eq!(p["group"], json!("stage"));
     assert!(
         p.get("palette").is_none() && p.get("max_bytes").is_none(),
         "{p}"

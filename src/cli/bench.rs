@@ -38,6 +38,10 @@ pub struct RasterBenchArgs {
     /// Print one JSON object instead of text.
     #[arg(long)]
     pub json: bool,
+    /// Paint every fill flat (the scene's colours) or with a linear or radial gradient (the
+    /// cost of gradient paint; tiny-skia draws the same gradients).
+    #[arg(long, value_enum, default_value_t = super::bench_paint::BenchPaint::Flat)]
+    pub paint: super::bench_paint::BenchPaint,
 }
 
 pub fn run(cmd: BenchCommand) -> Result<(), CliError> {
@@ -53,6 +57,7 @@ pub fn run(cmd: BenchCommand) -> Result<(), CliError> {
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct RasterBench {
     pub size: u32,
+    pub paint: super::bench_paint::BenchPaint,
     pub forward_ms: f64,
     pub forward_backward_ms: f64,
     pub tiny_skia_forward_ms: f64,
@@ -157,10 +162,15 @@ pub fn tiny_skia_render(scene: &Scene) -> Option<tiny_skia::Pixmap> {
             p.anti_alias = true;
             p
         };
+        let fill_gradient = sh.gradients.as_ref().and_then(|g| g.fill.as_ref());
         if let Some(f) = sh.fill.filter(|_| sh.is_closed()) {
+            let mut p = paint(f);
+            if let Some(s) = fill_gradient.and_then(super::bench_paint::shader) {
+                p.shader = s;
+            }
             pm.fill_path(
                 &path,
-                &paint(f),
+                &p,
                 tiny_skia::FillRule::Winding,
                 tiny_skia::Transform::identity(),
                 None,
@@ -196,7 +206,7 @@ fn raster_bench(a: RasterBenchArgs) -> Result<(), CliError> {
         return Err(CliError::Usage("--iters must be at least 1".into()));
     }
     let scene = crate::svg::load_scene(&a.scene).map_err(|e| CliError::Other(e.into()))?;
-    let scene = scene.scaled_to_width(a.size);
+    let scene = super::bench_paint::with_gradients(&scene.scaled_to_width(a.size), a.paint);
     scene
         .validate()
         .map_err(|e| CliError::Usage(format!("scaled scene is invalid: {e}")))?;
@@ -211,6 +221,7 @@ fn raster_bench(a: RasterBenchArgs) -> Result<(), CliError> {
     let tiny_skia_forward_ms = time_ms(a.iters, || tiny_skia_render(&scene));
     let r = RasterBench {
         size: a.size,
+        paint: a.paint,
         forward_ms,
         forward_backward_ms,
         tiny_skia_forward_ms,

@@ -61,6 +61,27 @@ pub struct GenerateArgs {
     /// Snapshot period of the LIVE and SDS stages [default: the preset's].
     #[arg(long)]
     pub snapshot_every: Option<u32>,
+    /// Return the N best distinct results (1 to 6): the best N samples of the rerank, each
+    /// traced and refined; with N > 1, `-o out.svg` writes out-1.svg ... out-N.svg.
+    #[arg(long, default_value_t = 1)]
+    pub variations: u32,
+}
+
+/// Where variation `i` (1-based) of `n` is written: `output` itself for a single result,
+/// otherwise `output` with `-i` before its extension (`out.svg` → `out-2.svg`).
+pub fn variation_path(output: &std::path::Path, i: usize, n: usize) -> PathBuf {
+    if n <= 1 {
+        return output.to_path_buf();
+    }
+    let stem = output
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let name = match output.extension() {
+        Some(ext) => format!("{stem}-{i}.{}", ext.to_string_lossy()),
+        None => format!("{stem}-{i}"),
+    };
+    output.with_file_name(name)
 }
 
 /// The canvas and the negative prompt of a text run.
@@ -205,14 +226,27 @@ pub fn run(args: GenerateArgs) -> Result<(), CliError> {
     let mut out = exec.run_plan(&plan, &input, &ctx)?;
     out.report.import_warnings = warnings;
     bar.finish_and_clear();
-    super::write_result(&args.output, &out.svg)?;
-    eprintln!("wrote {} ({} paths)", args.output.display(), out.paths);
-    let summary = serde_json::json!({
-        "output": args.output,
+    let n = out.variations.len() + 1;
+    let mut outputs = Vec::with_capacity(n);
+    for (i, (svg, paths)) in std::iter::once(&out)
+        .chain(&out.variations)
+        .map(|o| (&o.svg, o.paths))
+        .enumerate()
+    {
+        let path = variation_path(&args.output, i + 1, n);
+        super::write_result(&path, svg)?;
+        eprintln!("wrote {} ({paths} paths)", path.display());
+        outputs.push(path);
+    }
+    let mut summary = serde_json::json!({
+        "output": outputs[0],
         "paths": out.paths,
         "plan": plan,
         "detail": out.report,
     });
+    if n > 1 {
+        summary["outputs"] = serde_json::json!(outputs);
+    }
     println!("{summary}");
     Ok(())
 }
@@ -263,6 +297,7 @@ fn request_and_input(
             ..Default::default()
         },
         tuning: args.request.tuning.tuning(args.snapshot_every),
+        variations: args.variations,
         canvas: CanvasRequest {
             aspect: args.canvas.aspect,
             width: args.canvas.width,

@@ -3,6 +3,7 @@
 
 pub mod bench;
 pub mod bench_models;
+pub mod bench_paint;
 pub mod bench_rd;
 pub mod bench_stability;
 pub mod bench_vectorize;

@@ -18,7 +18,8 @@ pub struct VectorArgs {
     /// border is transparent) or #rrggbb.
     #[arg(long, default_value = "auto")]
     pub background: String,
-    /// Group the SVG's paths: none, or color (runs of one fill in a `<g>`, with stable ids).
+    /// Group the SVG's paths: none, color (runs of one fill in a `<g>`) or stage (runs of paths
+    /// one LIVE stage added in a `<g id="s<k>">`), with stable ids.
     #[arg(long, value_enum, default_value = "none")]
     pub group: Grouping,
 }

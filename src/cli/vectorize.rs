@@ -165,7 +165,7 @@ pub fn config_from_args(a: &VectorizeArgs) -> Result<LiveConfig, CliError> {
 
 pub fn run(a: VectorizeArgs) -> Result<(), CliError> {
     let cfg = config_from_args(&a)?;
-    let grouped = cfg.colors.group == crate::vector::palette::Grouping::Color;
+    let group = cfg.colors.group;
     let target = load_input(&a.input)?;
     let t0 = std::time::Instant::now();
     let (plan, result) = trace(&a, cfg, target)?;
@@ -177,8 +177,7 @@ pub fn run(a: VectorizeArgs) -> Result<(), CliError> {
             &result.scene,
             &crate::svg::SvgOptions {
                 precision,
-                group_by_color: grouped,
-                ids: grouped,
+                ..group.svg_options()
             },
         ),
     };

@@ -62,13 +62,30 @@ pub fn weighted_l2_into(
     }
     grad.clear();
     grad.resize(4 * n, 0.0);
+    Ok(weighted_l2_slices(
+        &render.data,
+        &target.data,
+        weights,
+        grad,
+    ))
+}
+
+/// [`weighted_l2_into`] on raw slices of equal pixel count (premultiplied RGBA `render` and
+/// `target`, one weight per pixel), writing the gradient into `grad` (same length as
+/// `render`): the per-band loss of [`crate::raster::render_loss_backward`]. Extra elements of
+/// the longer slice are ignored.
+pub fn weighted_l2_slices(
+    render: &[f32],
+    target: &[f32],
+    weights: &[f32],
+    grad: &mut [f32],
+) -> f64 {
     /// Pixels summed in `f32` before the running total takes them in `f64`.
     const BLOCK: usize = 64;
     let mut loss = 0.0f64;
     for (((p, q), g), w) in render
-        .data
         .chunks(4 * BLOCK)
-        .zip(target.data.chunks(4 * BLOCK))
+        .zip(target.chunks(4 * BLOCK))
         .zip(grad.chunks_mut(4 * BLOCK))
         .zip(weights.chunks(BLOCK))
     {
@@ -92,7 +109,7 @@ pub fn weighted_l2_into(
         }
         loss += block as f64;
     }
-    Ok(loss)
+    loss
 }
 
 /// Mean squared error over RGB composited over white (the quantity behind `image::psnr`),

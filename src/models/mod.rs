@@ -27,6 +27,7 @@ pub mod loader;
 pub mod nn;
 pub mod scheduler;
 pub mod scorer;
+pub mod sdxl_text;
 mod serde_defaults;
 pub mod stable_diffusion;
 pub mod taesd;

@@ -1,4 +1,5 @@
-//! Noise schedules from `scheduler/scheduler_config.json` and the DDIM / Euler samplers.
+//! Noise schedules from `scheduler/scheduler_config.json` and the samplers a model names there:
+//! DDIM, Euler, Euler ancestral (SD-Turbo / SDXL-Turbo) and LCM, each as diffusers steps it.
 
 use super::{ConfigIssue, ModelError, Result};
 use crate::models::serde_defaults::num;
@@ -48,6 +49,16 @@ pub struct SchedulerConfig {
     /// Dynamic thresholding (Imagen); not supported, refused when set.
     #[serde(default)]
     pub thresholding: bool,
+    /// LCM: the teacher's step count its timesteps are drawn from (`LCMScheduler`).
+    #[serde(default = "num::<50>")]
+    pub original_inference_steps: usize,
+    /// LCM: the factor on the timestep in the consistency boundary condition.
+    #[serde(default = "ten")]
+    pub timestep_scaling: f64,
+}
+
+fn ten() -> f64 {
+    10.0
 }
 
 fn one() -> f64 {
@@ -161,6 +172,66 @@ pub enum SamplerKind {
     Ddim,
     /// Euler (diffusers `EulerDiscreteScheduler`, no churn).
     Euler,
+    /// Euler ancestral (diffusers `EulerAncestralDiscreteScheduler`): each step lands at
+    /// `σ_down` and adds fresh noise of `σ_up`; SD-Turbo and SDXL-Turbo sample with it in 1–4
+    /// steps.
+    EulerAncestral,
+    /// Latent consistency (diffusers `LCMScheduler`): each step predicts the clean latent
+    /// through the consistency boundary condition and re-noises it to the next timestep.
+    Lcm,
+}
+
+impl SamplerKind {
+    /// The sampler a model's `scheduler_config.json` names (`_class_name`): Euler, Euler
+    /// ancestral and LCM as named; DDIM for DDIM and for every other class (PNDM, the SD 1.x
+    /// default, and the multistep solvers), whose training schedule DDIM samples as well.
+    pub fn of(cfg: &SchedulerConfig) -> SamplerKind {
+        match cfg.class_name.as_str() {
+            "EulerDiscreteScheduler" => SamplerKind::Euler,
+            "EulerAncestralDiscreteScheduler" => SamplerKind::EulerAncestral,
+            "LCMScheduler" => SamplerKind::Lcm,
+            _ => SamplerKind::Ddim,
+        }
+    }
+
+    /// Whether step `i` of `steps` adds fresh noise (and so needs it passed to
+    /// [`Sampler::step`]).
+    pub fn adds_noise(self, i: usize, steps: usize) -> bool {
+        match self {
+            SamplerKind::Ddim | SamplerKind::Euler => false,
+            SamplerKind::EulerAncestral => true,
+            SamplerKind::Lcm => i + 1 < steps,
+        }
+    }
+
+    fn uses_sigmas(self) -> bool {
+        matches!(self, SamplerKind::Euler | SamplerKind::EulerAncestral)
+    }
+}
+
+/// How a sampling run goes: the sampler, its steps and, for a stochastic sampler
+/// ([`SamplerKind::adds_noise`]), the standard-normal noise its steps add, in order.
+#[derive(Debug, Clone, Copy)]
+pub struct SamplerRun<'a> {
+    pub kind: SamplerKind,
+    pub steps: usize,
+    pub step_noise: &'a [Tensor],
+}
+
+impl SamplerRun<'_> {
+    /// A run of a deterministic sampler (DDIM, Euler).
+    pub fn plain(kind: SamplerKind, steps: usize) -> SamplerRun<'static> {
+        SamplerRun {
+            kind,
+            steps,
+            step_noise: &[],
+        }
+    }
+
+    /// How many noise tensors a run of `kind` for `steps` steps takes.
+    pub fn noise_count(kind: SamplerKind, steps: usize) -> usize {
+        (0..steps).filter(|&i| kind.adds_noise(i, steps)).count()
+    }
 }
 
 /// A configured sampler for a fixed number of steps.
@@ -175,8 +246,10 @@ pub struct Sampler {
     sigmas: Vec<f64>,
     final_alpha_cumprod: f64,
     step_ratio: usize,
-    /// DDIM: `Some(r)` clamps `x̂₀` to `[-r, r]` (diffusers `clip_sample`).
+    /// DDIM and LCM: `Some(r)` clamps `x̂₀` to `[-r, r]` (diffusers `clip_sample`).
     clip_x0: Option<f64>,
+    /// LCM: the factor on the timestep in the boundary condition.
+    timestep_scaling: f64,
 }
 
 /// A scheduler config this sampler cannot use.
@@ -221,6 +294,23 @@ fn spaced_timesteps(cfg: &SchedulerConfig, steps: usize) -> Result<Vec<f64>> {
     })
 }
 
+/// LCM's `steps` timesteps: evenly spaced indices into the `original_inference_steps`
+/// timesteps of the distilled teacher's schedule, from the last (as diffusers' `LCMScheduler`).
+fn lcm_timesteps(cfg: &SchedulerConfig, steps: usize) -> Result<Vec<f64>> {
+    let n = cfg.num_train_timesteps;
+    let orig = cfg.original_inference_steps;
+    if orig == 0 || orig > n || steps > orig {
+        return Err(bad_config(format!(
+            "original_inference_steps {orig} must be in 1..={n} and at least the {steps} steps"
+        )));
+    }
+    let k = n / orig;
+    let origin: Vec<usize> = (1..=orig).rev().map(|i| i * k - 1).collect();
+    Ok((0..steps)
+        .map(|i| origin[(i as f64 * orig as f64 / steps as f64).floor() as usize] as f64)
+        .collect())
+}
+
 /// Euler's σ at each of `timesteps` (interpolated between the training steps of `ac`), plus a
 /// final 0.
 fn euler_sigmas(ac: &[f64], timesteps: &[f64]) -> Vec<f64> {
@@ -263,9 +353,9 @@ impl Sampler {
                 "steps must be in 1..={n}, got {steps}"
             )));
         }
-        let spaced = spaced_timesteps(cfg, steps)?;
         let (timesteps, sigmas) = match kind {
             SamplerKind::Ddim => {
+                let spaced = spaced_timesteps(cfg, steps)?;
                 let t: Vec<f64> = if cfg.timestep_spacing == "linspace" {
                     spaced.iter().map(|x| x.round()).collect()
                 } else {
@@ -273,10 +363,12 @@ impl Sampler {
                 };
                 (t, Vec::new())
             }
-            SamplerKind::Euler => {
+            SamplerKind::Euler | SamplerKind::EulerAncestral => {
+                let spaced = spaced_timesteps(cfg, steps)?;
                 let s = euler_sigmas(&ac, &spaced);
                 (spaced, s)
             }
+            SamplerKind::Lcm => (lcm_timesteps(cfg, steps)?, Vec::new()),
         };
         for &t in &timesteps {
             if t < 0.0 || t >= n as f64 {
@@ -286,7 +378,6 @@ impl Sampler {
             }
         }
         let final_alpha_cumprod = if cfg.set_alpha_to_one { 1.0 } else { ac[0] };
-        let _ = &cfg.class_name;
         Ok(Self {
             kind,
             prediction_type: cfg.prediction_type,
@@ -296,14 +387,15 @@ impl Sampler {
             final_alpha_cumprod,
             step_ratio: n / steps,
             clip_x0: cfg.clip_sample.then_some(cfg.clip_sample_range),
+            timestep_scaling: cfg.timestep_scaling,
         })
     }
 
     /// Scale for the initial Gaussian noise.
     pub fn init_noise_sigma(&self, spacing_trailing_or_linspace: bool) -> f64 {
         match self.kind {
-            SamplerKind::Ddim => 1.0,
-            SamplerKind::Euler => {
+            SamplerKind::Ddim | SamplerKind::Lcm => 1.0,
+            SamplerKind::Euler | SamplerKind::EulerAncestral => {
                 let m = self.sigmas.iter().copied().fold(0.0, f64::max);
                 if spacing_trailing_or_linspace {
                     m
@@ -316,19 +408,32 @@ impl Sampler {
 
     /// The model input for step `i` (Euler divides by `sqrt(σ² + 1)`).
     pub fn scale_model_input(&self, x: &Tensor, i: usize) -> Result<Tensor> {
-        match self.kind {
-            SamplerKind::Ddim => Ok(x.clone()),
-            SamplerKind::Euler => {
-                let s = self.sigmas[i];
-                Ok((x / (s * s + 1.0).sqrt())?)
-            }
+        if self.kind.uses_sigmas() {
+            let s = self.sigmas[i];
+            Ok((x / (s * s + 1.0).sqrt())?)
+        } else {
+            Ok(x.clone())
         }
     }
 
     /// One step: `x` at step `i` and the (guided) raw model output → `x` at step `i + 1`.
-    pub fn step(&self, model_out: &Tensor, i: usize, x: &Tensor) -> Result<Tensor> {
+    /// `noise` (standard normal, `x`'s shape) is what a stochastic step adds
+    /// ([`SamplerKind::adds_noise`]); it must be given exactly then.
+    pub fn step(
+        &self,
+        model_out: &Tensor,
+        i: usize,
+        x: &Tensor,
+        noise: Option<&Tensor>,
+    ) -> Result<Tensor> {
         if i >= self.timesteps.len() {
             return Err(ModelError::InvalidInput(format!("step {i} out of range")));
+        }
+        if self.kind.adds_noise(i, self.timesteps.len()) != noise.is_some() {
+            return Err(ModelError::InvalidInput(format!(
+                "step {i} of {:?} takes noise exactly when it adds noise",
+                self.kind
+            )));
         }
         match self.kind {
             SamplerKind::Ddim => {
@@ -341,13 +446,10 @@ impl Sampler {
                 };
                 let (x0, eps) = split_prediction(self.prediction_type, model_out, x, a)?;
                 // As diffusers: the clamped x̂₀ is used, ε̂ stays the model's.
-                let x0 = match self.clip_x0 {
-                    Some(r) => x0.clamp(-r, r)?,
-                    None => x0,
-                };
+                let x0 = self.clipped(x0)?;
                 Ok(((x0 * a_prev.sqrt())? + (eps * (1.0 - a_prev).sqrt())?)?)
             }
-            SamplerKind::Euler => {
+            SamplerKind::Euler | SamplerKind::EulerAncestral => {
                 let s = self.sigmas[i];
                 let s_next = self.sigmas[i + 1];
                 let x0 = match self.prediction_type {
@@ -358,8 +460,52 @@ impl Sampler {
                     PredictionType::Sample => model_out.clone(),
                 };
                 let d = ((x - x0)? / s)?;
-                Ok((x + (d * (s_next - s))?)?)
+                match noise {
+                    None => Ok((x + (d * (s_next - s))?)?),
+                    Some(z) => {
+                        // σ_up² = σ_next² (σ² − σ_next²) / σ²; σ_down² = σ_next² − σ_up².
+                        let up = (s_next * s_next * (s * s - s_next * s_next) / (s * s)).sqrt();
+                        let down = (s_next * s_next - up * up).max(0.0).sqrt();
+                        Ok(((x + (d * (down - s))?)? + (z * up)?)?)
+                    }
+                }
             }
+            SamplerKind::Lcm => self.lcm_step(model_out, i, x, noise),
+        }
+    }
+
+    /// `x̂₀` clamped to `±clip_sample_range` when the config asks (diffusers `clip_sample`).
+    fn clipped(&self, x0: Tensor) -> Result<Tensor> {
+        Ok(match self.clip_x0 {
+            Some(r) => x0.clamp(-r, r)?,
+            None => x0,
+        })
+    }
+
+    /// LCM: the clean latent by the boundary condition `c_skip·x + c_out·x̂₀`, re-noised to the
+    /// next timestep (the last step returns it as it is).
+    fn lcm_step(
+        &self,
+        model_out: &Tensor,
+        i: usize,
+        x: &Tensor,
+        noise: Option<&Tensor>,
+    ) -> Result<Tensor> {
+        let t = self.timesteps[i];
+        let a = self.alphas_cumprod[t as usize];
+        let (x0, _) = split_prediction(self.prediction_type, model_out, x, a)?;
+        let x0 = self.clipped(x0)?;
+        // diffusers' boundary condition with σ_data = 0.5 on the scaled timestep
+        let st = t * self.timestep_scaling;
+        let c_skip = 0.25 / (st * st + 0.25);
+        let c_out = st / (st * st + 0.25).sqrt();
+        let denoised = ((x0 * c_out)? + (x * c_skip)?)?;
+        match (noise, self.timesteps.get(i + 1)) {
+            (Some(z), Some(&t_next)) => {
+                let a_next = self.alphas_cumprod[t_next as usize];
+                Ok(((denoised * a_next.sqrt())? + (z * (1.0 - a_next).sqrt())?)?)
+            }
+            _ => Ok(denoised),
         }
     }
 }
@@ -390,52 +536,5 @@ pub fn split_prediction(
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use candle_core::Device;
-
-    fn cfg(extra: &str) -> SchedulerConfig {
-        serde_json::from_str(&format!(
-            r#"{{"beta_schedule": "squaredcos_cap_v2", "prediction_type": "v_prediction",
-                "timestep_spacing": "trailing"{extra}}}"#
-        ))
-        .unwrap()
-    }
-
-    /// `clip_sample` clamps x̂₀ (so a wild model output cannot push x outside the data range at
-    /// the last step) and leaves in-range predictions alone.
-    #[test]
-    fn clip_sample_clamps_the_predicted_x0_only() {
-        let x = Tensor::from_vec(vec![0.5f32, -0.2, 0.1, 0.0], (1, 1, 2, 2), &Device::Cpu).unwrap();
-        // v = -x0 at t = 999 (ᾱ ≈ 0): outputs of ±5 mean x̂₀ ≈ ∓5, far outside [-1, 1].
-        let v = Tensor::from_vec(vec![5f32, -5.0, 0.3, -0.3], (1, 1, 2, 2), &Device::Cpu).unwrap();
-        let plain = Sampler::new(&cfg(""), SamplerKind::Ddim, 1).unwrap();
-        let clip = Sampler::new(&cfg(r#", "clip_sample": true"#), SamplerKind::Ddim, 1).unwrap();
-        assert_eq!(clip.timesteps, vec![999.0]);
-        let run = |s: &Sampler| -> Vec<f32> {
-            s.step(&v, 0, &x)
-                .unwrap()
-                .flatten_all()
-                .unwrap()
-                .to_vec1()
-                .unwrap()
-        };
-        let (a, b) = (run(&plain), run(&clip));
-        assert!(a[0] < -4.0 && a[1] > 4.0, "{a:?}");
-        assert!(b[0] >= -1.0 - 1e-6 && b[1] <= 1.0 + 1e-6, "{b:?}");
-        assert!((a[2] - b[2]).abs() < 1e-6 && (a[3] - b[3]).abs() < 1e-6);
-    }
-
-    #[test]
-    fn thresholding_and_bad_clip_range_are_refused() {
-        let e = Sampler::new(&cfg(r#", "thresholding": true"#), SamplerKind::Ddim, 4).unwrap_err();
-        assert!(e.to_string().contains("thresholding"), "{e}");
-        let e = Sampler::new(
-            &cfg(r#", "clip_sample": true, "clip_sample_range": 0.0"#),
-            SamplerKind::Ddim,
-            4,
-        )
-        .unwrap_err();
-        assert!(e.to_string().contains("clip_sample_range"), "{e}");
-    }
-}
+#[path = "scheduler_tests.rs"]
+mod tests;

@@ -1,10 +1,13 @@
 //! [`StableDiffusion`]: the components SDS and sampling need, behind one small API.
 
 use super::bert::BertTextEncoder;
-use super::clip::{ClipTextConfig, ClipTextModel, ClipTokenizer};
+use super::clip::{ClipTextModel, ClipTokenizer};
 use super::codec::{self, Codec, CodecKind, EncodeTape};
 use super::loader::{self, LoadOptions, ModelSource, Precision, UNET_WEIGHTS};
-use super::scheduler::{PredictionType, Sampler, SamplerKind, SchedulerConfig, split_prediction};
+use super::scheduler::{
+    PredictionType, Sampler, SamplerKind, SamplerRun, SchedulerConfig, split_prediction,
+};
+use super::sdxl_text::ClipParts;
 use super::taesd::Taesd;
 use super::unet::{Unet, UnetConfig};
 use super::vae::{AutoencoderKl, VaeConfig};
@@ -100,13 +103,13 @@ impl TextEncoder {
             let enc = BertTextEncoder::load(root, DType::F32, device, allow_download)?;
             return Ok(Self::Bert(enc));
         }
-        let tokenizer = ClipTokenizer::from_dir(&root.join("tokenizer"))?;
-        let config = ClipTextConfig::from_file(&dir.join("config.json"))?;
-        let w = loader::find_weights(&dir, loader::TEXT_WEIGHTS)?;
-        let vb = loader::var_builder(&w, precision.dtype(), device)?;
-        let model =
-            ClipTextModel::new(vb, &config).map_err(loader::mismatch("text_encoder", &w))?;
-        Ok(Self::Clip { tokenizer, model })
+        let p = ClipParts::load(root, ("tokenizer", "text_encoder"), precision, device)?;
+        let model = ClipTextModel::new(p.vb, &p.config)
+            .map_err(loader::mismatch("text_encoder", &p.weights))?;
+        Ok(Self::Clip {
+            tokenizer: p.tokenizer,
+            model,
+        })
     }
 
     /// Token ids padded to the context length (`[1, L]`, u32).
@@ -128,6 +131,25 @@ impl TextEncoder {
         };
         Ok(out.to_dtype(candle_core::DType::F32)?)
     }
+}
+
+/// SDXL pipelines load as parts ([`super::unet::Unet::forward_added`],
+/// [`super::sdxl_text::SdxlTextEncoders`]) but do not sample or run SDS yet: refused before any
+/// weights are read.
+fn refuse_sdxl(root: &Path) -> Result<()> {
+    let cfg = root.join("unet").join("config.json");
+    let unet: UnetConfig = loader::read_config(&cfg)?;
+    // a config that does not resolve is reported by the UNet's loader, naming the setting
+    if unet.arch().is_ok_and(|a| a.text_time.is_some()) {
+        return Err(ModelError::Unsupported {
+            component: "pipeline",
+            path: cfg.display().to_string(),
+            reason: "SDXL (addition_embed_type \"text_time\"): sampling and SDS with the \
+                     dual text encoders and the size/crop conditioning are not implemented"
+                .into(),
+        });
+    }
+    Ok(())
 }
 
 /// Text encoder + UNet + image codec (VAE, TAESD or pixel space) + noise schedule of a
@@ -268,6 +290,7 @@ impl StableDiffusion {
     /// otherwise `opts.taesd`, when set, replaces the VAE as the codec.
     pub fn load_source(source: &ModelSource, opts: &LoadOptions) -> Result<Self> {
         let root = loader::resolve(source, opts.allow_download)?;
+        refuse_sdxl(&root)?;
         let unet = load_unet(&root.join("unet"), opts.unet, &opts.device)?;
         let codec: Codec = if codec::is_pixel_space(&root)? {
             codec::pixel_space_for(&unet.config, &root)?.into()
@@ -497,34 +520,42 @@ impl StableDiffusion {
         let mut traj = Vec::with_capacity(run);
         for i in start..steps {
             let out = self.guided_raw(&x, s.timesteps[i], text_emb, uncond_emb, guidance)?;
-            x = s.step(&out, i, &x)?;
+            x = s.step(&out, i, &x, None)?;
             traj.push(x.clone());
         }
         Ok(traj)
     }
 
-    /// Samples latents from `init_noise` (standard normal, `[b, 4, h, w]`) with CFG; returns the
-    /// latents after every step (the last one is the result).
+    /// Samples latents from `init_noise` (standard normal, `[b, 4, h, w]`) with CFG as `run`
+    /// says; returns the latents after every step (the last one is the result). As diffusers,
+    /// `guidance ≤ 1` runs the conditional branch alone (SD-Turbo samples with 0).
     pub fn sample(
         &self,
         init_noise: &Tensor,
         text_emb: &Tensor,
         uncond_emb: &Tensor,
         guidance: f64,
-        steps: usize,
-        kind: SamplerKind,
+        run: SamplerRun<'_>,
     ) -> Result<Vec<Tensor>> {
-        let s = Sampler::new(&self.scheduler, kind, steps)?;
+        let s = Sampler::new(&self.scheduler, run.kind, run.steps)?;
         let spacing = matches!(
             self.scheduler.timestep_spacing.as_str(),
             "trailing" | "linspace"
         );
+        let guidance = if guidance <= 1.0 { 1.0 } else { guidance };
         let mut x = (init_noise * s.init_noise_sigma(spacing))?;
-        let mut traj = Vec::with_capacity(steps);
+        let mut traj = Vec::with_capacity(run.steps);
+        let mut noise = run.step_noise.iter();
         for (i, &t) in s.timesteps.iter().enumerate() {
             let inp = s.scale_model_input(&x, i)?;
             let out = self.guided_raw(&inp, t, text_emb, uncond_emb, guidance)?;
-            x = s.step(&out, i, &x)?;
+            // a missing noise is refused by the step
+            let z = run
+                .kind
+                .adds_noise(i, run.steps)
+                .then(|| noise.next())
+                .flatten();
+            x = s.step(&out, i, &x, z)?;
             traj.push(x.clone());
         }
         Ok(traj)

@@ -159,6 +159,7 @@ pub fn request_of(spec: &JobSpec) -> PlanRequest {
         samples: spec.samples,
         seed: spec.seed,
         retrieval: spec.retrieval,
+        variations: spec.variations.unwrap_or(1),
         vector: spec.vector.clone(),
         canvas: spec.canvas,
         negative_prompt: spec.negative_prompt.clone(),

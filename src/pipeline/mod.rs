@@ -34,17 +34,17 @@ pub use models::{
     default_model_dir, find_taesd, is_model_dir, is_pixel_model, is_small_model,
     resolve_default_model, resolve_encoder,
 };
-pub use plan::{ModelFacts, PlanRequest, RunPlan, StartKind, TextPlan, Tuning};
+pub use plan::{MAX_VARIATIONS, ModelFacts, PlanRequest, RunPlan, StartKind, TextPlan, Tuning};
 pub use presets::PresetSettings;
 pub use report::{
     RerankReport, ResumePoint, RetrievalReport, RunMethod, RunOutput, RunReport, SdsReport,
-    TraceReport,
+    TraceReport, VariationReport,
 };
 pub use spec::{
     JobKind, JobSpec, Limits, MAX_JSON_INTEGER, MAX_SEED, Method, PRIORITY_RANGE, Preset,
     SpecError, Style, check_seed, parse_seed,
 };
-pub use text::{Start, TextCheckpoint, run_text, sample_ranked};
+pub use text::{Start, TextCheckpoint, VariationStart, run_text, sample_ranked};
 pub use vectorize::{VectorizeCheckpoint, run_vectorize};
 
 #[cfg(test)]

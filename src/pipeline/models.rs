@@ -9,6 +9,7 @@ use crate::models::ComputeDevice;
 use crate::models::scorer::{ImageTextScorer, Scorer};
 use crate::models::stable_diffusion::ModelHints;
 use crate::retrieval::{IconIndex, RetrievalLocations};
+use crate::stages::sample::NoStarts;
 use crate::teacher::{AnalyticTeacher, AnalyticTeacherConfig, SdTeacher, Teacher};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -330,7 +331,7 @@ pub struct Models {
     pub scorer: Option<Scorer>,
     /// The caption index of the model's training icons, when the model pins icon sets and
     /// `vectorfusion setup` installed it; why not otherwise (reported in the run's detail).
-    pub retrieval: Result<Arc<IconIndex>, String>,
+    pub retrieval: Result<Arc<IconIndex>, NoStarts>,
 }
 
 impl std::fmt::Debug for Models {
@@ -390,7 +391,7 @@ impl Models {
             return Ok(Models {
                 teacher: Box::new(teacher),
                 scorer,
-                retrieval: Err("the test teacher has no retrieval index".into()),
+                retrieval: Err(NoStarts::TestTeacher),
             });
         };
         let taesd = match encoder {
@@ -412,10 +413,10 @@ impl Models {
             })?;
         let retrieval = match RetrievalLocations::from_env().load(sd_dir) {
             Ok(Some(idx)) => Ok(Arc::new(idx)),
-            Ok(None) => Err("the model pins no icon sets".to_string()),
+            Ok(None) => Err(NoStarts::NoIconSets),
             Err(e) => {
                 tracing::warn!(model = %sd_dir.display(), "sampling from noise only: {e}");
-                Err(e.to_string())
+                Err(NoStarts::Retrieval(e))
             }
         };
         Ok(Models {

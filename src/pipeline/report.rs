@@ -25,6 +25,10 @@ pub struct RunOutput {
     /// Paths in `scene` (`scene.shapes.len()`).
     pub paths: usize,
     pub report: RunReport,
+    /// Variations 2..N of a text run asked for more than one (this output is variation 1;
+    /// [`RunReport::variations`] summarises them all); empty otherwise.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub variations: Vec<RunOutput>,
 }
 
 impl RunOutput {
@@ -35,6 +39,55 @@ impl RunOutput {
             scene,
             svg,
             report,
+            variations: Vec::new(),
+        }
+    }
+
+    /// This output (variation 1) with `others` as variations 2, 3, ...: each in
+    /// [`RunOutput::variations`] and all summed up in [`RunReport::variations`] (left empty
+    /// when there are no others).
+    pub fn with_variations(mut self, others: Vec<RunOutput>) -> Self {
+        self.variations = others;
+        if !self.variations.is_empty() {
+            self.report.variations = std::iter::once(&self)
+                .chain(&self.variations)
+                .zip(1..)
+                .map(|(o, n)| VariationReport::of(n, &o.report, o.paths))
+                .collect();
+        }
+        self
+    }
+
+    /// The SVGs of every variation, variation 1 (this output's) first.
+    pub fn svgs(&self) -> impl Iterator<Item = &str> {
+        std::iter::once(self.svg.as_str()).chain(self.variations.iter().map(|v| v.svg.as_str()))
+    }
+}
+
+/// One of the results of a text run asked for variations: which sample it was drawn from,
+/// that sample's rerank score and its paths.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct VariationReport {
+    /// 1-based; variation 1 is the job's `result.svg`.
+    pub variation: u32,
+    /// Index of the sample it was traced from (`None`: a from-scratch run).
+    pub sample: Option<usize>,
+    /// The sample's rerank score (`None` without a scorer or samples).
+    pub score: Option<f64>,
+    /// Paths in its SVG.
+    pub paths: usize,
+}
+
+impl VariationReport {
+    /// The summary of variation `variation` (1-based), reported as `report`, with `paths`.
+    pub fn of(variation: u32, report: &RunReport, paths: usize) -> Self {
+        let rerank = report.rerank.as_ref();
+        VariationReport {
+            variation,
+            sample: rerank.map(|r| r.chosen),
+            score: rerank.and_then(|r| r.scores.get(r.chosen).copied()),
+            paths,
         }
     }
 }
@@ -130,6 +183,9 @@ pub struct RunReport {
     /// Paths pruned as weak (text) or unseen, over budget or hidden (vectorize).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub paths_pruned: Option<usize>,
+    /// Vectorize: paths merged into a touching path of the same fill.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub paths_merged: Option<usize>,
     /// Paths in the SVG.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub paths_needed: Option<usize>,
@@ -138,6 +194,9 @@ pub struct RunReport {
     pub seconds: Option<f64>,
     #[serde(flatten, skip_serializing_if = "Option::is_none")]
     pub resumed: Option<ResumePoint>,
+    /// Text runs asked for more than one result: every variation, 1 first (empty otherwise).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub variations: Vec<VariationReport>,
     /// What the import of the input SVG could not keep as drawn (ignored filters, broken
     /// reference cycles), one sentence each ([`crate::svg::SvgImport::warnings`]).
     #[serde(skip_serializing_if = "Vec::is_empty")]
@@ -152,6 +211,7 @@ impl RunReport {
             psnr: Some(r.psnr),
             paths_needed: Some(r.paths),
             paths_pruned: Some(r.pruned),
+            paths_merged: Some(r.merged),
             steps: Some(r.steps),
             stages: r.stages.clone(),
             editability: Some(r.editability.clone()),

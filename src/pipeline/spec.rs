@@ -152,6 +152,10 @@ pub struct JobSpec {
     /// (retrieval, when the model has an installed index); false samples from noise only.
     #[serde(default = "default_retrieval")]
     pub retrieval: bool,
+    /// Text jobs: how many of the best distinct results to return (`None`: one; the plan
+    /// checks the bounds).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub variations: Option<u32>,
     /// Colours, background, grouping and (vectorize) the stopping rules of the vector stage;
     /// jobs stored before them take the defaults.
     #[serde(default, flatten)]

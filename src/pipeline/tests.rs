@@ -21,6 +21,7 @@ fn spec() -> JobSpec {
         canvas: Default::default(),
         negative_prompt: None,
         plan: None,
+        variations: None,
     }
 }
 

@@ -11,28 +11,20 @@
 //! reported in the run's [`RunReport`]. The SDS stage checkpoints through the job context and a
 //! restarted job resumes from it to the identical SVG.
 
-use super::canvas::{kept_inside, map_shape, placed, stretched};
+use super::canvas::{kept_inside, placed};
 use super::context::{resume_as, save_checkpoint};
 use super::plan::{MIN_OPACITY, TextPlan, min_area_at};
-use super::report::{
-    RerankReport, ResumePoint, RetrievalReport, RunMethod, SdsReport, TraceReport,
-};
+use super::report::{ResumePoint, SdsReport, TraceReport};
 use super::{JobContext, Models, PipelineError, RunOutput, RunReport};
 use crate::caption::ColourSteer;
 use crate::image::Image;
 use crate::image::ops::resize;
-use crate::models::scorer::ImageTextScorer;
 use crate::progress::{CancelToken, CheckpointError, Progress, ProgressSink, Stage};
 use crate::retrieval::Hit;
 use crate::scene::Scene;
 use crate::stages::live;
 use crate::stages::live::prune::weak_paths;
-use crate::stages::sample::{Ranked, RetrievalPick, retrieved_count, sample_and_rerank};
 use crate::stages::sds::{RasterBackend, SdsCheckpoint, SdsState, run_sds_resumable};
-use crate::stages::styles::SampleStart;
-use crate::teacher::SampleConfig;
-use rand::SeedableRng;
-use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 /// The input a text run starts from (what [`TextPlan::start`] names).
@@ -54,6 +46,8 @@ fn no_sample_plan() -> PipelineError {
 
 /// What a text run checkpoints (the service stores it with the job): the SDS loop's state and
 /// what the stages before it produced, so a resumed run skips sampling, rerank and tracing.
+/// A run of several variations checkpoints the SDS of the one it is on (the finished ones
+/// and the starts of the later ones with it), and goes on from that one.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct TextCheckpoint {
     /// The plan the state belongs to ([`super::RunPlan::key`]); another plan ignores it.
@@ -61,12 +55,36 @@ pub struct TextCheckpoint {
     /// The run's report when SDS started (rerank scores, LIVE statistics).
     pub detail: RunReport,
     pub sds: SdsState,
+    /// The variations finished before this one.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub done: Vec<RunOutput>,
+    /// The starts of the variations after this one.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub pending: Vec<VariationStart>,
+}
+
+/// Where one variation of a text run starts SDS: its report so far and its scene.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct VariationStart {
+    pub detail: RunReport,
+    pub scene: Scene,
+}
+
+/// A text run between its stages: the variations finished, the one it is on (with its saved
+/// SDS state when resumed) and the starts of the later ones.
+struct Variations {
+    done: Vec<RunOutput>,
+    current: VariationStart,
+    resume_sds: Option<SdsState>,
+    pending: std::collections::VecDeque<VariationStart>,
 }
 
 struct JobCheckpoints<'a> {
     ctx: &'a JobContext,
     key: &'a str,
     detail: &'a RunReport,
+    done: &'a [RunOutput],
+    pending: &'a std::collections::VecDeque<VariationStart>,
 }
 
 impl SdsCheckpoint for JobCheckpoints<'_> {
@@ -81,6 +99,8 @@ impl SdsCheckpoint for JobCheckpoints<'_> {
                 key: self.key.to_string(),
                 detail: self.detail.clone(),
                 sds: state.clone(),
+                done: self.done.to_vec(),
+                pending: self.pending.iter().cloned().collect(),
             },
         )
     }
@@ -118,257 +138,73 @@ fn scaled(scene: &Scene, width: u32) -> Scene {
     }
 }
 
-/// The K samples of `plan` for `caption` and the scorer's pick (the first stage of
-/// `sd_live*`; `eval --method samples` scores the pick as an image).
-pub fn sample_ranked(
-    models: &Models,
-    plan: &TextPlan,
-    caption: &str,
-    sink: &dyn ProgressSink,
-    cancel: &CancelToken,
-) -> Result<(Ranked, Option<String>), PipelineError> {
-    let sp = plan.sample.as_ref().ok_or_else(no_sample_plan)?;
-    let n = retrieved_count(sp.samples, sp.retrieval_share);
-    let retrieval = if !sp.retrieval {
-        Err("turned off".to_string())
-    } else if n == 0 {
-        Err("the model's _retrieval_share is 0".to_string())
-    } else {
-        models
-            .retrieval
-            .as_deref()
-            .map(|i| {
-                let pick = RetrievalPick {
-                    n,
-                    per_caption: sp.retrieval_per_caption as usize,
-                    seed: plan.seeds.sample,
-                };
-                (i, pick)
-            })
-            .map_err(Clone::clone)
-    };
-    let cfg = SampleConfig {
-        k: sp.samples,
-        steps: sp.steps as usize,
-        guidance: f64::from(sp.guidance),
-        seed: plan.seeds.sample,
-        strength: sp.strength,
-        negative_prompt: plan.negative_prompt.clone().unwrap_or_default(),
-    };
-    sample_and_rerank(
-        models.teacher(),
-        models.scorer.as_ref(),
-        retrieval,
-        &plan.prompt,
-        caption,
-        plan.caption.as_ref(),
-        &cfg,
-        sink,
-        cancel,
-    )
-    .map_err(PipelineError::from)
-}
+mod start;
+pub use start::sample_ranked;
+use start::{render_dims, start_scenes};
 
-/// The rerank and retrieval of `ranked`, the samples of `plan` (`why_not`: why none started
-/// from a retrieved icon).
-fn rerank_reports(
-    models: &Models,
-    plan: &TextPlan,
-    ranked: &Ranked,
-    why_not: Option<String>,
-) -> Result<(RerankReport, RetrievalReport), PipelineError> {
-    let sp = plan.sample.as_ref().ok_or_else(no_sample_plan)?;
-    let rerank = RerankReport {
-        scorer: models.scorer.as_ref().map(|s| s.name().to_string()),
-        scores: ranked.scores().iter().map(|&s| f64::from(s)).collect(),
-        chosen: ranked.best(),
-        samples: sp.samples,
-        sources: ranked.sources().to_vec(),
-    };
-    let retrieval = RetrievalReport {
-        strength: sp.strength,
-        share: sp.retrieval_share,
-        per_caption: sp.retrieval_per_caption,
-        starts: ranked.sources().iter().flatten().cloned().collect(),
-        chosen: ranked.best_source().cloned(),
-        unavailable: why_not,
-    };
-    Ok((rerank, retrieval))
-}
-
-/// `image` scaled up so its longer side is `side` (small samples of a 32 px pixel-space prior
-/// are traced on the larger canvas); a large enough image as it is.
-fn upscaled(image: &Image, side: u32) -> std::borrow::Cow<'_, Image> {
-    let longer = image.width.max(image.height);
-    if longer >= side {
-        return std::borrow::Cow::Borrowed(image);
-    }
-    let k = side as f32 / longer as f32;
-    std::borrow::Cow::Owned(resize(
-        image,
-        ((image.width as f32 * k).round() as u32).max(1),
-        ((image.height as f32 * k).round() as u32).max(1),
-    ))
-}
-
-/// Tops `scene` up with the style's random shapes to the style's minimum for `plan` (a flat
-/// sample can trace to (almost) nothing, and SDS needs something to move). Returns how many
-/// were added.
-fn top_up(scene: &mut Scene, plan: &TextPlan) -> Result<usize, PipelineError> {
-    let spec = plan.style.spec();
-    let want = spec.min_shapes(plan.paths as usize);
-    let mut rng = ChaCha8Rng::seed_from_u64(plan.seeds.top_up);
-    let mut added = 0usize;
-    // Drawn on a square of the sample's longer side, stretched to the sample.
-    let (w, h) = plan.sample_dims();
-    let side = w.max(h);
-    let k = (w as f32 / side as f32, h as f32 / side as f32);
-    while scene.shapes.len() < want {
-        let shape = spec
-            .extra_shape(side, &mut rng)
-            .map_err(PipelineError::scene("initial"))?;
-        scene.shapes.push(if w == h {
-            shape
-        } else {
-            map_shape(&shape, k, (0.0, 0.0))
-        });
-        added += 1;
-    }
-    Ok(added)
-}
-
-/// `(width, height)` SDS renders `plan`'s scene at: the sample's, or larger where
-/// augmentation crops.
-fn render_dims(plan: &TextPlan) -> (u32, u32) {
-    plan.sds_config()
-        .and_then(|c| c.augment)
-        .map_or(plan.sample_dims(), |a| a.render_dims())
-}
-
-/// The style's random from-scratch scene at `(w, h)`: drawn on a square of the longer side,
-/// stretched to a non-square canvas.
-fn init_scene(plan: &TextPlan, (w, h): (u32, u32)) -> Result<Scene, PipelineError> {
-    let mut rng = ChaCha8Rng::seed_from_u64(plan.seeds.init);
-    let scene = plan
-        .style
-        .init_scene(w.max(h), plan.paths as usize, &mut rng)
-        .map_err(PipelineError::scene("initial"))?;
-    Ok(if w == h {
-        scene
-    } else {
-        stretched(&scene, w, h)
-    })
-}
-
-/// The starting scene from the best of K samples (`sd_live*`), with the rerank and retrieval
-/// in `report`.
-fn from_samples(
-    models: &Models,
-    plan: &TextPlan,
-    caption: &str,
-    report: &mut RunReport,
-    sink: &dyn ProgressSink,
-    cancel: &CancelToken,
-) -> Result<Scene, PipelineError> {
-    let size = plan.size;
-    let (width, height) = plan.sample_dims();
-    let (ranked, why_not) = sample_ranked(models, plan, caption, sink, cancel)?;
-    let (rerank, retrieval) = rerank_reports(models, plan, &ranked, why_not)?;
-    let mut ev = Progress::new(Stage::Rerank, 1, 1);
-    ev.detail = serde_json::to_value(&rerank).ok();
-    sink.report(ev);
-    report.rerank = Some(rerank);
-    report.retrieval = Some(retrieval);
-    report.caption = ranked.caption().cloned();
-    let spec = plan.style.spec();
-    if spec.sample_start() == SampleStart::Image {
-        return spec
-            .scene_from_image(ranked.best_image(), size)
-            .map_err(PipelineError::scene("initial"));
-    }
-    let best_img = upscaled(ranked.best_image(), plan.trace.size);
-    let (scene, traced) = trace(&best_img, plan, sink, cancel)?;
-    report.live = Some(traced);
-    let mut scene = spec
-        .restyle_trace(scaled(&scene, width), width.min(height))
-        .map_err(PipelineError::scene("initial"))?;
-    report.topped_up = Some(top_up(&mut scene, plan)?);
-    Ok(scene)
-}
-
-/// The report a text run starts with: what runs, with which teacher.
-fn first_report(models: &Models, plan: &TextPlan) -> RunReport {
-    let teacher = models.teacher();
-    RunReport {
-        method: Some(RunMethod::from(plan.method)),
-        style: Some(plan.style),
-        teacher: Some(teacher.name()),
-        encoder: Some(teacher.encoder().to_string()),
-        size: Some(plan.size),
-        prompt: Some(plan.prompt.clone()),
-        ..RunReport::default()
-    }
-}
-
-/// The scene a text run starts SDS from, and the saved SDS state when `resumed` (an
-/// interrupted attempt's checkpoint of this plan) is given; fills `report`.
-#[allow(clippy::too_many_arguments)]
-fn start_scene(
+/// when given, otherwise from the start scenes of every variation.
+fn begin(
     models: &Models,
     plan: &TextPlan,
     caption: &str,
     start: &Start,
     resumed: Option<TextCheckpoint>,
-    report: &mut RunReport,
     sink: &dyn ProgressSink,
     cancel: &CancelToken,
-) -> Result<(Scene, Option<SdsState>), PipelineError> {
-    let (size, _) = plan.sample_dims();
-    let scene = match (resumed, start) {
-        (Some(r), _) => {
-            *report = r.detail;
-            report.resumed = Some(ResumePoint::Step(r.sds.step));
-            return Ok((r.sds.scene.clone(), Some(r.sds)));
-        }
-        (None, Start::Svg(scene)) => scaled(scene, size),
-        (None, Start::Image(image)) => {
-            let (scene, traced) = trace(image, plan, sink, cancel)?;
-            report.live = Some(traced);
-            scaled(&scene, size)
-        }
-        (None, Start::Method) if plan.sample.is_none() => init_scene(plan, render_dims(plan))?,
-        (None, Start::Method) => from_samples(models, plan, caption, report, sink, cancel)?,
-    };
-    Ok((scene, None))
+) -> Result<Variations, PipelineError> {
+    if let Some(r) = resumed {
+        let mut detail = r.detail;
+        detail.resumed = Some(ResumePoint::Step(r.sds.step));
+        return Ok(Variations {
+            done: r.done,
+            current: VariationStart {
+                detail,
+                scene: r.sds.scene.clone(),
+            },
+            resume_sds: Some(r.sds),
+            pending: r.pending.into(),
+        });
+    }
+    let mut starts: std::collections::VecDeque<VariationStart> =
+        start_scenes(models, plan, caption, start, sink, cancel)?.into();
+    let current = starts
+        .pop_front()
+        .ok_or_else(|| PipelineError::Failed("plan: a run of no variations".into()))?;
+    Ok(Variations {
+        done: Vec::new(),
+        current,
+        resume_sds: None,
+        pending: starts,
+    })
 }
 
-/// Score distillation of `scene` (or on from `resume_sds`) as `plan` says, checkpointed
-/// through `ctx` with `report` under `key`; the distilled scene at the teacher's size.
-#[allow(clippy::too_many_arguments)]
+/// Score distillation of `run`'s current variation (or on from its saved state) as `plan`
+/// says, checkpointed through `ctx` with the run under `key`; the distilled scene at the
+/// teacher's size, the SDS statistics in the variation's report.
 fn distil(
     models: &Models,
     plan: &TextPlan,
     key: &str,
-    scene: Scene,
-    resume_sds: Option<SdsState>,
-    report: &mut RunReport,
+    run: &mut Variations,
     sink: &dyn ProgressSink,
     cancel: &CancelToken,
     ctx: Option<&JobContext>,
 ) -> Result<Scene, PipelineError> {
     let (Some(sp), Some(cfg)) = (&plan.sds, plan.sds_config()) else {
-        return Ok(scene);
+        return Ok(run.current.scene.clone());
     };
     let (width, _) = plan.sample_dims();
     let (render, _) = render_dims(plan);
-    let state = match resume_sds {
+    let state = match run.resume_sds.take() {
         Some(s) => s,
-        None => SdsState::start(scaled(&scene, render), &cfg),
+        None => SdsState::start(scaled(&run.current.scene, render), &cfg),
     };
     let checkpoints = ctx.map(|ctx| JobCheckpoints {
         ctx,
         key,
-        detail: report,
+        detail: &run.current.detail,
+        done: &run.done,
+        pending: &run.pending,
     });
     let out = run_sds_resumable(
         &RasterBackend,
@@ -382,7 +218,7 @@ fn distil(
     if out.stats.cancelled {
         return Err(PipelineError::Cancelled);
     }
-    report.sds = Some(SdsReport {
+    run.current.detail.sds = Some(SdsReport {
         stats: out.stats,
         augment: sp.augment,
     });
@@ -456,12 +292,40 @@ fn with_origin(svg: String, report: &RunReport, caption: &str) -> String {
     )
 }
 
+/// The finished output of a variation distilled to `scene` as `plan` says: pruned and
+/// finished ([`finish`]), validated and written, naming the icon it started from.
+fn output(
+    mut scene: Scene,
+    plan: &TextPlan,
+    mut report: RunReport,
+    caption: &str,
+    t0: std::time::Instant,
+) -> Result<RunOutput, PipelineError> {
+    // On a canvas of its own, no shape reaches past the sample's edge, where the canvas now
+    // goes on ...
+    if plan.canvas.is_some() {
+        kept_inside(&mut scene);
+    }
+    finish(&mut scene, plan, &mut report);
+    // ... then the sample fitted and centred on the SVG's canvas.
+    if let Some(c) = plan.canvas {
+        scene = placed(&scene, c.width, c.height);
+    }
+    report.seconds = Some(t0.elapsed().as_secs_f64());
+    scene.validate().map_err(PipelineError::scene("final"))?;
+    let svg = crate::vector::write_svg(&scene, &plan.colors);
+    let svg = with_origin(svg, &report, caption);
+    Ok(RunOutput::new(scene, svg, report))
+}
+
 /// Runs `plan` (key `key`, [`super::RunPlan::key`]) for `caption` from `start` with `models`:
 /// progress (with SVG snapshots) goes to `sink`, `cancel` is polled between steps. With a job
 /// context the SDS stage is checkpointed every `ctx.checkpoint_due` steps (and when cancelled),
 /// and a [`TextCheckpoint`] of the same plan in `ctx.resume_state()` skips the stages before
 /// SDS; a resumed run ends with the same SVG as an uninterrupted one
-/// ([`RunReport::resumed`]).
+/// ([`RunReport::resumed`]). A plan of several variations distils them one after the other
+/// (variation `i` with [`TextPlan::variation`]'s seeds); the output is the first, with the
+/// others in [`RunOutput::variations`] and a summary of all in [`RunReport::variations`].
 #[allow(clippy::too_many_arguments)]
 pub fn run_text(
     models: &Models,
@@ -480,51 +344,32 @@ pub fn run_text(
             plan.sample_dims()
         )));
     }
-    let mut report = first_report(models, plan);
     let t0 = std::time::Instant::now();
     let resumed = resume_as::<TextCheckpoint>(ctx).filter(|c| c.key == key);
-    // 1. The starting scene (or the saved SDS state of an interrupted attempt).
-    let (scene, resume_sds) = start_scene(
-        models,
-        plan,
-        caption,
-        start,
-        resumed,
-        &mut report,
-        sink,
-        cancel,
-    )?;
-    if cancel.is_cancelled() {
-        return Err(PipelineError::Cancelled);
+    // 1. The starting scenes (or the saved state of an interrupted attempt).
+    let mut run = begin(models, plan, caption, start, resumed, sink, cancel)?;
+    loop {
+        if cancel.is_cancelled() {
+            return Err(PipelineError::Cancelled);
+        }
+        let vplan = plan.variation(run.done.len());
+        // 2. Score distillation.
+        let scene = distil(models, &vplan, key, &mut run, sink, cancel, ctx)?;
+        // 3. Pruning and the vector stage's finish.
+        let detail = std::mem::take(&mut run.current.detail);
+        run.done.push(output(scene, &vplan, detail, caption, t0)?);
+        match run.pending.pop_front() {
+            Some(next) => run.current = next,
+            None => break,
+        }
     }
-    // 2. Score distillation.
-    let mut scene = distil(
-        models,
-        plan,
-        key,
-        scene,
-        resume_sds,
-        &mut report,
-        sink,
-        cancel,
-        ctx,
-    )?;
-    // 3. Pruning and the vector stage's finish (on a canvas of its own, no shape reaches past
-    // the sample's edge, where the canvas now goes on) ...
-    if plan.canvas.is_some() {
-        kept_inside(&mut scene);
-    }
-    finish(&mut scene, plan, &mut report);
-    // 4. ... then the sample fitted and centred on the SVG's canvas.
-    if let Some(c) = plan.canvas {
-        scene = placed(&scene, c.width, c.height);
-    }
-    report.seconds = Some(t0.elapsed().as_secs_f64());
-    scene.validate().map_err(PipelineError::scene("final"))?;
-    let svg = crate::vector::write_svg(&scene, &plan.colors);
-    let svg = with_origin(svg, &report, caption);
+    let mut outputs = run.done.into_iter();
+    let out = outputs
+        .next()
+        .ok_or_else(|| PipelineError::Failed("plan: a run of no variations".into()))?
+        .with_variations(outputs.collect());
     let mut done = Progress::new(Stage::Done, 1, 1);
-    done.svg = Some(svg.clone());
+    done.svg = Some(out.svg.clone());
     sink.report(done);
-    Ok(RunOutput::new(scene, svg, report))
+    Ok(out)
 }

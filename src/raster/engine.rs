@@ -3,7 +3,10 @@
 //! The canvas is cut into horizontal bands that are processed in parallel (rayon); inside a
 //! band, layers are painted in order, each only over its bounding box ∩ band.
 
-use super::geom::{Layer, LayerKind, SceneT, polyline_backward};
+use super::composite::{Area, composite, composite_back};
+use super::geom::{Layer, LayerKind, SceneT};
+use super::grad::{GradT, reduce};
+use super::paint::{Flat, GradientShade};
 use super::real::Real;
 use super::stroke;
 use super::walk::{Clip, deposit, edge_grad};
@@ -57,31 +60,6 @@ pub(crate) fn bands(height: u32) -> Vec<(i32, i32)> {
 
 fn premul_bg<T: Real>(bg: [T; 4]) -> [T; 4] {
     [bg[0] * bg[3], bg[1] * bg[3], bg[2] * bg[3], bg[3]]
-}
-
-/// Coverage of a fill from its winding integral `A`: `min(|A|, 1)` (nonzero), or the distance
-/// of `A` to the nearest even integer (even-odd: 0 on even windings, 1 on odd ones, linear in
-/// between, exact where one edge crosses a pixel).
-#[inline]
-fn coverage<T: Real>(a: T, even_odd: bool) -> T {
-    if even_odd {
-        (a - T::c(2.0) * (a * T::c(0.5)).round()).abs()
-    } else {
-        a.abs().min(T::one())
-    }
-}
-
-/// `d coverage / dA` (see [`coverage`]; 0 where the nonzero coverage saturates).
-#[inline]
-fn coverage_slope<T: Real>(a: T, even_odd: bool) -> T {
-    let r = if even_odd {
-        a - T::c(2.0) * (a * T::c(0.5)).round()
-    } else if a.abs() < T::one() {
-        a
-    } else {
-        return T::zero();
-    };
-    if r < T::zero() { -T::one() } else { T::one() }
 }
 
 /// A pixel box `[x0, y0, x1, y1)` ∩ the band rows `y0..y1`, if not empty.
@@ -148,13 +126,13 @@ fn forward_band<T: Real>(
         return;
     }
     for (li, l) in ls.iter().enumerate() {
-        paint_layer(sc.width, li, l, (y0, y1), img, tape.as_deref_mut(), &mut st);
+        paint_layer(sc, li, l, (y0, y1), img, tape.as_deref_mut(), &mut st);
     }
 }
 
 /// Paints layer `li` onto `img` (the band's rows of the layer it belongs to).
 pub(crate) fn paint_layer<T: Real>(
-    width: u32,
+    sc: &SceneT<T>,
     li: usize,
     l: &Layer<T>,
     (y0, y1): (i32, i32),
@@ -165,13 +143,13 @@ pub(crate) fn paint_layer<T: Real>(
     let Some(clip) = layer_clip(l, y0, y1) else {
         return;
     };
-    let w = width as usize;
+    let w = sc.width as usize;
     let cw = (clip.x1 - clip.x0) as usize;
     let rows = (clip.y1 - clip.y0) as usize;
     // Per-pixel value the coverage is a function of: the winding integral A for fills
     // (coverage min(|A|, 1) or its even-odd fold), the coverage itself for strokes. Written
     // straight into the tape when there is one.
-    let (buf, mut dst_buf) = match tape {
+    let (buf, dst_buf) = match tape {
         Some(t) => {
             t.recs.push(Rec {
                 kind: RecKind::Paint,
@@ -216,28 +194,22 @@ pub(crate) fn paint_layer<T: Real>(
             );
         }
     }
-    let fill = l.kind == LayerKind::Fill;
-    let eo = l.even_odd;
-    let [r, g, b, ca] = l.color;
-    for row in 0..rows {
-        let vrow = &out[row * cw..(row + 1) * cw];
-        let iy = (clip.y0 - y0) as usize + row;
-        let base = 4 * (iy * w + clip.x0 as usize);
-        let prow = &mut img[base..base + 4 * cw];
-        if let Some(d) = dst_buf.as_deref_mut() {
-            d.extend_from_slice(prow);
+    let at = Area {
+        clip,
+        y0,
+        w,
+        fill: l.kind == LayerKind::Fill,
+        even_odd: l.even_odd,
+    };
+    match l.paint {
+        None => {
+            let flat = Flat {
+                c: l.color,
+                dc: [T::zero(); 4],
+            };
+            composite(&at, out, img, dst_buf, &flat);
         }
-        for (&v, p) in vrow.iter().zip(prow.chunks_exact_mut(4)) {
-            let cov = if fill { coverage(v, eo) } else { v };
-            let alpha = cov * ca;
-            if alpha > T::zero() {
-                let keep = T::one() - alpha;
-                p[0] = r * alpha + p[0] * keep;
-                p[1] = g * alpha + p[1] * keep;
-                p[2] = b * alpha + p[2] * keep;
-                p[3] = alpha + p[3] * keep;
-            }
-        }
+        Some(pi) => composite(&at, out, img, dst_buf, &GradientShade::new(&sc.paints[pi])),
     }
 }
 
@@ -275,12 +247,14 @@ pub(crate) fn forward<T: Real>(
 /// Per-band gradient partial sums.
 pub(crate) struct BandGrad<T> {
     /// Per layer, per outline vertex.
-    dverts: Vec<Vec<[T; 2]>>,
+    pub dverts: Vec<Vec<[T; 2]>>,
     /// Per layer, straight RGBA.
-    dcolor: Vec<[T; 4]>,
+    pub dcolor: Vec<[T; 4]>,
     /// Per layer, stroke half-width.
-    dradius: Vec<T>,
-    dbg: [T; 4],
+    pub dradius: Vec<T>,
+    /// Per gradient of the scene, its parameters (empty until touched).
+    pub dpaint: Vec<Vec<T>>,
+    pub dbg: [T; 4],
     /// Per group, its opacity.
     pub dopacity: Vec<T>,
 }
@@ -292,25 +266,26 @@ pub(crate) struct GradScratch<T> {
     stroke: stroke::Scratch<T>,
 }
 
+/// The backward pass over one band; `g` holds dL/d(output) of the band's rows and is used up.
 fn backward_band<T: Real>(
     sc: &SceneT<T>,
     ls: &[Layer<T>],
     y0: i32,
     tape: &BandTape<T>,
-    dimg: &[T],
+    mut g: Vec<T>,
 ) -> BandGrad<T> {
-    let mut g: Vec<T> = dimg.to_vec();
     let mut out = BandGrad {
         dverts: vec![Vec::new(); ls.len()],
         dcolor: vec![[T::zero(); 4]; ls.len()],
         dradius: vec![T::zero(); ls.len()],
+        dpaint: vec![Vec::new(); sc.paints.len()],
         dbg: [T::zero(); 4],
         dopacity: vec![T::zero(); sc.groups.len()],
     };
     let mut st = GradScratch::default();
     if sc.groups.is_empty() {
         for rec in tape.recs.iter().rev() {
-            backward_layer(sc.width, ls, y0, tape, rec, &mut g, &mut out, &mut st);
+            backward_layer(sc, ls, y0, tape, rec, &mut g, &mut out, &mut st);
         }
     } else {
         super::layer::backward_band(sc, ls, y0, tape, &mut g, &mut out, &mut st);
@@ -326,11 +301,11 @@ fn backward_band<T: Real>(
 }
 
 /// Backward through the painting of one layer (`rec`): `g` (the gradient of the band's rows of
-/// the layer painted onto) becomes the gradient of what lay under it; the layer's colour,
-/// outline and width gradients are added to `out`.
+/// the layer painted onto) becomes the gradient of what lay under it; the layer's colour or
+/// gradient, outline and width gradients are added to `out`.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn backward_layer<T: Real>(
-    width: u32,
+    sc: &SceneT<T>,
     ls: &[Layer<T>],
     y0: i32,
     tape: &BandTape<T>,
@@ -339,68 +314,49 @@ pub(crate) fn backward_layer<T: Real>(
     out: &mut BandGrad<T>,
     st: &mut GradScratch<T>,
 ) {
-    let w = width as usize;
     let li = rec.layer as usize;
     let l = &ls[li];
     let clip = rec.clip;
     let cw = (clip.x1 - clip.x0) as usize;
     let rows = (clip.y1 - clip.y0) as usize;
     // Every entry is written in the pixel loop below; only grow, never clear.
-    let gbuf = &mut st.gbuf;
-    if gbuf.len() < cw * rows {
-        gbuf.resize(cw * rows, T::zero());
+    if st.gbuf.len() < cw * rows {
+        st.gbuf.resize(cw * rows, T::zero());
     }
-    let [cr, cg, cb, ca] = l.color;
     let fill = l.kind == LayerKind::Fill;
-    let eo = l.even_odd;
-    let mut dc = [T::zero(); 4];
-    let mut any = false;
-    for row in 0..rows {
-        let iy = (clip.y0 - y0) as usize + row;
-        let base = 4 * (iy * w + clip.x0 as usize);
-        let grow = &mut g[base..base + 4 * cw];
-        let off = rec.offset + row * cw;
-        let arow = &tape.area[off..off + cw];
-        let drow = &tape.dst[4 * off..4 * (off + cw)];
-        let gb = &mut gbuf[row * cw..(row + 1) * cw];
-        for (((&a, d), gp), gbv) in arow
-            .iter()
-            .zip(drow.chunks_exact(4))
-            .zip(grow.chunks_exact_mut(4))
-            .zip(gb.iter_mut())
-        {
-            *gbv = T::zero();
-            if a == T::zero() {
-                // No coverage and no edge inside: nothing flows through this layer here.
-                continue;
-            }
-            let cov = if fill { coverage(a, eo) } else { a };
-            let alpha = cov * ca;
-            let galpha = gp[0] * (cr - d[0])
-                + gp[1] * (cg - d[1])
-                + gp[2] * (cb - d[2])
-                + gp[3] * (T::one() - d[3]);
-            dc[0] += gp[0] * alpha;
-            dc[1] += gp[1] * alpha;
-            dc[2] += gp[2] * alpha;
-            dc[3] += galpha * cov;
-            let slope = if fill {
-                coverage_slope(a, eo)
-            } else {
-                T::one()
+    let at = Area {
+        clip,
+        y0,
+        w: sc.width as usize,
+        fill,
+        even_odd: l.even_odd,
+    };
+    let gb = &mut st.gbuf[..cw * rows];
+    let any = match l.paint {
+        None => {
+            let mut flat = Flat {
+                c: l.color,
+                dc: [T::zero(); 4],
             };
-            let v = galpha * ca * slope;
-            any |= v != T::zero();
-            *gbv = v;
-            let keep = T::one() - alpha;
-            for c in gp.iter_mut() {
-                *c *= keep;
+            let any = composite_back(&at, rec.offset, tape, g, gb, &mut flat);
+            for c in 0..4 {
+                out.dcolor[li][c] += flat.dc[c];
             }
+            any
         }
-    }
-    for c in 0..4 {
-        out.dcolor[li][c] += dc[c];
-    }
+        Some(pi) => {
+            let mut sh = GradientShade::new(&sc.paints[pi]);
+            let any = composite_back(&at, rec.offset, tape, g, gb, &mut sh);
+            let dp = &mut out.dpaint[pi];
+            if dp.is_empty() {
+                dp.resize(sh.d.len(), T::zero());
+            }
+            for (acc, v) in dp.iter_mut().zip(&sh.d) {
+                *acc += *v;
+            }
+            any
+        }
+    };
     let gb = &st.gbuf[..cw * rows];
     if any && !fill {
         let dp = &mut out.dverts[li];
@@ -426,17 +382,6 @@ pub(crate) fn backward_layer<T: Real>(
     }
 }
 
-/// Gradients in the layout of [`crate::scene::Params`], in the working precision.
-#[derive(Clone, Debug)]
-pub(crate) struct GradT<T> {
-    pub points: Vec<T>,
-    pub fill: Vec<T>,
-    pub stroke: Vec<T>,
-    pub width: Vec<T>,
-    pub bg: [T; 4],
-    pub opacity: Vec<T>,
-}
-
 /// Backward over all bands, then the chain rule back to scene parameters.
 pub(crate) fn backward<T: Real>(
     sc: &SceneT<T>,
@@ -452,83 +397,53 @@ pub(crate) fn backward<T: Real>(
         .map(|(&(y0, y1), tape)| {
             let lo = 4 * w * y0 as usize;
             let hi = 4 * w * y1 as usize;
-            backward_band(sc, ls, y0, tape, &dimg[lo..hi])
+            backward_band(sc, ls, y0, tape, dimg[lo..hi].to_vec())
         })
         .collect();
-    // Reduce over bands.
-    let mut dverts: Vec<Vec<[T; 2]>> = ls
-        .iter()
-        .map(|l| vec![[T::zero(); 2]; l.verts.len().max(l.poly.len())])
+    reduce(sc, ls, &parts)
+}
+
+/// A loss of one band: given the band's pixel range (indices into the image, row-major), its
+/// rendered premultiplied RGBA and a zeroed buffer of the same length, writes
+/// dL/d(rendered RGBA) into the buffer and returns the band's share of the loss.
+pub(crate) type BandLoss<'a, T> = dyn Fn(std::ops::Range<usize>, &[T], &mut [T]) -> f64 + Sync + 'a;
+
+/// [`forward`] with a tape, `loss` and [`backward`] fused band by band: one parallel pass, with
+/// the loss computed in parallel too. The gradients are those of [`backward`] given the
+/// per-band loss gradients; returns the loss (the band shares summed in band order), the
+/// gradients and the band tapes for reuse. Scenes with groups take the same path: a group's
+/// layers live within the band and its clip and mask factors are drawn per scene beforehand
+/// (`SceneT::groups`), so every band is independent.
+pub(crate) fn forward_backward<T: Real>(
+    sc: &SceneT<T>,
+    ls: &[Layer<T>],
+    mut recycled: Vec<BandTape<T>>,
+    loss: &BandLoss<'_, T>,
+) -> (f64, GradT<T>, Vec<BandTape<T>>) {
+    let w = sc.width as usize;
+    let bs = bands(sc.height);
+    recycled.resize_with(bs.len(), BandTape::default);
+    recycled.truncate(bs.len());
+    let done: Vec<(f64, BandGrad<T>, BandTape<T>)> = bs
+        .par_iter()
+        .zip(recycled.into_par_iter())
+        .map(|(&(y0, y1), mut tape)| {
+            let px = w * y0 as usize..w * y1 as usize;
+            let mut img = vec![T::zero(); 4 * px.len()];
+            forward_band(sc, ls, (y0, y1), &mut img, Some(&mut tape));
+            let mut g = vec![T::zero(); img.len()];
+            let l = loss(px, &img, &mut g);
+            let grad = backward_band(sc, ls, y0, &tape, g);
+            (l, grad, tape)
+        })
         .collect();
-    let mut dcolor = vec![[T::zero(); 4]; ls.len()];
-    let mut dradius = vec![T::zero(); ls.len()];
-    let mut dbg = [T::zero(); 4];
-    let mut dopacity = vec![T::zero(); sc.groups.len()];
-    for p in &parts {
-        for (acc, v) in dopacity.iter_mut().zip(&p.dopacity) {
-            *acc += *v;
-        }
-        for (li, dv) in p.dverts.iter().enumerate() {
-            for (acc, v) in dverts[li].iter_mut().zip(dv) {
-                acc[0] += v[0];
-                acc[1] += v[1];
-            }
-            for c in 0..4 {
-                dcolor[li][c] += p.dcolor[li][c];
-            }
-            dradius[li] += p.dradius[li];
-        }
-        for c in 0..4 {
-            dbg[c] += p.dbg[c];
-        }
+    let mut total = 0.0;
+    let mut parts = Vec::with_capacity(done.len());
+    let mut tapes = Vec::with_capacity(done.len());
+    for (l, g, t) in done {
+        total += l;
+        parts.push(g);
+        tapes.push(t);
     }
-    // Parameter layout offsets.
-    let mut pt_off = Vec::with_capacity(sc.shapes.len());
-    let mut fill_idx = Vec::with_capacity(sc.shapes.len());
-    let mut stroke_idx = Vec::with_capacity(sc.shapes.len());
-    let (mut np, mut nf, mut ns) = (0, 0, 0);
-    for s in &sc.shapes {
-        pt_off.push(np);
-        np += 2 * s.pts.len();
-        fill_idx.push(nf);
-        if s.fill.is_some() {
-            nf += 1;
-        }
-        stroke_idx.push(ns);
-        if s.stroke.is_some() {
-            ns += 1;
-        }
-    }
-    let mut grad = GradT {
-        points: vec![T::zero(); np],
-        fill: vec![T::zero(); 4 * nf],
-        stroke: vec![T::zero(); 4 * ns],
-        width: vec![T::zero(); ns],
-        bg: dbg,
-        opacity: dopacity,
-    };
-    for (li, l) in ls.iter().enumerate() {
-        let s = &sc.shapes[l.shape];
-        let dpts = &mut grad.points[pt_off[l.shape]..pt_off[l.shape] + 2 * s.pts.len()];
-        match l.kind {
-            LayerKind::Fill => {
-                polyline_backward(s, &dverts[li], dpts);
-                let k = 4 * fill_idx[l.shape];
-                for c in 0..4 {
-                    grad.fill[k + c] += dcolor[li][c];
-                }
-            }
-            LayerKind::Stroke => {
-                let dr = dradius[li];
-                polyline_backward(s, &dverts[li], dpts);
-                let k = stroke_idx[l.shape];
-                for c in 0..4 {
-                    grad.stroke[4 * k + c] += dcolor[li][c];
-                }
-                // r = max(w, 0) / 2; widths of valid scenes are >= 0 (right derivative at 0).
-                grad.width[k] += T::c(0.5) * dr;
-            }
-        }
-    }
-    grad
+    (total, reduce(sc, ls, &parts), tapes)
 }

@@ -9,6 +9,7 @@
 //!   the polyline (see `stroke`).
 
 use super::layer::GroupT;
+use super::paint::PaintT;
 use super::real::Real;
 use super::stroke::Style;
 use crate::scene::{FillRule, Rgba, Scene, ShapeKind, Stroke};
@@ -47,6 +48,9 @@ pub(crate) struct ShapeT<T> {
     pub pieces: Vec<u32>,
     /// Whether the fill uses the even-odd rule.
     pub even_odd: bool,
+    /// Indices into [`SceneT::paints`] of the fill's and the stroke's gradient.
+    pub fill_paint: Option<usize>,
+    pub stroke_paint: Option<usize>,
 }
 
 /// A scene's parameters in the working precision, plus the fixed flattening plan.
@@ -58,6 +62,9 @@ pub(crate) struct SceneT<T> {
     pub shapes: Vec<ShapeT<T>>,
     /// The scene's groups, with their clip and mask drawn (see `layer`).
     pub groups: Vec<GroupT<T>>,
+    /// Every gradient, shape by shape, fill before stroke (the parameter order of
+    /// [`crate::scene::paint::scene_gradient_params`]).
+    pub paints: Vec<PaintT<T>>,
 }
 
 fn seg_f32(kind: ShapeKind, p: &[[f32; 2]], i: usize) -> [[f32; 2]; 4] {
@@ -72,6 +79,13 @@ fn seg_f32(kind: ShapeKind, p: &[[f32; 2]], i: usize) -> [[f32; 2]; 4] {
 impl<T: Real> SceneT<T> {
     pub fn from_scene(scene: &Scene, tol: f32) -> Self {
         let c4 = |c: crate::scene::Rgba| c.to_array().map(T::of);
+        let mut paints = Vec::new();
+        let mut add = |g: Option<&crate::scene::Gradient>| {
+            g.map(|g| {
+                paints.push(PaintT::of(g));
+                paints.len() - 1
+            })
+        };
         let shapes = scene
             .shapes
             .iter()
@@ -92,6 +106,8 @@ impl<T: Real> SceneT<T> {
                     style: Style::of(&s.stroke.unwrap_or(Stroke::round(Rgba::BLACK, 0.0))),
                     pieces,
                     even_odd: s.fill_rule == FillRule::EvenOdd,
+                    fill_paint: add(s.gradients.as_ref().and_then(|g| g.fill.as_ref())),
+                    stroke_paint: add(s.gradients.as_ref().and_then(|g| g.stroke.as_ref())),
                 }
             })
             .collect();
@@ -101,6 +117,7 @@ impl<T: Real> SceneT<T> {
             bg: c4(scene.background),
             shapes,
             groups: super::layer::groups_t(scene, tol),
+            paints,
         }
     }
 }
@@ -189,6 +206,8 @@ pub(crate) struct Layer<T> {
     pub kind: LayerKind,
     /// Straight RGBA.
     pub color: [T; 4],
+    /// The gradient painted instead of `color` (index into [`SceneT::paints`]).
+    pub paint: Option<usize>,
     pub verts: Vec<[T; 2]>,
     /// `(start, len)` of each closed contour in `verts`.
     pub contours: Vec<(u32, u32)>,
@@ -240,6 +259,7 @@ pub(crate) fn layers<T: Real>(sc: &SceneT<T>) -> Vec<Layer<T>> {
                 shape: si,
                 kind: LayerKind::Fill,
                 color: c,
+                paint: s.fill_paint,
                 contours: vec![(0, poly.len() as u32)],
                 verts: poly.clone(),
                 bbox: bb,
@@ -262,6 +282,7 @@ pub(crate) fn layers<T: Real>(sc: &SceneT<T>) -> Vec<Layer<T>> {
                 shape: si,
                 kind: LayerKind::Stroke,
                 color: c,
+                paint: s.stroke_paint,
                 verts: Vec::new(),
                 contours: Vec::new(),
                 bbox: bb,

@@ -79,6 +79,7 @@ fn clip_factor<T: Real>(c: &ClipPath, w: u32, h: u32, tol: f32) -> Vec<T> {
     for s in &mut opaque.shapes {
         s.fill = Some(Rgba::BLACK);
         s.stroke = None;
+        s.gradients = None;
     }
     let mut f: Vec<T> = draw::<T>(&opaque, w, h, tol)
         .chunks_exact(4)
@@ -190,15 +191,7 @@ pub(crate) fn forward_band<T: Real>(
         match op {
             Op::Paint(li) => {
                 let top = stack.last_mut().map_or(&mut *img, |b| &mut b[..]);
-                paint_layer(
-                    sc.width,
-                    li,
-                    &ls[li],
-                    (y0, y1),
-                    top,
-                    tape.as_deref_mut(),
-                    st,
-                );
+                paint_layer(sc, li, &ls[li], (y0, y1), top, tape.as_deref_mut(), st);
             }
             Op::Push(gi) => {
                 let clip = box_clip(boxes[gi], y0, y1).unwrap_or(EMPTY);
@@ -267,7 +260,7 @@ pub(crate) fn backward_band<T: Real>(
     for rec in tape.recs.iter().rev() {
         let gi = rec.layer as usize;
         match rec.kind {
-            RecKind::Paint => backward_layer(sc.width, ls, y0, tape, rec, g, out, st),
+            RecKind::Paint => backward_layer(sc, ls, y0, tape, rec, g, out, st),
             RecKind::Pop => {
                 let mut inner = spare.pop().unwrap_or_default();
                 inner.resize(g.len(), T::zero());

@@ -17,6 +17,7 @@
 //!   drawn as SVG draws them, as a union of per-edge pieces (see `stroke`).
 //! - Per shape the fill is painted first, then the stroke. `alpha = coverage * colour.a`,
 //!   `out = colour.rgb * alpha + below * (1 - alpha)` (premultiplied), over the background.
+//!   The colour is the flat one, or a gradient's colour at the pixel centre (`paint`).
 //! - A scene's groups ([`crate::scene::Group`]) paint their shapes onto a transparent layer,
 //!   composited with `opacity × clip × mask` per pixel (see `layer`); a flat scene takes the
 //!   same path as before, untouched.
@@ -27,8 +28,8 @@
 //! coverage integral by Reynolds transport along each edge (see `walk`), then the chain rule
 //! goes through the stroke outline and the Bernstein weights of the flattening to the control
 //! points. Every group of [`Params`] gets gradients, group opacities included (clip and mask
-//! content is not a parameter: it is drawn once per pass and held constant). Edge lengths in the stroke normal are
-//! smoothed (`sqrt(|d|² + 1e-6)`) so degenerate paths give finite gradients.
+//! content is not a parameter: it is drawn once per pass and held constant). Edge lengths in the
+//! stroke normal are smoothed (`sqrt(|d|² + 1e-6)`) so degenerate paths give finite gradients.
 //!
 //! # Invariants and failure
 //! All functions take scenes that passed [`Scene::validate`] and cannot fail on them; on an
@@ -40,9 +41,12 @@
 // comparisons are intentional (a NaN must take the early-out branch).
 #![allow(clippy::needless_range_loop, clippy::neg_cmp_op_on_partial_ord)]
 
+mod composite;
 mod engine;
 mod geom;
+mod grad;
 mod layer;
+mod paint;
 mod real;
 mod stroke;
 mod walk;
@@ -51,6 +55,8 @@ mod walk;
 mod tests;
 #[cfg(test)]
 mod tests_layer;
+#[cfg(test)]
+mod tests_paint;
 #[cfg(test)]
 mod tests_stroke;
 
@@ -72,7 +78,10 @@ pub struct Tape {
 impl Tape {
     /// Floats held by the tape (for memory accounting).
     pub fn len_floats(&self) -> usize {
-        self.bands.iter().map(|b| b.area.len() + b.dst.len()).sum()
+        self.bands
+            .iter()
+            .map(|b| b.area.len() + b.dst.len() + b.group.len())
+            .sum()
     }
 
     fn matches(&self, scene: &Scene) -> bool {
@@ -85,6 +94,8 @@ impl Tape {
                     && a.fill.is_some() == b.fill.is_some()
                     && a.stroke.is_some() == b.stroke.is_some()
             })
+            && self.sc.paints.iter().map(|p| p.num_params()).sum::<usize>()
+                == crate::scene::paint::scene_gradient_params(scene).len()
     }
 }
 
@@ -101,21 +112,26 @@ const POOL_BAND_MAX_FLOATS: usize = 16 << 20;
 
 impl Drop for Tape {
     fn drop(&mut self) {
-        if let Ok(mut pool) = POOL.lock()
-            && pool.len() < POOL_MAX
-        {
-            let room = POOL_MAX - pool.len();
-            // Do not keep the buffers of unusually large renders alive.
-            pool.extend(
-                self.bands
-                    .drain(..)
-                    .filter(|b| {
-                        b.area.capacity() + b.dst.capacity() + b.group.capacity()
-                            <= POOL_BAND_MAX_FLOATS
-                    })
-                    .take(room),
-            );
-        }
+        recycle(std::mem::take(&mut self.bands));
+    }
+}
+
+/// Returns band buffers to [`POOL`] for the next render with a tape.
+fn recycle(bands: Vec<engine::BandTape<f32>>) {
+    if let Ok(mut pool) = POOL.lock()
+        && pool.len() < POOL_MAX
+    {
+        let room = POOL_MAX - pool.len();
+        // Do not keep the buffers of unusually large renders alive.
+        pool.extend(
+            bands
+                .into_iter()
+                .filter(|b| {
+                    b.area.capacity() + b.dst.capacity() + b.group.capacity()
+                        <= POOL_BAND_MAX_FLOATS
+                })
+                .take(room),
+        );
     }
 }
 
@@ -159,18 +175,49 @@ pub fn render_tape(scene: &Scene) -> (Image, Tape) {
 /// structure, or `d_image` has the wrong length, all gradients are zero (and a warning is
 /// logged) rather than a panic.
 pub fn backward(scene: &Scene, tape: &Tape, d_image: &[f32]) -> Params {
+    backward_with_gradients(scene, tape, d_image).0
+}
+
+/// [`backward`], plus the gradients of every gradient paint's parameters in the order of
+/// [`crate::scene::paint::scene_gradient_params`] (geometry, stop offsets, stop colours). A
+/// fill or stroke painted with a gradient gets zero gradient for its flat stand-in colour.
+pub fn backward_with_gradients(scene: &Scene, tape: &Tape, d_image: &[f32]) -> (Params, Vec<f32>) {
     let mut out = Params::zeros_like(scene);
     let n = 4 * scene.width as usize * scene.height as usize;
     if !tape.matches(scene) || d_image.len() != n {
         tracing::warn!("raster::backward: tape or d_image does not match the scene");
-        return out;
+        let np = crate::scene::paint::scene_gradient_params(scene).len();
+        return (out, vec![0.0; np]);
     }
     let g = engine::backward(&tape.sc, &tape.layers, &tape.bands, d_image);
     write_grad(&mut out, &g);
-    out
+    (out, g.paint)
 }
 
-fn write_grad(out: &mut Params, g: &engine::GradT<f32>) {
+/// A per-pixel loss on the rendered image, for [`render_loss_backward`]: called once per band
+/// of rows with the band's pixel range (indices `y0 * width .. y1 * width`), its premultiplied
+/// RGBA and a zeroed buffer of the same length, it writes dL/d(premultiplied RGBA) into the
+/// buffer and returns the band's share of the loss.
+pub type BandLoss<'a> = dyn Fn(std::ops::Range<usize>, &[f32], &mut [f32]) -> f64 + Sync + 'a;
+
+/// One optimisation step's forward and backward in a single parallel pass over the row bands:
+/// each band is painted, `loss` gives its gradient, and the band's backward runs at once (the
+/// loss runs in parallel, and the pass waits on its threads once instead of twice). The
+/// gradients equal [`backward`]'s given the same per-pixel loss gradient; the loss is the sum
+/// of the bands' shares in band order. Returns the loss and the gradients in the layout of
+/// [`Params::from_scene`].
+pub fn render_loss_backward(scene: &Scene, loss: &BandLoss<'_>) -> (f64, Params) {
+    let sc = SceneT::<f32>::from_scene(scene, FLATTEN_TOLERANCE);
+    let layers = geom::layers(&sc);
+    let recycled = take_pooled(engine::bands(scene.height).len());
+    let (value, g, bands) = engine::forward_backward(&sc, &layers, recycled, loss);
+    recycle(bands);
+    let mut out = Params::zeros_like(scene);
+    write_grad(&mut out, &g);
+    (value, out)
+}
+
+fn write_grad(out: &mut Params, g: &grad::GradT<f32>) {
     out.get_mut(ParamGroup::Points).copy_from_slice(&g.points);
     out.get_mut(ParamGroup::Fill).copy_from_slice(&g.fill);
     out.get_mut(ParamGroup::Stroke).copy_from_slice(&g.stroke);
@@ -186,7 +233,10 @@ pub fn flatten_shape(shape: &Shape, tolerance_px: f32) -> Vec<Vec<Point>> {
         width: 1,
         height: 1,
         background: crate::scene::Rgba::TRANSPARENT,
-        shapes: vec![shape.clone()],
+        shapes: vec![Shape {
+            gradients: None,
+            ..shape.clone()
+        }],
         groups: Vec::new(),
     };
     let t = SceneT::<f32>::from_scene(&sc, tolerance_px);

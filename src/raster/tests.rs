@@ -28,17 +28,18 @@ fn square_coverage_is_exact_area() {
 // ---------------------------------------------------------------------------------------------
 // Finite-difference gradient checks (f64).
 
-use super::engine::{self, GradT};
+use super::engine;
 use super::geom;
+use super::grad::GradT;
 use crate::scene::{Point, Stroke};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-fn loss_f64(sc: &SceneT<f64>, w: &[f64]) -> f64 {
+pub(super) fn loss_f64(sc: &SceneT<f64>, w: &[f64]) -> f64 {
     render_t(sc).iter().zip(w).map(|(a, b)| a * b).sum()
 }
 
-fn grad_f64(sc: &SceneT<f64>, w: &[f64]) -> GradT<f64> {
+pub(super) fn grad_f64(sc: &SceneT<f64>, w: &[f64]) -> GradT<f64> {
     let ls = geom::layers(sc);
     let (_, tapes) = engine::forward(sc, &ls, true, Vec::new());
     engine::backward(sc, &ls, &tapes, w)
@@ -333,4 +334,33 @@ pub(super) fn assert_same_image(a: &Image, b: &Image) {
         .map(|(x, y)| (x - y).abs())
         .fold(0.0, f32::max);
     assert!(max < 1e-5, "{max}");
+}
+
+#[test]
+fn fused_loss_pass_matches_render_then_backward() {
+    // 24x20 (two bands) and 96x80 (several bands), a non-uniform target and weights.
+    for (seed, width) in [(0u64, 24u32), (1, 24), (2, 96)] {
+        let s = random_scene(seed).scaled_to_width(width);
+        let mut rng = ChaCha8Rng::seed_from_u64(seed + 100);
+        let n = (s.width * s.height) as usize;
+        let target = Image {
+            width: s.width,
+            height: s.height,
+            data: (0..4 * n).map(|_| rng.random_range(0.0..1.0f32)).collect(),
+        };
+        let w: Vec<f32> = (0..n).map(|_| rng.random_range(0.0..2.0f32)).collect();
+        let (img, tape) = render_tape(&s);
+        let mut d = Vec::new();
+        let want_loss = crate::losses::weighted_l2_into(&img, &target, &w, &mut d).unwrap();
+        let want = backward(&s, &tape, &d);
+        let band = |px: std::ops::Range<usize>, img: &[f32], g: &mut [f32]| {
+            let t = &target.data[4 * px.start..4 * px.end];
+            crate::losses::weighted_l2_slices(img, t, &w[px], g)
+        };
+        let (loss, got) = render_loss_backward(&s, &band);
+        assert_eq!(got, want, "seed {seed}: the same gradients, bit for bit");
+        assert!(got.get(ParamGroup::Points).iter().any(|v| *v != 0.0));
+        let rel = (loss - want_loss).abs() / want_loss.abs();
+        assert!(rel < 1e-6, "seed {seed}: loss {loss} vs {want_loss}");
+    }
 }

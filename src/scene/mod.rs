@@ -13,11 +13,15 @@
 //!   `3n + 1` points. A polygon has `n >= 3` vertices and is always closed.
 //! - A closed shape has a fill; an open shape has a stroke and no fill.
 //! - [`Scene::groups`] obey the invariants of [`group`] (empty for a flat scene).
+//! - A fill or stroke painted with a gradient ([`Shape::gradients`]) keeps its flat colour as
+//!   the gradient's stand-in; the gradient's own invariants are in [`paint`].
 
 mod group;
+pub mod paint;
 mod params;
 
 pub use group::{Clip, Content, FillRule, Group, Mask, MaskKind};
+pub use paint::{Affine, Gradient, GradientGeometry, GradientStop, Gradients, Spread};
 pub use params::{ParamGroup, Params, Trainable};
 
 use serde::{Deserialize, Serialize};
@@ -190,6 +194,16 @@ pub struct Shape {
     /// How the fill covers where the outline overlaps itself (SVG `fill-rule`).
     #[serde(default, skip_serializing_if = "FillRule::is_nonzero")]
     pub fill_rule: FillRule,
+    /// Gradient paint of the fill and/or stroke (imported SVG); `None` (the common case) paints
+    /// the flat colours. With a gradient, `fill` / `stroke.color` is its flat stand-in (the
+    /// mean stop colour, see [`paint`]), read by colour-only code and ignored when drawing.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gradients: Option<Box<Gradients>>,
+    /// The LIVE stage that added the shape (0: the vtracer start), kept by every edit that
+    /// replaces it (splits, merges, scaling); `None` for shapes from anywhere else. The SVG
+    /// groups by it on request ([`crate::svg::SvgOptions::group_by_stage`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stage: Option<u16>,
 }
 
 /// Why a scene or shape is not valid.
@@ -213,8 +227,16 @@ pub enum SceneError {
 
 impl Shape {
     /// The shape with every control point moved by `f` and its stroke width multiplied by
-    /// `stroke_k` (kind and paint kept): the one way geometry is rescaled or placed.
+    /// `stroke_k` (kind and paint kept): the one way geometry is rescaled or placed. `f` must be
+    /// affine; gradients move with the shape.
     pub fn mapped(&self, f: impl Fn(&Point) -> Point, stroke_k: f32) -> Shape {
+        let gradients = self.gradients.as_ref().map(|g| {
+            let m = Affine::fit(&f);
+            Box::new(Gradients {
+                fill: g.fill.as_ref().map(|g| g.mapped(&m)),
+                stroke: g.stroke.as_ref().map(|g| g.mapped(&m)),
+            })
+        });
         Shape {
             kind: self.kind,
             points: self.points.iter().map(f).collect(),
@@ -224,6 +246,8 @@ impl Shape {
                 ..st
             }),
             fill_rule: self.fill_rule,
+            gradients,
+            stage: self.stage,
         }
     }
 
@@ -240,6 +264,8 @@ impl Shape {
             fill,
             stroke,
             fill_rule: FillRule::NonZero,
+            gradients: None,
+            stage: None,
         };
         s.validate(0)?;
         Ok(s)
@@ -404,6 +430,25 @@ impl Shape {
                     s.miter_limit
                 )));
             }
+        }
+        self.validate_gradients().map_err(err)
+    }
+
+    fn validate_gradients(&self) -> Result<(), String> {
+        let Some(g) = self.gradients.as_deref() else {
+            return Ok(());
+        };
+        if let Some(f) = &g.fill {
+            if self.fill.is_none() {
+                return Err("fill gradient on a shape without a fill".into());
+            }
+            f.validate().map_err(|e| format!("fill {e}"))?;
+        }
+        if let Some(s) = &g.stroke {
+            if self.stroke.is_none() {
+                return Err("stroke gradient on a shape without a stroke".into());
+            }
+            s.validate().map_err(|e| format!("stroke {e}"))?;
         }
         Ok(())
     }

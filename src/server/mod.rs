@@ -123,6 +123,11 @@ fn route_table() -> Vec<(Method, &'static str, MethodRouter<AppState>)> {
             "/jobs/{id}/snapshots/{file}",
             get(routes::snapshot),
         ),
+        (
+            Method::GET,
+            "/jobs/{id}/result/{file}",
+            get(routes::result_variation),
+        ),
         (Method::GET, "/healthz", get(routes::healthz)),
         (Method::GET, "/readyz", get(routes::readyz)),
         (Method::GET, "/metrics", get(routes::metrics)),
@@ -132,15 +137,20 @@ fn route_table() -> Vec<(Method, &'static str, MethodRouter<AppState>)> {
     ]
 }
 
-/// (method, path) of every route, in OpenAPI spelling (`/jobs/{id}/snapshots/{n}.svg`).
+/// (method, path) of every route, in OpenAPI spelling (`/jobs/{id}/snapshots/{n}.svg`; the
+/// one route of the variations is `/jobs/{id}/result/{i}.svg`, `.png` and `.pdf` there).
 pub fn routes() -> Vec<(String, String)> {
     route_table()
         .into_iter()
-        .map(|(m, p, _)| {
-            (
-                m.as_str().to_ascii_lowercase(),
-                p.replace("{file}", "{n}.svg"),
-            )
+        .flat_map(|(m, p, _)| {
+            let m = m.as_str().to_ascii_lowercase();
+            let paths = match p.strip_suffix("/result/{file}") {
+                Some(base) => ["svg", "png", "pdf"]
+                    .map(|ext| format!("{base}/result/{{i}}.{ext}"))
+                    .to_vec(),
+                None => vec![p.replace("{file}", "{n}.svg")],
+            };
+            paths.into_iter().map(move |p| (m.clone(), p))
         })
         .collect()
 }

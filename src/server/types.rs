@@ -4,15 +4,19 @@ use super::error::ApiError;
 use crate::pipeline::{
     Executor, JobKind, JobSpec, Limits, Method, Preset, RunPlan, SpecError, Style, request_of,
 };
-use crate::pipeline::{RerankReport, RunReport};
-use crate::progress::{Progress, Stage};
-use crate::store::{AttemptRow, JobRow, JobStatus};
+use crate::pipeline::{RerankReport, RunReport, VariationReport};
+use crate::progress::Stage;
+use crate::store::JobRow;
 use crate::vector::VectorOptions;
 use crate::vector::palette::ColorPlan;
 use base64::Engine;
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value};
+
+mod views;
+use views::rfc3339;
+pub use views::{AttemptView, ProgressView};
 
 /// Fields accepted by `POST /jobs` (anything else is rejected as unknown).
 pub const SUBMIT_FIELDS: &[&str] = &[
@@ -35,6 +39,7 @@ pub const SUBMIT_FIELDS: &[&str] = &[
     "group",
     "target_psnr",
     "max_bytes",
+    "variations",
     "aspect",
     "width",
     "height",
@@ -209,6 +214,7 @@ fn request_from(obj: &Map<String, Value>, default_seed: u64) -> Result<JobSpec, 
         preset,
         priority: field(obj, "priority")?.unwrap_or(0),
         retrieval: field(obj, "retrieval")?.unwrap_or(true),
+        variations: field(obj, "variations")?,
         vector: VectorOptions {
             colors: ColorPlan {
                 colors: field(obj, "colors")?,
@@ -287,88 +293,6 @@ pub fn check_svg(svg: &str) -> Result<(), ApiError> {
         .map_err(|e| ApiError::invalid("svg", format!("is not a valid SVG: {e}")))
 }
 
-fn rfc3339(ms: Option<i64>) -> Option<String> {
-    ms.and_then(chrono::DateTime::from_timestamp_millis)
-        .map(|t| t.to_rfc3339_opts(chrono::SecondsFormat::Millis, true))
-}
-
-/// One attempt of a job as the API shows it: times in RFC 3339, as every other time.
-#[derive(Serialize)]
-pub struct AttemptView {
-    pub attempt: i64,
-    pub worker: String,
-    pub outcome: String,
-    pub error: Option<String>,
-    pub started_at: Option<String>,
-    pub finished_at: Option<String>,
-}
-
-impl From<&AttemptRow> for AttemptView {
-    fn from(row: &AttemptRow) -> Self {
-        AttemptView {
-            attempt: row.attempt,
-            worker: row.worker.clone(),
-            outcome: row.outcome.clone(),
-            error: row.error.clone(),
-            started_at: rfc3339(Some(row.started_at)),
-            finished_at: rfc3339(row.finished_at),
-        }
-    }
-}
-
-/// A job's progress as the API shows it: the job's `progress` and the `progress` event.
-#[derive(Serialize)]
-pub struct ProgressView {
-    pub stage: Option<Stage>,
-    pub step: i64,
-    pub total: i64,
-    /// `step / total` in `0..=1` (0 while the total is unknown, 1 for a succeeded job).
-    pub fraction: f64,
-    pub loss: Option<f64>,
-    /// The stage's details (the rerank's scores), on live events only.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub detail: Option<Value>,
-}
-
-impl ProgressView {
-    fn new(stage: Option<Stage>, step: i64, total: i64, loss: Option<f64>) -> Self {
-        let fraction = if total > 0 {
-            (step as f64 / total as f64).clamp(0.0, 1.0)
-        } else {
-            0.0
-        };
-        ProgressView {
-            stage,
-            step,
-            total,
-            fraction,
-            loss,
-            detail: None,
-        }
-    }
-}
-
-impl From<&Progress> for ProgressView {
-    fn from(p: &Progress) -> Self {
-        ProgressView {
-            detail: p.detail.clone(),
-            ..ProgressView::new(Some(p.stage), i64::from(p.step), i64::from(p.total), p.loss)
-        }
-    }
-}
-
-/// The progress stored in the job's row.
-impl From<&JobRow> for ProgressView {
-    fn from(row: &JobRow) -> Self {
-        let stage = row.stage.as_deref().and_then(Stage::from_name);
-        let mut view = ProgressView::new(stage, row.step, row.total, row.loss);
-        if row.total <= 0 && row.status == JobStatus::Succeeded {
-            view.fraction = 1.0;
-        }
-        view
-    }
-}
-
 #[derive(Serialize)]
 pub struct ErrorView {
     pub code: crate::store::FailureCode,
@@ -393,6 +317,8 @@ pub struct ParamsView {
     pub has_image: bool,
     pub has_svg: bool,
     pub retrieval: bool,
+    /// Results the job returns (1 unless a text job asked for more).
+    pub variations: u32,
     /// Colours, background, grouping and the vectorize stopping rules, as submitted.
     #[serde(flatten)]
     pub vector: VectorOptions,
@@ -484,18 +410,54 @@ pub struct ResultView {
     pub paths: i64,
     /// The run's [`RunReport`] as stored (results stored before a field existed lack it).
     pub detail: Value,
+    /// Every result of the job, variation 1 (`result.svg`) first: one unless a text job
+    /// asked for more.
+    pub variations: Vec<VariationView>,
+}
+
+/// One result of a job: its number, sample, score, paths and downloads.
+#[derive(Serialize)]
+pub struct VariationView {
+    #[serde(flatten)]
+    pub report: VariationReport,
+    pub svg: String,
+    pub png: String,
+    pub pdf: String,
+}
+
+impl VariationView {
+    fn new(job_id: &str, report: VariationReport) -> Self {
+        let link = |ext: &str| format!("/jobs/{job_id}/result/{}.{ext}", report.variation);
+        VariationView {
+            svg: link("svg"),
+            png: link("png"),
+            pdf: link("pdf"),
+            report,
+        }
+    }
 }
 
 impl JobView {
     /// Adds the stored result (paths, detail, rerank scores) of a succeeded job.
     pub fn with_result(mut self, result: &crate::store::ResultRow) -> JobView {
         let detail: Value = serde_json::from_str(&result.detail).unwrap_or(Value::Null);
-        self.rerank = RunReport::deserialize(&detail)
-            .ok()
+        let report = RunReport::deserialize(&detail).ok();
+        self.rerank = report
+            .as_ref()
             .and_then(|r| r.rerank.as_ref().map(RerankView::from));
+        let report = report.unwrap_or_default();
+        let mut variations = report.variations.clone();
+        if variations.is_empty() {
+            let paths = usize::try_from(result.paths).unwrap_or(0);
+            variations.push(VariationReport::of(1, &report, paths));
+        }
         self.result = Some(ResultView {
             paths: result.paths,
             detail,
+            variations: variations
+                .into_iter()
+                .map(|v| VariationView::new(&self.id, v))
+                .collect(),
         });
         self
     }
@@ -546,6 +508,10 @@ impl JobView {
                 has_image: s.image.is_some(),
                 has_svg: s.svg.is_some(),
                 retrieval: s.retrieval,
+                variations: s
+                    .plan
+                    .as_ref()
+                    .map_or(s.variations.unwrap_or(1), RunPlan::variations),
                 vector: s.vector,
                 canvas: s.canvas,
                 negative_prompt: s.negative_prompt,

@@ -9,8 +9,29 @@ use crate::image::Image;
 use crate::models::scorer::{ImageTextScorer, Scorer};
 use crate::progress::{CancelToken, ProgressSink};
 use crate::retrieval::install::CAPTION_TOKENS;
-use crate::retrieval::{Hit, IconIndex};
-use crate::teacher::{SampleConfig, SampleError, Teacher};
+use crate::retrieval::{Hit, IconIndex, RetrievalError};
+use crate::teacher::{SampleConfig, SampleError, Teacher, TeacherError};
+
+/// Why a run starts from no retrieved icon (reported as the retrieval's `unavailable`).
+#[derive(Debug, thiserror::Error)]
+pub enum NoStarts {
+    #[error("turned off")]
+    Off,
+    #[error("the model's _retrieval_share is 0")]
+    NoShare,
+    #[error("the model pins no icon sets")]
+    NoIconSets,
+    #[error("the test teacher has no retrieval index")]
+    TestTeacher,
+    #[error("the model's text encoder is not the index's MiniLM")]
+    NotMiniLm,
+    #[error("the retrieved icons are square and the sample is {w}x{h}")]
+    NotSquare { w: u32, h: u32 },
+    #[error("text embedding: {0}")]
+    Embedding(#[source] TeacherError),
+    #[error(transparent)]
+    Retrieval(#[from] RetrievalError),
+}
 
 /// How many of the K samples start from retrieved images: `share` of them, rounded up (share
 /// 0.5: one of two, two of four), at most K. `share` outside `0..=1` (or NaN) is clamped to it.
@@ -65,6 +86,27 @@ impl Ranked {
     pub fn best_source(&self) -> Option<&Hit> {
         self.sources.get(self.best).and_then(Option::as_ref)
     }
+
+    /// The indices of the `n` best samples, best first: the kept one, then the others by
+    /// score (highest first; in sampling order without a scorer), skipping a sample equal to
+    /// one already picked while enough others are left. At most K.
+    pub fn top(&self, n: usize) -> Vec<usize> {
+        let score = |i: usize| self.scores.get(i).copied().unwrap_or(0.0);
+        let mut rest: Vec<usize> = (0..self.images.len()).filter(|&i| i != self.best).collect();
+        rest.sort_by(|&a, &b| score(b).total_cmp(&score(a)));
+        let mut picks = vec![self.best];
+        let mut same = Vec::new();
+        for i in rest {
+            if picks.iter().any(|&p| self.images[p] == self.images[i]) {
+                same.push(i);
+            } else {
+                picks.push(i);
+            }
+        }
+        picks.extend(same);
+        picks.truncate(n.max(1));
+        picks
+    }
 }
 
 /// Which icons of an index a run starts from: how many, at most how many drawings of one
@@ -84,41 +126,48 @@ pub fn retrieve(
     index: &IconIndex,
     caption: &str,
     pick: RetrievalPick,
-) -> Result<Vec<(Hit, Image)>, String> {
-    let q = teacher
-        .caption_embedding(caption, CAPTION_TOKENS)
-        .map_err(|e| e.to_string())?
-        .ok_or("the model's text encoder is not the index's MiniLM")?;
+) -> Result<Vec<(Hit, Image)>, NoStarts> {
+    let hits = nearest(teacher, index, caption, pick)?;
     let (w, h) = teacher.image_dims();
     if w != h {
-        return Err(format!(
-            "the retrieved icons are square and the sample is {w}x{h}"
-        ));
+        return Err(NoStarts::NotSquare { w, h });
     }
-    let hits = index
-        .nearest(&q, pick.n, pick.per_caption, pick.seed)
-        .map_err(|e| e.to_string())?;
     let images = render_hits(index, &hits, teacher.image_size())?;
     Ok(hits.into_iter().zip(images).collect())
 }
 
+/// The icons of `index` nearest to `text` (by the teacher's MiniLM embedding), unrendered.
+pub(super) fn nearest(
+    teacher: &dyn Teacher,
+    index: &IconIndex,
+    text: &str,
+    pick: RetrievalPick,
+) -> Result<Vec<Hit>, NoStarts> {
+    let q = teacher
+        .caption_embedding(text, CAPTION_TOKENS)
+        .map_err(NoStarts::Embedding)?
+        .ok_or(NoStarts::NotMiniLm)?;
+    Ok(index.nearest(&q, pick.n, pick.per_caption, pick.seed)?)
+}
+
 /// The icons of `hits` rendered at `side` px.
-pub fn render_hits(index: &IconIndex, hits: &[Hit], side: u32) -> Result<Vec<Image>, String> {
-    hits.iter()
-        .map(|h| index.render(&h.icon, side).map_err(|e| e.to_string()))
-        .collect()
+pub fn render_hits(
+    index: &IconIndex,
+    hits: &[Hit],
+    side: u32,
+) -> Result<Vec<Image>, RetrievalError> {
+    hits.iter().map(|h| index.render(&h.icon, side)).collect()
 }
 
 /// The starts of the retrieved samples: the caption's nearest icons, or as `steer` says
 /// ([`steered_starts`]; steering fills `report`).
 fn starts(
     teacher: &dyn Teacher,
-    retrieval: Result<(&IconIndex, RetrievalPick), String>,
+    (index, pick): (&IconIndex, RetrievalPick),
     caption: &str,
     steer: Option<&CaptionPlan>,
     report: &mut Option<CaptionReport>,
-) -> Result<Vec<(Hit, Image)>, String> {
-    let (index, pick) = retrieval?;
+) -> Result<Vec<(Hit, Image)>, NoStarts> {
     match (steer, report.as_mut()) {
         (Some(plan), Some(r)) if plan.steer >= ColourSteer::Start => {
             steered_starts(teacher, index, caption, plan, pick, r)
@@ -137,7 +186,7 @@ fn starts(
 pub fn sample_and_rerank(
     teacher: &dyn Teacher,
     scorer: Option<&Scorer>,
-    retrieval: Result<(&IconIndex, RetrievalPick), String>,
+    retrieval: Result<(&IconIndex, RetrievalPick), &NoStarts>,
     prompt: &str,
     caption: &str,
     steer: Option<&CaptionPlan>,
@@ -146,9 +195,11 @@ pub fn sample_and_rerank(
     cancel: &CancelToken,
 ) -> Result<(Ranked, Option<String>), SampleError> {
     let mut report = steer.map(|p| CaptionReport::of(p, retrieval.is_ok()));
-    let (hits, why_not) = match starts(teacher, retrieval, caption, steer, &mut report) {
-        Ok(h) => (h, None),
-        Err(e) => (Vec::new(), Some(e)),
+    let found = retrieval.map(|r| starts(teacher, r, caption, steer, &mut report));
+    let (hits, why_not) = match found {
+        Ok(Ok(h)) => (h, None),
+        Ok(Err(e)) => (Vec::new(), Some(e.to_string())),
+        Err(e) => (Vec::new(), Some(e.to_string())),
     };
     let (hits, starts): (Vec<Hit>, Vec<Image>) = hits.into_iter().unzip();
     let mut images = teacher.sample(prompt, &starts, cfg, sink, cancel)?;
@@ -184,6 +235,33 @@ pub fn sample_and_rerank(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn flat(v: f32) -> Image {
+        Image::filled(2, 2, [v, v, v, 1.0])
+    }
+
+    #[test]
+    fn the_top_samples_are_the_kept_one_then_by_score_and_distinct() {
+        let ranked = Ranked {
+            images: vec![flat(0.1), flat(0.2), flat(0.1), flat(0.3)],
+            best: 1,
+            scores: vec![0.5, 0.9, 0.8, 0.2],
+            sources: vec![None; 4],
+            caption: None,
+        };
+        assert_eq!(ranked.top(1), [1]);
+        // Sample 0 scores higher than 3 but equals sample 2 (picked before it): it comes after
+        // the distinct ones.
+        assert_eq!(ranked.top(3), [1, 2, 3]);
+        assert_eq!(ranked.top(4), [1, 2, 3, 0]);
+        assert_eq!(ranked.top(9), [1, 2, 3, 0]);
+        let unscored = Ranked {
+            scores: Vec::new(),
+            best: 0,
+            ..ranked
+        };
+        assert_eq!(unscored.top(3), [0, 1, 3]);
+    }
 
     #[test]
     fn a_share_of_the_samples_start_from_retrieval() {

@@ -4,13 +4,12 @@
 //! ranked first, the kept sample recoloured. How far is the model's `_colour_steer`
 //! ([`ColourSteer`]); the run's [`CaptionReport`] says what was done.
 
-use super::sample::{RetrievalPick, render_hits};
+use super::sample::{NoStarts, RetrievalPick, nearest, render_hits};
 use crate::caption::colour::dominant;
 use crate::caption::compose::compose;
 use crate::caption::recolour::recolour_image;
 use crate::caption::{CaptionPlan, ColourName, ColourSteer, Hue};
 use crate::image::Image;
-use crate::retrieval::install::CAPTION_TOKENS;
 use crate::retrieval::{Hit, IconIndex};
 use crate::teacher::Teacher;
 use serde::{Deserialize, Serialize};
@@ -73,22 +72,6 @@ impl CaptionReport {
     }
 }
 
-/// The icons nearest to `text`, unrendered.
-fn nearest(
-    teacher: &dyn Teacher,
-    index: &IconIndex,
-    text: &str,
-    pick: RetrievalPick,
-) -> Result<Vec<Hit>, String> {
-    let q = teacher
-        .caption_embedding(text, CAPTION_TOKENS)
-        .map_err(|e| e.to_string())?
-        .ok_or("the model's text encoder is not the index's MiniLM")?;
-    index
-        .nearest(&q, pick.n, pick.per_caption, pick.seed)
-        .map_err(|e| e.to_string())
-}
-
 /// `images` recoloured toward `colour` (when there is one); the family each moved.
 fn recoloured(images: &mut [Image], colour: Option<ColourName>) -> Vec<Option<Hue>> {
     images
@@ -108,7 +91,7 @@ pub fn steered_starts(
     plan: &CaptionPlan,
     pick: RetrievalPick,
     report: &mut CaptionReport,
-) -> Result<Vec<(Hit, Image)>, String> {
+) -> Result<Vec<(Hit, Image)>, NoStarts> {
     let side = teacher.image_size();
     let whole = nearest(teacher, index, caption, pick)?;
     if whole.first().is_some_and(|h| h.similarity >= KNOWN_NAME) || plan.objects.is_empty() {

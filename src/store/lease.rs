@@ -163,6 +163,22 @@ impl Store {
         detail: &str,
         now: i64,
     ) -> Result<bool, StoreError> {
+        self.complete_variations(lease, svg, paths, detail, &[], now)
+            .await
+    }
+
+    /// [`Store::complete`] for a job of several results: `svg` (with `paths` and `detail`) is
+    /// variation 1, `variations` the SVGs and path counts of variations 2, 3, ... (read back
+    /// with [`Store::result_variation`]), all in the one transaction.
+    pub async fn complete_variations(
+        &self,
+        lease: &Lease,
+        svg: &str,
+        paths: i64,
+        detail: &str,
+        variations: &[(&str, i64)],
+        now: i64,
+    ) -> Result<bool, StoreError> {
         let mut tx = self.begin().await?;
         let r = sqlx::query(sql!(self, "complete_job.sql"))
             .bind(&lease.job_id)
@@ -183,6 +199,15 @@ impl Store {
             .bind(now)
             .execute(&mut *tx)
             .await?;
+        for (n, (svg, paths)) in (2i64..).zip(variations) {
+            sqlx::query(sql!(self, "insert_result_variation.sql"))
+                .bind(&lease.job_id)
+                .bind(n)
+                .bind(*svg)
+                .bind(*paths)
+                .execute(&mut *tx)
+                .await?;
+        }
         self.finish_attempt(&mut tx, lease, AttemptOutcome::Succeeded, None, now)
             .await?;
         tx.commit().await?;

@@ -475,6 +475,20 @@ impl Store {
             .await?)
     }
 
+    /// The SVG of variation `n` (2, 3, ...) of a job's result ([`Store::complete_variations`];
+    /// variation 1 is [`Store::result`]'s), `None` when the job has no such variation.
+    pub async fn result_variation(
+        &self,
+        job_id: &str,
+        n: i64,
+    ) -> Result<Option<String>, StoreError> {
+        Ok(sqlx::query_scalar(sql!(self, "get_result_variation.sql"))
+            .bind(job_id)
+            .bind(n)
+            .fetch_optional(&self.pool)
+            .await?)
+    }
+
     /// The insert of `job`'s row (`RETURNING *`; nothing when its idempotency key is taken).
     fn insert_job_query<'q>(
         &self,

@@ -23,6 +23,10 @@ pub struct SvgOptions {
     /// paint order and stay the same for the same scene) and every colour group `c<k>`
     /// (`k` = 1, 2, … in document order).
     pub ids: bool,
+    /// Wraps runs of consecutive shapes added by one LIVE stage ([`Shape::stage`]) in one `<g>`
+    /// with the id `s<k>` (`k` = the stage; a later run of the same stage `s<k>-<n>`, `n` = 2,
+    /// 3, …); shapes without a stage stay outside any group.
+    pub group_by_stage: bool,
 }
 
 impl Default for SvgOptions {
@@ -31,6 +35,7 @@ impl Default for SvgOptions {
             precision: 2,
             group_by_color: false,
             ids: false,
+            group_by_stage: false,
         }
     }
 }
@@ -101,7 +106,7 @@ fn byte(v: f32) -> u8 {
 }
 
 /// `#rgb` when every channel's two hex digits are equal, else `#rrggbb`.
-fn hex(c: Rgba) -> String {
+pub(super) fn hex(c: Rgba) -> String {
     let b = [byte(c.r), byte(c.g), byte(c.b)];
     if b.iter().all(|v| v >> 4 == v & 15) {
         format!("#{:x}{:x}{:x}", b[0] & 15, b[1] & 15, b[2] & 15)
@@ -171,7 +176,9 @@ fn caps_attrs(st: &crate::scene::Stroke) -> String {
 }
 
 impl Paint {
-    pub(super) fn of(sh: &Shape, p: usize) -> Paint {
+    /// The shape's paint attributes; `ids` names its gradients (`url(#id)` replaces the flat
+    /// stand-in colour, whose opacity the gradient's stops already carry).
+    pub(super) fn of(sh: &Shape, p: usize, ids: &(Option<String>, Option<String>)) -> Paint {
         let op = |a: f32| {
             let s = num(a.clamp(0.0, 1.0), opacity_decimals(p));
             match s.as_str() {
@@ -181,6 +188,10 @@ impl Paint {
             }
         };
         let (fill, fill_opacity) = match sh.fill {
+            Some(_) if sh.is_closed() && ids.0.is_some() => (
+                format!("url(#{})", ids.0.as_deref().unwrap_or_default()),
+                None,
+            ),
             Some(f) if sh.is_closed() => match op(f.a) {
                 Some(o) => (hex(f), o),
                 None => ("none".to_string(), None),
@@ -190,9 +201,12 @@ impl Paint {
         let stroke = sh.stroke.and_then(|st| {
             let width = num(st.width, p);
             let visible = st.width > 0.0 && width != "0";
-            let opacity = op(st.color.a)?;
+            let (color, opacity) = match &ids.1 {
+                Some(id) => (format!("url(#{id})"), None),
+                None => (hex(st.color), op(st.color.a)?),
+            };
             visible.then(|| StrokePaint {
-                color: hex(st.color),
+                color,
                 width,
                 opacity,
                 caps: caps_attrs(&st),
@@ -286,23 +300,31 @@ pub fn to_svg(scene: &Scene, opts: &SvgOptions) -> String {
         opts,
         p: opts.precision.min(MAX_PRECISION) as usize,
         groups: 0,
+        stage_runs: std::collections::BTreeMap::new(),
     };
     w.header();
     if !scene.groups.is_empty() {
         return super::export_groups::layered(w);
     }
+    super::export_paint::push_defs(&mut w.out, scene);
+    let ids = super::export_paint::gradient_ids(scene);
     let items: Vec<(usize, Paint)> = scene
         .shapes
         .iter()
+        .zip(&ids)
         .enumerate()
-        .map(|(i, sh)| (i, Paint::of(sh, w.p)))
+        .map(|(i, (sh, id))| (i, Paint::of(sh, w.p, id)))
         .filter(|(_, paint)| paint.visible())
         .collect();
     let mut ctx = Inherited::root();
     let outer = w.stroke_group(&items, &mut ctx);
     let mut i = 0;
     while i < items.len() {
-        i = w.fill_run(&items, i, &ctx);
+        i = if opts.group_by_stage {
+            w.stage_run(&items, i, &ctx)
+        } else {
+            w.fill_run(&items, i, &ctx)
+        };
     }
     if outer {
         w.out.push_str("</g>\n");
@@ -320,6 +342,8 @@ pub(super) struct Writer<'a> {
     pub(super) p: usize,
     /// Colour groups written so far (their ids count up).
     groups: usize,
+    /// Stage groups written so far, per stage.
+    stage_runs: std::collections::BTreeMap<u16, usize>,
 }
 
 impl Writer<'_> {
@@ -385,6 +409,37 @@ impl Writer<'_> {
         }
         out.push_str(">\n");
         true
+    }
+
+    /// The paths from `items[i]` on that one LIVE stage added, in one `<g id="s<k>">` (see
+    /// [`SvgOptions::group_by_stage`]); paths without a stage one by one. Returns where the
+    /// next run starts.
+    fn stage_run(&mut self, items: &[(usize, Paint)], i: usize, ctx: &Inherited) -> usize {
+        let stage_of = |k: usize| self.scene.shapes[items[k].0].stage;
+        let stage = stage_of(i);
+        let mut j = i + 1;
+        while j < items.len() && stage_of(j) == stage {
+            j += 1;
+        }
+        let Some(s) = stage else {
+            return self.fill_run(items, i, ctx);
+        };
+        let n = self.stage_runs.entry(s).or_insert(0);
+        *n += 1;
+        let id = match *n {
+            1 => format!("s{s}"),
+            n => format!("s{s}-{n}"),
+        };
+        self.out.push_str("<g");
+        push_attr(&mut self.out, "id", &id);
+        self.out.push_str(">\n");
+        let run = &items[i..j];
+        let mut k = 0;
+        while k < run.len() {
+            k = self.fill_run(run, k, ctx);
+        }
+        self.out.push_str("</g>\n");
+        j
     }
 
     /// The paths from `items[i]` on: a run of two or more with one fill in a colour group

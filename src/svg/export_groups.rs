@@ -3,14 +3,17 @@
 //! drawing, with ids `clip1`, `clip2`, … and `mask1`, … in the order they are first needed
 //! (so the same scene gives the same document). Everything is in canvas units
 //! (`clipPathUnits` and `maskUnits` `userSpaceOnUse`, a mask region of the whole canvas); paths
-//! are written one by one with all their paint attributes (no shared-attribute groups).
+//! are written one by one with all their paint attributes (no shared-attribute groups), a
+//! gradient as a `<linearGradient>`/`<radialGradient>` in the defs with ids `g1`, `g2`, … in the
+//! order the paths are written (mask content included).
 //!
 //! SVG allows no `<g>` inside a `<clipPath>`: a clip content's group clip is written on each of
 //! its paths.
 
 use super::export::{Inherited, Paint, Writer, num, opacity_decimals, push_attr, push_paint};
+use super::export_paint::push_gradient;
 use super::path_data::push_path_data;
-use crate::scene::{Clip, Group, Mask, MaskKind, Shape};
+use crate::scene::{Clip, Gradient, Group, Mask, MaskKind, Shape};
 
 /// Finishes `w` (header written) for a scene with groups.
 pub(super) fn layered(w: Writer<'_>) -> String {
@@ -19,6 +22,7 @@ pub(super) fn layered(w: Writer<'_>) -> String {
         defs: String::new(),
         clips: 0,
         masks: 0,
+        gradients: 0,
         p: w.p,
         size: (scene.width, scene.height),
     };
@@ -39,6 +43,8 @@ struct Layered {
     defs: String,
     clips: usize,
     masks: usize,
+    /// Gradients written so far (ids `g1`, `g2`, …).
+    gradients: usize,
     /// Decimals of coordinates.
     p: usize,
     size: (u32, u32),
@@ -59,7 +65,8 @@ impl Layered {
                 open.push(groups[next].end);
                 next += 1;
             }
-            let paint = Paint::of(sh, self.p);
+            let ids = self.gradients_of(sh);
+            let paint = Paint::of(sh, self.p, &ids);
             if paint.visible() {
                 self.path_start(sh, out);
                 push_paint(out, &paint, &Inherited::root());
@@ -67,6 +74,21 @@ impl Layered {
             }
         }
         out.extend(open.iter().map(|_| "</g>\n"));
+    }
+
+    /// Writes the gradients of `sh` into the defs; returns their ids (fill, stroke).
+    fn gradients_of(&mut self, sh: &Shape) -> (Option<String>, Option<String>) {
+        let g = sh.gradients.as_deref();
+        let mut push = |g: Option<&Gradient>| {
+            g.map(|g| {
+                self.gradients += 1;
+                let id = format!("g{}", self.gradients);
+                push_gradient(&mut self.defs, g, &id);
+                id
+            })
+        };
+        let fill = push(g.and_then(|g| g.fill.as_ref()));
+        (fill, push(g.and_then(|g| g.stroke.as_ref())))
     }
 
     fn path_start(&self, sh: &Shape, out: &mut String) {

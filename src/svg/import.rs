@@ -1,9 +1,11 @@
 //! SVG text → [`Scene`] (the walk over usvg's tree that [`super`]'s module docs describe).
 
+use super::import_paint::{Painted, gradients, painted};
 use super::walk::{Mode, Walk};
 use super::{SvgError, parse_usvg_repaired};
 use crate::scene::{
-    Content, FillRule, LineCap, LineJoin, MAX_SIDE, Point, Rgba, Scene, Shape, ShapeKind, Stroke,
+    Content, FillRule, Gradient, LineCap, LineJoin, MAX_SIDE, Point, Rgba, Scene, Shape, ShapeKind,
+    Stroke,
 };
 use resvg::usvg;
 
@@ -103,38 +105,6 @@ fn subpaths(data: &usvg::tiny_skia_path::Path, ts: usvg::Transform) -> Vec<SubPa
     out
 }
 
-fn paint_color(paint: &usvg::Paint, opacity: f32) -> Rgba {
-    let c8 = |c: usvg::Color| {
-        [
-            c.red as f32 / 255.0,
-            c.green as f32 / 255.0,
-            c.blue as f32 / 255.0,
-        ]
-    };
-    let avg = |stops: &[usvg::Stop]| {
-        if stops.is_empty() {
-            return ([0.0; 3], 1.0);
-        }
-        let mut s = [0.0f32; 4];
-        for st in stops {
-            let c = c8(st.color());
-            s[0] += c[0];
-            s[1] += c[1];
-            s[2] += c[2];
-            s[3] += st.opacity().get();
-        }
-        let n = stops.len() as f32;
-        ([s[0] / n, s[1] / n, s[2] / n], s[3] / n)
-    };
-    let (rgb, a) = match paint {
-        usvg::Paint::Color(c) => (c8(*c), 1.0),
-        usvg::Paint::LinearGradient(g) => avg(g.stops()),
-        usvg::Paint::RadialGradient(g) => avg(g.stops()),
-        usvg::Paint::Pattern(_) => ([0.5; 3], 1.0),
-    };
-    Rgba::new(rgb[0], rgb[1], rgb[2], a * opacity).clamped()
-}
-
 fn closed_points(subs: &[SubPath]) -> Vec<Point> {
     // Points of a closed cubic path: anchor, ctrl, ctrl per segment.
     let mut pts = Vec::new();
@@ -180,22 +150,27 @@ pub(super) fn path_shapes(
     }
     let fill = p
         .fill()
-        .map(|f| paint_color(f.paint(), f.opacity().get() * opacity));
+        .map(|f| painted(f.paint(), f.opacity().get() * opacity, ts));
     let stroke = p
         .stroke()
         .map_or(StrokeDraw::Nothing, |s| stroke_draw(p, s, ts, opacity));
     if let Some(f) = fill {
         // A single closed outline keeps its (undashed) stroke on the filled shape.
         let on_fill = match &stroke {
-            StrokeDraw::Strokes(st, None) if subs.len() == 1 && subs[0].closed => Some(*st),
+            StrokeDraw::Strokes(st, sg, None) if subs.len() == 1 && subs[0].closed => {
+                Some((*st, sg.clone()))
+            }
             _ => None,
         };
+        let (st, sg) = on_fill.clone().unzip();
         shapes.push(Shape {
             kind: ShapeKind::ClosedCubic,
             points: closed_points(&subs),
-            fill: Some(f),
-            stroke: on_fill,
+            fill: Some(f.color),
+            stroke: st,
             fill_rule: fill_rule(p),
+            gradients: gradients(f.gradient, sg.flatten()),
+            stage: None,
         });
         if on_fill.is_some() {
             return;
@@ -203,23 +178,25 @@ pub(super) fn path_shapes(
     }
     match stroke {
         StrokeDraw::Nothing => {}
-        StrokeDraw::Strokes(st, dashes) => {
+        StrokeDraw::Strokes(st, sg, dashes) => {
             for s in dashes.as_ref().unwrap_or(&subs) {
-                shapes.push(stroke_shape(s, st));
+                shapes.push(stroke_shape(s, st, sg.clone()));
             }
         }
-        StrokeDraw::Outline(color, outline) => shapes.push(Shape {
+        StrokeDraw::Outline(paint, outline) => shapes.push(Shape {
             kind: ShapeKind::ClosedCubic,
             points: closed_points(&outline),
-            fill: Some(color),
+            fill: Some(paint.color),
             stroke: None,
             fill_rule: FillRule::NonZero,
+            gradients: gradients(paint.gradient, None),
+            stage: None,
         }),
     }
 }
 
 /// One subpath stroked: open, or closed with a transparent fill.
-fn stroke_shape(s: &SubPath, st: Stroke) -> Shape {
+fn stroke_shape(s: &SubPath, st: Stroke, gradient: Option<Gradient>) -> Shape {
     if !s.closed {
         return Shape {
             kind: ShapeKind::OpenCubic,
@@ -227,6 +204,8 @@ fn stroke_shape(s: &SubPath, st: Stroke) -> Shape {
             fill: None,
             stroke: Some(st),
             fill_rule: FillRule::NonZero,
+            gradients: gradients(None, gradient),
+            stage: None,
         };
     }
     let mut pts = Vec::new();
@@ -241,22 +220,25 @@ fn stroke_shape(s: &SubPath, st: Stroke) -> Shape {
         fill: Some(Rgba::TRANSPARENT),
         stroke: Some(st),
         fill_rule: FillRule::NonZero,
+        gradients: gradients(None, gradient),
+        stage: None,
     }
 }
 
 /// How a path's stroke is drawn.
 enum StrokeDraw {
     Nothing,
-    /// As strokes of the scene: along the path's subpaths, or along these dashes.
-    Strokes(Stroke, Option<Vec<SubPath>>),
+    /// As strokes of the scene (with the stroke's gradient): along the path's subpaths, or
+    /// along these dashes.
+    Strokes(Stroke, Option<Gradient>, Option<Vec<SubPath>>),
     /// Under a transform that is no similarity (skew, unequal scales) a stroke of one width
     /// cannot be drawn: its outline (computed in the path's own units, dashes, caps and joins
-    /// included) is filled in this colour instead.
-    Outline(Rgba, Vec<SubPath>),
+    /// included) is filled in this paint instead.
+    Outline(Painted, Vec<SubPath>),
 }
 
 fn stroke_draw(p: &usvg::Path, s: &usvg::Stroke, ts: usvg::Transform, opacity: f32) -> StrokeDraw {
-    let color = paint_color(s.paint(), s.opacity().get() * opacity);
+    let paint = painted(s.paint(), s.opacity().get() * opacity, ts);
     let scale = (ts.sx * ts.sy - ts.kx * ts.ky).abs().sqrt();
     let width = s.width().get() * scale;
     if !(width.is_finite() && width > 0.0) {
@@ -277,12 +259,12 @@ fn stroke_draw(p: &usvg::Path, s: &usvg::Stroke, ts: usvg::Transform, opacity: f
             None => p.data(),
         };
         return match data.stroke(&outline_stroke, res) {
-            Some(o) => StrokeDraw::Outline(color, subpaths(&o, ts)),
+            Some(o) => StrokeDraw::Outline(paint, subpaths(&o, ts)),
             None => StrokeDraw::Nothing,
         };
     }
     let st = Stroke {
-        color,
+        color: paint.color,
         width,
         cap: match s.linecap() {
             usvg::LineCap::Butt => LineCap::Butt,
@@ -299,8 +281,8 @@ fn stroke_draw(p: &usvg::Path, s: &usvg::Stroke, ts: usvg::Transform, opacity: f
     match dashed {
         // A dash pattern that draws nothing.
         Some(None) => StrokeDraw::Nothing,
-        Some(Some(d)) => StrokeDraw::Strokes(st, Some(subpaths(&d, ts))),
-        None => StrokeDraw::Strokes(st, None),
+        Some(Some(d)) => StrokeDraw::Strokes(st, paint.gradient, Some(subpaths(&d, ts))),
+        None => StrokeDraw::Strokes(st, paint.gradient, None),
     }
 }
 
@@ -344,6 +326,8 @@ pub(super) fn clip_path_shape(
         fill: Some(Rgba::BLACK),
         stroke: None,
         fill_rule: rule,
+        gradients: None,
+        stage: None,
     });
 }
 
@@ -373,6 +357,9 @@ pub fn import_svg(text: &str) -> Result<SvgImport, SvgError> {
     }
     let mut walk = Walk::new((w, h));
     for w in parsed.warnings {
+        walk.warn(w);
+    }
+    for w in super::import_paint::dangling_paint_warnings(text) {
         walk.warn(w);
     }
     let mut content = Content::default();
@@ -412,7 +399,11 @@ pub fn import_svg(text: &str) -> Result<SvgImport, SvgError> {
 }
 
 fn is_canvas_rect(s: &Shape, w: f32, h: f32) -> bool {
-    if s.stroke.is_some() || s.kind != ShapeKind::ClosedCubic || s.points.len() != 12 {
+    if s.stroke.is_some()
+        || s.gradients.is_some()
+        || s.kind != ShapeKind::ClosedCubic
+        || s.points.len() != 12
+    {
         return false;
     }
     // Four straight segments along the canvas border.

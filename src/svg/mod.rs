@@ -27,7 +27,10 @@
 //!   `<g fill="…">`; [`SvgOptions::ids`]: `id="p<k>"` on paths (shape index + 1) and
 //!   `id="c<k>"` on colour groups.
 //!
-//! The background becomes a full-canvas `<rect>` first when it is not fully transparent. A scene
+//! The background becomes a full-canvas `<rect>` first when it is not fully transparent.
+//! Gradients are written once each in a `<defs>` after it (`export_paint`: user-space
+//! coordinates, exact numbers, ids `g1, g2, …` in scene order) and referenced as `url(#gK)`;
+//! those of clip and mask content are not written (content is drawn in flat colours). A scene
 //! with groups is written by `export_groups` (`<g opacity clip-path mask>`, `<clipPath>` and
 //! `<mask>` in `<defs>` with ids `clip<k>`/`mask<k>`); even-odd fills get `fill-rule="evenodd"`.
 //! [`crate::vector::export::compact_svg`] picks the fewest decimals that still render the same.
@@ -60,18 +63,23 @@
 //!   a `<mask>`, the mask region as a clip when it does not cover the canvas) are kept with their
 //!   units resolved in canvas pixels; nested `<svg>` and `<symbol>` viewports are the clip paths
 //!   usvg gives them. Transforms are chained group by group as resvg draws them.
-//! - gradients and patterns are replaced by the average colour of their stops (patterns: grey);
-//!   images, text without fonts and filters are ignored, each with a warning naming the element
-//!   (`filter on #id ignored …`; at most 16, then a count): the content is drawn as it is,
-//!   unfiltered.
+//! - **gradients**: linear and radial gradients (fill and stroke) become
+//!   [`crate::scene::Gradient`]s in canvas pixels, as usvg resolved them (`href` inheritance,
+//!   units, stop clamping; see `import_paint`), the flat colour beside them being the mean stop
+//!   colour; a stroke drawn as a filled outline keeps its gradient as the outline's fill.
+//!   Patterns become grey; images, text without fonts and filters are ignored, each with a
+//!   warning naming the element (`filter on #id ignored …`; at most 16, then a count): the
+//!   content is drawn as it is, unfiltered.
 //! - if the first shape is a filled rectangle covering the whole canvas (what [`to_svg`] writes
 //!   for the background) it becomes the scene background.
 
 mod export;
 mod export_groups;
+mod export_paint;
 mod file;
 mod guard;
 mod import;
+mod import_paint;
 mod path_data;
 mod profile;
 mod walk;
@@ -130,10 +138,21 @@ pub fn pixmap(width: u32, height: u32) -> Result<resvg::tiny_skia::Pixmap, Rende
 /// Renders `svg` to PNG with resvg at its own size, scaled down so the longest side is at most
 /// `max_side` (the service's `result.png`, the command line's `-o out.png`).
 pub fn render_png(svg: &str, max_side: f32) -> Result<Vec<u8>, RenderError> {
+    render_png_scaled(svg, |longer| (max_side / longer).min(1.0))
+}
+
+/// Renders `svg` to PNG with resvg scaled (up or down) so its longest side is `side` px (the
+/// service's `result.png?size=N`).
+pub fn render_png_at(svg: &str, side: u32) -> Result<Vec<u8>, RenderError> {
+    render_png_scaled(svg, |longer| side as f32 / longer)
+}
+
+/// Renders `svg` to PNG at the scale `scale(its longest side)` gives.
+fn render_png_scaled(svg: &str, scale: impl Fn(f32) -> f32) -> Result<Vec<u8>, RenderError> {
     use resvg::tiny_skia;
     let tree = parse_usvg(svg)?;
     let size = tree.size();
-    let scale = (max_side / size.width().max(size.height())).min(1.0);
+    let scale = scale(size.width().max(size.height()));
     let w = (size.width() * scale).ceil().max(1.0) as u32;
     let h = (size.height() * scale).ceil().max(1.0) as u32;
     let mut pixmap = pixmap(w, h)?;
@@ -170,3 +189,5 @@ pub fn parse_usvg_repaired(text: &str) -> Result<Parsed, SvgRejected> {
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_gradient;

@@ -167,6 +167,46 @@ fn groups_and_ids() {
 }
 
 #[test]
+fn stage_groups_have_stable_ids_and_keep_the_picture() {
+    let mut s = Scene::new(64, 64, Rgba::WHITE).unwrap();
+    let red = Rgba::new(1.0, 0.0, 0.0, 1.0);
+    for (i, stage) in [Some(1), Some(1), Some(2), None, Some(1)]
+        .into_iter()
+        .enumerate()
+    {
+        let mut sq = Shape::square(i as f32 * 8.0, 4.0, 6.0, red).unwrap();
+        sq.stage = stage;
+        s.shapes.push(sq);
+    }
+    let opts = crate::vector::palette::Grouping::Stage.svg_options();
+    let svg = to_svg(&s, &opts);
+    check_safe_output(&svg).unwrap();
+    let order: Vec<&str> = svg
+        .split("id=\"")
+        .skip(1)
+        .map(|t| &t[..t.find('"').unwrap()])
+        .collect();
+    assert_eq!(
+        order,
+        ["s1", "p1", "p2", "s2", "p3", "p4", "s1-2", "p5"],
+        "{svg}"
+    );
+    assert_eq!(svg.matches("<g").count(), 3, "{svg}");
+    assert_eq!(svg, to_svg(&s, &opts));
+    let back = from_svg(&svg).unwrap();
+    let plain = from_svg(&to_svg(&s, &SvgOptions::default())).unwrap();
+    assert_eq!(
+        crate::raster::render(&back).data,
+        crate::raster::render(&plain).data
+    );
+    // Without stages there is nothing to group.
+    for sh in &mut s.shapes {
+        sh.stage = None;
+    }
+    assert!(!to_svg(&s, &opts).contains("<g"));
+}
+
+#[test]
 fn export_import_round_trip() {
     let s = sample_scene();
     let svg = to_svg(
@@ -498,6 +538,7 @@ fn random_scenes_round_trip_with_every_option() {
                         precision,
                         group_by_color,
                         ids,
+                        ..Default::default()
                     };
                     let svg = to_svg(&scene, &opts);
                     assert_eq!(svg, to_svg(&scene, &opts));

@@ -6,7 +6,7 @@
 
 use crate::image::Image;
 use crate::models::StableDiffusion;
-use crate::models::scheduler::SamplerKind;
+use crate::models::scheduler::{SamplerKind, SamplerRun};
 use crate::progress::{CancelToken, Progress, ProgressSink};
 use candle_core::{DType, Tensor};
 use rand::SeedableRng;
@@ -17,7 +17,8 @@ use rand_chacha::ChaCha8Rng;
 pub struct SampleConfig {
     /// Number of samples K.
     pub k: u32,
-    /// Sampler (DDIM) steps for a sample from noise; an SDEdit sample runs `strength` of them.
+    /// Sampler steps for a sample from noise (the model's own sampler, `scheduler_config.json`'s
+    /// `_class_name`); an SDEdit sample runs `strength` of them with DDIM.
     pub steps: usize,
     pub guidance: f64,
     pub seed: u64,
@@ -102,6 +103,8 @@ pub fn draw(
     let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed ^ 0x5a3b_1e00);
     let mut start_rng = ChaCha8Rng::seed_from_u64(cfg.seed ^ 0x5de0_17a1);
     let n_starts = starts.len().min(cfg.k as usize);
+    // samples from noise run the model's own sampler
+    let kind = SamplerKind::of(&sd.scheduler);
     let mut out = Vec::with_capacity(cfg.k as usize);
     for i in 0..cfg.k as usize {
         let start = starts.get(i).filter(|_| i < n_starts);
@@ -113,9 +116,7 @@ pub fn draw(
         } else {
             &mut rng
         };
-        let noise: Vec<f32> = (0..c * h * w).map(|_| super::gaussian(r)).collect();
-        let noise = Tensor::from_vec(noise, (1, c, h, w), sd.device())
-            .map_err(|e| SampleError::failed("noise", e))?;
+        let noise = latent_noise(r, latent_shape, sd)?;
         let traj = if let Some(start) = start {
             let x = image_tensor(start, sd.device())?;
             let z = sd
@@ -137,14 +138,16 @@ pub fn draw(
                 cfg.steps,
             )
         } else {
-            sd.sample(
-                &noise,
-                &cond,
-                &uncond,
-                cfg.guidance,
-                cfg.steps,
-                SamplerKind::Ddim,
-            )
+            // a stochastic sampler's step noise follows the start noise
+            let step_noise = (0..SamplerRun::noise_count(kind, cfg.steps))
+                .map(|_| latent_noise(r, latent_shape, sd))
+                .collect::<Result<Vec<_>, _>>()?;
+            let run = SamplerRun {
+                kind,
+                steps: cfg.steps,
+                step_noise: &step_noise,
+            };
+            sd.sample(&noise, &cond, &uncond, cfg.guidance, run)
         }
         .map_err(|e| SampleError::failed("sampling", e))?;
         let z = traj
@@ -159,6 +162,16 @@ pub fn draw(
         ));
     }
     Ok(out)
+}
+
+/// Standard-normal noise of `[1, c, h, w]` from `r`.
+fn latent_noise(
+    r: &mut ChaCha8Rng,
+    [c, h, w]: [usize; 3],
+    sd: &StableDiffusion,
+) -> Result<Tensor, SampleError> {
+    let z: Vec<f32> = (0..c * h * w).map(|_| super::gaussian(r)).collect();
+    Tensor::from_vec(z, (1, c, h, w), sd.device()).map_err(|e| SampleError::failed("noise", e))
 }
 
 #[cfg(test)]

@@ -233,6 +233,8 @@ fn to_shape(segs: &[[P; 4]], template: &Shape) -> Option<Shape> {
         fill: template.fill,
         stroke: template.stroke,
         fill_rule: template.fill_rule,
+        gradients: template.gradients.clone(),
+        stage: template.stage,
     };
     shape.validate(0).ok().map(|_| shape)
 }

@@ -11,6 +11,7 @@
 pub mod check;
 pub mod export;
 pub mod lobes;
+pub mod merge;
 pub mod palette;
 pub mod simple;
 
@@ -145,17 +146,12 @@ pub fn drop_unseen(scene: &mut Scene, scale: f32) -> usize {
 }
 
 /// The SVG text of a finished scene: the fewest decimals whose render stays within
-/// [`export::Tolerance`] (see [`export::compact_svg`]), grouped by colour with stable ids when
-/// `colors.group` says so. Rounding can make an outline meet itself: the text is read back, and
+/// [`export::Tolerance`] (see [`export::compact_svg`]), grouped by colour or LIVE stage with
+/// stable ids when `colors.group` says so. Rounding can make an outline meet itself: the text is read back, and
 /// while any outline does, those are made simple again ([`make_simple`]) at the rounded
 /// coordinates and the scene is written anew (three rounds at most).
 pub fn write_svg(scene: &Scene, colors: &ColorPlan) -> String {
-    let grouped = colors.group == palette::Grouping::Color;
-    let opts = crate::svg::SvgOptions {
-        group_by_color: grouped,
-        ids: grouped,
-        ..Default::default()
-    };
+    let opts = colors.group.svg_options();
     let mut text = export::compact_svg(scene, &opts).svg;
     for _ in 0..3 {
         let Ok(mut back) = crate::svg::from_svg(&text) else {
@@ -204,6 +200,9 @@ pub struct FinishReport {
     pub split: usize,
     /// Paths dropped as hidden or too small to see.
     pub dropped: usize,
+    /// Paths merged into a touching path of the same fill ([`merge`]).
+    #[serde(default)]
+    pub merged: usize,
     /// Distinct fills left.
     pub colors: usize,
 }
@@ -212,7 +211,8 @@ pub struct FinishReport {
 /// split into simple pieces, hidden paths dropped, with `drop_small` paths too small to see
 /// (not for styles whose cells are meant to be one pixel: pixel art, strokes), fills reduced as `colors`
 /// says (a user palette: each fill to its nearest entry; a colour cap: k-means of the fills
-/// weighted by what they show; otherwise near-equal fills merged), and the background set.
+/// weighted by what they show; otherwise near-equal fills merged), touching paths of one fill
+/// merged ([`merge`]; with `drop_small` only), and the background set.
 pub fn finish_scene(scene: &mut Scene, colors: &ColorPlan, drop_small: bool) -> FinishReport {
     let split = make_simple(scene, SIMPLE_MIN_AREA);
     let mut dropped = drop_hidden(scene);
@@ -228,6 +228,12 @@ pub fn finish_scene(scene: &mut Scene, colors: &ColorPlan, drop_small: bool) -> 
             palette::merge_similar(scene, palette::MERGE_DISTANCE);
         }
     }
+    // Pixel cells and strokes stay as they are drawn.
+    let merged = if drop_small {
+        merge::merge_touching(scene, merge::MergeTolerance::default())
+    } else {
+        0
+    };
     match colors.background {
         Background::Transparent => scene.background = Rgba::TRANSPARENT,
         Background::Color(c) => scene.background = c.to_rgba(),
@@ -240,6 +246,7 @@ pub fn finish_scene(scene: &mut Scene, colors: &ColorPlan, drop_small: bool) -> 
     FinishReport {
         split,
         dropped,
+        merged,
         colors: palette::distinct_fills(scene),
     }
 }

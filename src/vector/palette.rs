@@ -209,6 +209,21 @@ pub enum Grouping {
     None,
     /// Runs of paths with the same fill in one `<g>` that carries the fill, with stable ids.
     Color,
+    /// Runs of paths added by one LIVE stage in one `<g id="s<k>">` (stage 0: the vtracer
+    /// start), paths with stable ids; paths no stage added stay outside groups.
+    Stage,
+}
+
+impl Grouping {
+    /// The SVG options of this grouping at the default precision (ids with any grouping).
+    pub fn svg_options(self) -> crate::svg::SvgOptions {
+        crate::svg::SvgOptions {
+            group_by_color: self == Grouping::Color,
+            group_by_stage: self == Grouping::Stage,
+            ids: self != Grouping::None,
+            ..Default::default()
+        }
+    }
 }
 
 impl ColorPlan {

@@ -41,7 +41,7 @@ pub const CONTACT_EPS: f64 = 1e-3;
 /// flattened smooth curves turn far less per vertex, cuts and real corners more.
 const CORNER_TAN: f64 = 0.7;
 
-type P = (f64, f64);
+pub(super) type P = (f64, f64);
 
 /// The outline of `shape` as a polyline at `tolerance` px (kurbo's flattening; clamped to at
 /// least 1e-4 px). Closed shapes give a ring that does not repeat its first vertex; open shapes
@@ -73,7 +73,7 @@ fn shape_path(shape: &Shape) -> BezPath {
     path
 }
 
-fn flatten_f64(shape: &Shape, tolerance: f64) -> Vec<P> {
+pub(super) fn flatten_f64(shape: &Shape, tolerance: f64) -> Vec<P> {
     let mut out: Vec<P> = Vec::new();
     kurbo::flatten(shape_path(shape), tolerance.max(1e-4), |el| match el {
         PathEl::MoveTo(p) | PathEl::LineTo(p) => out.push((p.x, p.y)),
@@ -95,7 +95,7 @@ pub fn is_simple(shape: &Shape) -> bool {
 }
 
 /// Merges consecutive vertices closer than [`CONTACT_EPS`] (also last with first).
-fn dedup(ring: &[P]) -> Vec<P> {
+pub(super) fn dedup(ring: &[P]) -> Vec<P> {
     let mut out: Vec<P> = Vec::with_capacity(ring.len());
     for &p in ring {
         if out.last().is_none_or(|&q| dist(p, q) > CONTACT_EPS) {
@@ -306,7 +306,7 @@ pub fn rings_cross(a: &[P], b: &[P]) -> bool {
 }
 
 /// Signed area of a ring (shoelace).
-fn ring_area(r: &[P]) -> f64 {
+pub(super) fn ring_area(r: &[P]) -> f64 {
     let n = r.len();
     (0..n).map(|i| cross(r[i], r[(i + 1) % n])).sum::<f64>() * 0.5
 }
@@ -317,7 +317,7 @@ fn to_p(c: &[[f64; 2]]) -> Vec<P> {
     c.iter().map(|p| (p[0], p[1])).collect()
 }
 
-fn overlay_opts() -> OverlayOptions<f64> {
+pub(super) fn overlay_opts() -> OverlayOptions<f64> {
     OverlayOptions::ogc()
 }
 
@@ -456,13 +456,15 @@ fn bez_cubic_points(path: &BezPath) -> Vec<Point> {
 
 /// One simple piece from a simple ring: the cubic fit at `tolerance` if it is simple, else the
 /// ring itself with straight segments.
-fn fit_piece(ring: &[P], template: &Shape, tolerance: f64) -> Option<Shape> {
+pub(super) fn fit_piece(ring: &[P], template: &Shape, tolerance: f64) -> Option<Shape> {
     let make = |points: Vec<Point>| Shape {
         kind: ShapeKind::ClosedCubic,
         points,
         fill: template.fill,
         stroke: template.stroke,
         fill_rule: template.fill_rule,
+        gradients: template.gradients.clone(),
+        stage: template.stage,
     };
     let mut path = BezPath::new();
     path.move_to(kp(ring[0]));
@@ -492,7 +494,7 @@ fn fit_piece(ring: &[P], template: &Shape, tolerance: f64) -> Option<Shape> {
 /// decimals), so that a piece verified simple stays simple as written.
 const SNAP: f32 = 0.01;
 
-fn snapped(pts: Vec<Point>) -> Vec<Point> {
+pub(super) fn snapped(pts: Vec<Point>) -> Vec<Point> {
     let s = |v: f32| (v / SNAP).round() * SNAP;
     pts.into_iter()
         .map(|p| Point::new(s(p.x), s(p.y)))
@@ -502,7 +504,7 @@ fn snapped(pts: Vec<Point>) -> Vec<Point> {
 /// A piece is accepted when it is valid, [`is_simple`], and simple at a tenth of
 /// [`FLATTEN_TOLERANCE`] too: a fit may hide a loop smaller than the usual flattening (a
 /// near-cusp handle), and a finer outside measure would see it.
-fn piece_ok(s: &Shape) -> bool {
+pub(super) fn piece_ok(s: &Shape) -> bool {
     s.validate(0).is_ok()
         && is_simple(s)
         && ring_is_simple(&flatten_f64(s, 0.1 * FLATTEN_TOLERANCE as f64))

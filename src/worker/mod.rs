@@ -400,11 +400,19 @@ fn checkpointer(
 fn complete(s: &Shared, lease: &Lease, out: &RunOutput, started: Instant) {
     // A report always serialises; `{}` only guards the impossible.
     let detail = serde_json::to_string(&out.report).unwrap_or_else(|_| "{}".into());
-    let stored =
-        s.runtime.block_on(
-            s.store
-                .complete(lease, &out.svg, out.paths as i64, &detail, now_ms()),
-        );
+    let variations: Vec<(&str, i64)> = out
+        .variations
+        .iter()
+        .map(|v| (v.svg.as_str(), v.paths as i64))
+        .collect();
+    let stored = s.runtime.block_on(s.store.complete_variations(
+        lease,
+        &out.svg,
+        out.paths as i64,
+        &detail,
+        &variations,
+        now_ms(),
+    ));
     match stored {
         Ok(true) => {
             let secs = started.elapsed().as_secs_f64();

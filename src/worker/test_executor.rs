@@ -179,7 +179,16 @@ impl Executor for TestExecutor {
             ..RunReport::default()
         };
         let svg = scene_svg(&scene);
-        Ok(RunOutput::new(scene, svg, report))
+        // A text job of several variations: variation i drawn with the seed moved on by i.
+        let n = spec.plan.as_ref().map_or(1, RunPlan::variations);
+        let others = (1..n)
+            .map(|i| {
+                let scene = scene_at(spec.seed.wrapping_add(u64::from(i)), paths, steps, steps)?;
+                let svg = scene_svg(&scene);
+                Ok(RunOutput::new(scene, svg, RunReport::default()))
+            })
+            .collect::<Result<_, PipelineError>>()?;
+        Ok(RunOutput::new(scene, svg, report).with_variations(others))
     }
 
     fn text_ready(&self) -> Result<(), crate::pipeline::NotReady> {

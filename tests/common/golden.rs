@@ -47,6 +47,7 @@ pub fn resvg_render(svg_text: &str) -> Image {
     }
 }
 
+/// Mean absolute difference over every channel.
 pub fn mean_abs_diff(a: &Image, b: &Image) -> f64 {
     assert_eq!((a.width, a.height), (b.width, b.height));
     let s: f64 = a
@@ -59,7 +60,7 @@ pub fn mean_abs_diff(a: &Image, b: &Image) -> f64 {
 }
 
 /// The share of pixels whose largest channel difference exceeds `large`.
-pub fn large_share(a: &Image, b: &Image, large: f32) -> f64 {
+pub fn share_off_by(a: &Image, b: &Image, large: f32) -> f64 {
     let n = a
         .data
         .chunks_exact(4)
@@ -73,7 +74,7 @@ pub fn large_share(a: &Image, b: &Image, large: f32) -> f64 {
 /// over `tol`; returns the mean.
 pub fn compare(name: &str, ours: &Image, theirs: &Image, tol: &Tolerance) -> f64 {
     let d = mean_abs_diff(ours, theirs);
-    let share = large_share(ours, theirs, tol.large);
+    let share = share_off_by(ours, theirs, tol.large);
     let large = tol.large * 255.0;
     eprintln!(
         "{name}: mean abs diff {:.3}/255, {:.3}% of pixels differ by more than {large}/255",
@@ -81,7 +82,7 @@ pub fn compare(name: &str, ours: &Image, theirs: &Image, tol: &Tolerance) -> f64
         share * 100.0
     );
     if d > tol.mean || share > tol.max_share {
-        let p = write_diff(name, ours, theirs);
+        let p = write_triptych(name, ours, theirs);
         panic!(
             "{name}: mean abs diff {:.3}/255 (at most {:.1}/255), {:.3}% of pixels differ by more \
              than {large}/255 (at most {:.2}%), diff image at {p}",
@@ -94,7 +95,9 @@ pub fn compare(name: &str, ours: &Image, theirs: &Image, tol: &Tolerance) -> f64
     d
 }
 
-pub fn write_diff(name: &str, ours: &Image, theirs: &Image) -> String {
+/// Writes `ours | theirs | 8x amplified difference` to `$CARGO_TARGET_TMPDIR/golden_<name>.png`
+/// and returns its path.
+pub fn write_triptych(name: &str, ours: &Image, theirs: &Image) -> String {
     let (w, h) = (ours.width, ours.height);
     let mut out = Image::new(3 * w, h);
     for y in 0..h {

@@ -1,6 +1,7 @@
 //! Helpers shared by the integration tests (`mod common;`): service clients, fixtures, tensors.
 #![allow(dead_code)]
 
+pub mod golden;
 pub mod http;
 pub mod runs;
 pub mod server;
@@ -8,7 +9,7 @@ pub mod tensors;
 pub mod webdriver;
 
 #[allow(unused_imports)]
-pub use tensors::{abs_max, fixture, max_abs};
+pub use tensors::{abs_max, assert_close, fixture, max_abs};
 
 use base64::Engine;
 use std::net::SocketAddr;

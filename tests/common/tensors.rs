@@ -27,3 +27,15 @@ pub fn abs_max(a: &Tensor) -> f32 {
         .to_scalar::<f32>()
         .unwrap()
 }
+
+/// Asserts `got` is within `tol` (max abs) of the reference `want`, and that the reference is
+/// not trivially small.
+pub fn assert_close(name: &str, got: &Tensor, want: &Tensor, tol: f32) {
+    let e = max_abs(got, want);
+    assert!(
+        e <= tol,
+        "{name}: max abs err {e} > {tol} (ref scale {})",
+        abs_max(want)
+    );
+    assert!(abs_max(want) > 1e-3, "{name}: reference is trivially small");
+}

@@ -53,12 +53,21 @@ pub struct UnetConfig {
     pub dual_cross_attention: bool,
     #[serde(default)]
     pub only_cross_attention: Value,
+    /// `null` in SDXL's config (false).
     #[serde(default)]
-    pub upcast_attention: bool,
+    pub upcast_attention: Option<bool>,
     #[serde(default)]
     pub class_embed_type: Option<String>,
+    /// `"text_time"` (SDXL): pooled text embedding + size/crop time ids added to the time
+    /// embedding; other kinds are refused.
     #[serde(default)]
     pub addition_embed_type: Option<String>,
+    #[serde(default)]
+    pub addition_time_embed_dim: Option<usize>,
+    #[serde(default)]
+    pub projection_class_embeddings_input_dim: Option<usize>,
+    #[serde(default)]
+    pub encoder_hid_dim_type: Option<String>,
     #[serde(default)]
     pub num_class_embeds: Option<usize>,
     #[serde(default)]
@@ -159,6 +168,27 @@ pub struct LevelArch {
     pub up_attn: Option<AttnArch>,
 }
 
+/// SDXL's added conditioning (`addition_embed_type = "text_time"`): `add_time_proj` embeds each
+/// of the 6 time ids (original size, crop top-left, target size) in `time_dim` sinusoidal
+/// channels; with the pooled text embedding (`pooled_dim` = `input_dim − 6 × time_dim`) they
+/// go through `add_embedding` into the time embedding.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TextTimeArch {
+    pub time_dim: usize,
+    /// `projection_class_embeddings_input_dim`.
+    pub input_dim: usize,
+}
+
+impl TextTimeArch {
+    /// The number of time ids (`[orig_h, orig_w, crop_top, crop_left, target_h, target_w]`).
+    pub const TIME_IDS: usize = 6;
+
+    /// Width of the pooled text embedding the UNet takes.
+    pub fn pooled_dim(&self) -> usize {
+        self.input_dim - Self::TIME_IDS * self.time_dim
+    }
+}
+
 /// The resolved architecture: everything the forward pass needs, checked for consistency.
 #[derive(Debug, Clone, PartialEq)]
 pub struct UnetArch {
@@ -176,6 +206,8 @@ pub struct UnetArch {
     pub freq_shift: f64,
     pub center_input_sample: bool,
     pub upcast_attention: bool,
+    /// SDXL's size/crop and pooled-text conditioning, when the config has it.
+    pub text_time: Option<TextTimeArch>,
 }
 
 impl UnetArch {
@@ -228,8 +260,39 @@ impl UnetConfig {
             flip_sin_to_cos: self.flip_sin_to_cos,
             freq_shift: self.freq_shift,
             center_input_sample: self.center_input_sample,
-            upcast_attention: self.upcast_attention,
+            upcast_attention: self.upcast_attention.unwrap_or(false),
+            text_time: self.text_time()?,
         })
+    }
+
+    /// `addition_embed_type`: none, or `"text_time"` with both of its widths.
+    fn text_time(&self) -> std::result::Result<Option<TextTimeArch>, ConfigIssue> {
+        match self.addition_embed_type.as_deref() {
+            None => Ok(None),
+            Some("text_time") => {
+                let (Some(time_dim), Some(input_dim)) = (
+                    self.addition_time_embed_dim,
+                    self.projection_class_embeddings_input_dim,
+                ) else {
+                    return Err(ConfigIssue::Inconsistent(
+                        "addition_embed_type \"text_time\" needs addition_time_embed_dim and \
+                         projection_class_embeddings_input_dim"
+                            .into(),
+                    ));
+                };
+                if time_dim == 0 || input_dim <= TextTimeArch::TIME_IDS * time_dim {
+                    return Err(ConfigIssue::Inconsistent(format!(
+                        "projection_class_embeddings_input_dim {input_dim} leaves no room for the \
+                         pooled text embedding beside 6 × addition_time_embed_dim {time_dim}"
+                    )));
+                }
+                Ok(Some(TextTimeArch {
+                    time_dim,
+                    input_dim,
+                }))
+            }
+            Some(t) => unsupported("addition_embed_type", Some(format!("{t:?}"))),
+        }
     }
 
     /// Refuses the block features this implementation does not have (other activations,
@@ -249,7 +312,7 @@ impl UnetConfig {
         }
         for (name, v) in [
             ("class_embed_type", &self.class_embed_type),
-            ("addition_embed_type (SDXL)", &self.addition_embed_type),
+            ("encoder_hid_dim_type", &self.encoder_hid_dim_type),
             ("time_embedding_act_fn", &self.time_embedding_act_fn),
             ("timestep_post_act", &self.timestep_post_act),
             ("cross_attention_norm", &self.cross_attention_norm),
@@ -396,6 +459,26 @@ impl UnetConfig {
     /// The full-size SD 2.1 UNet config (benchmarks with random weights).
     pub fn sd21() -> Self {
         Self::sd(1024, serde_json::json!([5, 10, 20, 20]), true)
+    }
+
+    /// The full-size SDXL base UNet config (benchmarks with random weights).
+    pub fn sdxl() -> Self {
+        let cfg = serde_json::json!({
+            "block_out_channels": [320, 640, 1280],
+            "down_block_types": ["DownBlock2D", "CrossAttnDownBlock2D", "CrossAttnDownBlock2D"],
+            "up_block_types": ["CrossAttnUpBlock2D", "CrossAttnUpBlock2D", "UpBlock2D"],
+            "cross_attention_dim": 2048,
+            "attention_head_dim": [5, 10, 20],
+            "transformer_layers_per_block": [1, 2, 10],
+            "use_linear_projection": true,
+            "layers_per_block": 2,
+            "addition_embed_type": "text_time",
+            "addition_time_embed_dim": 256,
+            "projection_class_embeddings_input_dim": 2816,
+            "upcast_attention": null,
+        });
+        // a literal config: deserialising it cannot fail
+        serde_json::from_value(cfg).unwrap_or_else(|_| unreachable!())
     }
 
     fn sd(cross: usize, heads: Value, linear: bool) -> Self {

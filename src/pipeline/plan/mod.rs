@@ -4,12 +4,11 @@
 //! checkpoints read the plan and nothing else, so a queued job runs the same whatever the preset
 //! table says later, and the CLI and the service cannot disagree.
 
-use super::canvas::{CanvasPlan, CanvasRequest, SampleShape, resolve_canvas};
+use super::canvas::{CanvasPlan, CanvasRequest, resolve_canvas};
 use super::presets::PresetSettings;
 use super::spec::{check_range, check_text};
 use super::{EncoderChoice, JobKind, Limits, Method, Preset, SpecError, Style};
 use crate::caption::CaptionPlan;
-use crate::models::stable_diffusion::ModelHints;
 use crate::stages::live::{CANVAS_SIDES, LiveConfig, PathBudget};
 use crate::stages::sds::{T_MAX, T_MIN};
 use crate::vector::VectorOptions;
@@ -60,6 +59,8 @@ pub struct PlanRequest {
     pub samples: Option<u32>,
     pub seed: u64,
     pub retrieval: bool,
+    /// Text runs: how many of the best distinct results to return (1..=[`MAX_VARIATIONS`]).
+    pub variations: u32,
     /// Colours, background, grouping; for vectorize runs the stopping rules too.
     pub vector: VectorOptions,
     /// Text runs: the canvas asked for (nothing: the preset's square).
@@ -85,6 +86,7 @@ impl PlanRequest {
             samples: None,
             seed: 0,
             retrieval: true,
+            variations: 1,
             vector: VectorOptions::default(),
             canvas: CanvasRequest::default(),
             negative_prompt: None,
@@ -112,57 +114,6 @@ pub struct Tuning {
     pub snapshot_every: Option<u32>,
     /// Vectorize runs: this LIVE configuration as it is (the `vectorize` command's options).
     pub live: Option<LiveConfig>,
-}
-
-/// What the executor knows about its model before loading it.
-#[derive(Clone, Debug, PartialEq)]
-pub struct ModelFacts {
-    /// What the model is: the model directory's name, or the test teacher (never a path).
-    pub name: String,
-    pub hints: ModelHints,
-    /// The configured SDS encoder.
-    pub encoder_choice: EncoderChoice,
-    /// A TAESD encoder was found for this model.
-    pub taesd_found: bool,
-    /// The shapes it samples at (a non-square canvas is sampled at its aspect only by a
-    /// model that takes [`SampleShape::Multiple`]).
-    pub sample_shape: SampleShape,
-    /// Its guidance has an unconditional branch that can embed a negative prompt.
-    pub negative_prompt: bool,
-}
-
-impl ModelFacts {
-    /// A model without a directory of its own (the test teacher, a custom executor): the
-    /// paper's hints, the VAE, no TAESD.
-    pub fn paper(name: impl Into<String>) -> Self {
-        ModelFacts {
-            name: name.into(),
-            hints: ModelHints::default(),
-            encoder_choice: EncoderChoice::Vae,
-            taesd_found: false,
-            sample_shape: SampleShape::Square,
-            negative_prompt: false,
-        }
-    }
-
-    /// [`ModelFacts::paper`] for a model that samples like Stable Diffusion 1.x/2.x: any
-    /// multiple of 64 px, a negative prompt in its guidance (a custom executor's default).
-    pub fn stable_diffusion(name: impl Into<String>) -> Self {
-        ModelFacts {
-            sample_shape: SampleShape::Multiple(64),
-            negative_prompt: true,
-            ..ModelFacts::paper(name)
-        }
-    }
-
-    /// The SDS encoder a run uses, `prefer_taesd` being its preset's wish.
-    pub fn encoder(&self, prefer_taesd: bool) -> EncoderChoice {
-        match self.encoder_choice {
-            EncoderChoice::Auto if prefer_taesd && self.taesd_found => EncoderChoice::Taesd,
-            EncoderChoice::Auto => EncoderChoice::Vae,
-            fixed => fixed,
-        }
-    }
 }
 
 /// The model a text plan runs on.
@@ -294,6 +245,15 @@ pub struct TextPlan {
     /// before it existed take the default (near-equal fills merged).
     #[serde(default)]
     pub colors: ColorPlan,
+    /// How many results the run returns: the best `variations` distinct samples of the rerank
+    /// (K is at least this), each traced and distilled with its own seeds
+    /// ([`Seeds::variation`]); from-scratch runs start each from its own init. 1 (the plans
+    /// stored before it existed) is left out of the JSON, so the plan's key is unchanged.
+    #[serde(
+        default = "variations::one",
+        skip_serializing_if = "variations::is_one"
+    )]
+    pub variations: u32,
     /// The colour and objects the caption names and how far the model steers toward them;
     /// absent for a caption of one uncoloured thing (and in plans stored before it existed).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -334,6 +294,11 @@ impl RunPlan {
     /// K, the samples of a text run that samples.
     pub fn samples(&self) -> Option<u32> {
         Some(self.text.as_ref()?.sample.as_ref()?.samples)
+    }
+
+    /// How many results the run returns (1 but for text runs asked for more).
+    pub fn variations(&self) -> u32 {
+        self.text.as_ref().map_or(1, |t| t.variations)
     }
 
     /// Identifies the run for its checkpoints: a state saved under another plan is ignored.
@@ -392,6 +357,7 @@ fn vectorize_plan(req: &PlanRequest, limits: &Limits) -> Result<LiveConfig, Spec
     req.vector
         .validate()
         .map_err(|(field, reason)| SpecError::new(field, reason))?;
+    check_variations(req, None, limits)?;
     if let Some(cfg) = &req.tuning.live {
         cfg.validate()
             .map_err(|e| SpecError::new("paths", e.to_string()))?;
@@ -528,8 +494,11 @@ fn text_plan(
         JobKind::Text => req.start,
     };
     let from_method = start == StartKind::Method;
-    let sample = (from_method && req.method != Method::Scratch).then_some(SamplePlan {
-        samples: n.samples,
+    let samples = from_method && req.method != Method::Scratch;
+    let variations = check_variations(req, samples.then_some(n.samples), limits)?;
+    let sample = samples.then_some(SamplePlan {
+        // K: enough samples for the variations' distinct picks.
+        samples: n.samples.max(variations),
         steps: ps.sample_steps as u32,
         guidance: model.hints.sample_guidance,
         retrieval: req.retrieval,
@@ -573,11 +542,18 @@ fn text_plan(
             encoder: model.encoder(ps.prefer_taesd),
         },
         colors: req.vector.colors.clone(),
+        variations,
     })
 }
 
 mod text_plan;
 use text_plan::{negative_prompt, sample_shape};
+
+mod facts;
+mod variations;
+pub use facts::ModelFacts;
+pub use variations::MAX_VARIATIONS;
+use variations::check_variations;
 
 #[cfg(test)]
 mod tests;

@@ -1,4 +1,5 @@
 use super::*;
+use crate::models::stable_diffusion::ModelHints;
 use crate::pipeline::canvas::SampleShape;
 use crate::scene::MAX_PATHS;
 use crate::stages::sds::SdsConfig;

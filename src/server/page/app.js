@@ -20,7 +20,9 @@
   const FIELD_INPUT = { caption: 'caption', style: 'style', preset: 'preset', method: 'method',
     paths: 'paths', seed: 'seed', steps: 'steps', samples: 'samples', priority: 'priority',
     retrieval: 'retrieval', image: 'file', svg: 'file', aspect: 'aspect', width: 'aspect',
-    height: 'aspect', negative_prompt: 'negative-prompt' };
+    height: 'aspect', negative_prompt: 'negative-prompt', variations: 'variations', colors: 'colors',
+    palette: 'palette', background: 'background', group: 'group' };
+  const HEX_COLOUR = /^#([0-9a-f]{3}|[0-9a-f]{6})$/i;
 
   const state = {
     apiKey: sessionStorage.getItem(KEY_STORAGE) || '',
@@ -194,7 +196,8 @@
     el.submit.textContent = state.submitting ? 'Submitting…' : label;
     el.method.disabled = kind === 'image'; // the API refuses `method` on vectorize jobs
     el.methodHint.hidden = kind !== 'image';
-    el.textFields.hidden = el.aspectHint.hidden = kind === 'image'; // canvas + negative prompt: text jobs
+    // canvas, negative prompt, variations: text jobs only
+    el.textFields.hidden = el.aspectHint.hidden = el.variationsHint.hidden = kind === 'image';
     el.captionCount.textContent = String([...el.caption.value].length); // characters, as the API counts
   }
 
@@ -291,9 +294,41 @@
     if (kind === 'text' && el.aspect.value) body.aspect = el.aspect.value;
     const negative = el.negativePrompt.value.trim();
     if (kind === 'text' && negative) body.negative_prompt = negative;
+    const variations = intField('variations', 1, 6);
+    if (kind === 'text' && variations > 1) body.variations = variations;
+    Object.assign(body, colourFields());
     const template = toJson(body, readSeed());
     const json = f ? template.split(`"${f.kind === 'svg' ? SVG_MARK : IMAGE_MARK}"`).join(JSON.stringify(f.data)) : template;
     return { json, template, files: f ? { [f.kind]: f.name, svgText: f.kind === 'svg' ? f.data : null } : {} };
+  }
+
+  // The vector stage's options the form sets (validated as the API does): colors, palette,
+  // background, group; the defaults are left out.
+  function colourFields() {
+    const out = {};
+    const colors = intField('colors', 1, 64);
+    if (colors !== undefined) out.colors = colors;
+    const palette = el.palette.value.split(/[\s,]+/).filter(Boolean);
+    const bad = palette.find((c) => !HEX_COLOUR.test(c));
+    if (bad) throw localError('palette', `${bad} is not a colour: write #rgb or #rrggbb`);
+    if (palette.length > 64) throw localError('palette', `has ${palette.length} colours; at most 64`);
+    if (palette.length) out.palette = palette;
+    const bg = el.background.value;
+    if (bg === 'transparent') out.background = 'transparent';
+    else if (bg === 'color') out.background = el.backgroundColor.value;
+    if (el.group.value === 'color') out.group = 'color';
+    return out;
+  }
+
+  // The form's colour controls showing `p`'s colors, palette, background and group.
+  function setColourFields(p) {
+    el.colors.value = p.colors ?? '';
+    el.palette.value = (p.palette || []).join(' ');
+    const bg = p.background || 'auto';
+    el.background.value = bg === 'auto' || bg === 'transparent' ? bg : 'color';
+    if (el.background.value === 'color') el.backgroundColor.value = bg;
+    el.backgroundColor.hidden = el.background.value !== 'color';
+    el.group.value = p.group === 'color' ? 'color' : 'none';
   }
 
   async function onSubmit(e) {
@@ -334,6 +369,8 @@
     for (const k of ['paths', 'steps', 'samples', 'seed']) el[k].value = p[k] ?? '';
     el.aspect.value = p.aspect ?? '';
     el.negativePrompt.value = p.negative_prompt ?? '';
+    el.variations.value = p.variations > 1 ? p.variations : '';
+    setColourFields(p);
     el.priority.value = job.priority || '';
     updateMode();
     announce('Settings copied into the form.');
@@ -376,7 +413,9 @@
     if (p.caption != null) body.caption = p.caption;
     if (p.has_image) body.image = IMAGE_MARK;
     if (p.has_svg) body.svg = SVG_MARK;
-    for (const k of ['style', 'preset', 'method', 'paths', 'steps', 'aspect', 'width', 'height', 'negative_prompt']) if (p[k] != null) body[k] = p[k];
+    for (const k of ['style', 'preset', 'method', 'paths', 'steps', 'aspect', 'width', 'height', 'negative_prompt',
+      'colors', 'palette', 'background', 'group']) if (p[k] != null) body[k] = p[k];
+    if (p.variations > 1) body.variations = p.variations;
     if (job.kind === 'text' && p.samples != null) body.samples = p.samples;
     if (job.priority) body.priority = job.priority;
     return { template: toJson(body, p.seed != null ? String(p.seed) : null),
@@ -415,8 +454,9 @@
 
   function resetCanvas() {
     for (const img of [el.snapshot, el.result]) img.removeAttribute('src');
-    for (const a of [el.downloadSvg, el.downloadPng]) { a.removeAttribute('href'); a.setAttribute('aria-disabled', 'true'); }
-    for (const n of [el.snapshot, el.resultView, el.samplesView, el.paramsView, el.detailBox]) n.hidden = true;
+    [el.downloadSvg, el.downloadPng, el.downloadPdf].forEach(disableLink);
+    for (const n of [el.snapshot, el.resultView, el.samplesView, el.paramsView, el.detailBox, el.variationPicker]) n.hidden = true;
+    el.variationList.textContent = '';
     el.empty.hidden = el.liveView.hidden = false;
     el.sampleList.textContent = el.step.textContent = el.connection.textContent = '';
     el.loss.textContent = el.pathCount.textContent = el.snapshotN.textContent = el.attempt.textContent = '–';
@@ -428,7 +468,8 @@
   function openJob(id, initial) {
     closeView();
     const v = { id, abort: new AbortController(), urls: new Set(), snapshotUrl: null, pendingSvg: null,
-      raf: 0, lastEventId: null, job: null, finished: false, closed: false };
+      raf: 0, lastEventId: null, job: null, finished: false, closed: false,
+      variations: [], picked: 0, svgs: new Map() };
     state.view = v;
     resetCanvas();
     if (initial) applyJob(v, initial);
@@ -576,7 +617,7 @@
     el.cancel.hidden = true;
     el.connection.textContent = '';
     refreshJobs();
-    loadJobDetail(v); // result.paths, result.detail, rerank, error
+    const detail = loadJobDetail(v); // result.paths, result.detail, result.variations, rerank, error
     if (job.status !== 'succeeded') {
       const e = job.error || {};
       setStage(null, job.status === 'failed' ? 'Failed' : 'Cancelled');
@@ -587,30 +628,89 @@
     setStage(null, 'Done');
     el.progress.max = 1;
     el.progress.value = 1;
-    const base = `/jobs/${encodeURIComponent(v.id)}`;
-    const stem = fileStem(job);
     try {
-      const svg = await fetchBlob(v, `${base}/result.svg`, 'image/svg+xml');
+      await detail; // result.variations
       if (!live(v)) return;
-      // The download link's href is a blob of exactly the bytes result.svg returned.
-      el.result.src = el.downloadSvg.href = svg.url;
-      el.downloadSvg.download = `${stem}.svg`;
-      el.downloadSvg.removeAttribute('aria-disabled');
-      el.resultBytes.textContent = fmtBytes(svg.buf.byteLength);
-      // Decoded from the bytes (fetching the blob: URL would need connect-src blob:).
-      const paths = v.job.result ? v.job.result.paths : countPaths(new TextDecoder().decode(svg.buf));
-      el.resultPaths.textContent = `${fmtInt(paths)} paths`;
-      el.pathCount.textContent = fmtInt(paths);
+      v.variations = (v.job.result && v.job.result.variations) || [];
       el.liveView.hidden = true;
       el.resultView.hidden = false;
-      announce(`Done: ${fmtInt(paths)} paths, ${fmtBytes(svg.buf.byteLength)}.`);
-      const png = await fetchBlob(v, `${base}/result.png`, 'image/png');
+      renderVariations(v);
+      await showVariation(v, 1);
       if (!live(v)) return;
-      el.downloadPng.href = png.url;
-      el.downloadPng.download = `${stem}.png`;
-      el.downloadPng.removeAttribute('aria-disabled');
+      const n = variationCount(v);
+      announce(`Done: ${n > 1 ? `${n} variations, ` : ''}${el.resultPaths.textContent}, ${el.resultBytes.textContent}.`);
     } catch (err) {
       if (err.name !== 'AbortError' && live(v)) showError(err);
+    }
+  }
+
+  // ---------- the result: variations and export ----------
+
+  const variationCount = (v) => Math.max(1, v.variations.length);
+  function disableLink(a) { a.removeAttribute('href'); a.setAttribute('aria-disabled', 'true'); }
+  function setLink(a, url, name) { a.href = url; a.download = name; a.removeAttribute('aria-disabled'); }
+
+  // The API path of variation i's file (1-based; result/1 is result.svg), a PNG at the chosen size.
+  function resultPath(v, i, ext) {
+    const path = `/jobs/${encodeURIComponent(v.id)}/result/${i}.${ext}`;
+    return ext === 'png' && el.pngSize.value ? `${path}?size=${el.pngSize.value}` : path;
+  }
+  const variationStem = (v, i) => (variationCount(v) > 1 ? `${fileStem(v.job)}-${i}` : fileStem(v.job));
+
+  // Variation i's SVG (fetched once per view).
+  async function variationSvg(v, i) {
+    if (!v.svgs.has(i)) v.svgs.set(i, fetchBlob(v, resultPath(v, i, 'svg'), 'image/svg+xml'));
+    return v.svgs.get(i);
+  }
+
+  // A thumbnail button per variation (none for a single result).
+  function renderVariations(v) {
+    const n = variationCount(v);
+    el.variationList.textContent = '';
+    el.variationPicker.hidden = n < 2;
+    if (n < 2) return;
+    for (const info of v.variations) {
+      const i = info.variation;
+      const img = h('img', { alt: '' });
+      const score = info.score != null ? ` · ${Number(info.score).toFixed(3)}` : '';
+      el.variationList.append(h('li', {}, h('button', { type: 'button', className: 'variation',
+        dataset: { i: String(i) }, attrs: { 'aria-pressed': 'false', 'aria-label': `Variation ${i}${score}, ${info.paths} paths` } },
+      h('span', { className: 'thumb checker' }, img), h('span', { className: 'variation-n' }, `#${i}${score}`))));
+      variationSvg(v, i).then((s) => { if (live(v)) img.src = s.url; }, () => {});
+    }
+  }
+
+  // Shows variation i: the picture, its paths and bytes, and its SVG, PNG and PDF downloads.
+  async function showVariation(v, i) {
+    v.picked = i;
+    for (const b of el.variationList.querySelectorAll('button')) b.setAttribute('aria-pressed', String(b.dataset.i === String(i)));
+    [el.downloadSvg, el.downloadPng, el.downloadPdf].forEach(disableLink);
+    const svg = await variationSvg(v, i);
+    if (!live(v) || v.picked !== i) return;
+    const stem = variationStem(v, i);
+    // The link's href is a blob of exactly the bytes the API returned.
+    el.result.src = svg.url;
+    setLink(el.downloadSvg, svg.url, `${stem}.svg`);
+    el.resultBytes.textContent = fmtBytes(svg.buf.byteLength);
+    const info = v.variations.find((x) => x.variation === i);
+    // Decoded from the bytes (fetching the blob: URL would need connect-src blob:).
+    const paths = info ? info.paths : countPaths(new TextDecoder().decode(svg.buf));
+    const n = variationCount(v);
+    el.resultPaths.textContent = `${n > 1 ? `Variation ${i} of ${n} · ` : ''}${fmtInt(paths)} paths`;
+    el.pathCount.textContent = fmtInt(paths);
+    const pdf = fetchBlob(v, resultPath(v, i, 'pdf'), 'application/pdf').then((f) => {
+      if (live(v) && v.picked === i) setLink(el.downloadPdf, f.url, `${stem}.pdf`);
+    });
+    await Promise.all([loadPng(v), pdf]);
+  }
+
+  // The PNG download of the picked variation at the chosen size.
+  async function loadPng(v) {
+    const i = v.picked, size = el.pngSize.value;
+    disableLink(el.downloadPng);
+    const png = await fetchBlob(v, resultPath(v, i, 'png'), 'image/png');
+    if (live(v) && v.picked === i && el.pngSize.value === size) {
+      setLink(el.downloadPng, png.url, `${variationStem(v, i)}${size ? `-${size}px` : ''}.png`);
     }
   }
 
@@ -875,7 +975,18 @@
     el.jobs.addEventListener('click', onJobsClick);
     el.jobsRefresh.addEventListener('click', () => { clearError(); refreshJobs(true); });
     // Download links without their blob yet do nothing (and, without href, are not focusable).
-    for (const a of [el.downloadSvg, el.downloadPng]) {
+    el.background.addEventListener('change', () => { el.backgroundColor.hidden = el.background.value !== 'color'; });
+    el.variationList.addEventListener('click', (e) => {
+      const b = e.target.closest('button[data-i]');
+      if (!b || !state.view) return;
+      const v = state.view;
+      showVariation(v, Number(b.dataset.i)).catch((err) => { if (err.name !== 'AbortError' && live(v)) showError(err); });
+    });
+    el.pngSize.addEventListener('change', () => {
+      const v = state.view;
+      if (v && v.picked) loadPng(v).catch((err) => { if (err.name !== 'AbortError' && live(v)) showError(err); });
+    });
+    for (const a of [el.downloadSvg, el.downloadPng, el.downloadPdf]) {
       a.addEventListener('click', (e) => { if (a.getAttribute('aria-disabled') === 'true') e.preventDefault(); });
     }
     setInterval(() => { if (!document.hidden) refreshJobs(); }, 5000);

@@ -12,5 +12,5 @@ mod submit;
 pub(super) use access::{auth_and_count, method_not_allowed, no_route};
 pub(super) use health::{healthz, metrics, readyz};
 pub(super) use jobs::{cancel, check_other_params, get_job, job_id, list, load_job};
-pub(super) use results::{result_pdf, result_png, result_svg, snapshot};
+pub(super) use results::{result_pdf, result_png, result_svg, result_variation, snapshot};
 pub(super) use submit::submit;

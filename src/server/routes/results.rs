@@ -1,17 +1,55 @@
-//! A finished job's output: `result.svg`, the `result.png` preview, `result.pdf` and the
-//! snapshots.
+//! A finished job's output: `result.svg`, the `result.png` preview, `result.pdf`, each
+//! variation's (`result/{i}.svg|png|pdf`) and the snapshots.
 
-use super::jobs::{job_id, load_job};
+use super::jobs::{check_other_params, job_id, load_job};
 use crate::server::AppState;
 use crate::server::error::ApiError;
 use crate::server::tenant::Caller;
 use crate::store::JobStatus;
-use axum::extract::{Extension, Path, State};
+use axum::extract::rejection::QueryRejection;
+use axum::extract::{Extension, Path, Query, State};
 use axum::http::{HeaderMap, header};
 use axum::response::{IntoResponse, Response};
 
 /// Longest side of `result.png`.
 const PREVIEW_MAX_SIDE: f32 = 1024.0;
+
+/// The longest side a PNG may be asked for with `?size=` (px).
+pub const PNG_SIDES: std::ops::RangeInclusive<u32> = 16..=4096;
+
+/// The query of a PNG download: `size`, the PNG's longest side in px ([`PNG_SIDES`]; without
+/// it, the preview: the SVG's own size, at most [`PREVIEW_MAX_SIDE`]).
+#[derive(serde::Deserialize)]
+pub(in crate::server) struct PngQuery {
+    size: Option<String>,
+    /// Every other parameter: see [`check_other_params`].
+    #[serde(flatten)]
+    other: std::collections::BTreeMap<String, String>,
+}
+
+impl PngQuery {
+    /// The query of a request, checked: the longest side asked for, if any.
+    fn side(query: Result<Query<PngQuery>, QueryRejection>) -> Result<Option<u32>, ApiError> {
+        let Query(q) = query.map_err(|e| ApiError::InvalidQuery {
+            field: "query".into(),
+            reason: e.body_text(),
+        })?;
+        check_other_params(&q.other, "size")?;
+        let Some(raw) = q.size else { return Ok(None) };
+        raw.parse::<u32>()
+            .ok()
+            .filter(|n| PNG_SIDES.contains(n))
+            .map(Some)
+            .ok_or_else(|| ApiError::InvalidQuery {
+                field: "size".into(),
+                reason: format!(
+                    "must be a whole number from {} to {} (the PNG's longest side in px)",
+                    PNG_SIDES.start(),
+                    PNG_SIDES.end()
+                ),
+            })
+    }
+}
 
 /// The generic binary type every download is also served as, for clients that cannot name
 /// `image/svg+xml` or `image/png` (code generators map it to a file).
@@ -99,13 +137,27 @@ pub(in crate::server) async fn result_png(
     State(state): State<AppState>,
     Extension(caller): Extension<Caller>,
     Path(raw): Path<String>,
+    query: Result<Query<PngQuery>, QueryRejection>,
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
     let id = job_id(&raw)?;
+    let side = PngQuery::side(query)?;
     let svg = finished_result(&state, &id, &caller).await?.svg;
-    converted(&headers, "image/png", move || {
-        crate::svg::render_png(&svg, PREVIEW_MAX_SIDE)
-            .map_err(|e| ApiError::Internal(format!("rendering the preview failed: {e}")))
+    png_response(&headers, svg, side).await
+}
+
+/// `svg` rendered as a PNG: its longest side `side` px, or the preview without it.
+async fn png_response(
+    headers: &HeaderMap,
+    svg: String,
+    side: Option<u32>,
+) -> Result<Response, ApiError> {
+    converted(headers, "image/png", move || {
+        match side {
+            Some(side) => crate::svg::render_png_at(&svg, side),
+            None => crate::svg::render_png(&svg, PREVIEW_MAX_SIDE),
+        }
+        .map_err(|e| ApiError::Internal(format!("rendering the PNG failed: {e}")))
     })
     .await
 }
@@ -119,12 +171,64 @@ pub(in crate::server) async fn result_pdf(
 ) -> Result<Response, ApiError> {
     let id = job_id(&raw)?;
     let svg = finished_result(&state, &id, &caller).await?.svg;
-    converted(&headers, "application/pdf", move || {
+    pdf_response(&headers, svg).await
+}
+
+/// `svg` as a one-page vector PDF.
+async fn pdf_response(headers: &HeaderMap, svg: String) -> Result<Response, ApiError> {
+    converted(headers, "application/pdf", move || {
         crate::svg::from_svg(&svg)
             .map(|scene| crate::pdf::to_pdf(&scene))
             .map_err(|e| ApiError::Internal(format!("converting the result to PDF failed: {e}")))
     })
     .await
+}
+
+/// `result/{i}.svg|png|pdf`: variation `i` (1-based; 1 is `result.svg`) of a succeeded job.
+pub(in crate::server) async fn result_variation(
+    State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
+    Path((raw, file)): Path<(String, String)>,
+    query: Result<Query<PngQuery>, QueryRejection>,
+    headers: HeaderMap,
+) -> Result<Response, ApiError> {
+    let id = job_id(&raw)?;
+    let side = PngQuery::side(query)?;
+    let not_found = || ApiError::NotFound {
+        what: "result variation",
+        id: format!(
+            "{id}/result/{file} (variations are named I.svg, I.png or I.pdf, I = 1, 2, ...)"
+        ),
+    };
+    let (n, ext) = numbered(&file, &["svg", "png", "pdf"]).ok_or_else(not_found)?;
+    if side.is_some() && ext != "png" {
+        return Err(ApiError::InvalidQuery {
+            field: "size".into(),
+            reason: "only applies to a PNG".into(),
+        });
+    }
+    let first = finished_result(&state, &id, &caller).await?;
+    let svg = if n == 1 {
+        first.svg
+    } else {
+        state
+            .store
+            .result_variation(&id, n)
+            .await?
+            .ok_or_else(not_found)?
+    };
+    match ext {
+        "png" => png_response(&headers, svg, side).await,
+        "pdf" => pdf_response(&headers, svg).await,
+        _ => Ok(svg_response(&headers, svg)),
+    }
+}
+
+/// `N.ext` (N = 1, 2, ...; `ext` one of `exts`) as N and its extension.
+fn numbered<'a>(file: &'a str, exts: &[&str]) -> Option<(i64, &'a str)> {
+    let (n, ext) = file.rsplit_once('.')?;
+    let n = n.parse::<i64>().ok().filter(|n| *n >= 1)?;
+    exts.contains(&ext).then_some((n, ext))
 }
 
 /// The bytes `convert` makes (CPU work, off the async threads), served as `native` or as
@@ -152,14 +256,10 @@ pub(in crate::server) async fn snapshot(
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
     let id = job_id(&raw)?;
-    let n = file
-        .strip_suffix(".svg")
-        .and_then(|s| s.parse::<i64>().ok())
-        .filter(|n| *n >= 1)
-        .ok_or_else(|| ApiError::NotFound {
-            what: "snapshot",
-            id: format!("{id}/{file} (snapshots are named N.svg, N = 1, 2, ...)"),
-        })?;
+    let (n, _) = numbered(&file, &["svg"]).ok_or_else(|| ApiError::NotFound {
+        what: "snapshot",
+        id: format!("{id}/{file} (snapshots are named N.svg, N = 1, 2, ...)"),
+    })?;
     load_job(&state, &id, &caller).await?;
     let snap = state
         .store

@@ -69,6 +69,8 @@ pub struct LiveResult {
     pub stages: Vec<StageReport>,
     /// Paths removed by pruning (`auto` only).
     pub pruned: usize,
+    /// Paths merged into a touching path of the same fill ([`crate::vector::merge`]).
+    pub merged: usize,
     /// Adam steps taken.
     pub steps: u32,
     /// What a designer finds in the SVG: self-intersecting, hidden and sliver paths, colours.
@@ -272,7 +274,7 @@ pub fn vectorize_resumable(
         st.prev_psnr = run.psnr(&st.scene);
     }
     run.add_stages(&mut st, &mut rng, &stages_plan, max_total, checkpoint)?;
-    let (out, pruned) = run.finish(st.scene, st.reports.len())?;
+    let (out, pruned, merged) = run.finish(st.scene, st.reports.len())?;
     let psnr = crate::image::psnr(&crate::raster::render(&out), target);
     run.report_done(&out, psnr);
     Ok(LiveResult {
@@ -282,6 +284,7 @@ pub fn vectorize_resumable(
         psnr,
         stages: st.reports,
         pruned,
+        merged,
         steps: run.step,
     })
 }

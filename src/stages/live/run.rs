@@ -8,7 +8,7 @@ use super::{
 };
 use crate::image::Image;
 use crate::image::ops::resize;
-use crate::losses::{outline, udf_weights, weighted_l2_into, xing_loss};
+use crate::losses::{LossError, outline, udf_weights, weighted_l2_slices, xing_loss};
 use crate::optim::{Adam, AdamConfig, GroupSchedules, LrSchedule};
 use crate::progress::{CancelToken, Progress, ProgressSink, Stage};
 use crate::scene::{ParamGroup, Params, Rgba, Scene, Trainable};
@@ -106,17 +106,14 @@ impl Run<'_> {
         let mut window: Vec<f64> = Vec::with_capacity(CONVERGE_WINDOW);
         let mut previous: Option<f64> = None;
         let mut weights = Vec::new();
-        let mut d_image = Vec::new();
         for it in 0..iters {
             if self.cancel.is_cancelled() {
                 return Err(LiveError::Cancelled);
             }
-            let (img, tape) = crate::raster::render_tape(scene);
             if it % UDF_EVERY == 0 {
                 weights = self.loss_weights(scene, &in_focus);
             }
-            let loss = weighted_l2_into(&img, &self.target, &weights, &mut d_image)?;
-            let mut grad = crate::raster::backward(scene, &tape, &d_image);
+            let (loss, mut grad) = self.loss_and_grad(scene, &weights)?;
             let xing = if self.cfg.xing_weight > 0.0 {
                 xing_loss(
                     scene,
@@ -146,6 +143,28 @@ impl Run<'_> {
             }
         }
         Ok(last)
+    }
+
+    /// The weighted L2 loss of `scene`'s render against the target and its gradient, in one
+    /// fused forward, loss and backward pass over the rasteriser's row bands.
+    fn loss_and_grad(&self, scene: &Scene, weights: &[f32]) -> Result<(f64, Params), LiveError> {
+        let t = &self.target;
+        if (scene.width, scene.height) != (t.width, t.height) {
+            let e = LossError::SizeMismatch(scene.width, scene.height, t.width, t.height);
+            return Err(e.into());
+        }
+        if weights.len() != t.len_pixels() {
+            let e = LossError::WeightLength {
+                got: weights.len(),
+                expected: t.len_pixels(),
+            };
+            return Err(e.into());
+        }
+        let band = |px: Range<usize>, img: &[f32], grad: &mut [f32]| {
+            let target = &t.data[4 * px.start..4 * px.end];
+            weighted_l2_slices(img, target, &weights[px], grad)
+        };
+        Ok(crate::raster::render_loss_backward(scene, &band))
     }
 
     /// Per-pixel weights of the L2 loss: uniform, plus LIVE's unsigned-distance term around
@@ -230,8 +249,9 @@ impl Run<'_> {
         self.sink.report(done);
     }
 
-    /// Replaces faint or tiny paths by circles at the current high-error regions.
-    fn reinit_weak(&self, scene: &mut Scene, rng: &mut ChaCha8Rng) -> usize {
+    /// Replaces faint or tiny paths by circles at the current high-error regions, tagged as
+    /// added by `stage`.
+    fn reinit_weak(&self, scene: &mut Scene, rng: &mut ChaCha8Rng, stage: usize) -> usize {
         let min_area = self.cfg.reinit_min_area * self.px() * self.px();
         let weak = prune::weak_paths(scene, self.cfg.reinit_min_opacity, min_area);
         if weak.is_empty() {
@@ -239,6 +259,7 @@ impl Run<'_> {
         }
         let current = crate::raster::render(scene);
         let fresh = init::init_paths(&current, &self.target, weak.len(), &self.init_cfg(), rng);
+        let fresh = tagged(fresh, stage);
         let count = fresh.len();
         for (i, shape) in weak.into_iter().zip(fresh) {
             scene.shapes[i] = shape;
@@ -310,6 +331,15 @@ fn untwist(scene: &mut Scene, in_focus: &mut Vec<bool>) -> bool {
     focus.truncate(scene.shapes.len());
     *in_focus = focus;
     true
+}
+
+/// `shapes` tagged as added by LIVE stage `stage` ([`crate::scene::Shape::stage`]).
+fn tagged(mut shapes: Vec<crate::scene::Shape>, stage: usize) -> Vec<crate::scene::Shape> {
+    let tag = u16::try_from(stage).ok();
+    for s in &mut shapes {
+        s.stage = tag;
+    }
+    shapes
 }
 
 /// `scene` (at the working size) scaled to the target's `tw`×`th` canvas.
@@ -385,14 +415,14 @@ impl Run<'_> {
             tracer::trace(&small, &tracer::TracerSetting::default()).map_err(LiveError::Tracer)?;
         let start = tracer::traced_to_scene(&traced, ww, wh, max_total, 12)?;
         let scene = &mut st.scene;
-        scene.shapes = start.shapes;
+        scene.shapes = tagged(start.shapes, 0);
         if self.background_free {
             scene.background = start.background;
         }
         self.choose_colours(scene);
         let n = scene.shapes.len();
         let loss = self.optimise(scene, 0..n, self.cfg.iters_per_stage, 0, true)?;
-        let reinit = self.reinit_weak(scene, rng);
+        let reinit = self.reinit_weak(scene, rng, 0);
         self.make_simple(scene);
         self.choose_colours(scene);
         let psnr = self.psnr(scene);
@@ -445,6 +475,7 @@ impl Run<'_> {
         }
         let current = crate::raster::render(&st.scene);
         let fresh = init::init_paths(&current, &self.target, want, &self.init_cfg(), rng);
+        let fresh = tagged(fresh, si + 1);
         let added = fresh.len();
         if added == 0 {
             return Ok(None);
@@ -455,7 +486,7 @@ impl Run<'_> {
         let end = scene.shapes.len();
         self.choose_colours(scene);
         let loss = self.optimise(scene, start..end, self.cfg.iters_per_stage, si + 1, true)?;
-        let reinit = self.reinit_weak(scene, rng);
+        let reinit = self.reinit_weak(scene, rng, si + 1);
         self.make_simple(scene);
         self.choose_colours(scene);
         let psnr = self.psnr(scene);
@@ -505,13 +536,14 @@ impl Run<'_> {
     }
 
     /// The end of a trace after `stages` stages: colours settled, the final pass, then faint,
-    /// unseen, over-budget and hidden paths dropped and outlines made simple. Returns the scene
-    /// at the target's size and the number of paths pruned.
+    /// unseen paths dropped, overlapping paths of one fill merged ([`crate::vector::merge`]),
+    /// paths past `max_bytes` and hidden paths dropped, outlines made simple.
+    /// Returns the scene at the target's size, the number of paths pruned and of merges.
     pub(super) fn finish(
         &mut self,
         mut scene: Scene,
         stages: usize,
-    ) -> Result<(Scene, usize), LiveError> {
+    ) -> Result<(Scene, usize, usize), LiveError> {
         let cfg = self.cfg;
         self.switch_to_full(&mut scene);
         // Colours settle before the last pass, which then fits the geometry to them.
@@ -535,6 +567,7 @@ impl Run<'_> {
         let (tw, th) = (self.out_width, self.out_height);
         let scale = tw as f32 / self.target.width as f32;
         let mut pruned = crate::vector::drop_unseen(&mut scene, scale);
+        let merged = crate::vector::merge::merge_touching(&mut scene, Default::default());
         if let PathBudget::Auto {
             prune_tolerance, ..
         } = cfg.budget
@@ -551,6 +584,6 @@ impl Run<'_> {
         crate::vector::make_simple(&mut out, crate::vector::SIMPLE_MIN_AREA);
         pruned += crate::vector::drop_hidden(&mut out);
         out.validate()?;
-        Ok((out, pruned))
+        Ok((out, pruned, merged))
     }
 }

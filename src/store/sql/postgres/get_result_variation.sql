@@ -1,0 +1,1 @@
+SELECT svg FROM result_variations WHERE job_id = $1 AND n = $2
