@@ -56,6 +56,8 @@ mod tests;
 #[cfg(test)]
 mod tests_layer;
 #[cfg(test)]
+mod tests_layer_paint;
+#[cfg(test)]
 mod tests_paint;
 #[cfg(test)]
 mod tests_stroke;

@@ -6,14 +6,14 @@ use crate::scene::{Clip, Content, FillRule, Group, Mask, MaskKind, Rgba};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
-fn content(shapes: Vec<Shape>) -> Content {
+pub(super) fn content(shapes: Vec<Shape>) -> Content {
     Content {
         shapes,
         groups: Vec::new(),
     }
 }
 
-fn clip(shapes: Vec<Shape>) -> Box<Clip> {
+pub(super) fn clip(shapes: Vec<Shape>) -> Box<Clip> {
     Box::new(Clip {
         content: content(shapes),
         clip: None,
@@ -21,7 +21,7 @@ fn clip(shapes: Vec<Shape>) -> Box<Clip> {
 }
 
 /// Two nested squares wound the same way as one closed polygon (a bridge there and back).
-fn frame(rule: FillRule) -> Shape {
+pub(super) fn frame(rule: FillRule) -> Shape {
     let p = |x: f32, y: f32| Point::new(x, y);
     let mut s = Shape::polygon(
         vec![

@@ -19,7 +19,7 @@ fn stops(colors: &[(f32, [f32; 4])]) -> Vec<GradientStop> {
         .collect()
 }
 
-fn linear(x1: f32, y1: f32, x2: f32, y2: f32, spread: Spread) -> Gradient {
+pub(super) fn linear(x1: f32, y1: f32, x2: f32, y2: f32, spread: Spread) -> Gradient {
     Gradient {
         geometry: GradientGeometry::Linear { x1, y1, x2, y2 },
         transform: Affine::IDENTITY,
@@ -32,7 +32,7 @@ fn linear(x1: f32, y1: f32, x2: f32, y2: f32, spread: Spread) -> Gradient {
     }
 }
 
-fn radial(spread: Spread, fr: f32) -> Gradient {
+pub(super) fn radial(spread: Spread, fr: f32) -> Gradient {
     Gradient {
         geometry: GradientGeometry::Radial {
             cx: 2.0,
@@ -55,13 +55,13 @@ fn radial(spread: Spread, fr: f32) -> Gradient {
     }
 }
 
-fn with(mut s: Shape, fill: Option<Gradient>, stroke: Option<Gradient>) -> Shape {
+pub(super) fn with(mut s: Shape, fill: Option<Gradient>, stroke: Option<Gradient>) -> Shape {
     s.gradients = Some(Box::new(Gradients { fill, stroke }));
     s
 }
 
 /// A filled linear, a filled-and-stroked radial and an open stroked linear gradient.
-fn scene(spread: Spread) -> Scene {
+pub(super) fn scene(spread: Spread) -> Scene {
     let mut s = Scene::new(24, 20, Rgba::new(0.9, 0.9, 0.8, 1.0)).unwrap();
     let blob = Shape::circle(8.3, 9.1, 6.6, 4, Rgba::BLACK).unwrap();
     s.shapes.push(with(
@@ -93,7 +93,7 @@ fn scene(spread: Spread) -> Scene {
 }
 
 /// Checks every gradient parameter; returns (checked, mismatches).
-fn fd_check_paint(scene: &Scene, seed: u64) -> (usize, Vec<String>) {
+pub(super) fn fd_check_paint(scene: &Scene, seed: u64) -> (usize, Vec<String>) {
     let sc = SceneT::<f64>::from_scene(scene, FLATTEN_TOLERANCE);
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let n = 4 * (scene.width * scene.height) as usize;
