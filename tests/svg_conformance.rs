@@ -1,5 +1,5 @@
-//! Conformance: SVGs using clip paths, masks, group opacity, even-odd fills and nested
-//! viewports, imported and drawn by our rasteriser, against resvg's render of the same text
+//! Conformance: SVGs using clip paths, masks, group opacity, even-odd fills, nested viewports
+//! and gradient paint inside groups and masks, imported and drawn by our rasteriser, against resvg's render of the same text
 //! (the tolerance of resvg's test-suite harness; a triptych PNG in `$CARGO_TARGET_TMPDIR` on
 //! failure). Then each scene exported and imported again is the same scene, and resvg draws the
 //! export as we draw the scene.
@@ -80,6 +80,27 @@ const CASES: &[(&str, &str)] = &[
           <circle cx="5" cy="10" r="4" fill="#fc0"/>
         </svg>"##,
     ),
+    (
+        "gradients_in_clipped_faded_group_and_mask",
+        r##"<defs>
+          <linearGradient id="lin" x1="0" y1="0" x2="1" y2="1" spreadMethod="reflect">
+            <stop offset="0" stop-color="#c33"/>
+            <stop offset=".6" stop-color="#fc0" stop-opacity=".7"/>
+            <stop offset="1" stop-color="#36c"/>
+          </linearGradient>
+          <radialGradient id="rad" gradientUnits="userSpaceOnUse" cx="70" cy="40" r="25" fx="62" fy="35">
+            <stop offset="0" stop-color="#fff"/>
+            <stop offset="1" stop-color="#000"/>
+          </radialGradient>
+          <clipPath id="c"><circle cx="40" cy="40" r="30"/></clipPath>
+          <mask id="m"><rect x="45" y="10" width="50" height="60" fill="url(#rad)"/></mask>
+        </defs>
+        <g clip-path="url(#c)" opacity=".7">
+          <path d="M5 5H75V75H5Z" fill="url(#lin)"/>
+          <circle cx="40" cy="40" r="14" fill="#093" stroke="url(#lin)" stroke-width="5"/>
+        </g>
+        <g mask="url(#m)"><rect x="45" y="10" width="50" height="60" fill="url(#lin)"/></g>"##,
+    ),
 ];
 
 fn import(name: &str, text: &str) -> Scene {
@@ -125,6 +146,14 @@ fn the_features_are_kept_in_the_scene() {
     );
     let op = count("group_opacity_overlaps");
     assert_eq!(op.groups.len(), 3, "{:?}", op.groups);
+    // Gradients inside a clipped, faded group and in mask content stay gradients.
+    let gr = count("gradients_in_clipped_faded_group_and_mask");
+    let painted = |s: &[scene::Shape]| s.iter().filter(|s| s.gradients.is_some()).count();
+    let g = &gr.groups[0];
+    assert!(g.clip.is_some() && g.opacity < 1.0, "{g:?}");
+    assert_eq!(painted(&gr.shapes[g.start..g.end]), 2);
+    let m = gr.groups.iter().find_map(|g| g.mask.as_ref()).unwrap();
+    assert_eq!(painted(&m.content.shapes), 1);
 }
 
 /// Points, colours and opacities equal within what the export's decimals keep; the structure
