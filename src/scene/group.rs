@@ -25,8 +25,34 @@
 //! [`Scene::groups`]: super::Scene::groups
 //! [`Scene::validate`]: super::Scene::validate
 
-use super::{Point, SceneError, Shape};
+use super::{Point, Scene, SceneError, Shape};
 use serde::{Deserialize, Serialize};
+
+impl Scene {
+    /// Replaces shape `i` by `pieces[i]` (none, itself, or several shapes in its place in the
+    /// paint order), keeping every group on the pieces of the shapes it had; a group left
+    /// without shapes is dropped. `pieces` has one entry per shape (missing entries remove
+    /// their shapes). What the vector finish uses to split, drop and merge shapes of a scene
+    /// with groups.
+    pub fn replace_shapes(&mut self, pieces: Vec<Vec<Shape>>) {
+        // `at[k]`: the new index of old shape k's first piece; `at[n]`: the new length.
+        let n = self.shapes.len();
+        let mut at = Vec::with_capacity(n + 1);
+        let mut shapes = Vec::with_capacity(n);
+        let mut pieces = pieces.into_iter();
+        for _ in 0..n {
+            at.push(shapes.len());
+            shapes.extend(pieces.next().unwrap_or_default());
+        }
+        at.push(shapes.len());
+        for g in &mut self.groups {
+            g.start = at[g.start.min(n)];
+            g.end = at[g.end.min(n)];
+        }
+        self.groups.retain(|g| g.start < g.end);
+        self.shapes = shapes;
+    }
+}
 
 /// Which points a closed outline covers (SVG `fill-rule`, `clip-rule`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -251,6 +277,28 @@ mod tests {
         assert!(s.validate().is_err(), "empty");
         s.groups = vec![Group::new(0..1, 1.5)];
         assert!(s.validate().is_err(), "opacity");
+    }
+
+    #[test]
+    fn replacing_shapes_keeps_groups_on_their_pieces() {
+        let mut s = scene(4);
+        s.groups = vec![
+            Group::new(0..4, 0.5),
+            Group::new(1..3, 1.0),
+            Group::new(3..4, 0.2),
+        ];
+        let sq = |x: f32| Shape::square(x, 1.0, 2.0, Rgba::BLACK).unwrap();
+        // Shape 1 split in three, shape 3 dropped (its group with it).
+        s.replace_shapes(vec![
+            vec![sq(0.0)],
+            vec![sq(1.0), sq(2.0), sq(3.0)],
+            vec![sq(4.0)],
+        ]);
+        assert_eq!(s.shapes.len(), 5);
+        let ranges: Vec<_> = s.groups.iter().map(|g| (g.start, g.end)).collect();
+        assert_eq!(ranges, vec![(0, 5), (1, 5)]);
+        assert_eq!(s.validate(), Ok(()));
+        assert_eq!(s.shapes[4], sq(4.0));
     }
 
     #[test]

@@ -93,23 +93,28 @@ pub const SIMPLE_MIN_AREA: f32 = 0.5;
 /// dropped. Returns how many paths were repaired. The scene never grows past `MAX_PATHS`.
 pub fn make_simple(scene: &mut Scene, min_area: f32) -> usize {
     let mut repaired = 0;
-    let mut out = Vec::with_capacity(scene.shapes.len());
-    for s in std::mem::take(&mut scene.shapes) {
-        if simple::is_simple(&s) {
-            out.push(s);
-            continue;
-        }
-        repaired += 1;
-        for l in lobes::split_lobes(&s, min_area) {
-            if simple::is_simple(&l) {
-                out.push(l);
-            } else {
-                out.extend(simple::split_simple(&l, SIMPLE_TOLERANCE, min_area));
+    let mut budget = crate::scene::MAX_PATHS;
+    let mut pieces = Vec::with_capacity(scene.shapes.len());
+    for s in &scene.shapes {
+        let mut out = Vec::new();
+        if simple::is_simple(s) {
+            out.push(s.clone());
+        } else {
+            repaired += 1;
+            for l in lobes::split_lobes(s, min_area) {
+                if simple::is_simple(&l) {
+                    out.push(l);
+                } else {
+                    out.extend(simple::split_simple(&l, SIMPLE_TOLERANCE, min_area));
+                }
             }
         }
+        out.truncate(budget);
+        budget -= out.len();
+        pieces.push(out);
     }
-    out.truncate(crate::scene::MAX_PATHS);
-    scene.shapes = out;
+    // Groups stay on the pieces of their shapes.
+    scene.replace_shapes(pieces);
     repaired
 }
 
@@ -140,8 +145,10 @@ pub fn drop_unseen(scene: &mut Scene, scale: f32) -> usize {
             v.area as f64 * k2 >= check::SLIVER_AREA && wide
         })
         .collect();
-    let mut keep = keep.into_iter();
-    scene.shapes.retain(|_| keep.next().unwrap_or(true));
+    let pieces = (scene.shapes.iter().zip(keep))
+        .map(|(sh, k)| if k { vec![sh.clone()] } else { Vec::new() })
+        .collect();
+    scene.replace_shapes(pieces);
     before - scene.shapes.len()
 }
 
@@ -177,7 +184,7 @@ pub fn drop_hidden(scene: &mut Scene) -> usize {
     while i > 0 {
         i -= 1;
         let mut trial = scene.clone();
-        trial.shapes.remove(i);
+        trial.remove_shape(i);
         let img = crate::raster::render(&trial);
         let unchanged = img
             .data

@@ -113,3 +113,54 @@ fn a_union_with_a_hole_is_not_one_path() {
     .unwrap();
     assert!(union_shape(&upper, &lower).is_none());
 }
+
+#[test]
+fn the_finish_keeps_groups_on_their_shapes() {
+    // A looping outline (split into lobes), a hidden circle (dropped) and two touching red
+    // circles (merged) inside a half-opaque group, after a blue circle outside it.
+    let p = |x: f32, y: f32| crate::scene::Point::new(x, y);
+    let eight = Shape::closed_cubic(
+        vec![
+            p(48.0, 30.0),
+            p(60.0, 18.0),
+            p(80.0, 18.0),
+            p(80.0, 30.0),
+            p(80.0, 42.0),
+            p(60.0, 42.0),
+            p(48.0, 30.0),
+            p(36.0, 18.0),
+            p(16.0, 18.0),
+            p(16.0, 30.0),
+            p(16.0, 42.0),
+            p(36.0, 42.0),
+        ],
+        BLUE,
+    )
+    .unwrap();
+    let mut s = scene(vec![
+        circle(20.0, 75.0, 12.0, BLUE),
+        circle(58.0, 70.0, 4.0, RED),
+        eight,
+        circle(35.0, 70.0, 14.0, RED),
+        circle(58.0, 70.0, 14.0, RED),
+    ]);
+    s.groups = vec![crate::scene::Group::new(1..5, 0.5)];
+    s.validate().unwrap();
+    let before = crate::raster::render(&s);
+    let report = crate::vector::finish_scene(&mut s, &crate::vector::ColorPlan::default(), true);
+    assert!(
+        report.split >= 1 && report.dropped >= 1 && report.merged >= 1,
+        "{report:?}"
+    );
+    s.validate().unwrap();
+    assert_eq!(s.groups.len(), 1);
+    let g = &s.groups[0];
+    assert_eq!(
+        (g.start, g.end),
+        (1, s.shapes.len()),
+        "every later shape stays inside"
+    );
+    assert_eq!(s.shapes[0].points, circle(20.0, 75.0, 12.0, BLUE).points);
+    let (mean, _) = super::super::export::diff(&before, &crate::raster::render(&s));
+    assert!(mean < 1.0 / 255.0, "{}", mean * 255.0);
+}
