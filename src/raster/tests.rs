@@ -336,28 +336,38 @@ pub(super) fn assert_same_image(a: &Image, b: &Image) {
     assert!(max < 1e-5, "{max}");
 }
 
+/// The weighted L2 of `s`'s render against a random target (weights and target from `seed`):
+/// by render-then-backward and by the fused pass, each as (loss, gradients, gradient-paint
+/// gradients).
+pub(super) fn separate_and_fused(s: &Scene, seed: u64) -> [(f64, Params, Vec<f32>); 2] {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let n = (s.width * s.height) as usize;
+    let target = Image {
+        width: s.width,
+        height: s.height,
+        data: (0..4 * n).map(|_| rng.random_range(0.0..1.0f32)).collect(),
+    };
+    let w: Vec<f32> = (0..n).map(|_| rng.random_range(0.0..2.0f32)).collect();
+    let (img, tape) = render_tape(s);
+    let mut d = Vec::new();
+    let want_loss = crate::losses::weighted_l2_into(&img, &target, &w, &mut d).unwrap();
+    let (want, want_paint) = backward_with_gradients(s, &tape, &d);
+    let band = |px: std::ops::Range<usize>, img: &[f32], g: &mut [f32]| {
+        let t = &target.data[4 * px.start..4 * px.end];
+        crate::losses::weighted_l2_slices(img, t, &w[px], g)
+    };
+    let (loss, got) = render_loss_backward(s, &band);
+    let sc = SceneT::<f32>::from_scene(s, FLATTEN_TOLERANCE);
+    let (_, g, _) = engine::forward_backward(&sc, &geom::layers(&sc), Vec::new(), &band);
+    [(want_loss, want, want_paint), (loss, got, g.paint)]
+}
+
 #[test]
 fn fused_loss_pass_matches_render_then_backward() {
     // 24x20 (two bands) and 96x80 (several bands), a non-uniform target and weights.
     for (seed, width) in [(0u64, 24u32), (1, 24), (2, 96)] {
         let s = random_scene(seed).scaled_to_width(width);
-        let mut rng = ChaCha8Rng::seed_from_u64(seed + 100);
-        let n = (s.width * s.height) as usize;
-        let target = Image {
-            width: s.width,
-            height: s.height,
-            data: (0..4 * n).map(|_| rng.random_range(0.0..1.0f32)).collect(),
-        };
-        let w: Vec<f32> = (0..n).map(|_| rng.random_range(0.0..2.0f32)).collect();
-        let (img, tape) = render_tape(&s);
-        let mut d = Vec::new();
-        let want_loss = crate::losses::weighted_l2_into(&img, &target, &w, &mut d).unwrap();
-        let want = backward(&s, &tape, &d);
-        let band = |px: std::ops::Range<usize>, img: &[f32], g: &mut [f32]| {
-            let t = &target.data[4 * px.start..4 * px.end];
-            crate::losses::weighted_l2_slices(img, t, &w[px], g)
-        };
-        let (loss, got) = render_loss_backward(&s, &band);
+        let [(want_loss, want, _), (loss, got, _)] = separate_and_fused(&s, seed + 100);
         assert_eq!(got, want, "seed {seed}: the same gradients, bit for bit");
         assert!(got.get(ParamGroup::Points).iter().any(|v| *v != 0.0));
         let rel = (loss - want_loss).abs() / want_loss.abs();

@@ -1,13 +1,11 @@
 //! Gradient paint inside groups: clipped, masked and faded gradients forward and backward,
 //! gradient-painted mask content, and the fused pass on such scenes.
 
-use super::tests::{assert_fd, assert_same_image};
+use super::tests::{assert_fd, assert_same_image, separate_and_fused};
 use super::tests_layer::{clip, content};
 use super::tests_paint::{fd_check_paint, linear, radial, scene, with};
 use super::*;
 use crate::scene::{Group, Mask, MaskKind, Rgba, Spread};
-use rand::{RngExt, SeedableRng};
-use rand_chacha::ChaCha8Rng;
 
 /// The gradient test scene (a linear fill, a radial fill and stroke, a linear open stroke)
 /// with its first two shapes in a clipped group at opacity 0.6 and the third under a luminance
@@ -104,33 +102,14 @@ fn a_clip_draws_its_content_opaque_whatever_its_paint() {
 fn fused_loss_pass_matches_render_then_backward_with_groups_and_gradients() {
     for (seed, spread, width) in [(0u64, Spread::Pad, 24u32), (1, Spread::Reflect, 72)] {
         let s = grouped(spread).scaled_to_width(width);
-        let mut rng = ChaCha8Rng::seed_from_u64(seed + 300);
-        let n = (s.width * s.height) as usize;
-        let target: Vec<f32> = (0..4 * n).map(|_| rng.random_range(0.0..1.0f32)).collect();
-        let w: Vec<f32> = (0..n).map(|_| rng.random_range(0.0..2.0f32)).collect();
-        let target = crate::image::Image {
-            width: s.width,
-            height: s.height,
-            data: target,
-        };
-        let (img, tape) = render_tape(&s);
-        let mut d = Vec::new();
-        let want_loss = crate::losses::weighted_l2_into(&img, &target, &w, &mut d).unwrap();
-        let (want, want_paint) = backward_with_gradients(&s, &tape, &d);
-        let band = |px: std::ops::Range<usize>, img: &[f32], g: &mut [f32]| {
-            let t = &target.data[4 * px.start..4 * px.end];
-            crate::losses::weighted_l2_slices(img, t, &w[px], g)
-        };
-        let (loss, got) = render_loss_backward(&s, &band);
+        let [(want_loss, want, want_paint), (loss, got, paint)] =
+            separate_and_fused(&s, seed + 300);
         assert_eq!(got, want, "seed {seed}: the same gradients, bit for bit");
         assert!(got.get(ParamGroup::Opacity).iter().all(|v| *v != 0.0));
         let rel = (loss - want_loss).abs() / want_loss.abs();
         assert!(rel < 1e-6, "seed {seed}: loss {loss} vs {want_loss}");
         // The gradient parameters' gradients, from the same fused pass.
-        let sc = SceneT::<f32>::from_scene(&s, FLATTEN_TOLERANCE);
-        let ls = geom::layers(&sc);
-        let (_, g, _) = engine::forward_backward(&sc, &ls, Vec::new(), &band);
-        assert_eq!(g.paint, want_paint, "seed {seed}: gradient parameters");
-        assert!(g.paint.iter().any(|v| *v != 0.0));
+        assert_eq!(paint, want_paint, "seed {seed}: gradient parameters");
+        assert!(paint.iter().any(|v| *v != 0.0));
     }
 }

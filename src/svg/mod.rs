@@ -29,8 +29,8 @@
 //!
 //! The background becomes a full-canvas `<rect>` first when it is not fully transparent.
 //! Gradients are written once each in a `<defs>` after it (`export_paint`: user-space
-//! coordinates, exact numbers, ids `g1, g2, …` in scene order) and referenced as `url(#gK)`;
-//! those of clip and mask content are not written (content is drawn in flat colours). A scene
+//! coordinates, exact numbers, ids `g1, g2, …` in scene order) and referenced as `url(#gK)`
+//! (in a scene with groups, in the order the paths are written, mask content included). A scene
 //! with groups is written by `export_groups` (`<g opacity clip-path mask>`, `<clipPath>` and
 //! `<mask>` in `<defs>` with ids `clip<k>`/`mask<k>`); even-odd fills get `fill-rule="evenodd"`.
 //! [`crate::vector::export::compact_svg`] picks the fewest decimals that still render the same.
