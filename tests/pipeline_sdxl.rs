@@ -7,7 +7,7 @@ mod common;
 
 use common::runs;
 use std::path::PathBuf;
-use vectorfusion::pipeline::{Aspect, Method, PlanRequest, Preset, Style};
+use vectorfusion::pipeline::{Aspect, Method, PlanRequest, Preset};
 
 fn fixture(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
