@@ -5,24 +5,10 @@
 
 mod common;
 
-use common::runs;
-use std::path::PathBuf;
+use common::fixture;
+use common::runs::{self, assert_valid_svg};
+use std::path::Path;
 use vectorfusion::pipeline::{Aspect, Method, PlanRequest, Preset};
-
-fn fixture(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/fixtures")
-        .join(name)
-}
-
-fn assert_valid_svg(svg: &str) {
-    assert!(svg.starts_with("<svg"), "{svg}");
-    assert!(!svg.contains("NaN") && !svg.contains("inf"), "{svg}");
-    vectorfusion::svg::from_svg(svg)
-        .unwrap()
-        .validate()
-        .unwrap();
-}
 
 /// A draft request (32 px samples), 2 samples, 3 SDS steps.
 fn req(method: Method) -> PlanRequest {
@@ -76,15 +62,17 @@ fn a_wide_canvas_reaches_the_size_conditioning() {
 fn generate_writes_the_svg_of_an_sdxl_model() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("crown.svg");
+    let (model, scorer) = (fixture("sdxl-tiny"), fixture("clip-tiny"));
     let st = std::process::Command::new(env!("CARGO_BIN_EXE_vectorfusion"))
         .args(["generate", "a crown", "--preset", "draft", "--steps", "3"])
-        .args(["--negative-prompt", "blurry"])
-        .arg("--model")
-        .arg(fixture("sdxl-tiny"))
-        .arg("--scorer")
-        .arg(fixture("clip-tiny"))
-        .arg("-o")
-        .arg(&out)
+        .args(["--negative-prompt", "blurry", "--model"])
+        .args([
+            &model,
+            Path::new("--scorer"),
+            &scorer,
+            Path::new("-o"),
+            &out,
+        ])
         .output()
         .unwrap();
     let err = String::from_utf8_lossy(&st.stderr);
