@@ -56,6 +56,7 @@ impl Teacher for RandomText {
             embed_shape: vec![1, 77, 768],
             cond: r("c")?,
             uncond: r("u")?,
+            added: None,
         })
     }
     fn encode(&self, im: &Image) -> Result<Latent, TeacherError> {

@@ -3,6 +3,9 @@
 with random weights, same inputs, median wall time per component. Optional; needs the venv.
 
   /work/venv/bin/python scripts/bench_models_torch.py --arch sd15 --size 256 --reps 3 --json
+
+--arch sdxl: the SDXL base UNet (pooled-text and size/crop conditioning) and its VAE (SD's
+architecture); the text encoders are not timed, as on the Rust side.
 """
 
 import argparse
@@ -33,9 +36,40 @@ def timed(fn, reps, key=None, warmup=1):
     return statistics.median(ts)
 
 
+def unet_for(arch, s):
+    """The full-size UNet of `arch` (random weights), a batch-2 context and the added
+    conditioning (SDXL: random pooled embeddings, the size time ids of `s` px; else None)."""
+    if arch == "sdxl":
+        unet = UNet2DConditionModel(
+            block_out_channels=(320, 640, 1280),
+            down_block_types=("DownBlock2D", "CrossAttnDownBlock2D", "CrossAttnDownBlock2D"),
+            up_block_types=("CrossAttnUpBlock2D", "CrossAttnUpBlock2D", "UpBlock2D"),
+            cross_attention_dim=2048,
+            attention_head_dim=[5, 10, 20],
+            transformer_layers_per_block=[1, 2, 10],
+            use_linear_projection=True,
+            addition_embed_type="text_time",
+            addition_time_embed_dim=256,
+            projection_class_embeddings_input_dim=2816,
+            sample_size=s // 8,
+        ).eval()
+        ids = torch.tensor([[s, s, 0, 0, s, s]], dtype=torch.float32).repeat(2, 1)
+        added = {"text_embeds": torch.randn(2, 1280), "time_ids": ids}
+        return unet, torch.randn(2, 77, 2048), added
+    sd21 = arch == "sd21"
+    unet = UNet2DConditionModel(
+        block_out_channels=(320, 640, 1280, 1280),
+        cross_attention_dim=1024 if sd21 else 768,
+        attention_head_dim=[5, 10, 20, 20] if sd21 else 8,
+        use_linear_projection=sd21,
+        sample_size=s // 8,
+    ).eval()
+    return unet, torch.randn(2, 77, 1024 if sd21 else 768), None
+
+
 def main():
     ap = argparse.ArgumentParser()
-    ap.add_argument("--arch", choices=["sd15", "sd21", "taesd"], default="sd15")
+    ap.add_argument("--arch", choices=["sd15", "sd21", "sdxl", "taesd"], default="sd15")
     ap.add_argument("--size", type=int, default=512)
     ap.add_argument("--reps", type=int, default=3)
     ap.add_argument("--unet-reps", type=int, default=1)
@@ -84,7 +118,7 @@ def main():
 
     if a.arch != "taesd":
         sd21 = a.arch == "sd21"
-        if want("text"):
+        if want("text") and a.arch != "sdxl":
             cfg = (
                 CLIPTextConfig(hidden_size=1024, intermediate_size=4096, num_hidden_layers=23,
                                num_attention_heads=16, hidden_act="gelu", projection_dim=512)
@@ -98,18 +132,11 @@ def main():
             with torch.no_grad():
                 r["text_ms"] = timed(lambda: te(ids), a.reps, "text", a.warmup)
         if want("unet"):
-            unet = UNet2DConditionModel(
-                block_out_channels=(320, 640, 1280, 1280),
-                cross_attention_dim=1024 if sd21 else 768,
-                attention_head_dim=[5, 10, 20, 20] if sd21 else 8,
-                use_linear_projection=sd21,
-                sample_size=s // 8,
-            ).eval()
-            ctx = torch.randn(2, 77, 1024 if sd21 else 768)
+            unet, ctx, added = unet_for(a.arch, s)
             z2 = torch.cat([lat, lat])
 
             def step():
-                out = unet(z2, 500, encoder_hidden_states=ctx).sample
+                out = unet(z2, 500, encoder_hidden_states=ctx, added_cond_kwargs=added).sample
                 u, c = out.chunk(2)
                 return u + 7.5 * (c - u)
 

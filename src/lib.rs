@@ -13,7 +13,7 @@
 //! | [`pdf`] | scene → one-page vector PDF (`result.pdf`, `-o out.pdf`) |
 //! | [`vector`] | the vector stage's finish: simple outlines, palettes, editability checks, compact export |
 //! | [`image`] | RGBA f32 buffers, PNG in/out, resizing, PSNR and SSIM |
-//! | [`models`] | models on candle: Stable Diffusion (UNet, VAE + VJP, TAESD, samplers, loading), CLIP, MiniLM, the scorers |
+//! | [`models`] | models on candle: Stable Diffusion and SDXL (UNet, VAE + VJP, TAESD, samplers, loading), CLIP, MiniLM, the scorers |
 //! | [`fetch`] | size-capped HTTPS downloads of pinned files (MiniLM wheel, icon sets) |
 //! | [`caption`] | what a caption names: its colour (parsed, recolouring, hue families) and its objects (two-object layouts) |
 //! | [`retrieval`] | the caption index over the training icons and the icons it returns |

@@ -3,7 +3,7 @@
 //! encoder against its diffusers reference, and the loader's pixel-space detection.
 
 mod common;
-use common::{assert_close, fixture, max_abs};
+use common::{assert_close, fixture, max_abs, tc};
 
 use candle_core::{DType, Device, Tensor};
 use std::collections::HashMap;
@@ -61,7 +61,7 @@ fn pixel_unet_and_guidance_match_diffusers() {
             &r[&format!("unet.cond.t{t}")],
             1e-4,
         );
-        let g = sd.predict_noise(z, t, cond, uncond, 7.5).unwrap();
+        let g = sd.predict_noise(z, t, &tc(cond), &tc(uncond), 7.5).unwrap();
         assert_close(
             &format!("guided t={t}"),
             &g,
@@ -89,8 +89,8 @@ fn squaredcos_schedule_and_four_step_ddim_sample_match_diffusers() {
     let traj = sd
         .sample(
             &r["ddim.init"],
-            &r["text.cond"],
-            &r["text.uncond"],
+            &tc(&r["text.cond"]),
+            &tc(&r["text.uncond"]),
             7.5,
             SamplerRun::plain(SamplerKind::Ddim, 4),
         )
@@ -112,7 +112,7 @@ fn squaredcos_schedule_and_four_step_ddim_sample_match_diffusers() {
 fn sdedit_keeps_its_start_at_strength_zero_and_runs_the_tail_of_the_schedule() {
     let sd = pixel();
     let r = pixel_refs();
-    let (cond, uncond) = (&r["text.cond"], &r["text.uncond"]);
+    let (cond, uncond) = (&tc(&r["text.cond"]), &tc(&r["text.uncond"]));
     let init = &r["ddim.init"];
     let noise = (init * 0.5).unwrap();
     let same = sd
@@ -240,6 +240,7 @@ fn sds_image_gradient_through_the_pixel_teacher_matches_diffusers() {
         embed_shape: r["text.cond"].dims().to_vec(),
         cond: flat(&r["text.cond"]),
         uncond: flat(&r["text.uncond"]),
+        added: None,
     };
     let im = opaque(&r["encode.image64"]);
     let (g, _) = sds_image_grad(
@@ -272,6 +273,7 @@ fn sds_image_gradient_with_taesd_as_the_encoder_matches_diffusers() {
         embed_shape: sd_refs["text.cond"].dims().to_vec(),
         cond: flat(&sd_refs["text.cond"]),
         uncond: flat(&sd_refs["text.uncond"]),
+        added: None,
     };
     let (g, _) = sds_image_grad(
         &te,

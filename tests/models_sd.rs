@@ -2,7 +2,7 @@
 //! produced by `scripts/make_sd_fixtures.py` (fp32, max abs error ≤ 1e-4).
 
 mod common;
-use common::{abs_max, assert_close, fixture, max_abs};
+use common::{abs_max, assert_close, fixture, max_abs, tc};
 
 use candle_core::{DType, Device, Tensor};
 use std::collections::HashMap;
@@ -32,7 +32,7 @@ fn unet_matches_diffusers() {
             &r[&format!("unet.cond.t{t}")],
             1e-4,
         );
-        let g = sd.predict_noise(z, t, cond, uncond, 7.5).unwrap();
+        let g = sd.predict_noise(z, t, &tc(cond), &tc(uncond), 7.5).unwrap();
         assert_close(
             &format!("guided t={t}"),
             &g,
@@ -63,7 +63,13 @@ fn v_prediction_unet_from_fp16_file_matches() {
     let r = refs("sd-tiny-v");
     for t in [999usize, 500, 10] {
         let eps = sd
-            .predict_noise(&r["unet.z"], t, &r["text.cond"], &r["text.uncond"], 7.5)
+            .predict_noise(
+                &r["unet.z"],
+                t,
+                &tc(&r["text.cond"]),
+                &tc(&r["text.uncond"]),
+                7.5,
+            )
             .unwrap();
         assert_close(
             &format!("v->eps t={t}"),
@@ -163,8 +169,8 @@ fn ddim_trajectory_matches_diffusers() {
     let traj = sd
         .sample(
             &r["ddim.init"],
-            &r["text.cond"],
-            &r["text.uncond"],
+            &tc(&r["text.cond"]),
+            &tc(&r["text.uncond"]),
             7.5,
             SamplerRun::plain(SamplerKind::Ddim, 3),
         )
@@ -206,8 +212,8 @@ fn euler_trailing_trajectory_matches_diffusers() {
     let traj = sd
         .sample(
             &r["euler.init"],
-            &r["text.cond"],
-            &r["text.uncond"],
+            &tc(&r["text.cond"]),
+            &tc(&r["text.uncond"]),
             7.5,
             SamplerRun::plain(SamplerKind::Euler, 2),
         )
@@ -236,8 +242,8 @@ fn sds_image_gradient_matches_reference() {
             &lat,
             600,
             &r["sds.noise"],
-            &r["text.cond"],
-            &r["text.uncond"],
+            &tc(&r["text.cond"]),
+            &tc(&r["text.uncond"]),
             7.5,
         )
         .unwrap();
@@ -322,7 +328,13 @@ fn bad_inputs_are_rejected() {
     let bad = Tensor::zeros((1, 3, 31, 31), DType::F32, &Device::Cpu).unwrap();
     assert!(matches!(sd.encode(&bad), Err(ModelError::InvalidInput(_))));
     assert!(matches!(
-        sd.predict_noise(&r["unet.z"], 1000, &r["text.cond"], &r["text.uncond"], 7.5),
+        sd.predict_noise(
+            &r["unet.z"],
+            1000,
+            &tc(&r["text.cond"]),
+            &tc(&r["text.uncond"]),
+            7.5
+        ),
         Err(ModelError::InvalidInput(_))
     ));
     let wrong_ctx = Tensor::zeros((1, 77, 8), DType::F32, &Device::Cpu).unwrap();
@@ -368,7 +380,7 @@ fn text_embeddings_from_prompt_match_transformers_and_drive_the_unet() {
     assert_close("uncond emb", &uncond, &r["text.uncond"], 1e-4);
     // full path: prompt -> embeddings -> guided noise prediction
     let g = sd
-        .predict_noise(&r["unet.z"], 500, &cond, &uncond, 7.5)
+        .predict_noise(&r["unet.z"], 500, &tc(&cond), &tc(&uncond), 7.5)
         .unwrap();
     assert_close("prompt-guided t=500", &g, &r["unet.guided.t500"], 1e-4);
 }
@@ -416,8 +428,8 @@ fn few_step_samplers_match_diffusers() {
         let traj = sd
             .sample(
                 &r[&format!("{name}.init")],
-                &refs("sd-tiny")["text.cond"],
-                &refs("sd-tiny")["text.uncond"],
+                &tc(&refs("sd-tiny")["text.cond"]),
+                &tc(&refs("sd-tiny")["text.uncond"]),
                 guidance,
                 run,
             )
@@ -433,8 +445,8 @@ fn few_step_samplers_match_diffusers() {
         let e = sd
             .sample(
                 &r[&format!("{name}.init")],
-                &refs("sd-tiny")["text.cond"],
-                &refs("sd-tiny")["text.uncond"],
+                &tc(&refs("sd-tiny")["text.cond"]),
+                &tc(&refs("sd-tiny")["text.uncond"]),
                 guidance,
                 bare,
             )

@@ -7,10 +7,14 @@ use common::{abs_max, assert_close, fixture, max_abs};
 
 use candle_core::{Device, Tensor};
 use std::collections::HashMap;
+use vectorfusion::image::Image;
+use vectorfusion::models::scheduler::{Sampler, SamplerKind, SamplerRun};
 use vectorfusion::models::sdxl_text::SdxlTextEncoders;
 use vectorfusion::models::stable_diffusion::load_unet;
 use vectorfusion::models::unet::{AddedCond, Unet};
-use vectorfusion::models::{ModelError, Precision};
+use vectorfusion::models::{LoadOptions, ModelError, Precision, StableDiffusion, TextCond};
+use vectorfusion::stages::sds::{Weighting, sds_image_grad};
+use vectorfusion::teacher::{SdTeacher, Teacher};
 
 fn refs() -> HashMap<String, Tensor> {
     candle_core::safetensors::load(fixture("sdxl-tiny").join("refs.safetensors"), &Device::Cpu)
@@ -150,22 +154,98 @@ fn sdxl_text_embeddings_drive_the_unet() {
     assert_close("prompt → unet t=500", &out, &r["unet.cond.t500"], 1e-4);
 }
 
+fn pipeline() -> StableDiffusion {
+    StableDiffusion::load(&fixture("sdxl-tiny"), &LoadOptions::default()).unwrap()
+}
+
+/// The whole SDXL directory: `text_cond` gives diffusers' conditioning (both encoders, the
+/// pooled embedding, zeros for the empty negative prompt, the size time ids of the image), and
+/// the guided sampler driven as `StableDiffusionXLPipeline.__call__` does it (the scheduler's
+/// Euler, leading spacing, 3 steps, guidance 5, 32 px) follows the reference trajectory.
 #[test]
-fn sdxl_pipeline_directory_is_refused_with_a_clear_error() {
-    let e = vectorfusion::models::StableDiffusion::load(
-        &fixture("sdxl-tiny"),
-        &vectorfusion::models::LoadOptions::default(),
-    )
-    .unwrap_err();
-    assert!(
-        matches!(
-            e,
-            ModelError::Unsupported {
-                component: "pipeline",
-                ..
-            }
-        ),
-        "{e}"
-    );
-    assert!(e.to_string().contains("SDXL"), "{e}");
+fn sdxl_pipeline_samples_the_reference_euler_trajectory() {
+    let sd = pipeline();
+    let r = refs();
+    assert!(sd.is_sdxl());
+    let (cond, uncond) = sd.text_cond("a red cat", "", (32, 32)).unwrap();
+    assert_close("context", &cond.context, &r["text.context"], 1e-4);
+    let (ca, ua) = (cond.added.as_ref().unwrap(), uncond.added.as_ref().unwrap());
+    assert_close("pooled", &ca.text_embeds, &r["text.pooled"], 1e-4);
+    assert_close("time ids", &ca.time_ids, &r["unet.time_ids"], 0.0);
+    assert_close("negative time ids", &ua.time_ids, &r["unet.time_ids"], 0.0);
+    assert_eq!(abs_max(&uncond.context) + abs_max(&ua.text_embeds), 0.0);
+    let kind = SamplerKind::of(&sd.scheduler);
+    assert_eq!(kind, SamplerKind::Euler);
+    let ts = Sampler::new(&sd.scheduler, kind, 3).unwrap().timesteps;
+    let want: Vec<f32> = r["traj.timesteps"].to_vec1().unwrap();
+    assert_eq!(ts, want.iter().map(|&t| t as f64).collect::<Vec<_>>());
+    let traj = sd
+        .sample(
+            &r["traj.init"],
+            &cond,
+            &uncond,
+            5.0,
+            SamplerRun::plain(kind, 3),
+        )
+        .unwrap();
+    assert_eq!(traj.len(), 3);
+    for (i, x) in traj.iter().enumerate() {
+        // latents of scale ~12 (σ_max ≈ 14.6 at the start); measured: ≤ 3.6e-5
+        assert_close(&format!("step {i}"), x, &r[&format!("traj.step{i}")], 1e-4);
+    }
+}
+
+/// A written negative prompt is embedded (no zeros), and the time ids follow a non-square
+/// image: `[h, w, 0, 0, h, w]`.
+#[test]
+fn sdxl_negative_prompt_and_canvas_reach_the_conditioning() {
+    let sd = pipeline();
+    let (cond, uncond) = sd.text_cond("a red cat", "blurry", (64, 32)).unwrap();
+    assert!(abs_max(&uncond.added.unwrap().text_embeds) > 0.0);
+    let ids: Vec<f32> = cond
+        .added
+        .unwrap()
+        .time_ids
+        .flatten_all()
+        .unwrap()
+        .to_vec1()
+        .unwrap();
+    assert_eq!(ids, [32.0, 64.0, 0.0, 0.0, 32.0, 64.0]);
+    // a conditioning without its added part is refused by the UNet, not run
+    let r = refs();
+    let bare = TextCond::from(r["text.context"].clone());
+    let e = sd
+        .predict_noise(&r["unet.z"], 500, &bare, &bare, 5.0)
+        .unwrap_err();
+    assert!(e.to_string().contains("added conditioning"), "{e}");
+}
+
+/// An SDS step through the SDXL teacher: finite, non-zero image gradients, the same twice.
+#[test]
+fn sdxl_teacher_sds_step_is_finite_and_deterministic() {
+    let te = SdTeacher::load(&fixture("sdxl-tiny"), 32).unwrap();
+    assert!(te.name().contains("Stable Diffusion XL"), "{}", te.name());
+    let c = te.condition("a red cat", "").unwrap();
+    let added = c.added.as_ref().unwrap();
+    assert_eq!(added.time_ids, [32.0, 32.0, 0.0, 0.0, 32.0, 32.0]);
+    assert_eq!(added.pooled.len(), 32);
+    let mut im = Image::filled(32, 32, [0.9, 0.5, 0.2, 1.0]);
+    for (i, v) in im.data.iter_mut().enumerate() {
+        *v *= 0.5 + 0.5 * ((i % 7) as f32 / 7.0);
+    }
+    let [ch, h, w] = te.latent_shape();
+    let noise: Vec<f32> = (0..ch * h * w)
+        .map(|i| ((i * 37 % 101) as f32 / 50.0) - 1.0)
+        .collect();
+    let step = || sds_image_grad(&te, &im, 600, &noise, &c, 7.5, Weighting::OneMinusAlpha).unwrap();
+    let (g, _) = step();
+    assert_eq!(g.len(), 4 * 32 * 32);
+    assert!(g.iter().all(|v| v.is_finite()));
+    assert!(g.iter().any(|v| *v != 0.0));
+    assert_eq!(step().0, g, "the same step twice");
+    // the pooled embedding enters: another prompt moves the gradient
+    let c2 = te.condition("a blue dog", "").unwrap();
+    let (g2, _) =
+        sds_image_grad(&te, &im, 600, &noise, &c2, 7.5, Weighting::OneMinusAlpha).unwrap();
+    assert_ne!(g, g2);
 }

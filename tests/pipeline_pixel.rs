@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::runs;
+use common::runs::{self, assert_valid_svg};
 use std::path::PathBuf;
 use vectorfusion::pipeline::{
     DefaultExecutor, EncoderChoice, Executor, JobContext, JobKind, JobSpec, Method, ModelDirs,
@@ -16,16 +16,6 @@ fn fixture(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
         .join("tests/fixtures")
         .join(name)
-}
-
-fn assert_valid_svg(svg: &str) {
-    assert!(svg.starts_with("<svg"), "{svg}");
-    assert!(!svg.contains("NaN") && !svg.contains("inf"), "{svg}");
-    vectorfusion::svg::from_svg(svg)
-        .unwrap()
-        .validate()
-        .unwrap();
-    resvg::usvg::Tree::from_str(svg, &resvg::usvg::Options::default()).unwrap();
 }
 
 fn req(method: Method, style: Style) -> PlanRequest {

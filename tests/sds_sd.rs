@@ -54,6 +54,7 @@ fn sds_image_gradient_through_the_teacher_matches_diffusers() {
         embed_shape: shape,
         cond,
         uncond,
+        added: None,
     };
     let (g, _) = sds_image_grad(&te, &im, 600, &noise, &c, 7.5, Weighting::OneMinusAlpha).unwrap();
     let (want, _) = vec(&refs["sds.d_image"]);

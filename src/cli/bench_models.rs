@@ -1,13 +1,14 @@
-//! `vectorfusion bench models`: full-size Stable Diffusion / TAESD architectures with random
+//! `vectorfusion bench models`: full-size Stable Diffusion (1.5, 2.1, SDXL) / TAESD architectures with random
 //! weights (compute does not depend on weight values), median wall time per component.
 
 use super::request_args::parse_device;
 use super::{CliError, ResultExt};
 use crate::models::clip::{ClipTextConfig, ClipTextModel};
 use crate::models::codec::Codec;
+use crate::models::guided::size_time_ids;
 use crate::models::loader::random_var_builder;
 use crate::models::taesd::{Taesd, TaesdConfig};
-use crate::models::unet::{Unet, UnetConfig};
+use crate::models::unet::{AddedCond, Unet, UnetConfig};
 use crate::models::vae::{AutoencoderKl, VaeConfig};
 use crate::models::{ComputeDevice, ModelError, Precision};
 use candle_core::{DType, Device, Tensor};
@@ -17,6 +18,9 @@ use std::time::Instant;
 pub enum Arch {
     Sd15,
     Sd21,
+    /// The SDXL base UNet (with its pooled-text and size/crop conditioning) and VAE; the text
+    /// encoders are not timed.
+    Sdxl,
     Taesd,
 }
 
@@ -295,33 +299,33 @@ impl Bench<'_> {
         Ok(())
     }
 
-    /// Stable Diffusion 1.5 or 2.1: its VAE, CLIP text encoder and a guided UNet step.
+    /// Stable Diffusion 1.5, 2.1 or SDXL: its VAE (SDXL's has SD's architecture), CLIP text
+    /// encoder (not SDXL's two) and a guided UNet step.
     fn stable_diffusion(
         &self,
         r: &mut Report,
         image: &Tensor,
         lat: &Tensor,
     ) -> Result<(), CliError> {
-        let sd21 = self.args.arch == Arch::Sd21;
+        let arch = self.args.arch;
         if self.want("encoder") || self.want("vjp") || self.want("decoder") {
             let vae =
                 AutoencoderKl::new(random_var_builder(DType::F32, &self.dev), VaeConfig::sd())
                     .map_err(candle_err)?;
             self.autoencoder(r, &Codec::from(vae), (image, lat))?;
         }
-        let text_cfg = text_config(sd21)?;
-        if self.want("text") {
+        if self.want("text") && arch != Arch::Sdxl {
             self.say("text encoder");
-            r.text_ms = self.text_encoder(r, &text_cfg)?;
+            r.text_ms = self.text_encoder(r, &text_config(arch == Arch::Sd21)?)?;
         }
         if self.want("unet") {
             self.say("guided UNet step (batch 2)");
-            let cfg = if sd21 {
-                UnetConfig::sd21()
-            } else {
-                UnetConfig::sd15()
+            let cfg = match arch {
+                Arch::Sd21 => UnetConfig::sd21(),
+                Arch::Sdxl => UnetConfig::sdxl(),
+                _ => UnetConfig::sd15(),
             };
-            r.unet_cfg_ms = self.guided_unet(r, cfg, text_cfg.hidden_size, lat)?;
+            r.unet_cfg_ms = self.guided_unet(r, cfg, lat)?;
         }
         Ok(())
     }
@@ -342,13 +346,13 @@ impl Bench<'_> {
         Ok(r.put("text", tm))
     }
 
-    /// One classifier-free-guided UNet step: a batch of 2 at `--unet-precision`, then the
-    /// guidance combination.
+    /// One classifier-free-guided UNet step: a batch of 2 at `--unet-precision` (SDXL: with
+    /// random pooled embeddings and the size time ids of `--size`), then the guidance
+    /// combination.
     fn guided_unet(
         &self,
         r: &mut Report,
         cfg: UnetConfig,
-        cross: usize,
         lat: &Tensor,
     ) -> Result<Option<f64>, CliError> {
         let unet = Unet::new(
@@ -357,10 +361,25 @@ impl Bench<'_> {
             std::path::Path::new("<random weights>"),
         )
         .map_err(model_err)?;
+        let cross = unet.arch.cross_attention_dim;
         let ctx = Tensor::randn(0f32, 1f32, (2, 77, cross), &self.dev).map_err(candle_err)?;
+        let added = match unet.arch.text_time {
+            Some(tt) => {
+                let side = self.args.size as u32;
+                let ids = size_time_ids(side, side, &self.dev).map_err(model_err)?;
+                Some(AddedCond {
+                    text_embeds: Tensor::randn(0f32, 1f32, (2, tt.pooled_dim()), &self.dev)
+                        .map_err(candle_err)?,
+                    time_ids: Tensor::cat(&[&ids, &ids], 0).map_err(candle_err)?,
+                })
+            }
+            None => None,
+        };
         let z2 = Tensor::cat(&[lat, lat], 0).map_err(candle_err)?;
         let tm = self.time(self.args.unet_reps, || {
-            let out = unet.forward(&z2, 500.0, &ctx).map_err(model_err)?;
+            let out = unet
+                .forward_added(&z2, 500.0, &ctx, added.as_ref())
+                .map_err(model_err)?;
             // the guidance combination itself
             let u = out.narrow(0, 0, 1).map_err(candle_err)?;
             let c = out.narrow(0, 1, 1).map_err(candle_err)?;
@@ -415,7 +434,7 @@ pub fn run(args: BenchModelsArgs) -> Result<(), CliError> {
             .map_err(candle_err)?;
             bench.autoencoder(&mut r, &Codec::from(t), (&image, &lat))?;
         }
-        Arch::Sd15 | Arch::Sd21 => bench.stable_diffusion(&mut r, &image, &lat)?,
+        Arch::Sd15 | Arch::Sd21 | Arch::Sdxl => bench.stable_diffusion(&mut r, &image, &lat)?,
     }
     if args.json {
         let text = serde_json::to_string(&r).failed(|| "encoding the report".into())?;

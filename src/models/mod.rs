@@ -11,6 +11,8 @@
 //! | [`codec`] | the image ↔ latent map: VAE, TAESD or pixel space (models without `vae/`) |
 //! | [`taesd`] | `AutoencoderTiny` (madebyollin/taesd layout): encode (+VJP) and decode |
 //! | [`scheduler`] | noise schedules (`alphas_cumprod`), DDIM and Euler samplers |
+//! | [`guided`] | [`TextCond`] (a guidance branch's text conditioning, SDXL's added part too), guided noise prediction, SDS gradient, sampling |
+//! | [`sdxl_text`] | SDXL's two CLIP text encoders (context and pooled embedding) |
 //! | [`bert`] | BERT/MiniLM text encoder (WordPiece tokenizer, `BertModel`, MiniLM weight fetch) |
 //! | [`clip`] | CLIP text/vision towers and BPE tokenizer (text encoder of SD 1.x/2.x) |
 //! | [`scorer`] | one scorer abstraction over CLIP and the embedded IconClip (rerank, eval) |
@@ -22,6 +24,7 @@
 pub mod bert;
 pub mod clip;
 pub mod codec;
+pub mod guided;
 pub mod kernels;
 pub mod loader;
 pub mod nn;
@@ -34,6 +37,7 @@ pub mod taesd;
 pub mod unet;
 pub mod vae;
 
+pub use guided::TextCond;
 pub use loader::{
     ComputeDevice, DeviceError, LoadOptions, ModelSource, Precision, UnknownPrecision,
 };

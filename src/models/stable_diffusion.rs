@@ -4,10 +4,8 @@ use super::bert::BertTextEncoder;
 use super::clip::{ClipTextModel, ClipTokenizer};
 use super::codec::{self, Codec, CodecKind, EncodeTape};
 use super::loader::{self, LoadOptions, ModelSource, Precision, UNET_WEIGHTS};
-use super::scheduler::{
-    PredictionType, Sampler, SamplerKind, SamplerRun, SchedulerConfig, split_prediction,
-};
-use super::sdxl_text::ClipParts;
+use super::scheduler::{PredictionType, SchedulerConfig};
+use super::sdxl_text::{ClipParts, SdxlTextEncoders};
 use super::taesd::Taesd;
 use super::unet::{Unet, UnetConfig};
 use super::vae::{AutoencoderKl, VaeConfig};
@@ -68,7 +66,9 @@ pub fn load_scheduler(dir: &Path) -> Result<SchedulerConfig> {
 /// The text conditioning, chosen by `text_encoder/config.json` `model_type`: CLIP
 /// (`clip_text_model`, SD 1.x/2.x: `[1, 77, d]` `last_hidden_state`) or BERT (`bert`, the
 /// embedded model's MiniLM: `[1, L, 384]` `last_hidden_state` over all `L =
-/// tokenizer.model_max_length` positions, padding included, see `docs/EMBEDDED.md`).
+/// tokenizer.model_max_length` positions, padding included, see `docs/EMBEDDED.md`); SDXL
+/// directories (a UNet with `addition_embed_type = "text_time"`) load both of theirs
+/// ([`SdxlTextEncoders`], by [`StableDiffusion::load_source`]).
 #[derive(Debug)]
 #[allow(clippy::large_enum_variant)] // one per loaded model
 pub enum TextEncoder {
@@ -77,6 +77,8 @@ pub enum TextEncoder {
         model: ClipTextModel,
     },
     Bert(BertTextEncoder),
+    /// SDXL's two CLIP text encoders (context and pooled embedding).
+    Sdxl(Box<SdxlTextEncoders>),
 }
 
 impl TextEncoder {
@@ -117,39 +119,23 @@ impl TextEncoder {
         let ids = match self {
             Self::Clip { tokenizer, .. } => tokenizer.encode_padded(prompt),
             Self::Bert(b) => b.tokenizer.encode(prompt, b.tokenizer.max_length)?.ids,
+            Self::Sdxl(s) => s.tokenizer.encode_padded(prompt),
         };
         Ok(Tensor::from_vec(ids.clone(), (1, ids.len()), device)?)
     }
 
-    /// `[1, L, hidden]` f32 embeddings of a prompt (`""` gives the unconditional ones).
+    /// `[1, L, hidden]` f32 embeddings of a prompt (`""` gives the unconditional ones); SDXL:
+    /// the context alone (both encoders' penultimate states), without the pooled embedding.
     pub fn embed(&self, prompt: &str, device: &Device) -> Result<Tensor> {
         let out = match self {
             Self::Clip { model, .. } => {
                 model.forward(&self.ids(prompt, device)?)?.last_hidden_state
             }
             Self::Bert(b) => b.last_hidden_state(&[prompt], b.tokenizer.max_length)?,
+            Self::Sdxl(s) => s.embed(prompt, device)?.context,
         };
         Ok(out.to_dtype(candle_core::DType::F32)?)
     }
-}
-
-/// SDXL pipelines load as parts ([`super::unet::Unet::forward_added`],
-/// [`super::sdxl_text::SdxlTextEncoders`]) but do not sample or run SDS yet: refused before any
-/// weights are read.
-fn refuse_sdxl(root: &Path) -> Result<()> {
-    let cfg = root.join("unet").join("config.json");
-    let unet: UnetConfig = loader::read_config(&cfg)?;
-    // a config that does not resolve is reported by the UNet's loader, naming the setting
-    if unet.arch().is_ok_and(|a| a.text_time.is_some()) {
-        return Err(ModelError::Unsupported {
-            component: "pipeline",
-            path: cfg.display().to_string(),
-            reason: "SDXL (addition_embed_type \"text_time\"): sampling and SDS with the \
-                     dual text encoders and the size/crop conditioning are not implemented"
-                .into(),
-        });
-    }
-    Ok(())
 }
 
 /// Text encoder + UNet + image codec (VAE, TAESD or pixel space) + noise schedule of a
@@ -290,7 +276,6 @@ impl StableDiffusion {
     /// otherwise `opts.taesd`, when set, replaces the VAE as the codec.
     pub fn load_source(source: &ModelSource, opts: &LoadOptions) -> Result<Self> {
         let root = loader::resolve(source, opts.allow_download)?;
-        refuse_sdxl(&root)?;
         let unet = load_unet(&root.join("unet"), opts.unet, &opts.device)?;
         let codec: Codec = if codec::is_pixel_space(&root)? {
             codec::pixel_space_for(&unet.config, &root)?.into()
@@ -301,7 +286,12 @@ impl StableDiffusion {
             load_vae(&root.join("vae"), opts.vae, &opts.device)?.into()
         };
         let scheduler = load_scheduler(&root.join("scheduler"))?;
-        let text = TextEncoder::load(&root, opts.text, &opts.device)?;
+        let text = if unet.arch.text_time.is_some() {
+            let te = SdxlTextEncoders::load(&root, opts.text, &opts.device)?;
+            TextEncoder::Sdxl(Box::new(te))
+        } else {
+            TextEncoder::load(&root, opts.text, &opts.device)?
+        };
         let mut sd = Self::from_parts(unet, codec, scheduler, opts.device.clone())?;
         sd.text = Some(text);
         sd.hints = ModelHints::read(&root)?;
@@ -345,7 +335,8 @@ impl StableDiffusion {
         t.embed(prompt, &self.device)
     }
 
-    /// `(prompt embeddings, empty-prompt embeddings)` for classifier-free guidance.
+    /// `(prompt embeddings, empty-prompt embeddings)` for classifier-free guidance (contexts
+    /// only: [`Self::text_cond`] gives SDXL's whole conditioning).
     pub fn text_embeddings(&self, prompt: &str) -> Result<(Tensor, Tensor)> {
         Ok((self.embed_text(prompt)?, self.embed_text("")?))
     }
@@ -420,144 +411,5 @@ impl StableDiffusion {
     /// Latents → images in `[0, 1]` (pixel space: at the latent size; callers upscale).
     pub fn decode(&self, latents: &Tensor) -> Result<Tensor> {
         self.codec.decode(latents)
-    }
-
-    fn guided_raw(
-        &self,
-        z_t: &Tensor,
-        t: f64,
-        text_emb: &Tensor,
-        uncond_emb: &Tensor,
-        guidance: f64,
-    ) -> Result<Tensor> {
-        if guidance == 1.0 {
-            return self.unet.forward(z_t, t, text_emb);
-        }
-        let b = z_t.dim(0)?;
-        let ctx = Tensor::cat(&[uncond_emb, text_emb], 0).map_err(|e| {
-            ModelError::InvalidInput(format!(
-                "text and empty-prompt embeddings differ in shape: {e}"
-            ))
-        })?;
-        let out = self.unet.forward(&Tensor::cat(&[z_t, z_t], 0)?, t, &ctx)?;
-        let u = out.narrow(0, 0, b)?;
-        let c = out.narrow(0, b, b)?;
-        Ok((&u + ((c - &u)? * guidance)?)?)
-    }
-
-    /// Classifier-free-guided noise prediction `ε̂(z_t, t)`; v-prediction models are converted
-    /// to ε. `guidance == 1` runs the conditional branch only.
-    pub fn predict_noise(
-        &self,
-        z_t: &Tensor,
-        t: usize,
-        text_emb: &Tensor,
-        uncond_emb: &Tensor,
-        guidance: f64,
-    ) -> Result<Tensor> {
-        let a = *self.alphas_cumprod.get(t).ok_or_else(|| {
-            ModelError::InvalidInput(format!(
-                "timestep {t} out of range 0..{}",
-                self.alphas_cumprod.len()
-            ))
-        })?;
-        let raw = self.guided_raw(z_t, t as f64, text_emb, uncond_emb, guidance)?;
-        Ok(split_prediction(self.prediction_type(), &raw, z_t, a)?.1)
-    }
-
-    /// Latent-space SDS gradient `w(t) (ε̂(z_t, t) − ε)` with `w(t) = 1 − ᾱ_t` and
-    /// `z_t = √ᾱ_t z + √(1−ᾱ_t) ε`.
-    pub fn sds_latent_grad(
-        &self,
-        latents: &Tensor,
-        t: usize,
-        noise: &Tensor,
-        text_emb: &Tensor,
-        uncond_emb: &Tensor,
-        guidance: f64,
-    ) -> Result<Tensor> {
-        let a = *self
-            .alphas_cumprod
-            .get(t)
-            .ok_or_else(|| ModelError::InvalidInput(format!("timestep {t} out of range")))?;
-        let z_t = ((latents * a.sqrt())? + (noise * (1.0 - a).sqrt())?)?;
-        let eps = self.predict_noise(&z_t, t, text_emb, uncond_emb, guidance)?;
-        Ok(((eps - noise)? * (1.0 - a))?)
-    }
-
-    /// SDEdit (Meng et al., ICLR 2022) with DDIM: the clean latents `init` noised with `noise`
-    /// (standard normal, same shape) to the step `strength` of the way up a `steps`-step schedule
-    /// (0 returns `init`; 1 starts at the first step, like [`StableDiffusion::sample`]), then
-    /// denoised with CFG to the end. Returns the latents after each step run.
-    #[allow(clippy::too_many_arguments)]
-    pub fn sample_from(
-        &self,
-        init: &Tensor,
-        noise: &Tensor,
-        strength: f64,
-        text_emb: &Tensor,
-        uncond_emb: &Tensor,
-        guidance: f64,
-        steps: usize,
-    ) -> Result<Vec<Tensor>> {
-        if !(0.0..=1.0).contains(&strength) {
-            return Err(ModelError::InvalidInput(format!(
-                "SDEdit strength must be in 0..=1, got {strength}"
-            )));
-        }
-        let s = Sampler::new(&self.scheduler, SamplerKind::Ddim, steps)?;
-        let run = ((steps as f64 * strength).round() as usize).min(steps);
-        if run == 0 {
-            return Ok(vec![init.clone()]);
-        }
-        let start = steps - run;
-        let t0 = s.timesteps[start];
-        let a = *self
-            .alphas_cumprod
-            .get(t0 as usize)
-            .ok_or_else(|| ModelError::InvalidInput(format!("timestep {t0} out of range")))?;
-        let mut x = ((init * a.sqrt())? + (noise * (1.0 - a).sqrt())?)?;
-        let mut traj = Vec::with_capacity(run);
-        for i in start..steps {
-            let out = self.guided_raw(&x, s.timesteps[i], text_emb, uncond_emb, guidance)?;
-            x = s.step(&out, i, &x, None)?;
-            traj.push(x.clone());
-        }
-        Ok(traj)
-    }
-
-    /// Samples latents from `init_noise` (standard normal, `[b, 4, h, w]`) with CFG as `run`
-    /// says; returns the latents after every step (the last one is the result). As diffusers,
-    /// `guidance ≤ 1` runs the conditional branch alone (SD-Turbo samples with 0).
-    pub fn sample(
-        &self,
-        init_noise: &Tensor,
-        text_emb: &Tensor,
-        uncond_emb: &Tensor,
-        guidance: f64,
-        run: SamplerRun<'_>,
-    ) -> Result<Vec<Tensor>> {
-        let s = Sampler::new(&self.scheduler, run.kind, run.steps)?;
-        let spacing = matches!(
-            self.scheduler.timestep_spacing.as_str(),
-            "trailing" | "linspace"
-        );
-        let guidance = if guidance <= 1.0 { 1.0 } else { guidance };
-        let mut x = (init_noise * s.init_noise_sigma(spacing))?;
-        let mut traj = Vec::with_capacity(run.steps);
-        let mut noise = run.step_noise.iter();
-        for (i, &t) in s.timesteps.iter().enumerate() {
-            let inp = s.scale_model_input(&x, i)?;
-            let out = self.guided_raw(&inp, t, text_emb, uncond_emb, guidance)?;
-            // a missing noise is refused by the step
-            let z = run
-                .kind
-                .adds_noise(i, run.steps)
-                .then(|| noise.next())
-                .flatten();
-            x = s.step(&out, i, &x, z)?;
-            traj.push(x.clone());
-        }
-        Ok(traj)
     }
 }

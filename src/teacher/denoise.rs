@@ -5,8 +5,8 @@
 //! reranking are the sample stage's ([`crate::stages::sample`]).
 
 use crate::image::Image;
-use crate::models::StableDiffusion;
 use crate::models::scheduler::{SamplerKind, SamplerRun};
+use crate::models::{StableDiffusion, TextCond};
 use crate::progress::{CancelToken, Progress, ProgressSink};
 use candle_core::{DType, Tensor};
 use rand::SeedableRng;
@@ -81,23 +81,19 @@ pub fn tensor_image(t: &Tensor) -> Result<Image, SampleError> {
     Ok(im)
 }
 
-/// Draws `cfg.k` samples of `prompt` at the latent shape `[c, h, w]`; `starts` (at most K used)
+/// Draws `cfg.k` samples conditioned on `(cond, uncond)` (the prompt's and the negative prompt's,
+/// [`StableDiffusion::text_cond`]) at the latent shape `[c, h, w]`; `starts` (at most K used)
 /// are SDEdit starting images at the model's image side. Seeded: the same inputs give the same
 /// samples, and the noise of the samples from noise does not depend on `starts`.
 pub fn draw(
     sd: &StableDiffusion,
     latent_shape: [usize; 3],
-    prompt: &str,
+    (cond, uncond): &(TextCond, TextCond),
     starts: &[Image],
     cfg: &SampleConfig,
     sink: &dyn ProgressSink,
     cancel: &CancelToken,
 ) -> Result<Vec<Image>, SampleError> {
-    let embed = |p: &str| {
-        sd.embed_text(p)
-            .map_err(|e| SampleError::failed("text encoder", e))
-    };
-    let (cond, uncond) = (embed(prompt)?, embed(&cfg.negative_prompt)?);
     let [c, h, w] = latent_shape;
     // noise samples draw from the sampler's historical stream; SDEdit noise from its own
     let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed ^ 0x5a3b_1e00);
@@ -132,8 +128,8 @@ pub fn draw(
                 &z,
                 &noise,
                 cfg.strength,
-                &cond,
-                &uncond,
+                cond,
+                uncond,
                 cfg.guidance,
                 cfg.steps,
             )
@@ -147,7 +143,7 @@ pub fn draw(
                 steps: cfg.steps,
                 step_noise: &step_noise,
             };
-            sd.sample(&noise, &cond, &uncond, cfg.guidance, run)
+            sd.sample(&noise, cond, uncond, cfg.guidance, run)
         }
         .map_err(|e| SampleError::failed("sampling", e))?;
         let z = traj

@@ -79,7 +79,8 @@ impl Latent {
 /// Text conditioning prepared once per job by [`Teacher::condition`].
 ///
 /// Model teachers keep their text embeddings here (`cond` and `uncond`, flattened, with
-/// `embed_shape`); the analytic test teacher keeps only the prompt (and may select a target by it).
+/// `embed_shape`; SDXL's pooled embeddings and time ids in `added`); the analytic test teacher
+/// keeps only the prompt (and may select a target by it).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Conditioning {
     pub prompt: String,
@@ -87,6 +88,17 @@ pub struct Conditioning {
     pub embed_shape: Vec<usize>,
     pub cond: Vec<f32>,
     pub uncond: Vec<f32>,
+    /// SDXL's added conditioning; `None` for models without it.
+    pub added: Option<AddedConditioning>,
+}
+
+/// SDXL's added conditioning, flattened: the pooled text embedding of each branch (`[1, d]`)
+/// and the size/crop time ids (`[1, 6]`) both branches share.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct AddedConditioning {
+    pub pooled: Vec<f32>,
+    pub pooled_uncond: Vec<f32>,
+    pub time_ids: Vec<f32>,
 }
 
 /// Pulls dL/d(latent) back to dL/d(image data), at the image an encoder pass was linearised at

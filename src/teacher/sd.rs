@@ -8,11 +8,15 @@
 //! Images cross the boundary composited over white as `[1, 3, H, W]` tensors in `[0, 1]`; the
 //! image gradient is mapped back to premultiplied RGBA (`d/dα = −Σ_c d/dc`).
 
-use super::{Conditioning, Latent, Pullback, SampleConfig, SampleError, Teacher, TeacherError};
+use super::{
+    AddedConditioning, Conditioning, Latent, Pullback, SampleConfig, SampleError, Teacher,
+    TeacherError,
+};
 use crate::image::Image;
 use crate::models::codec::CodecKind;
 use crate::models::stable_diffusion::ModelHints;
-use crate::models::{ComputeDevice, LoadOptions, StableDiffusion};
+use crate::models::unet::AddedCond;
+use crate::models::{ComputeDevice, LoadOptions, StableDiffusion, TextCond};
 use crate::progress::{CancelToken, ProgressSink};
 use candle_core::{DType, Tensor};
 use std::path::Path;
@@ -98,6 +102,15 @@ impl SdTeacher {
         &self.sd
     }
 
+    /// "Stable Diffusion XL" for SDXL checkpoints, else "Stable Diffusion".
+    fn family(&self) -> &'static str {
+        if self.sd.is_sdxl() {
+            "Stable Diffusion XL"
+        } else {
+            "Stable Diffusion"
+        }
+    }
+
     /// The encoder VJP's `[1, 3, s, s]` gradient as dL/d(premultiplied RGBA data): the alpha
     /// gradient is minus the sum of the colour gradients.
     fn image_grad(&self, dx: &Tensor) -> Result<Vec<f32>, TeacherError> {
@@ -180,6 +193,25 @@ impl SdTeacher {
         }
         Tensor::from_vec(data.to_vec(), shape, self.sd.device()).map_err(model_err)
     }
+
+    /// The `(prompt, negative prompt)` model conditionings of a [`Conditioning`].
+    fn branches(&self, cond: &Conditioning) -> Result<(TextCond, TextCond), TeacherError> {
+        let mut c = TextCond::from(self.embedding(&cond.cond, &cond.embed_shape)?);
+        let mut u = TextCond::from(self.embedding(&cond.uncond, &cond.embed_shape)?);
+        if let Some(a) = &cond.added {
+            let row = |d: &[f32]| self.embedding(d, &[1, d.len()]);
+            let time_ids = row(&a.time_ids)?;
+            u.added = Some(AddedCond {
+                text_embeds: row(&a.pooled_uncond)?,
+                time_ids: time_ids.clone(),
+            });
+            c.added = Some(AddedCond {
+                text_embeds: row(&a.pooled)?,
+                time_ids,
+            });
+        }
+        Ok((c, u))
+    }
 }
 
 fn flat(t: &Tensor) -> Result<(Vec<f32>, Vec<usize>), TeacherError> {
@@ -208,10 +240,14 @@ impl Teacher for SdTeacher {
         sink: &dyn ProgressSink,
         cancel: &CancelToken,
     ) -> Result<Vec<Image>, SampleError> {
+        let conds = self
+            .sd
+            .text_cond(prompt, &cfg.negative_prompt, (self.width, self.height))
+            .map_err(|e| SampleError::failed("text encoder", e))?;
         super::denoise::draw(
             &self.sd,
             self.latent_shape,
-            prompt,
+            &conds,
             starts,
             cfg,
             sink,
@@ -238,8 +274,8 @@ impl Teacher for SdTeacher {
                 "pixel-space diffusion ({0}x{0} prior, {s} px renders)",
                 self.latent_shape[1]
             ),
-            CodecKind::Vae => format!("Stable Diffusion (VAE encoder, {s} px)"),
-            CodecKind::Taesd => format!("Stable Diffusion (TAESD encoder, {s} px)"),
+            CodecKind::Vae => format!("{} (VAE encoder, {s} px)", self.family()),
+            CodecKind::Taesd => format!("{} (TAESD encoder, {s} px)", self.family()),
         }
     }
 
@@ -265,21 +301,32 @@ impl Teacher for SdTeacher {
     }
 
     fn condition(&self, prompt: &str, negative_prompt: &str) -> Result<Conditioning, TeacherError> {
-        let cond = self.sd.embed_text(prompt).map_err(model_err)?;
-        let uncond = self.sd.embed_text(negative_prompt).map_err(model_err)?;
-        let (c, shape) = flat(&cond)?;
-        let (u, ushape) = flat(&uncond)?;
+        let (c, u) = self
+            .sd
+            .text_cond(prompt, negative_prompt, (self.width, self.height))
+            .map_err(model_err)?;
+        let (cond, shape) = flat(&c.context)?;
+        let (uncond, ushape) = flat(&u.context)?;
         if shape != ushape {
             return Err(TeacherError::Model(
                 "prompt and negative-prompt embeddings differ in shape".into(),
             ));
         }
+        let added = match (&c.added, &u.added) {
+            (Some(a), Some(b)) => Some(AddedConditioning {
+                pooled: flat(&a.text_embeds)?.0,
+                pooled_uncond: flat(&b.text_embeds)?.0,
+                time_ids: flat(&a.time_ids)?.0,
+            }),
+            _ => None,
+        };
         Ok(Conditioning {
             prompt: prompt.to_string(),
             negative_prompt: negative_prompt.to_string(),
             embed_shape: shape,
-            cond: c,
-            uncond: u,
+            cond,
+            uncond,
+            added,
         })
     }
 
@@ -318,8 +365,7 @@ impl Teacher for SdTeacher {
     ) -> Result<Latent, TeacherError> {
         super::check_timestep(t, self.alphas.len())?;
         let z = self.latent_tensor(z_t)?;
-        let c = self.embedding(&cond.cond, &cond.embed_shape)?;
-        let u = self.embedding(&cond.uncond, &cond.embed_shape)?;
+        let (c, u) = self.branches(cond)?;
         let eps = self
             .sd
             .predict_noise(&z, t, &c, &u, guidance as f64)

@@ -9,7 +9,7 @@ pub mod tensors;
 pub mod webdriver;
 
 #[allow(unused_imports)]
-pub use tensors::{abs_max, assert_close, fixture, max_abs};
+pub use tensors::{abs_max, assert_close, fixture, max_abs, tc};
 
 use base64::Engine;
 use std::net::SocketAddr;

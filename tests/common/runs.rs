@@ -58,3 +58,14 @@ pub fn blank_output() -> RunOutput {
         vectorfusion::pipeline::RunReport::default(),
     )
 }
+
+/// A written SVG that parses back into a valid scene (and for usvg), without NaN or infinity.
+pub fn assert_valid_svg(svg: &str) {
+    assert!(svg.starts_with("<svg"), "{svg}");
+    assert!(!svg.contains("NaN") && !svg.contains("inf"), "{svg}");
+    vectorfusion::svg::from_svg(svg)
+        .unwrap()
+        .validate()
+        .unwrap();
+    resvg::usvg::Tree::from_str(svg, &resvg::usvg::Options::default()).unwrap();
+}

@@ -10,6 +10,11 @@ pub fn fixture(name: &str) -> PathBuf {
         .join(name)
 }
 
+/// A context alone as one guidance branch's conditioning (SD 1.x/2.x fixtures).
+pub fn tc(t: &Tensor) -> vectorfusion::models::TextCond {
+    t.clone().into()
+}
+
 /// Largest absolute elementwise difference of two tensors of the same shape (compared in f32).
 pub fn max_abs(a: &Tensor, b: &Tensor) -> f32 {
     assert_eq!(a.dims(), b.dims(), "shape mismatch");
