@@ -246,7 +246,9 @@ fn finish(scene: &mut Scene, plan: &TextPlan, report: &mut RunReport) {
     }
     recolour_svg(scene, plan, report);
     let finish = crate::vector::finish_scene(scene, &plan.colors, plan.style.spec().prune_weak());
-    crate::vector::fill::tidy_gradients(scene);
+    if !plan.fill.is_flat() {
+        crate::vector::fill::tidy_gradients(scene);
+    }
     report.finish = Some(finish);
     report.editability = Some(crate::vector::check::check(scene));
     report.paths_initial = Some(before);

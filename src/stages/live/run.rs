@@ -591,7 +591,9 @@ impl Run<'_> {
         let mut out = output_scene(&scene, tw, th);
         crate::vector::make_simple(&mut out, crate::vector::SIMPLE_MIN_AREA);
         pruned += crate::vector::drop_hidden(&mut out);
-        crate::vector::fill::tidy_gradients(&mut out);
+        if !cfg.fill.is_flat() {
+            crate::vector::fill::tidy_gradients(&mut out);
+        }
         out.validate()?;
         Ok((out, pruned, merged))
     }

@@ -130,41 +130,55 @@ pub fn restart_like(old: &Gradient, shape: &Shape) -> Gradient {
 }
 
 /// Decimals of gradient geometry (pixels) and stop offsets in the written SVG.
-const GEOMETRY_DECIMALS: i32 = 2;
-const OFFSET_DECIMALS: i32 = 3;
+const GEOMETRY_DECIMALS: i32 = 1;
+const OFFSET_DECIMALS: i32 = 2;
 
 /// Makes `scene`'s gradients what a short SVG writes: a transform that only scales uniformly
 /// and translates is folded into the geometry; geometry and offsets are rounded
 /// ([`GEOMETRY_DECIMALS`], [`OFFSET_DECIMALS`]) and stop colours to 8 bits, so the SVG renders
-/// as the scene does.
+/// as the scene does; a fill gradient whose stops all have one colour becomes that flat fill.
 pub fn tidy_gradients(scene: &mut Scene) {
     for sh in &mut scene.shapes {
         let Some(gs) = sh.gradients.as_deref_mut() else {
             continue;
         };
         for g in [gs.fill.as_mut(), gs.stroke.as_mut()].into_iter().flatten() {
-            fold_transform(g);
-            let round = |v: f32, d: i32| {
-                let k = 10f32.powi(d);
-                (v * k).round() / k
-            };
-            let mut values: Vec<f32> = g.params();
-            let ng = g.geometry.values().len();
-            for v in &mut values[..ng] {
-                *v = round(*v, GEOMETRY_DECIMALS);
-            }
-            for stop in values[ng..].chunks_exact_mut(5) {
-                stop[0] = round(stop[0], OFFSET_DECIMALS);
-                for c in &mut stop[1..4] {
-                    *c = (*c * 255.0).round() / 255.0;
-                }
-            }
-            g.set_params(&values);
+            tidy(g);
         }
-        if let (Some(g), Some(f)) = (&gs.fill, &mut sh.fill) {
+        if let Some(g) = &gs.fill
+            && g.stops.windows(2).all(|w| w[0].color == w[1].color)
+        {
+            sh.fill = Some(g.stops[0].color);
+            gs.fill = None;
+        } else if let (Some(g), Some(f)) = (&gs.fill, &mut sh.fill) {
             *f = g.mean_color();
         }
+        if gs.fill.is_none() && gs.stroke.is_none() {
+            sh.gradients = None;
+        }
     }
+}
+
+/// One gradient rounded as [`tidy_gradients`] says.
+fn tidy(g: &mut Gradient) {
+    fold_transform(g);
+    let round = |v: f32, d: i32| {
+        let k = 10f32.powi(d);
+        (v * k).round() / k
+    };
+    let mut values: Vec<f32> = g.params();
+    let ng = g.geometry.values().len();
+    for v in &mut values[..ng] {
+        *v = round(*v, GEOMETRY_DECIMALS);
+    }
+    for stop in values[ng..].chunks_exact_mut(5) {
+        stop[0] = round(stop[0], OFFSET_DECIMALS);
+        for c in &mut stop[1..4] {
+            *c = (*c * 255.0).round() / 255.0;
+        }
+        stop[4] = round(stop[4], 3);
+    }
+    g.set_params(&values);
 }
 
 /// Folds a transform `x' = s x + e, y' = s y + f` (`s > 0`) into the geometry.
