@@ -345,7 +345,10 @@ impl Tools {
         let base = live_base(a);
         let mut live_runs: Vec<(String, LiveConfig)> = Vec::new();
         for &fill in &a.fills {
-            let base = LiveConfig { fill, ..base.clone() };
+            let base = LiveConfig {
+                fill,
+                ..base.clone()
+            };
             let suffix = if fill.is_flat() { "" } else { fill.name() };
             for &b in budgets {
                 let label = format!("paths {b} {suffix}").trim_end().to_string();
