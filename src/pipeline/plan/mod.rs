@@ -565,3 +565,5 @@ use variations::check_variations;
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_fill;
