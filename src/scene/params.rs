@@ -379,13 +379,7 @@ mod tests {
         p2.get_mut(ParamGroup::PaintStops)[5..10].copy_from_slice(&[1.0, 0.0, 1.0, 0.0, 1.0]);
         p2.get_mut(ParamGroup::PaintGeometry)[3] += 2.0;
         p2.write_to(&mut s).unwrap();
-        let g = s.shapes[0]
-            .gradients
-            .as_ref()
-            .unwrap()
-            .fill
-            .as_ref()
-            .unwrap();
+        let g = crate::vector::fill::fill_gradient(&s.shapes[0]).unwrap();
         assert_eq!(g.stops[1].color, Rgba::new(0.0, 1.0, 0.0, 1.0));
         // The flat stand-in follows the gradient (the mean of the stops).
         assert_eq!(s.shapes[0].fill.unwrap().g, 0.5);

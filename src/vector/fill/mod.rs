@@ -91,7 +91,7 @@ impl FillKind {
     pub fn paint_new(self, scene: &mut Scene) -> usize {
         let mut n = 0;
         for sh in &mut scene.shapes {
-            if sh.gradients.as_ref().is_some_and(|g| g.fill.is_some()) {
+            if fill_gradient(sh).is_some() {
                 continue;
             }
             let Some(g) = self.gradient_for(sh) else {
@@ -181,38 +181,33 @@ fn tidy(g: &mut Gradient) {
     g.set_params(&values);
 }
 
-/// Folds a transform `x' = s x + e, y' = s y + f` (`s > 0`) into the geometry.
+/// Folds a transform `x' = s x + e, y' = s y + f` (`s > 0`) into the geometry: points map,
+/// radii scale.
 fn fold_transform(g: &mut Gradient) {
     let [a, b, c, d, e, f] = g.transform.0;
     if !(b == 0.0 && c == 0.0 && a == d && a > 0.0) {
         return;
     }
-    let (s, m) = (a, |x: f32, y: f32| (a * x + e, d * y + f));
-    g.geometry = match g.geometry {
-        GradientGeometry::Linear { x1, y1, x2, y2 } => {
-            let ((x1, y1), (x2, y2)) = (m(x1, y1), m(x2, y2));
-            GradientGeometry::Linear { x1, y1, x2, y2 }
-        }
-        GradientGeometry::Radial {
-            cx,
-            cy,
-            r,
-            fx,
-            fy,
-            fr,
-        } => {
-            let ((cx, cy), (fx, fy)) = (m(cx, cy), m(fx, fy));
-            GradientGeometry::Radial {
-                cx,
-                cy,
-                r: s * r,
-                fx,
-                fy,
-                fr: s * fr,
-            }
-        }
+    let mut v = g.params();
+    // Linear: x1 y1 x2 y2; radial: cx cy r fx fy fr (points at 0, 3; radii at 2, 5).
+    let (points, radii): (&[usize], &[usize]) = match g.geometry {
+        GradientGeometry::Linear { .. } => (&[0, 2], &[]),
+        GradientGeometry::Radial { .. } => (&[0, 3], &[2, 5]),
     };
+    for &k in points {
+        v[k] = a * v[k] + e;
+        v[k + 1] = d * v[k + 1] + f;
+    }
+    for &k in radii {
+        v[k] *= a;
+    }
+    g.set_params(&v);
     g.transform = Affine::IDENTITY;
+}
+
+/// The gradient painting `shape`'s fill, if any.
+pub fn fill_gradient(shape: &Shape) -> Option<&Gradient> {
+    shape.gradients.as_deref().and_then(|g| g.fill.as_ref())
 }
 
 /// The stop alphas of `flat` gradient-paint stops ([`crate::scene::ParamGroup::PaintStops`]

@@ -1,6 +1,15 @@
 use super::*;
 use crate::scene::{Params, Rgba, Scene, Shape};
 
+/// The largest per-channel difference of two renders.
+fn max_diff(a: &crate::image::Image, b: &crate::image::Image) -> f32 {
+    a.data
+        .iter()
+        .zip(&b.data)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0f32, f32::max)
+}
+
 fn scene(kind: FillKind) -> Scene {
     let mut s = Scene::new(48, 40, Rgba::WHITE).unwrap();
     s.shapes
@@ -19,12 +28,7 @@ fn flat_equivalent_gradients_render_as_the_flat_fill() {
         assert!(s.validate().is_ok());
         assert!(s.shapes.iter().all(|sh| sh.gradients.is_some()));
         let img = crate::raster::render(&s);
-        let worst = img
-            .data
-            .iter()
-            .zip(&flat.data)
-            .map(|(a, b)| (a - b).abs())
-            .fold(0.0f32, f32::max);
+        let worst = max_diff(&img, &flat);
         assert!(worst < 1e-5, "{kind:?}: {worst}");
         // Painting again adds nothing.
         let mut again = s.clone();
@@ -57,34 +61,17 @@ fn tidy_folds_uniform_scales_and_keeps_the_render() {
     big.height = 80;
     let before = crate::raster::render(&big);
     tidy_gradients(&mut big);
-    let g = big.shapes[0]
-        .gradients
-        .as_ref()
-        .unwrap()
-        .fill
-        .as_ref()
-        .unwrap();
+    let g = fill_gradient(&big.shapes[0]).unwrap();
     assert_eq!(g.transform, Affine::IDENTITY);
     let after = crate::raster::render(&big);
-    let worst = after
-        .data
-        .iter()
-        .zip(&before.data)
-        .map(|(a, b)| (a - b).abs())
-        .fold(0.0f32, f32::max);
+    let worst = max_diff(&after, &before);
     assert!(worst < 0.02, "{worst}");
 }
 
 #[test]
 fn restart_keeps_the_parameter_layout() {
     let s = scene(FillKind::Linear);
-    let old = s.shapes[0]
-        .gradients
-        .as_ref()
-        .unwrap()
-        .fill
-        .as_ref()
-        .unwrap();
+    let old = fill_gradient(&s.shapes[0]).unwrap();
     let fresh = Shape::circle(30.0, 30.0, 4.0, 4, Rgba::BLACK).unwrap();
     let g = restart_like(old, &fresh);
     assert_eq!(g.num_params(), old.num_params());
