@@ -704,6 +704,18 @@ async fn bad_input_gets_clear_4xx_json_never_500() {
             "max_bytes",
         ),
         json_case(
+            "fill unknown",
+            json!({"kind": "vectorize", "image": png_b64(8), "fill": "conic"}),
+            "invalid_field",
+            "fill",
+        ),
+        json_case(
+            "fill gradient with a palette",
+            json!({"kind": "vectorize", "image": png_b64(8), "fill": "linear", "colors": 4}),
+            "invalid_field",
+            "fill",
+        ),
+        json_case(
             "max_bytes on a text job",
             json!({"kind": "text", "caption": "a cat", "max_bytes": 4000}),
             "invalid_field",
@@ -1162,9 +1174,17 @@ async fn vector_options_are_stored_and_reach_the_plan() {
     let p = get(srv.addr, &format!("/jobs/{id}")).await.json()["params"].clone();
     assert_eq!(p["group"], json!("stage"));
     assert!(
-        p.get("palette").is_none() && p.get("max_bytes").is_none(),
+        p.get("palette").is_none() && p.get("max_bytes").is_none() && p.get("fill").is_none(),
         "{p}"
     );
+    // A gradient fill is stored and reaches the LIVE settings.
+    let body = json!({"kind": "vectorize", "image": png_b64(8), "fill": "radial"});
+    let r = post_json(srv.addr, "/jobs", &body).await;
+    assert_eq!(r.status, 202, "{}", r.text());
+    let id = r.json()["id"].as_str().unwrap().to_string();
+    let p = get(srv.addr, &format!("/jobs/{id}")).await.json()["params"].clone();
+    assert_eq!(p["fill"], json!("radial"));
+    assert_eq!(p["plan"]["vectorize"]["fill"], json!("radial"));
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -343,15 +343,18 @@ impl Tools {
             eprintln!("SKIP {tool}: {why}");
         }
         let base = live_base(a);
-        let mut live_runs: Vec<(String, LiveConfig)> = budgets
-            .iter()
-            .map(|&b| {
-                (
-                    format!("paths {b}"),
-                    with_budget(&base, PathBudget::fixed(b)),
-                )
-            })
-            .collect();
+        let mut live_runs: Vec<(String, LiveConfig)> = Vec::new();
+        for &fill in &a.fills {
+            let base = LiveConfig {
+                fill,
+                ..base.clone()
+            };
+            let suffix = if fill.is_flat() { "" } else { fill.name() };
+            for &b in budgets {
+                let label = format!("paths {b} {suffix}").trim_end().to_string();
+                live_runs.push((label, with_budget(&base, PathBudget::fixed(b))));
+            }
+        }
         if a.auto {
             live_runs.push(("auto".into(), with_budget(&base, PathBudget::auto())));
         }

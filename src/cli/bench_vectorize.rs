@@ -31,6 +31,10 @@ pub struct BenchVectorizeArgs {
     /// Also run `--paths auto`.
     #[arg(long)]
     pub auto: bool,
+    /// `--rd`: LIVE's fill paints to run at each budget (comma-separated: flat, linear,
+    /// radial); a gradient run's setting is named `paths N linear`.
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "flat")]
+    pub fills: Vec<crate::vector::fill::FillKind>,
     /// Also run LIVE started from vtracer's trace at each budget.
     #[arg(long)]
     pub vtracer_init: bool,

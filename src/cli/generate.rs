@@ -294,6 +294,7 @@ fn request_and_input(
         start,
         vector: crate::vector::VectorOptions {
             colors: args.vector.color_plan()?,
+            fill: args.vector.fill()?,
             ..Default::default()
         },
         tuning: args.request.tuning.tuning(args.snapshot_every),

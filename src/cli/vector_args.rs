@@ -2,6 +2,7 @@
 //! grouping (one set of flags, one [`ColorPlan`] they turn into).
 
 use super::CliError;
+use crate::vector::fill::FillKind;
 use crate::vector::palette::{Background, ColorPlan, Grouping, check_colors, parse_palette};
 
 #[derive(clap::Args, Debug, Clone)]
@@ -22,6 +23,10 @@ pub struct VectorArgs {
     /// one LIVE stage added in a `<g id="s<k>">`), with stable ids.
     #[arg(long, value_enum, default_value = "none")]
     pub group: Grouping,
+    /// What the paths are painted with: flat colours, or one linear or radial gradient each
+    /// (optimised with the paths; not with --colors or --palette).
+    #[arg(long, value_enum, default_value = "flat")]
+    pub fill: FillKind,
 }
 
 impl VectorArgs {
@@ -48,6 +53,15 @@ impl VectorArgs {
             group: self.group,
         })
     }
+
+    /// `--fill`, refused with `--colors` or `--palette` (a usage error naming `--fill`).
+    pub fn fill(&self) -> Result<FillKind, CliError> {
+        let palette = self.colors.is_some() || self.palette.is_some();
+        self.fill
+            .check_with_palette(palette)
+            .map_err(|e| CliError::Usage(format!("--fill: {e}")))?;
+        Ok(self.fill)
+    }
 }
 
 #[cfg(test)]
@@ -60,6 +74,7 @@ mod tests {
             palette: palette.map(str::to_string),
             background: background.into(),
             group: Grouping::None,
+            fill: FillKind::Flat,
         }
     }
 
@@ -77,5 +92,22 @@ mod tests {
             .unwrap();
         assert_eq!(ok.palette.unwrap().len(), 2);
         assert_eq!(ok.background.to_string(), "#aabbcc");
+        let gradient = VectorArgs {
+            fill: FillKind::Linear,
+            ..args(None, Some("#fff"), "auto")
+        };
+        assert!(msg_fill(gradient).starts_with("--fill: linear cannot be combined"));
+        let free = VectorArgs {
+            fill: FillKind::Radial,
+            ..args(None, None, "auto")
+        };
+        assert_eq!(free.fill().unwrap(), FillKind::Radial);
+    }
+
+    fn msg_fill(a: VectorArgs) -> String {
+        match a.fill() {
+            Err(CliError::Usage(m)) => m,
+            other => panic!("{other:?}"),
+        }
     }
 }

@@ -137,6 +137,7 @@ pub fn config_from_args(a: &VectorizeArgs) -> Result<LiveConfig, CliError> {
     }
     cfg.seed = a.seed;
     cfg.colors = a.vector.color_plan()?;
+    cfg.fill = a.vector.fill()?;
     cfg.target_psnr = a
         .target_psnr
         .map(crate::vector::check_target_psnr)

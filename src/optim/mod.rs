@@ -25,6 +25,11 @@ pub enum LrSchedule {
 }
 
 impl LrSchedule {
+    /// A rate of 0 (the group does not move).
+    pub fn zero() -> LrSchedule {
+        LrSchedule::Constant { lr: 0.0 }
+    }
+
     pub fn lr(&self, step: u32) -> f32 {
         match *self {
             LrSchedule::Constant { lr } => lr,
@@ -93,6 +98,12 @@ pub struct GroupSchedules {
     pub stroke: LrSchedule,
     pub width: LrSchedule,
     pub background: LrSchedule,
+    /// Gradient paints' geometry (pixels; zero in settings stored before it existed).
+    #[serde(default = "LrSchedule::zero")]
+    pub paint_geometry: LrSchedule,
+    /// Gradient paints' stop offsets and colours (`[0, 1]`).
+    #[serde(default = "LrSchedule::zero")]
+    pub paint_stops: LrSchedule,
 }
 
 impl GroupSchedules {
@@ -104,6 +115,8 @@ impl GroupSchedules {
             stroke: self.stroke.scaled(k),
             width: self.width.scaled(k),
             background: self.background.scaled(k),
+            paint_geometry: self.paint_geometry.scaled(k),
+            paint_stops: self.paint_stops.scaled(k),
         }
     }
 
@@ -115,6 +128,8 @@ impl GroupSchedules {
             ParamGroup::Stroke => &self.stroke,
             ParamGroup::Width => &self.width,
             ParamGroup::Background => &self.background,
+            ParamGroup::PaintGeometry => &self.paint_geometry,
+            ParamGroup::PaintStops => &self.paint_stops,
         }
     }
 }
@@ -263,7 +278,9 @@ mod tests {
             fill: c.clone(),
             stroke: c.clone(),
             width: c.clone(),
-            background: c,
+            background: c.clone(),
+            paint_geometry: c.clone(),
+            paint_stops: c,
         }
     }
 

@@ -171,6 +171,9 @@ pub struct RunReport {
     /// Vectorize: Adam steps taken.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub steps: Option<u32>,
+    /// The fill paint of a run with gradient fills (absent for flat fills).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fill: Option<crate::vector::fill::FillKind>,
     /// Vectorize: what each LIVE stage did.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub stages: Vec<StageReport>,

@@ -197,7 +197,12 @@ fn distil(
     let (render, _) = render_dims(plan);
     let state = match run.resume_sds.take() {
         Some(s) => s,
-        None => SdsState::start(scaled(&run.current.scene, render), &cfg),
+        None => {
+            // A start without gradients (from scratch, a given SVG) gets them here.
+            let mut start = scaled(&run.current.scene, render);
+            plan.fill.paint_new(&mut start);
+            SdsState::start(start, &cfg)
+        }
     };
     let checkpoints = ctx.map(|ctx| JobCheckpoints {
         ctx,
@@ -241,6 +246,9 @@ fn finish(scene: &mut Scene, plan: &TextPlan, report: &mut RunReport) {
     }
     recolour_svg(scene, plan, report);
     let finish = crate::vector::finish_scene(scene, &plan.colors, plan.style.spec().prune_weak());
+    if !plan.fill.is_flat() {
+        crate::vector::fill::tidy_gradients(scene);
+    }
     report.finish = Some(finish);
     report.editability = Some(crate::vector::check::check(scene));
     report.paths_initial = Some(before);

@@ -78,6 +78,7 @@ pub fn run_vectorize(
     let report = RunReport {
         seconds: Some(t0.elapsed().as_secs_f64()),
         resumed: resumed_from.map(ResumePoint::LiveStage),
+        fill: (!cfg.fill.is_flat()).then_some(cfg.fill),
         ..RunReport::vectorized(&r)
     };
     Ok(RunOutput::new(r.scene, svg, report))

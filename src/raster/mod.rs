@@ -181,8 +181,9 @@ pub fn backward(scene: &Scene, tape: &Tape, d_image: &[f32]) -> Params {
 }
 
 /// [`backward`], plus the gradients of every gradient paint's parameters in the order of
-/// [`crate::scene::paint::scene_gradient_params`] (geometry, stop offsets, stop colours). A
-/// fill or stroke painted with a gradient gets zero gradient for its flat stand-in colour.
+/// [`crate::scene::paint::scene_gradient_params`] (geometry, stop offsets, stop colours; the
+/// [`Params`] hold them too, split into its two paint groups). A fill or stroke painted with a
+/// gradient gets zero gradient for its flat stand-in colour.
 pub fn backward_with_gradients(scene: &Scene, tape: &Tape, d_image: &[f32]) -> (Params, Vec<f32>) {
     let mut out = Params::zeros_like(scene);
     let n = 4 * scene.width as usize * scene.height as usize;
@@ -192,7 +193,7 @@ pub fn backward_with_gradients(scene: &Scene, tape: &Tape, d_image: &[f32]) -> (
         return (out, vec![0.0; np]);
     }
     let g = engine::backward(&tape.sc, &tape.layers, &tape.bands, d_image);
-    write_grad(&mut out, &g);
+    write_grad(&mut out, &g, scene);
     (out, g.paint)
 }
 
@@ -215,17 +216,18 @@ pub fn render_loss_backward(scene: &Scene, loss: &BandLoss<'_>) -> (f64, Params)
     let (value, g, bands) = engine::forward_backward(&sc, &layers, recycled, loss);
     recycle(bands);
     let mut out = Params::zeros_like(scene);
-    write_grad(&mut out, &g);
+    write_grad(&mut out, &g, scene);
     (value, out)
 }
 
-fn write_grad(out: &mut Params, g: &grad::GradT<f32>) {
+fn write_grad(out: &mut Params, g: &grad::GradT<f32>, scene: &Scene) {
     out.get_mut(ParamGroup::Points).copy_from_slice(&g.points);
     out.get_mut(ParamGroup::Fill).copy_from_slice(&g.fill);
     out.get_mut(ParamGroup::Stroke).copy_from_slice(&g.stroke);
     out.get_mut(ParamGroup::Width).copy_from_slice(&g.width);
     out.get_mut(ParamGroup::Background).copy_from_slice(&g.bg);
     out.get_mut(ParamGroup::Opacity).copy_from_slice(&g.opacity);
+    out.set_paint(scene, &g.paint);
 }
 
 /// The polyline(s) of a shape's outline at `tolerance_px` (closed outlines do not repeat their

@@ -133,6 +133,7 @@ fn route_table() -> Vec<(Method, &'static str, MethodRouter<AppState>)> {
         (Method::GET, "/metrics", get(routes::metrics)),
         (Method::GET, "/", get(page::index)),
         (Method::GET, "/app.js", get(page::app_js)),
+        (Method::GET, "/js/{module}", get(page::module)),
         (Method::GET, "/style.css", get(page::style_css)),
     ]
 }

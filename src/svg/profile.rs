@@ -3,11 +3,13 @@
 //! output path (results, snapshots, `vectorize`, `generate`).
 //!
 //! - XML without a DTD, entities or processing instructions other than the XML declaration;
-//! - elements from an allowlist (`svg`, `g`, `path`, `rect`, `metadata`, `title`, `desc`) in the
-//!   SVG namespace, each with attributes from its allowlist: no `<script>`, `<foreignObject>`,
-//!   `<image>`, `<use>`, event handlers (`on*`), `href`, `style`, or `url(…)` values, so nothing
-//!   runs and nothing outside the file is fetched; `id` only on `<g>` and `<path>`, and only a
-//!   plain name (a letter, then letters, digits, `_`, `-`);
+//! - elements from an allowlist (`svg`, `g`, `path`, `rect`, `metadata`, `title`, `desc`, and
+//!   the gradient paint: `defs`, `linearGradient`, `radialGradient`, `stop`) in the SVG
+//!   namespace, each with attributes from its allowlist: no `<script>`, `<foreignObject>`,
+//!   `<image>`, `<use>`, event handlers (`on*`), `href` or `style`, and no `url(…)` value but a
+//!   fill or stroke naming a gradient of the same file (`url(#id)`), so nothing runs and nothing
+//!   outside the file is fetched; `id` only on `<g>`, `<path>` and gradients, and only a plain
+//!   name (a letter, then letters, digits, `_`, `-`);
 //! - the root has `viewBox`, `width` and `height`; every number is finite.
 //!
 //! Our writer ([`super::to_svg`], [`super::with_metadata`]) builds documents from a scene, so an
@@ -36,6 +38,23 @@ fn allowed(tag: &str, attr: &str) -> bool {
         "g" => attr == "id" || PAINT.contains(&attr),
         "path" => matches!(attr, "d" | "id") || PAINT.contains(&attr),
         "rect" => matches!(attr, "x" | "y" | "width" | "height") || PAINT.contains(&attr),
+        "linearGradient" | "radialGradient" => matches!(
+            attr,
+            "id" | "gradientUnits"
+                | "gradientTransform"
+                | "spreadMethod"
+                | "x1"
+                | "y1"
+                | "x2"
+                | "y2"
+                | "cx"
+                | "cy"
+                | "r"
+                | "fx"
+                | "fy"
+                | "fr"
+        ),
+        "stop" => matches!(attr, "offset" | "stop-color" | "stop-opacity"),
         _ => false,
     }
 }
@@ -106,6 +125,15 @@ fn plain_id(v: &str) -> bool {
         && chars.all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
 }
 
+/// A fill or stroke naming a paint of the same file: `url(#id)` with a plain id.
+fn local_paint_ref(attr: &str, value: &str) -> bool {
+    matches!(attr, "fill" | "stroke")
+        && value
+            .strip_prefix("url(#")
+            .and_then(|v| v.strip_suffix(')'))
+            .is_some_and(plain_id)
+}
+
 fn check_element(node: Node) -> Result<(), ProfileViolation> {
     let tag = node.tag_name().name();
     if node.tag_name().namespace() != Some(SVG_NS) {
@@ -113,7 +141,17 @@ fn check_element(node: Node) -> Result<(), ProfileViolation> {
     }
     if !matches!(
         tag,
-        "svg" | "g" | "path" | "rect" | "metadata" | "title" | "desc"
+        "svg"
+            | "g"
+            | "path"
+            | "rect"
+            | "metadata"
+            | "title"
+            | "desc"
+            | "defs"
+            | "linearGradient"
+            | "radialGradient"
+            | "stop"
     ) {
         return Err(ProfileViolation::Element(tag.to_string()));
     }
@@ -133,7 +171,7 @@ fn check_element(node: Node) -> Result<(), ProfileViolation> {
             let id = owned(v);
             return Err(ProfileViolation::Id { tag, id });
         }
-        if v.contains("url(") {
+        if v.contains("url(") && !local_paint_ref(name, v) {
             let name = owned(name);
             return Err(ProfileViolation::Reference { tag, name });
         }
@@ -174,7 +212,8 @@ mod tests {
             hostile,
             r#"<svg xmlns="http://www.w3.org/2000/svg" width="4" height="4"/>"#,
             r#"<svg xmlns="http://www.w3.org/2000/svg" width="4" height="4" viewBox="0 0 4 4"><path d="MNaN 0"/></svg>"#,
-            r#"<svg xmlns="http://www.w3.org/2000/svg" width="4" height="4" viewBox="0 0 4 4"><path d="M0 0" fill="url(#a)"/></svg>"#,
+            r#"<svg xmlns="http://www.w3.org/2000/svg" width="4" height="4" viewBox="0 0 4 4"><path d="M0 0" fill="url(https://example.com/#a)"/></svg>"#,
+            r#"<svg xmlns="http://www.w3.org/2000/svg" width="4" height="4" viewBox="0 0 4 4"><path d="M0 0" transform="url(#a)"/></svg>"#,
         ] {
             assert!(check_safe_output(bad).is_err(), "{bad}");
         }
@@ -189,5 +228,13 @@ mod tests {
             .unwrap(),
         );
         check_safe_output(&to_svg(&s, &SvgOptions::default())).unwrap();
+        // Gradient paint: <defs>, the gradients and their stops, fills naming them.
+        crate::vector::fill::FillKind::Radial.paint_new(&mut s);
+        let out = to_svg(&s, &SvgOptions::default());
+        assert!(
+            out.contains("<radialGradient") && out.contains("url(#g1)"),
+            "{out}"
+        );
+        check_safe_output(&out).unwrap();
     }
 }

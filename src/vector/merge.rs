@@ -61,11 +61,13 @@ fn boxes_meet(a: &Box2, b: &Box2, grow: f64) -> bool {
     a[0] <= b[2] + grow && b[0] <= a[2] + grow && a[1] <= b[3] + grow && b[1] <= a[3] + grow
 }
 
-/// Whether two shapes paint alike: closed, no stroke, the same opaque fill as the SVG writes it.
+/// Whether two shapes paint alike: closed, no stroke, the same opaque flat fill as the SVG
+/// writes it (a gradient paints differently wherever it is).
 fn same_paint(a: &Shape, b: &Shape) -> bool {
     let paint = |s: &Shape| {
         s.fill
             .filter(|f| s.is_closed() && s.stroke.is_none() && f.a >= 1.0)
+            .filter(|_| s.gradients.is_none())
             .map(|f| written_color(f, super::export::MAX_DECIMALS))
     };
     paint(a).is_some() && paint(a) == paint(b)

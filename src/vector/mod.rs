@@ -10,6 +10,7 @@
 
 pub mod check;
 pub mod export;
+pub mod fill;
 pub mod lobes;
 pub mod merge;
 pub mod palette;
@@ -31,6 +32,9 @@ pub struct VectorOptions {
     /// Vectorize runs: the SVG at most this many bytes.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub max_bytes: Option<usize>,
+    /// What the trace (and SDS) paint fills with; `flat` is left out of the JSON.
+    #[serde(default, skip_serializing_if = "fill::FillKind::is_flat")]
+    pub fill: fill::FillKind,
 }
 
 /// Smallest `max_bytes` accepted: an SVG's header and one small path.
@@ -77,6 +81,10 @@ impl VectorOptions {
         if let Some(v) = self.max_bytes {
             check_max_bytes(v).map_err(|e| ("max_bytes", e.to_string()))?;
         }
+        let palette = self.colors.colors.is_some() || self.colors.palette.is_some();
+        self.fill
+            .check_with_palette(palette)
+            .map_err(|e| ("fill", e))?;
         Ok(())
     }
 }

@@ -12,6 +12,7 @@ use crate::caption::CaptionPlan;
 use crate::stages::live::{CANVAS_SIDES, LiveConfig, PathBudget};
 use crate::stages::sds::{T_MAX, T_MIN};
 use crate::vector::VectorOptions;
+use crate::vector::fill::FillKind;
 use crate::vector::palette::ColorPlan;
 use serde::{Deserialize, Serialize};
 
@@ -245,6 +246,10 @@ pub struct TextPlan {
     /// before it existed take the default (near-equal fills merged).
     #[serde(default)]
     pub colors: ColorPlan,
+    /// What the trace and SDS paint fills with; `flat` (and plans stored before it existed)
+    /// is left out of the JSON, so the plan's key is unchanged.
+    #[serde(default, skip_serializing_if = "FillKind::is_flat")]
+    pub fill: FillKind,
     /// How many results the run returns: the best `variations` distinct samples of the rerank
     /// (K is at least this), each traced and distilled with its own seeds
     /// ([`Seeds::variation`]); from-scratch runs start each from its own init. 1 (the plans
@@ -375,6 +380,7 @@ fn vectorize_plan(req: &PlanRequest, limits: &Limits) -> Result<LiveConfig, Spec
         budget: PathBudget::auto_up_to(paths),
         seed: req.seed,
         colors: req.vector.colors.clone(),
+        fill: req.vector.fill,
         target_psnr: req.vector.target_psnr,
         max_bytes: req.vector.max_bytes,
         ..req.preset.live_config()
@@ -488,6 +494,7 @@ fn text_plan(
     req.vector
         .validate()
         .map_err(|(field, reason)| SpecError::new(field, reason))?;
+    check_fill_style(req.vector.fill, req.style)?;
     let n = text_numbers(req, &ps, limits)?;
     let start = match req.kind {
         JobKind::Vectorize => StartKind::Image,
@@ -542,12 +549,13 @@ fn text_plan(
             encoder: model.encoder(ps.prefer_taesd),
         },
         colors: req.vector.colors.clone(),
+        fill: req.vector.fill,
         variations,
     })
 }
 
 mod text_plan;
-use text_plan::{negative_prompt, sample_shape};
+use text_plan::{check_fill_style, negative_prompt, sample_shape};
 
 mod facts;
 mod variations;
@@ -557,3 +565,5 @@ use variations::check_variations;
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_fill;

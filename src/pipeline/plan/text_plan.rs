@@ -3,8 +3,11 @@
 
 use super::{Limits, ModelFacts, PlanRequest, SpecError, TextPlan, check_text};
 use crate::pipeline::canvas::SampleShape;
+use crate::scene::Trainable;
 use crate::stages::live::{LiveConfig, PathBudget};
 use crate::stages::sds::{ReinitConfig, SdsConfig};
+use crate::stages::styles::Style;
+use crate::vector::fill::FillKind;
 
 impl TextPlan {
     /// `(width, height)` of the image the model samples, LIVE traces and SDS distils.
@@ -32,6 +35,7 @@ impl TextPlan {
             seed: self.seeds.trace,
             snapshot_every: self.snapshot_every,
             colors: self.colors.clone(),
+            fill: self.fill,
             ..LiveConfig::default()
         }
     }
@@ -63,9 +67,32 @@ impl TextPlan {
             }),
             snapshot_every: self.snapshot_every,
             seed: self.seeds.sds,
+            trainable: Trainable {
+                paint: !self.fill.is_flat(),
+                ..paper.trainable
+            },
             ..paper
         })
     }
+}
+
+/// A gradient fill is for filled paths drawn freely: iconography (pixel art's cells, low
+/// poly's flat polygons and the stroke styles keep their paint).
+pub(super) fn check_fill_style(fill: FillKind, style: Style) -> Result<(), SpecError> {
+    if fill.is_flat() || style == Style::Iconography {
+        return Ok(());
+    }
+    let name = serde_json::to_value(style)
+        .ok()
+        .and_then(|v| v.as_str().map(str::to_string))
+        .unwrap_or_default();
+    Err(SpecError::new(
+        "fill",
+        format!(
+            "{} applies to style iconography only, not {name}",
+            fill.name()
+        ),
+    ))
 }
 
 /// The shapes `req` is sampled at on `model`: pixel art draws its square grid.

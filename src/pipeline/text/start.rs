@@ -227,6 +227,7 @@ fn first_report(models: &Models, plan: &TextPlan) -> RunReport {
         encoder: Some(teacher.encoder().to_string()),
         size: Some(plan.size),
         prompt: Some(plan.prompt.clone()),
+        fill: (!plan.fill.is_flat()).then_some(plan.fill),
         ..RunReport::default()
     }
 }

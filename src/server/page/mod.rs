@@ -8,6 +8,12 @@ use axum::response::{IntoResponse, Response};
 
 const INDEX_HTML: &str = include_str!("index.html");
 const APP_JS: &str = include_str!("app.js");
+/// The ES modules `app.js` imports, served at `/js/<name>`.
+const MODULES: [(&str, &str); 3] = [
+    ("common.js", include_str!("common.js")),
+    ("form.js", include_str!("form.js")),
+    ("view.js", include_str!("view.js")),
+];
 const STYLE_CSS: &str = include_str!("style.css");
 
 /// The page's Content-Security-Policy.
@@ -17,7 +23,7 @@ pub const CSP: &str = "default-src 'none'; script-src 'self'; style-src 'self'; 
 
 /// Paths of the page's files (served without an API key).
 pub fn is_page(path: &str) -> bool {
-    matches!(path, "/" | "/app.js" | "/style.css")
+    matches!(path, "/" | "/app.js" | "/style.css") || path.starts_with("/js/")
 }
 
 fn file(body: &'static str, content_type: &'static str) -> Response {
@@ -45,6 +51,18 @@ pub(super) async fn index() -> Response {
 
 pub(super) async fn app_js() -> Response {
     file(APP_JS, "text/javascript; charset=utf-8")
+}
+
+/// `/js/{module}`: one of the page's script modules; 404 for any other name.
+pub(super) async fn module(axum::extract::Path(name): axum::extract::Path<String>) -> Response {
+    match MODULES.iter().find(|(n, _)| *n == name) {
+        Some((_, body)) => file(body, "text/javascript; charset=utf-8"),
+        None => crate::server::error::ApiError::NotFound {
+            what: "page module",
+            id: name,
+        }
+        .into_response(),
+    }
 }
 
 pub(super) async fn style_css() -> Response {

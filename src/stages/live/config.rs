@@ -3,6 +3,7 @@
 use super::schedule;
 use crate::losses::LossError;
 use crate::scene::{MAX_PATHS, SceneError};
+use crate::vector::fill::FillKind;
 use crate::vector::palette::ColorPlan;
 use crate::vector::{check_max_bytes, check_target_psnr};
 use serde::{Deserialize, Serialize};
@@ -156,6 +157,28 @@ pub struct LiveConfig {
     /// below `size` works at `size` throughout.
     #[serde(default)]
     pub coarse_size: u32,
+    /// What the paths are painted with: flat colours (the default, left out of the JSON so
+    /// the plan's key is unchanged) or a linear or radial gradient each.
+    #[serde(default, skip_serializing_if = "FillKind::is_flat")]
+    pub fill: FillKind,
+    /// Peak learning rates of gradient paints: geometry (pixels per step at the full working
+    /// size, like `lr_points`) and stop offsets and colours (like `lr_fill`).
+    #[serde(
+        default = "lr_paint_default",
+        skip_serializing_if = "is_lr_paint_default"
+    )]
+    pub lr_paint: [f32; 2],
+}
+
+/// [`LiveConfig::lr_paint`]'s default: geometry as fast as points, stops as fast as fills.
+pub const LR_PAINT: [f32; 2] = [1.0, 0.02];
+
+fn lr_paint_default() -> [f32; 2] {
+    LR_PAINT
+}
+
+fn is_lr_paint_default(v: &[f32; 2]) -> bool {
+    *v == LR_PAINT
 }
 
 impl LiveConfig {
@@ -196,6 +219,8 @@ impl LiveConfig {
             self.lr_points,
             self.lr_fill,
             self.lr_background,
+            self.lr_paint[0],
+            self.lr_paint[1],
             self.udf_weight,
             self.udf_tau,
             self.xing_weight,
@@ -213,6 +238,9 @@ impl LiveConfig {
         self.colors
             .validate()
             .map_err(|(field, e)| LiveError::Config(format!("{field}: {e}")))?;
+        self.fill
+            .check_with_palette(self.colors.colors.is_some() || self.colors.palette.is_some())
+            .map_err(|e| LiveError::Config(format!("fill: {e}")))?;
         if let Some(v) = self.target_psnr {
             check_target_psnr(v).map_err(|e| LiveError::Config(format!("target_psnr: {e}")))?;
         }
@@ -263,6 +291,8 @@ impl Default for LiveConfig {
             max_bytes: None,
             converge_tol: 0.0,
             coarse_size: 0,
+            fill: FillKind::Flat,
+            lr_paint: LR_PAINT,
         }
     }
 }

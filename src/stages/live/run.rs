@@ -71,6 +71,8 @@ impl Run<'_> {
             stroke: LrSchedule::Constant { lr: 0.0 },
             width: LrSchedule::Constant { lr: 0.0 },
             background: sched(self.cfg.lr_background),
+            paint_geometry: sched(self.cfg.lr_paint[0] * self.px()),
+            paint_stops: sched(self.cfg.lr_paint[1]),
         }
     }
 
@@ -91,6 +93,7 @@ impl Run<'_> {
             stroke: false,
             width: false,
             background: self.background_free,
+            paint: fills,
         };
         let mut adam = Adam::new(
             &params,
@@ -202,6 +205,9 @@ impl Run<'_> {
             {
                 *a = 1.0;
             }
+            for a in crate::vector::fill::stop_alphas(params.get_mut(ParamGroup::PaintStops)) {
+                *a = 1.0;
+            }
         }
         if self.background_free
             && let Some(a) = params.get_mut(ParamGroup::Background).get_mut(3)
@@ -280,11 +286,13 @@ impl Run<'_> {
         crate::image::psnr(&crate::raster::render(scene), &self.target)
     }
 
-    /// Gives the paths their palette colours (when a palette is in force).
+    /// Gives the paths their palette colours (when a palette is in force) and new paths the
+    /// gradient paint of a gradient fill (painting as their flat colour does).
     fn choose_colours(&self, scene: &mut Scene) {
         if let Some(p) = &self.palette {
             palette::choose_fills(scene, Some(&self.target), p);
         }
+        self.cfg.fill.paint_new(scene);
     }
 
     /// Splits every path whose outline crosses itself or folds into a spike into simple pieces
@@ -583,6 +591,9 @@ impl Run<'_> {
         let mut out = output_scene(&scene, tw, th);
         crate::vector::make_simple(&mut out, crate::vector::SIMPLE_MIN_AREA);
         pruned += crate::vector::drop_hidden(&mut out);
+        if !cfg.fill.is_flat() {
+            crate::vector::fill::tidy_gradients(&mut out);
+        }
         out.validate()?;
         Ok((out, pruned, merged))
     }

@@ -18,17 +18,18 @@
 #![allow(clippy::needless_range_loop)] // index loops read clearest in pixel code
 
 mod config;
+mod reinit;
+use reinit::reinit_faint;
 
 pub use config::*;
 
-use super::styles::random_circle;
 use crate::augment::Warp;
 use crate::image::Image;
 use crate::optim::{Adam, StepOutcome};
 use crate::progress::{CancelToken, CheckpointError, Progress, ProgressSink, Stage};
 use crate::scene::{ParamGroup, Params, Scene};
 use crate::teacher::{Conditioning, Latent, Teacher};
-use rand::{Rng, RngExt, SeedableRng};
+use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
@@ -241,60 +242,6 @@ fn clip_groups(g: &mut Params, max: f32) -> bool {
     clipped
 }
 
-/// Shoelace area of a shape's control polygon.
-fn control_area(points: &[crate::scene::Point]) -> f32 {
-    let n = points.len();
-    let mut a = 0.0;
-    for i in 0..n {
-        let (p, q) = (points[i], points[(i + 1) % n]);
-        a += p.x * q.y - q.x * p.y;
-    }
-    0.5 * a.abs()
-}
-
-/// Re-initialises faint / tiny closed cubic paths in place (new random circle) and resets their
-/// Adam moments. Returns the number re-initialised.
-fn reinit_faint<R: Rng>(
-    scene: &mut Scene,
-    params: &mut Params,
-    adam: &mut Adam,
-    cfg: &ReinitConfig,
-    rng: &mut R,
-) -> Result<u32, SdsError> {
-    let mut count = 0;
-    let mut fill_idx = 0usize;
-    let size = scene.width.min(scene.height);
-    for i in 0..scene.shapes.len() {
-        let sh = &scene.shapes[i];
-        let Some(fill) = sh.fill else { continue };
-        let faint = fill.a < cfg.min_opacity
-            || cfg
-                .min_area
-                .is_some_and(|m| sh.is_closed() && control_area(&sh.points) < m);
-        let same_layout = sh.kind == crate::scene::ShapeKind::ClosedCubic && sh.points.len() == 12;
-        if faint && same_layout {
-            let fresh = random_circle(size, rng)?;
-            let off = Params::point_offset(scene, i);
-            let np = 2 * fresh.points.len();
-            let pts = params.get_mut(ParamGroup::Points);
-            for (k, p) in fresh.points.iter().enumerate() {
-                pts[off + 2 * k] = p.x;
-                pts[off + 2 * k + 1] = p.y;
-            }
-            if let Some(f) = fresh.fill {
-                params.get_mut(ParamGroup::Fill)[4 * fill_idx..4 * fill_idx + 4]
-                    .copy_from_slice(&f.to_array());
-            }
-            adam.reset_range(ParamGroup::Points, off..off + np);
-            adam.reset_range(ParamGroup::Fill, 4 * fill_idx..4 * fill_idx + 4);
-            scene.shapes[i] = fresh;
-            count += 1;
-        }
-        fill_idx += 1;
-    }
-    Ok(count)
-}
-
 /// Runs SDS on `scene` (rendered at its own size) with `teacher`. The scene should be
 /// [`SdsConfig::render_size`] px wide for the teacher's input size.
 pub fn run_sds<B: Backend>(
@@ -456,6 +403,9 @@ impl<B: Backend> Fixed<'_, B> {
         if cfg.opaque_fills {
             for rgba in grad.get_mut(ParamGroup::Fill).chunks_exact_mut(4) {
                 rgba[3] = 0.0;
+            }
+            for a in crate::vector::fill::stop_alphas(grad.get_mut(ParamGroup::PaintStops)) {
+                *a = 0.0;
             }
         }
         Ok((grad, loss))

@@ -261,7 +261,8 @@ pub trait StyleSpec: Send + Sync {
 }
 
 /// The paper's schedules: points warm-up 0.02 → 0.2 over 500 steps, cosine to 0.05 at the end;
-/// colours 20x lower; widths 2x lower; background 200x lower.
+/// colours (and gradient stops) 20x lower; widths 2x lower; background 200x lower; gradient
+/// geometry as the points.
 pub fn paper_schedules(steps: u32) -> GroupSchedules {
     let points = LrSchedule::WarmupCosine {
         start: 0.02,
@@ -275,6 +276,9 @@ pub fn paper_schedules(steps: u32) -> GroupSchedules {
         stroke: points.scaled(1.0 / 20.0),
         width: points.scaled(0.5),
         background: points.scaled(1.0 / 200.0),
+        // Gradient geometry is in pixels like the points, its stops in [0, 1] like colours.
+        paint_geometry: points.clone(),
+        paint_stops: points.scaled(1.0 / 20.0),
         points,
     }
 }

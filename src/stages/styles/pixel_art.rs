@@ -51,6 +51,8 @@ impl StyleSpec for PixelArt {
             stroke: colours,
             width: LrSchedule::Constant { lr: 0.0 },
             background: LrSchedule::Constant { lr: 0.0 },
+            paint_geometry: LrSchedule::zero(),
+            paint_stops: LrSchedule::zero(),
         }
     }
 
