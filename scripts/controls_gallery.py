@@ -7,7 +7,8 @@ screenshot (tests/playground_page.rs writes target/tmp/playground/playground-var
 run it first).
 
 Usage: scripts/controls_gallery.py [OUT_DIR]   (default docs/img; VF_BIN names the binary,
-default target/debug/vectorfusion). Python standard library only: PNGs are decoded and written
+default target/debug/vectorfusion; VF_ROWS=controls_fill,... draws only those rows and no
+export picture). Python standard library only: PNGs are decoded and written
 here (8-bit RGB/RGBA, non-interlaced, as resvg and Chromium write them).
 """
 
@@ -37,6 +38,8 @@ ROWS = [
      [(3, []), (3, ["--colors", "2"]), (3, ["--palette", "#1d3557,#e63946,#f1faee"])]),
     ("controls_background", "a red apple",
      [(3, []), (3, ["--background", "transparent"]), (3, ["--background", "#ffe8a3"])]),
+    ("controls_fill", "a red apple",
+     [(3, []), (3, ["--fill", "linear"]), (3, ["--fill", "radial"])]),
 ]
 
 
@@ -162,14 +165,18 @@ def main():
     out_dir.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as t:
         tmp = Path(t)
+        only = [r for r in os.environ.get("VF_ROWS", "").split(",") if r]
         for name, caption, runs in ROWS:
+            if only and name not in only:
+                continue
             pictures = []
             for k, (seed, extra) in enumerate(runs):
                 for svg in generate(tmp, f"{name}{k}", caption, seed, extra):
                     pictures.append(render(svg, HEIGHT))
             row_png(out_dir / f"{name}.png", pictures)
             print(f"{name}.png: {len(pictures)} pictures")
-    export_picture(out_dir)
+    if not only:
+        export_picture(out_dir)
 
 
 if __name__ == "__main__":
