@@ -362,6 +362,7 @@ fn vectorize_plan(req: &PlanRequest, limits: &Limits) -> Result<LiveConfig, Spec
     req.vector
         .validate()
         .map_err(|(field, reason)| SpecError::new(field, reason))?;
+    check_fill_style(req.vector.fill, req.style)?;
     check_variations(req, None, limits)?;
     if let Some(cfg) = &req.tuning.live {
         cfg.validate()

@@ -75,4 +75,16 @@ fn bad_combinations_name_the_fill_field() {
     let e = err(palette);
     assert_eq!(e.field, "fill");
     assert!(e.reason.contains("palette"), "{}", e.reason);
+    // A vectorize job keeps the same rule, with or without a model (as openapi.yaml says).
+    let sketch = PlanRequest {
+        kind: JobKind::Vectorize,
+        caption: None,
+        style: Style::Sketch,
+        ..with_fill(PlanRequest::text(""), FillKind::Linear)
+    };
+    for facts in [None, Some(facts())] {
+        let e = resolve(&sketch, facts.as_ref(), &Limits::default()).unwrap_err();
+        assert_eq!(e.field, "fill");
+        assert!(e.reason.contains("sketch"), "{}", e.reason);
+    }
 }
