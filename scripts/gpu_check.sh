@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The GPU path, run for real (issue #24): one prepared check of the `cuda` cargo feature on the
+# The GPU path, run for real: one prepared check of the `cuda` cargo feature on the
 # lent device machine (one H200, CUDA 13 libraries and PyTorch in its python3, no Rust toolchain,
 # no network). Three modes:
 #
@@ -7,10 +7,13 @@
 #                                   #   (trimmed) into .gpu/, check the 64 MiB carry limit
 #   scripts/gpu_check.sh run        # THERE (GPU): every check, each under `timeout`; needs OUT
 #   scripts/gpu_check.sh --dry-run  # HERE: prepare, then the run half on the CPU at toy sizes
-#                                   #   (OUT = a temp folder) so the plumbing is known to work
+#                                   #   (OUT = a temp folder) so the plumbing is known to work;
+#                                   #   `--dry-run --no-prepare` reuses what .gpu/ holds
 #
 # The device call after `prepare` (one call; the checks keep within GPU_CHECK_BUDGET_S = 470 s):
 #   command: bash scripts/gpu_check.sh run     carry: [".gpu"]     timeout_s: 570
+# The call sends the checkout the session was started in, even from a helper's worktree: run
+# `prepare` in that checkout, so that its .gpu/ is the one carried.
 # It returns $OUT/report.json (one record per check: status pass | fail | timeout | skipped |
 # not_implemented, seconds, exit code, sampled GPU memory, the check's JSON output) and
 # $OUT/log.txt (everything printed). The exit status is 1 when any check failed or timed out.
@@ -54,7 +57,7 @@ say() { printf '[gpu_check] %s\n' "$*" >&2; }
 die() { say "ERROR: $*"; exit 1; }
 
 usage() {
-  sed -n '2,16p' "$0" | sed 's/^# \{0,1\}//'
+  sed -n '2,19p' "$0" | sed 's/^# \{0,1\}//'
 }
 
 # ------------------------------------------------------------------------------------------------
@@ -792,7 +795,7 @@ run_mode() {
 }
 
 dry_run() {
-  prepare
+  [[ ${1:-} == --no-prepare ]] || prepare
   OUT="$(mktemp -d /tmp/gpu-check-dry.XXXXXX)"
   export OUT
   say "dry run: the run half on the CPU at toy sizes, OUT=$OUT"
@@ -802,7 +805,7 @@ dry_run() {
 case "${1:-}" in
   prepare) prepare ;;
   run) run_mode device ;;
-  --dry-run | dry-run) dry_run ;;
+  --dry-run | dry-run) dry_run "${2:-}" ;;
   -h | --help | help) usage ;;
   *) usage >&2; exit 2 ;;
 esac
