@@ -625,11 +625,19 @@ PY
   done
   join_ld() { local IFS=:; VF_LD="${dirs[*]}${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"; }
   join_ld
-  # Fall back to searching the disk for whatever ldd still cannot find.
-  for lib in $(LD_LIBRARY_PATH=$VF_LD ldd "$WORK/bin/vectorfusion" | awk '/not found/{print $1}'); do
-    hit=$(timeout 60 find / \( -path /proc -o -path /sys -o -path /dev \) -prune -o -name "$lib" -print 2>/dev/null | head -1 || true)
-    if [[ -n $hit ]]; then say "found $lib at $hit"; dirs+=("$(dirname "$hit")"); fi
-  done
+  # Fall back to searching the disk for whatever ldd still cannot find: one walk of at most 60 s
+  # for all of them (it comes out of the checks' budget), the first hit of each name kept.
+  local -a missing names=()
+  read -ra missing <<<"$(LD_LIBRARY_PATH=$VF_LD ldd "$WORK/bin/vectorfusion" | awk '/not found/{print $1}' | tr '\n' ' ')"
+  if ((${#missing[@]})); then
+    say "not found on the library path: ${missing[*]}; searching the disk (60 s at most)"
+    for lib in "${missing[@]}"; do names+=(-o -name "$lib"); done
+    while IFS= read -r hit; do
+      say "found $hit"
+      dirs+=("$(dirname "$hit")")
+    done < <(timeout 60 find / \( -path /proc -o -path /sys -o -path /dev \) -prune -o \
+      \( "${names[@]:1}" \) -print 2>/dev/null | awk -F/ '!seen[$NF]++' || true)
+  fi
   join_ld
   say "LD_LIBRARY_PATH for vectorfusion: $VF_LD"
   VF="$WORK/bin/vf"
