@@ -1,16 +1,19 @@
 #!/usr/bin/env bash
-# The GPU path, run for real (issue #24): one prepared check of the `cuda` cargo feature on the
+# The GPU path, run for real: one prepared check of the `cuda` cargo feature on the
 # lent device machine (one H200, CUDA 13 libraries and PyTorch in its python3, no Rust toolchain,
 # no network). Three modes:
 #
-#   scripts/gpu_check.sh prepare    # HERE (CPU): build the `cuda` binary, pack it and the
-#                                   #   diffusers wheels into .gpu/, check the 64 MiB carry limit
+#   scripts/gpu_check.sh prepare    # HERE (CPU): build the `cuda` binary, pack it and diffusers
+#                                   #   (trimmed) into .gpu/, check the 64 MiB carry limit
 #   scripts/gpu_check.sh run        # THERE (GPU): every check, each under `timeout`; needs OUT
 #   scripts/gpu_check.sh --dry-run  # HERE: prepare, then the run half on the CPU at toy sizes
-#                                   #   (OUT = a temp folder) so the plumbing is known to work
+#                                   #   (OUT = a temp folder) so the plumbing is known to work;
+#                                   #   `--dry-run --no-prepare` reuses what .gpu/ holds
 #
 # The device call after `prepare` (one call; the checks keep within GPU_CHECK_BUDGET_S = 470 s):
 #   command: bash scripts/gpu_check.sh run     carry: [".gpu"]     timeout_s: 570
+# The call sends the checkout the session was started in, even from a helper's worktree: run
+# `prepare` in that checkout, so that its .gpu/ is the one carried.
 # It returns $OUT/report.json (one record per check: status pass | fail | timeout | skipped |
 # not_implemented, seconds, exit code, sampled GPU memory, the check's JSON output) and
 # $OUT/log.txt (everything printed). The exit status is 1 when any check failed or timed out.
@@ -29,7 +32,8 @@
 #   fixture_equivalence_cuda   not implemented (see GAPS in the helper below)
 #
 # Env knobs: GPU_CHECK_BUDGET_S (470 there, 3600 in the dry run), GPU_CHECK_SKIP_BUILD=1 (reuse
-# the built binary), GPU_CHECK_NO_WHEELS=1 (no diffusers wheels), GPU_CHECK_SVG_TOL (0.5),
+# the built binary), GPU_CHECK_NO_WHEELS=1 (no diffusers), GPU_CHECK_PYTHON (python3: the one
+# with torch and transformers; here a venv's), GPU_CHECK_SVG_TOL (0.5),
 # GPU_CHECK_MEM_SAMPLE_S (0.2), GPU_CHECK_KEEP=1 (keep the work folder), CUDA_DIR (the PyPI
 # toolkit, default /work/cuda-toolkit, as scripts/cuda_toolkit_from_pypi.sh), CARGO_TARGET_DIR
 # (default ../target-cuda, as that script).
@@ -38,7 +42,8 @@ ROOT="$(cd "$(dirname "$0")/.." && pwd)"
 GPU_DIR="$ROOT/.gpu"                     # ignored (.git/info/exclude), carried to the device
 BIN_XZ="$GPU_DIR/vectorfusion.xz"        # xz: the PTX inside the binary compresses well, and the
                                          # whole tree that travels must stay under 64 MiB
-WHL_DIR="$GPU_DIR/whl"
+WHL_DIR="$GPU_DIR/whl"                  # the old layout (wheels); removed by prepare
+SITE_XZ="$GPU_DIR/site.tar.xz"           # diffusers & co., installed and trimmed (pack_site)
 CUDA_DIR="${CUDA_DIR:-/work/cuda-toolkit}"
 CARRY_LIMIT=$((64 * 1024 * 1024))
 # diffusers and what it needs that the device image lacks (/work/.library/device/KINDS.md lists
@@ -52,7 +57,7 @@ say() { printf '[gpu_check] %s\n' "$*" >&2; }
 die() { say "ERROR: $*"; exit 1; }
 
 usage() {
-  sed -n '2,16p' "$0" | sed 's/^# \{0,1\}//'
+  sed -n '2,19p' "$0" | sed 's/^# \{0,1\}//'
 }
 
 # ------------------------------------------------------------------------------------------------
@@ -105,27 +110,41 @@ package_binary() {
   rm -rf "$tmp"
 }
 
-# Wheels as /work/.library/device/README.md says (no index there: installed with --no-index).
-download_wheels() {
+# diffusers and its missing needs, carried as one xz tarball of the installed packages rather than
+# wheels: the tracked tree is ~52 MiB of the 64 MiB that may travel, and the diffusers wheel alone
+# is 6.1 MiB. Installed here (all pure Python: --no-deps, no code runs), then trimmed of the
+# pipeline families (pipelines/*/ and modular_pipelines/*/: 20 of its 30 MiB; the checks import
+# only the models, and diffusers imports those lazily), then packed: about 1 MiB.
+pack_site() {
+  rm -rf "$WHL_DIR" "$SITE_XZ"
   if [[ ${GPU_CHECK_NO_WHEELS:-0} == 1 ]]; then
-    say "GPU_CHECK_NO_WHEELS=1: no wheels (the torch checks will fail there: no diffusers)"
-    rm -rf "$WHL_DIR"
+    say "GPU_CHECK_NO_WHEELS=1: no diffusers (the torch checks will fail there)"
     return 0
   fi
-  rm -rf "$WHL_DIR"     # one version of each: two stop the whole install
-  mkdir -p "$WHL_DIR"
-  local spec
+  local tmp spec d
+  tmp="$(mktemp -d)"
+  mkdir -p "$tmp/whl" "$tmp/site"
   for spec in "${WHEELS[@]}"; do
     if ! python3 -m pip download -q --no-deps --only-binary=:all: --python-version 3.12 \
         --implementation cp --platform manylinux_2_28_x86_64 --platform manylinux_2_27_x86_64 \
         --platform manylinux_2_17_x86_64 --platform manylinux2014_x86_64 \
-        --platform manylinux1_x86_64 -d "$WHL_DIR" "$spec"; then
+        --platform manylinux1_x86_64 -d "$tmp/whl" "$spec"; then
       # a pure-Python package published as an sdist only: build its wheel here (no code runs there)
       say "no wheel of $spec on the index: building one"
-      python3 -m pip wheel -q --no-deps -w "$WHL_DIR" "$spec" || die "cannot get a wheel of $spec"
+      python3 -m pip wheel -q --no-deps -w "$tmp/whl" "$spec" || die "cannot get a wheel of $spec"
     fi
   done
-  ls -l "$WHL_DIR" >&2
+  ls -l "$tmp/whl" >&2
+  python3 -m pip install -q --root-user-action=ignore --no-index --no-deps --no-compile --target "$tmp/site" "$tmp/whl"/*.whl \
+    || die "the wheels did not install into $tmp/site"
+  for d in "$tmp/site/diffusers/pipelines" "$tmp/site/diffusers/modular_pipelines"; do
+    find "$d" -mindepth 1 -maxdepth 1 -type d -exec rm -rf {} +
+  done
+  rm -rf "$tmp/site/bin"
+  find "$tmp/site" -name __pycache__ -prune -exec rm -rf {} +
+  tar -C "$tmp/site" -cf - . | xz -T0 -9 >"$SITE_XZ"
+  say "packed $(du -sh "$tmp/site" | cut -f1) of Python packages -> $(du -h "$SITE_XZ" | cut -f1) $SITE_XZ"
+  rm -rf "$tmp"
 }
 
 # Everything that travels: tracked + untracked-not-ignored files, shared/, and the carried .gpu/.
@@ -162,7 +181,7 @@ prepare() {
   ensure_excluded
   build_binary
   package_binary
-  download_wheels
+  pack_site
   check_carry_size
   say "prepared. Device call: command 'bash scripts/gpu_check.sh run', carry [\".gpu\"], timeout_s 570"
 }
@@ -589,12 +608,13 @@ setup_binary() {
     ln -sf "$CUDA_DIR/lib64/stubs/libcuda.so" "$WORK/stub/libcuda.so.1"
     dirs+=("$CUDA_DIR/lib64" "$WORK/stub")
   fi
-  while IFS= read -r d; do [[ -n $d ]] && dirs+=("$d"); done < <(python3 - <<'PY' 2>/dev/null || true
+  while IFS= read -r d; do [[ -n $d ]] && dirs+=("$d"); done < <("$PY" - <<'PY' 2>/dev/null || true
 import glob, os
 try:
     import nvidia
     for p in nvidia.__path__:
-        for d in sorted(glob.glob(os.path.join(p, "cu13", "lib")) + glob.glob(os.path.join(p, "*", "lib"))):
+        cu13 = glob.glob(os.path.join(p, "cu13", "lib"))
+        for d in dict.fromkeys(cu13 + sorted(glob.glob(os.path.join(p, "*", "lib")))):
             print(d)
 except Exception:
     pass
@@ -605,11 +625,19 @@ PY
   done
   join_ld() { local IFS=:; VF_LD="${dirs[*]}${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"; }
   join_ld
-  # Fall back to searching the disk for whatever ldd still cannot find.
-  for lib in $(LD_LIBRARY_PATH=$VF_LD ldd "$WORK/bin/vectorfusion" | awk '/not found/{print $1}'); do
-    hit=$(timeout 60 find / \( -path /proc -o -path /sys -o -path /dev \) -prune -o -name "$lib" -print 2>/dev/null | head -1 || true)
-    if [[ -n $hit ]]; then say "found $lib at $hit"; dirs+=("$(dirname "$hit")"); fi
-  done
+  # Fall back to searching the disk for whatever ldd still cannot find: one walk of at most 60 s
+  # for all of them (it comes out of the checks' budget), the first hit of each name kept.
+  local -a missing names=()
+  read -ra missing <<<"$(LD_LIBRARY_PATH=$VF_LD ldd "$WORK/bin/vectorfusion" | awk '/not found/{print $1}' | tr '\n' ' ')"
+  if ((${#missing[@]})); then
+    say "not found on the library path: ${missing[*]}; searching the disk (60 s at most)"
+    for lib in "${missing[@]}"; do names+=(-o -name "$lib"); done
+    while IFS= read -r hit; do
+      say "found $hit"
+      dirs+=("$(dirname "$hit")")
+    done < <(timeout 60 find / \( -path /proc -o -path /sys -o -path /dev \) -prune -o \
+      \( "${names[@]:1}" \) -print 2>/dev/null | awk -F/ '!seen[$NF]++' || true)
+  fi
   join_ld
   say "LD_LIBRARY_PATH for vectorfusion: $VF_LD"
   VF="$WORK/bin/vf"
@@ -622,16 +650,19 @@ EOF
   chmod +x "$VF"
 }
 
-# The carried wheels into a private site folder (README.md's recipe), on PYTHONPATH for the
-# Python checks only.
-setup_wheels() {
+# The carried packages (pack_site) into a private site folder, on PYTHONPATH for the Python
+# checks only.
+setup_site() {
   SITE="$WORK/site"
   mkdir -p "$SITE"
-  if compgen -G "$WHL_DIR/*.whl" >/dev/null; then
-    python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade \
-      --target "$SITE" "$WHL_DIR"/*.whl || say "WARNING: the wheels did not install"
+  if [[ -f $SITE_XZ ]]; then
+    "$PY" -c '
+import sys, tarfile
+with tarfile.open(sys.argv[1]) as t:
+    t.extractall(sys.argv[2], **({"filter": "data"} if hasattr(tarfile, "data_filter") else {}))
+' "$SITE_XZ" "$SITE" || say "WARNING: $SITE_XZ did not unpack"
   else
-    say "WARNING: no wheels in $WHL_DIR: the torch checks need diffusers"
+    say "WARNING: no $SITE_XZ: the torch checks need diffusers"
   fi
 }
 
@@ -667,6 +698,12 @@ run_mode() {
   t() { echo $(($1 * half_scale)); }   # per-check timeouts, longer for the CPU dry run
 
   write_helpers
+  # The Python with PyTorch and transformers: python3 there (KINDS.md); here python3 may lack
+  # them, so GPU_CHECK_PYTHON names another (a venv's python) for the Python checks.
+  PY="${GPU_CHECK_PYTHON:-python3}"
+  if ! "$PY" -c 'import torch, transformers' 2>/dev/null; then
+    say "WARNING: $PY cannot import torch and transformers: python_env, torch_* and write_random_sd15 will fail (set GPU_CHECK_PYTHON)"
+  fi
   HAVE_SMI=0
   command -v nvidia-smi >/dev/null && HAVE_SMI=1
   python3 "$HELPERS" meta mode "$MODE" device "$dev" started_utc "$(date -u +%FT%TZ)" \
@@ -674,8 +711,8 @@ run_mode() {
     gpu "$( ((HAVE_SMI)) && nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader || echo none)"
 
   setup_binary
-  setup_wheels
-  local py=(env PYTHONPATH="$SITE${PYTHONPATH:+:$PYTHONPATH}" PYTHONUNBUFFERED=1 python3)
+  setup_site
+  local py=(env PYTHONPATH="$SITE${PYTHONPATH:+:$PYTHONPATH}" PYTHONUNBUFFERED=1 "$PY")
   local fixture="$ROOT/tests/fixtures/sd-tiny"
   local sd="$WORK/sd15-random"
 
@@ -766,7 +803,7 @@ run_mode() {
 }
 
 dry_run() {
-  prepare
+  [[ ${1:-} == --no-prepare ]] || prepare
   OUT="$(mktemp -d /tmp/gpu-check-dry.XXXXXX)"
   export OUT
   say "dry run: the run half on the CPU at toy sizes, OUT=$OUT"
@@ -776,7 +813,7 @@ dry_run() {
 case "${1:-}" in
   prepare) prepare ;;
   run) run_mode device ;;
-  --dry-run | dry-run) dry_run ;;
+  --dry-run | dry-run) dry_run "${2:-}" ;;
   -h | --help | help) usage ;;
   *) usage >&2; exit 2 ;;
 esac
