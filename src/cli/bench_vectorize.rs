@@ -25,7 +25,7 @@ pub struct BenchVectorizeArgs {
     /// Path budgets for LIVE and the tuned vtracer setting.
     #[arg(long, default_value = "16,32,64")]
     pub paths: String,
-    /// LIVE settings of this preset (draft, fast, balanced or paper; `quality` is paper).
+    /// LIVE settings of this preset (draft, fast, balanced, paper or cpu; `quality` is paper).
     #[arg(long, value_enum, default_value = "balanced")]
     pub preset: Preset,
     /// Also run `--paths auto`.

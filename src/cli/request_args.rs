@@ -64,8 +64,9 @@ pub struct RequestArgs {
     /// `icon`, `line` are accepted too).
     #[arg(long, default_value = "iconography", value_parser = parse_word::<Style>)]
     pub style: Style,
-    /// Preset: draft, fast, balanced or paper (resolution, steps, paths, samples, sampler
-    /// steps, LIVE iterations; `default` and `quality` are older names of balanced and paper).
+    /// Preset: draft, fast, balanced, paper or cpu (resolution, steps, paths, samples, sampler
+    /// steps, LIVE iterations; cpu: Stable Diffusion in ≤ 10 minutes on 2 cores; `default` and
+    /// `quality` are older names of balanced and paper).
     #[arg(long, default_value = "balanced", value_parser = parse_word::<Preset>)]
     pub preset: Preset,
     #[command(flatten)]

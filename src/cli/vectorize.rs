@@ -34,8 +34,9 @@ pub struct VectorizeArgs {
     pub iters: Option<u32>,
     #[arg(long, default_value_t = 0, value_parser = crate::pipeline::parse_seed)]
     pub seed: u64,
-    /// Preset: draft, fast, balanced or paper (`quality` is an older name of paper): the
-    /// working size and iterations; the same vocabulary as `generate` and the service.
+    /// Preset: draft, fast, balanced, paper or cpu (`quality` is an older name of paper; cpu
+    /// traces as balanced): the working size and iterations; the same vocabulary as `generate`
+    /// and the service.
     #[arg(long, default_value = "balanced")]
     pub preset: String,
     /// Start from vtracer's trace instead of circles.

@@ -4,16 +4,23 @@
 
 use super::PipelineError;
 use super::canvas::SampleShape;
-use super::plan::ModelFacts;
+use super::plan::{ModelFacts, few_step};
 use crate::models::ComputeDevice;
 use crate::models::scorer::{ImageTextScorer, Scorer};
-use crate::models::stable_diffusion::ModelHints;
+use crate::models::scheduler::SamplerKind;
+use crate::models::stable_diffusion::{ModelHints, load_scheduler};
 use crate::retrieval::{IconIndex, RetrievalLocations};
 use crate::stages::sample::NoStarts;
 use crate::teacher::{AnalyticTeacher, AnalyticTeacherConfig, SdTeacher, Teacher};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
+
+/// The sampler `model`'s `scheduler/scheduler_config.json` names (DDIM when it cannot be read:
+/// the loader reports a malformed one when the run starts).
+fn sampler_kind(model: &Path) -> SamplerKind {
+    load_scheduler(&model.join("scheduler")).map_or(SamplerKind::Ddim, |c| SamplerKind::of(&c))
+}
 
 /// Which encoder turns renders into latents for SDS with a latent (Stable Diffusion) model.
 /// Pixel-space models have no encoder to choose and ignore it.
@@ -267,6 +274,7 @@ impl ModelDirs {
             // Sampling and SDS guide with `embed(prompt)` against `embed(negative prompt)` (the
             // embedded model too, trained with dropped captions): any such model takes one.
             negative_prompt: true,
+            few_step: few_step(sampler_kind(sd), &hints),
         })
     }
 

@@ -1,5 +1,5 @@
-//! The preset tables: what `draft`, `fast`, `balanced` and `paper` mean for Stable Diffusion,
-//! for a small prior and for LIVE (vectorize runs). Read only by [`super::plan`] when a request
+//! The preset tables: what `draft`, `fast`, `balanced`, `paper` and `cpu` mean for Stable
+//! Diffusion, for a small prior and for LIVE (vectorize runs). Read only by [`super::plan`] when a request
 //! is resolved (and by the benchmarks, which name a preset); a stored plan keeps the numbers, so
 //! editing these tables changes new jobs only.
 
@@ -31,6 +31,10 @@ pub struct PresetSettings {
     /// it first); the traced scene is then scaled to `size`.
     pub trace_size: u32,
 }
+
+/// Sampler steps per image of the `cpu` preset with a few-step (turbo or LCM) model: the top
+/// of the 1–4 such checkpoints are made for.
+pub const FEW_STEP_SAMPLE_STEPS: usize = 4;
 
 impl Preset {
     /// The settings of this preset.
@@ -80,7 +84,42 @@ impl Preset {
                 prefer_taesd: false,
                 trace_size: 512,
             },
+            // Sized by measured parts (docs/BENCHMARKS.md, 2-core AMD EPYC, 256 px): a guided
+            // UNet call 3.3 s, an SDS step through TAESD 3.4 s, the LIVE trace seconds. 4 × 12
+            // sampler calls ≈ 2.6 min + 80 SDS steps ≈ 4.5 min + loading and decoding ≈ 8 min
+            // per SVG; LIVE keeps `balanced`'s paths and iterations (they cost seconds). A
+            // few-step model samples differently ([`Preset::settings_for_model`]).
+            Preset::Cpu => PresetSettings {
+                size: 256,
+                steps: 80,
+                paths: 64,
+                samples: 4,
+                sample_steps: 12,
+                live_iters: 100,
+                snapshot_every: 20,
+                prefer_taesd: true,
+                trace_size: 256,
+            },
         }
+    }
+
+    /// [`Preset::settings_for`] for a model that does or does not sample in a few steps
+    /// (`few_step`: an LCM scheduler or a guidance-distilled turbo checkpoint,
+    /// [`super::plan::ModelFacts::few_step`]). Only `cpu` reads it: from such a Stable
+    /// Diffusion model it draws K = 8 images in [`FEW_STEP_SAMPLE_STEPS`] steps each instead of
+    /// 4 in 12 (32 UNet calls against 48, each half the cost for a turbo model, which runs no
+    /// unconditional branch): a wider rerank for less time. The other presets keep their
+    /// numbers for every model.
+    pub fn settings_for_model(self, small_prior: bool, few_step: bool) -> PresetSettings {
+        let ps = self.settings_for(small_prior);
+        if self == Preset::Cpu && few_step && !small_prior {
+            return PresetSettings {
+                samples: 8,
+                sample_steps: FEW_STEP_SAMPLE_STEPS,
+                ..ps
+            };
+        }
+        ps
     }
 
     /// The settings of this preset for a model of the given kind: Stable Diffusion
@@ -119,7 +158,8 @@ impl Preset {
                 prefer_taesd: false,
                 trace_size: 128,
             },
-            Preset::Balanced => PresetSettings {
+            // `cpu` is `balanced` for a small prior: that already runs in seconds on 2 cores.
+            Preset::Balanced | Preset::Cpu => PresetSettings {
                 size: 64,
                 steps: 50,
                 paths: 24,
@@ -154,7 +194,8 @@ impl Preset {
     /// are the request's): LIVE's own settings ([`LiveConfig::default`]) for `fast`, cut to
     /// 64 px and 20/10 iterations for `draft`, at a larger canvas, larger new circles and a
     /// wider UDF band for `balanced` and `paper`; `balanced` runs all stages but the last at
-    /// 80 px (coarse-to-fine), `paper` at 256 px throughout with more iterations.
+    /// 80 px (coarse-to-fine), `paper` at 256 px throughout with more iterations; `cpu` is
+    /// `balanced` (a vectorize run takes seconds on 2 cores).
     pub fn live_config(self) -> LiveConfig {
         let base = LiveConfig::default();
         match self {
@@ -165,7 +206,7 @@ impl Preset {
                 ..base
             },
             Preset::Fast => base,
-            Preset::Balanced => LiveConfig {
+            Preset::Balanced | Preset::Cpu => LiveConfig {
                 size: 160,
                 coarse_size: 80,
                 iters_per_stage: 100,

@@ -237,6 +237,9 @@ pub struct RerankReport {
     pub samples: u32,
     /// Per sample, the retrieved icon it started from (`None`: from noise).
     pub sources: Vec<Option<Hit>>,
+    /// Wall-clock seconds of sampling, decoding and reranking the K images.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub seconds: Option<f64>,
 }
 
 /// Retrieval: which training icons the samples started from.
@@ -266,6 +269,9 @@ pub struct TraceReport {
     pub psnr: f64,
     pub pruned: usize,
     pub steps: u32,
+    /// Wall-clock seconds of the trace.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub seconds: Option<f64>,
 }
 
 impl From<&LiveResult> for TraceReport {
@@ -275,6 +281,7 @@ impl From<&LiveResult> for TraceReport {
             psnr: r.psnr,
             pruned: r.pruned,
             steps: r.steps,
+            seconds: None,
         }
     }
 }
@@ -286,6 +293,9 @@ pub struct SdsReport {
     pub stats: SdsStats,
     #[serde(default)]
     pub augment: bool,
+    /// Wall-clock seconds of the SDS loop (of the last attempt when resumed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub seconds: Option<f64>,
 }
 
 #[cfg(test)]

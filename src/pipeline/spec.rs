@@ -51,10 +51,19 @@ pub enum Preset {
     Balanced,
     #[value(alias = "quality")]
     Paper,
+    /// Stable Diffusion at 256 px through TAESD sized for a 2-core CPU (≤ 10 minutes per SVG);
+    /// its sampler steps follow the model's sampler ([`Preset::settings_for_model`]).
+    Cpu,
 }
 
 impl Preset {
-    pub const ALL: &[Preset] = &[Preset::Draft, Preset::Fast, Preset::Balanced, Preset::Paper];
+    pub const ALL: &[Preset] = &[
+        Preset::Draft,
+        Preset::Fast,
+        Preset::Balanced,
+        Preset::Paper,
+        Preset::Cpu,
+    ];
 }
 
 /// Hard limits on a job's parameters: the `[limits]` section of `config.toml` (every field
@@ -383,7 +392,7 @@ impl std::str::FromStr for Preset {
             "quality" => return Ok(Preset::Paper),
             _ => {}
         }
-        parse_word(s, "preset", "draft, fast, balanced or paper")
+        parse_word(s, "preset", "draft, fast, balanced, paper or cpu")
     }
 }
 

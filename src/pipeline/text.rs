@@ -113,6 +113,7 @@ fn trace(
     sink: &dyn ProgressSink,
     cancel: &CancelToken,
 ) -> Result<(Scene, TraceReport), PipelineError> {
+    let t0 = std::time::Instant::now();
     let cfg = plan.trace_config();
     let size = cfg.size;
     let img = if image.width.max(image.height) > size {
@@ -126,7 +127,10 @@ fn trace(
         image.clone()
     };
     let r = live::vectorize(&img, &cfg, sink, cancel)?;
-    let report = TraceReport::from(&r);
+    let report = TraceReport {
+        seconds: Some(t0.elapsed().as_secs_f64()),
+        ..TraceReport::from(&r)
+    };
     Ok((r.scene, report))
 }
 
@@ -211,6 +215,7 @@ fn distil(
         done: &run.done,
         pending: &run.pending,
     });
+    let t0 = std::time::Instant::now();
     let out = run_sds_resumable(
         &RasterBackend,
         models.teacher(),
@@ -226,6 +231,7 @@ fn distil(
     run.current.detail.sds = Some(SdsReport {
         stats: out.stats,
         augment: sp.augment,
+        seconds: Some(t0.elapsed().as_secs_f64()),
     });
     Ok(scaled(&out.scene, width))
 }

@@ -1,6 +1,7 @@
 //! What the executor knows about its model before loading it ([`ModelFacts`]).
 
 use super::EncoderChoice;
+use crate::models::scheduler::SamplerKind;
 use crate::models::stable_diffusion::ModelHints;
 use crate::pipeline::canvas::SampleShape;
 
@@ -19,6 +20,17 @@ pub struct ModelFacts {
     pub sample_shape: SampleShape,
     /// Its guidance has an unconditional branch that can embed a negative prompt.
     pub negative_prompt: bool,
+    /// It samples in a few steps ([`few_step`]); the `cpu` preset reads it
+    /// ([`crate::pipeline::Preset::settings_for_model`]).
+    pub few_step: bool,
+}
+
+/// Whether a model samples in a few steps: its `scheduler_config.json` names `LCMScheduler`
+/// (a latent consistency model), or its `_sample_guidance` is at most 1 (a guidance-distilled
+/// turbo checkpoint, which samples without the unconditional branch). Euler ancestral alone
+/// says nothing: ordinary checkpoints ship it too.
+pub fn few_step(sampler: SamplerKind, hints: &ModelHints) -> bool {
+    sampler == SamplerKind::Lcm || hints.sample_guidance <= 1.0
 }
 
 impl ModelFacts {
@@ -32,6 +44,7 @@ impl ModelFacts {
             taesd_found: false,
             sample_shape: SampleShape::Square,
             negative_prompt: false,
+            few_step: false,
         }
     }
 

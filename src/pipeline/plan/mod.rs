@@ -491,7 +491,9 @@ fn text_plan(
         .caption
         .as_deref()
         .ok_or_else(|| SpecError::new("caption", "is required for a text run"))?;
-    let ps: PresetSettings = req.preset.settings_for(model.hints.small_prior);
+    let ps: PresetSettings = req
+        .preset
+        .settings_for_model(model.hints.small_prior, model.few_step);
     req.vector
         .validate()
         .map_err(|(field, reason)| SpecError::new(field, reason))?;
@@ -560,7 +562,7 @@ use text_plan::{check_fill_style, negative_prompt, sample_shape};
 
 mod facts;
 mod variations;
-pub use facts::ModelFacts;
+pub use facts::{ModelFacts, few_step};
 pub use variations::MAX_VARIATIONS;
 use variations::check_variations;
 

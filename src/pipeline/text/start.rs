@@ -80,6 +80,7 @@ fn rerank_reports(
         chosen: ranked.best(),
         samples: sp.samples,
         sources: ranked.sources().to_vec(),
+        seconds: None,
     };
     let retrieval = RetrievalReport {
         strength: sp.strength,
@@ -165,8 +166,10 @@ fn from_samples(
     sink: &dyn ProgressSink,
     cancel: &CancelToken,
 ) -> Result<Vec<VariationStart>, PipelineError> {
+    let t0 = std::time::Instant::now();
     let (ranked, why_not) = sample_ranked(models, plan, caption, sink, cancel)?;
-    let (rerank, retrieval) = rerank_reports(models, plan, &ranked, why_not)?;
+    let (mut rerank, retrieval) = rerank_reports(models, plan, &ranked, why_not)?;
+    rerank.seconds = Some(t0.elapsed().as_secs_f64());
     let mut ev = Progress::new(Stage::Rerank, 1, 1);
     ev.detail = serde_json::to_value(&rerank).ok();
     sink.report(ev);
