@@ -127,7 +127,10 @@ fn cpu_on_a_small_prior_is_its_balanced_preset() {
     }
     let b = Preset::Balanced.settings_for(true);
     // The small prior's balanced run already takes seconds: 2 samples × 12 steps at 64 px.
-    assert_eq!((b.size, b.samples, b.sample_steps, b.steps), (64, 2, 12, 50));
+    assert_eq!(
+        (b.size, b.samples, b.sample_steps, b.steps),
+        (64, 2, 12, 50)
+    );
     // For vectorize runs too, cpu is balanced.
     assert_eq!(Preset::Cpu.live_config(), Preset::Balanced.live_config());
     assert_eq!("CPU".parse::<Preset>(), Ok(Preset::Cpu));
