@@ -85,10 +85,11 @@ impl Preset {
                 trace_size: 512,
             },
             // Sized by measured parts (docs/BENCHMARKS.md, 2-core AMD EPYC, 256 px): a guided
-            // UNet call 3.3 s, an SDS step through TAESD 3.4 s, the LIVE trace seconds. 4 × 12
-            // sampler calls ≈ 2.6 min + 80 SDS steps ≈ 4.5 min + loading and decoding ≈ 8 min
-            // per SVG; LIVE keeps `balanced`'s paths and iterations (they cost seconds). A
-            // few-step model samples differently ([`Preset::settings_for_model`]).
+            // UNet call 3.3 s, an SDS step through TAESD 3.4 s, the LIVE trace seconds; so 4 × 12
+            // sampler calls + 80 SDS steps + loading ≈ 8 min computed, 5.6 min measured end to
+            // end (quiet), leaving room for a slower machine. LIVE keeps `balanced`'s paths and
+            // iterations (they cost seconds). A few-step model samples differently
+            // ([`Preset::settings_for_model`]).
             Preset::Cpu => PresetSettings {
                 size: 256,
                 steps: 80,
