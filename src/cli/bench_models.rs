@@ -149,6 +149,8 @@ struct Timing {
 
 #[derive(Debug, Default, serde::Serialize)]
 struct Report {
+    /// the CPU and the SIMD paths the kernels take on it
+    cpu: crate::models::kernels::cpu::CpuReport,
     /// process CPU ms per run (user + system), per component
     cpu_ms: std::collections::BTreeMap<String, f64>,
     arch: String,
@@ -190,6 +192,7 @@ impl Report {
             reps: args.reps,
             unet_reps: args.unet_reps,
             threads: candle_core::utils::get_num_threads(),
+            cpu: crate::models::kernels::cpu::CpuReport::detect(),
             ..Report::default()
         }
     }
@@ -214,6 +217,13 @@ impl Report {
             self.threads,
             self.reps,
             self.unet_reps
+        );
+        println!(
+            "  cpu             {} [{}]; gemm {}, element-wise {}",
+            self.cpu.model,
+            self.cpu.features.join(" "),
+            self.cpu.gemm,
+            self.cpu.elementwise
         );
         println!("  unet_cfg_ms     {}", f(self.unet_cfg_ms));
         println!("  encoder_fwd_ms  {}", f(self.encoder_fwd_ms));

@@ -9,6 +9,7 @@
 
 pub mod attention;
 pub mod conv;
+pub mod cpu;
 pub mod linear;
 pub mod math;
 pub mod norm;
