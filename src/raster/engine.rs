@@ -9,19 +9,23 @@ use super::grad::{GradT, reduce};
 use super::paint::{Flat, GradientShade};
 use super::real::Real;
 use super::stroke;
-use super::walk::{Clip, deposit, edge_grad};
+use super::walk::{Clip, Piece, deposit, deposit_record, edge_grad_recorded};
 use rayon::prelude::*;
 
 /// What the forward pass remembers per band for the backward pass: for every layer touching
 /// the band, the raw accumulated winding integral `A` and the colour underneath (`dst`) over
 /// the layer's box ∩ band; for every group closed in the band, its layer and what lay under it
-/// (`group`, see `layer`). Memory is proportional to the painted area.
+/// (`group`, see `layer`); for every fill, the pieces of its edges inside the band (`pieces`,
+/// one range of it per edge in `spans`), so that the backward pass does not walk them again.
+/// Memory is proportional to the painted area and the outlines' length.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct BandTape<T> {
     pub recs: Vec<Rec>,
     pub area: Vec<T>,
     pub dst: Vec<T>,
     pub group: Vec<T>,
+    pub pieces: Vec<Piece<T>>,
+    pub spans: Vec<(u32, u32)>,
 }
 
 /// One step of the forward pass in a band.
@@ -41,6 +45,8 @@ pub(crate) struct Rec {
     pub layer: u32,
     pub clip: Clip,
     pub offset: usize,
+    /// A painted fill's first edge in [`BandTape::spans`].
+    pub edges: usize,
 }
 
 /// Row range of each band.
@@ -118,6 +124,8 @@ fn forward_band<T: Real>(
         t.area.clear();
         t.dst.clear();
         t.group.clear();
+        t.pieces.clear();
+        t.spans.clear();
         t.area.reserve(total);
         t.dst.reserve(4 * total);
     }
@@ -149,19 +157,24 @@ pub(crate) fn paint_layer<T: Real>(
     // Per-pixel value the coverage is a function of: the winding integral A for fills
     // (coverage min(|A|, 1) or its even-odd fold), the coverage itself for strokes. Written
     // straight into the tape when there is one.
-    let (buf, dst_buf) = match tape {
+    let (buf, dst_buf, record) = match tape {
         Some(t) => {
             t.recs.push(Rec {
                 kind: RecKind::Paint,
                 layer: li as u32,
                 clip,
                 offset: t.area.len(),
+                edges: t.spans.len(),
             });
-            (&mut t.area, Some(&mut t.dst))
+            (
+                &mut t.area,
+                Some(&mut t.dst),
+                Some((&mut t.pieces, &mut t.spans)),
+            )
         }
         None => {
             st.vals.clear();
-            (&mut st.vals, None)
+            (&mut st.vals, None, None)
         }
     };
     let start = buf.len();
@@ -173,7 +186,14 @@ pub(crate) fn paint_layer<T: Real>(
             let acc = &mut st.acc;
             acc.clear();
             acc.resize(stride * rows, T::zero());
-            for_each_edge(l, |a, b| deposit(l.verts[a], l.verts[b], clip, acc, stride));
+            match record {
+                Some((pieces, spans)) => for_each_edge(l, |a, b| {
+                    let start = pieces.len() as u32;
+                    deposit_record(l.verts[a], l.verts[b], clip, acc, pieces);
+                    spans.push((start, pieces.len() as u32));
+                }),
+                None => for_each_edge(l, |a, b| deposit(l.verts[a], l.verts[b], clip, acc, stride)),
+            }
             for (arow, vrow) in acc.chunks_exact(stride).zip(out.chunks_exact_mut(cw)) {
                 let mut s = T::zero();
                 for (v, &dv) in vrow.iter_mut().zip(arow) {
@@ -371,9 +391,13 @@ pub(crate) fn backward_layer<T: Real>(
         if dv.is_empty() {
             dv.resize(l.verts.len(), [T::zero(); 2]);
         }
+        let mut k = rec.edges;
         for_each_edge(l, |ia, ib| {
             let (mut d0, mut d1) = ([T::zero(); 2], [T::zero(); 2]);
-            edge_grad(l.verts[ia], l.verts[ib], clip, gb, cw, &mut d0, &mut d1);
+            let (s, e) = tape.spans[k];
+            k += 1;
+            let pieces = &tape.pieces[s as usize..e as usize];
+            edge_grad_recorded(l.verts[ia], l.verts[ib], pieces, gb, &mut d0, &mut d1);
             for c in 0..2 {
                 dv[ia][c] += d0[c];
                 dv[ib][c] += d1[c];
