@@ -312,6 +312,10 @@ fn backward_band<T: Real>(
     }
     let bg = sc.bg;
     for gp in g.chunks_exact(4) {
+        // Where nothing reaches the background (under opaque paint) the sums would take zeros.
+        if gp == [T::zero(); 4] {
+            continue;
+        }
         out.dbg[0] += gp[0] * bg[3];
         out.dbg[1] += gp[1] * bg[3];
         out.dbg[2] += gp[2] * bg[3];

@@ -397,8 +397,7 @@ fn recorded_pieces_give_the_walks_deposit_and_gradient_bit_for_bit() {
             }
         })
         .collect();
-    let mut point =
-        |rng: &mut ChaCha8Rng| [rng.random_range(-2.0..16.0), rng.random_range(0.0..14.0)];
+    let point = |rng: &mut ChaCha8Rng| [rng.random_range(-2.0..16.0), rng.random_range(0.0..14.0)];
     for k in 0..300 {
         let p0 = point(&mut rng);
         // Some horizontal and vertical edges too.
