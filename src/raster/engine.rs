@@ -26,6 +26,9 @@ pub(crate) struct BandTape<T> {
     pub group: Vec<T>,
     pub pieces: Vec<Piece<T>>,
     pub spans: Vec<(u32, u32)>,
+    /// The band's image and its loss gradient in [`forward_backward`] (kept for reuse).
+    pub img: Vec<T>,
+    pub grad: Vec<T>,
 }
 
 /// One step of the forward pass in a band.
@@ -293,7 +296,7 @@ fn backward_band<T: Real>(
     y0: i32,
     tape: &BandTape<T>,
     mut g: Vec<T>,
-) -> BandGrad<T> {
+) -> (BandGrad<T>, Vec<T>) {
     let mut out = BandGrad {
         dverts: vec![Vec::new(); ls.len()],
         dcolor: vec![[T::zero(); 4]; ls.len()],
@@ -321,7 +324,7 @@ fn backward_band<T: Real>(
         out.dbg[2] += gp[2] * bg[3];
         out.dbg[3] += gp[0] * bg[0] + gp[1] * bg[1] + gp[2] * bg[2] + gp[3];
     }
-    out
+    (out, g)
 }
 
 /// Backward through the painting of one layer (`rec`): `g` (the gradient of the band's rows of
@@ -425,7 +428,7 @@ pub(crate) fn backward<T: Real>(
         .map(|(&(y0, y1), tape)| {
             let lo = 4 * w * y0 as usize;
             let hi = 4 * w * y1 as usize;
-            backward_band(sc, ls, y0, tape, dimg[lo..hi].to_vec())
+            backward_band(sc, ls, y0, tape, dimg[lo..hi].to_vec()).0
         })
         .collect();
     reduce(sc, ls, &parts)
@@ -457,11 +460,16 @@ pub(crate) fn forward_backward<T: Real>(
         .zip(recycled.into_par_iter())
         .map(|(&(y0, y1), mut tape)| {
             let px = w * y0 as usize..w * y1 as usize;
-            let mut img = vec![T::zero(); 4 * px.len()];
+            // Every pixel is painted (the background first); the loss gets a zeroed gradient.
+            let mut img = std::mem::take(&mut tape.img);
+            img.resize(4 * px.len(), T::zero());
             forward_band(sc, ls, (y0, y1), &mut img, Some(&mut tape));
-            let mut g = vec![T::zero(); img.len()];
+            let mut g = std::mem::take(&mut tape.grad);
+            g.clear();
+            g.resize(img.len(), T::zero());
             let l = loss(px, &img, &mut g);
-            let grad = backward_band(sc, ls, y0, &tape, g);
+            let (grad, g) = backward_band(sc, ls, y0, &tape, g);
+            (tape.img, tape.grad) = (img, g);
             (l, grad, tape)
         })
         .collect();

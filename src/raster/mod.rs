@@ -130,7 +130,11 @@ fn recycle(bands: Vec<engine::BandTape<f32>>) {
             bands
                 .into_iter()
                 .filter(|b| {
-                    b.area.capacity() + b.dst.capacity() + b.group.capacity()
+                    b.area.capacity()
+                        + b.dst.capacity()
+                        + b.group.capacity()
+                        + b.img.capacity()
+                        + b.grad.capacity()
                         <= POOL_BAND_MAX_FLOATS
                 })
                 .take(room),
