@@ -125,8 +125,10 @@ pub(crate) fn composite_back<T: Real, S: Shade<T>>(
             .enumerate()
         {
             *gbv = T::zero();
-            if a == T::zero() {
-                // No coverage and no edge inside: nothing flows through this layer here.
+            if a == T::zero() || gp == [T::zero(); 4] {
+                // No coverage and no edge inside, or no gradient from above (under an opaque
+                // layer): nothing flows through this layer here (the skipped updates would add
+                // and scale zeros only).
                 continue;
             }
             let x = clip.x0 + ix as i32;

@@ -9,19 +9,26 @@ use super::grad::{GradT, reduce};
 use super::paint::{Flat, GradientShade};
 use super::real::Real;
 use super::stroke;
-use super::walk::{Clip, deposit, edge_grad};
+use super::walk::{Clip, Piece, deposit, deposit_record, edge_grad_recorded};
 use rayon::prelude::*;
 
 /// What the forward pass remembers per band for the backward pass: for every layer touching
 /// the band, the raw accumulated winding integral `A` and the colour underneath (`dst`) over
 /// the layer's box ∩ band; for every group closed in the band, its layer and what lay under it
-/// (`group`, see `layer`). Memory is proportional to the painted area.
+/// (`group`, see `layer`); for every fill, the pieces of its edges inside the band (`pieces`,
+/// one range of it per edge in `spans`), so that the backward pass does not walk them again.
+/// Memory is proportional to the painted area and the outlines' length.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct BandTape<T> {
     pub recs: Vec<Rec>,
     pub area: Vec<T>,
     pub dst: Vec<T>,
     pub group: Vec<T>,
+    pub pieces: Vec<Piece<T>>,
+    pub spans: Vec<(u32, u32)>,
+    /// The band's image and its loss gradient in [`forward_backward`] (kept for reuse).
+    pub img: Vec<T>,
+    pub grad: Vec<T>,
 }
 
 /// One step of the forward pass in a band.
@@ -41,6 +48,8 @@ pub(crate) struct Rec {
     pub layer: u32,
     pub clip: Clip,
     pub offset: usize,
+    /// A painted fill's first edge in [`BandTape::spans`].
+    pub edges: usize,
 }
 
 /// Row range of each band.
@@ -118,6 +127,8 @@ fn forward_band<T: Real>(
         t.area.clear();
         t.dst.clear();
         t.group.clear();
+        t.pieces.clear();
+        t.spans.clear();
         t.area.reserve(total);
         t.dst.reserve(4 * total);
     }
@@ -149,19 +160,24 @@ pub(crate) fn paint_layer<T: Real>(
     // Per-pixel value the coverage is a function of: the winding integral A for fills
     // (coverage min(|A|, 1) or its even-odd fold), the coverage itself for strokes. Written
     // straight into the tape when there is one.
-    let (buf, dst_buf) = match tape {
+    let (buf, dst_buf, record) = match tape {
         Some(t) => {
             t.recs.push(Rec {
                 kind: RecKind::Paint,
                 layer: li as u32,
                 clip,
                 offset: t.area.len(),
+                edges: t.spans.len(),
             });
-            (&mut t.area, Some(&mut t.dst))
+            (
+                &mut t.area,
+                Some(&mut t.dst),
+                Some((&mut t.pieces, &mut t.spans)),
+            )
         }
         None => {
             st.vals.clear();
-            (&mut st.vals, None)
+            (&mut st.vals, None, None)
         }
     };
     let start = buf.len();
@@ -173,7 +189,14 @@ pub(crate) fn paint_layer<T: Real>(
             let acc = &mut st.acc;
             acc.clear();
             acc.resize(stride * rows, T::zero());
-            for_each_edge(l, |a, b| deposit(l.verts[a], l.verts[b], clip, acc, stride));
+            match record {
+                Some((pieces, spans)) => for_each_edge(l, |a, b| {
+                    let start = pieces.len() as u32;
+                    deposit_record(l.verts[a], l.verts[b], clip, acc, pieces);
+                    spans.push((start, pieces.len() as u32));
+                }),
+                None => for_each_edge(l, |a, b| deposit(l.verts[a], l.verts[b], clip, acc, stride)),
+            }
             for (arow, vrow) in acc.chunks_exact(stride).zip(out.chunks_exact_mut(cw)) {
                 let mut s = T::zero();
                 for (v, &dv) in vrow.iter_mut().zip(arow) {
@@ -273,7 +296,7 @@ fn backward_band<T: Real>(
     y0: i32,
     tape: &BandTape<T>,
     mut g: Vec<T>,
-) -> BandGrad<T> {
+) -> (BandGrad<T>, Vec<T>) {
     let mut out = BandGrad {
         dverts: vec![Vec::new(); ls.len()],
         dcolor: vec![[T::zero(); 4]; ls.len()],
@@ -292,12 +315,16 @@ fn backward_band<T: Real>(
     }
     let bg = sc.bg;
     for gp in g.chunks_exact(4) {
+        // Where nothing reaches the background (under opaque paint) the sums would take zeros.
+        if gp == [T::zero(); 4] {
+            continue;
+        }
         out.dbg[0] += gp[0] * bg[3];
         out.dbg[1] += gp[1] * bg[3];
         out.dbg[2] += gp[2] * bg[3];
         out.dbg[3] += gp[0] * bg[0] + gp[1] * bg[1] + gp[2] * bg[2] + gp[3];
     }
-    out
+    (out, g)
 }
 
 /// Backward through the painting of one layer (`rec`): `g` (the gradient of the band's rows of
@@ -371,9 +398,13 @@ pub(crate) fn backward_layer<T: Real>(
         if dv.is_empty() {
             dv.resize(l.verts.len(), [T::zero(); 2]);
         }
+        let mut k = rec.edges;
         for_each_edge(l, |ia, ib| {
             let (mut d0, mut d1) = ([T::zero(); 2], [T::zero(); 2]);
-            edge_grad(l.verts[ia], l.verts[ib], clip, gb, cw, &mut d0, &mut d1);
+            let (s, e) = tape.spans[k];
+            k += 1;
+            let pieces = &tape.pieces[s as usize..e as usize];
+            edge_grad_recorded(l.verts[ia], l.verts[ib], pieces, gb, &mut d0, &mut d1);
             for c in 0..2 {
                 dv[ia][c] += d0[c];
                 dv[ib][c] += d1[c];
@@ -397,7 +428,7 @@ pub(crate) fn backward<T: Real>(
         .map(|(&(y0, y1), tape)| {
             let lo = 4 * w * y0 as usize;
             let hi = 4 * w * y1 as usize;
-            backward_band(sc, ls, y0, tape, dimg[lo..hi].to_vec())
+            backward_band(sc, ls, y0, tape, dimg[lo..hi].to_vec()).0
         })
         .collect();
     reduce(sc, ls, &parts)
@@ -429,11 +460,16 @@ pub(crate) fn forward_backward<T: Real>(
         .zip(recycled.into_par_iter())
         .map(|(&(y0, y1), mut tape)| {
             let px = w * y0 as usize..w * y1 as usize;
-            let mut img = vec![T::zero(); 4 * px.len()];
+            // Every pixel is painted (the background first); the loss gets a zeroed gradient.
+            let mut img = std::mem::take(&mut tape.img);
+            img.resize(4 * px.len(), T::zero());
             forward_band(sc, ls, (y0, y1), &mut img, Some(&mut tape));
-            let mut g = vec![T::zero(); img.len()];
+            let mut g = std::mem::take(&mut tape.grad);
+            g.clear();
+            g.resize(img.len(), T::zero());
             let l = loss(px, &img, &mut g);
-            let grad = backward_band(sc, ls, y0, &tape, g);
+            let (grad, g) = backward_band(sc, ls, y0, &tape, g);
+            (tape.img, tape.grad) = (img, g);
             (l, grad, tape)
         })
         .collect();

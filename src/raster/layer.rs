@@ -209,6 +209,7 @@ pub(crate) fn forward_band<T: Real>(
                         layer: gi as u32,
                         clip,
                         offset: 0,
+                        edges: 0,
                     });
                 }
             }
@@ -223,6 +224,7 @@ pub(crate) fn forward_band<T: Real>(
                         layer: gi as u32,
                         clip,
                         offset,
+                        edges: 0,
                     });
                 }
                 let mut rec = tape.as_deref_mut().map(|t| &mut t.group);

@@ -35,7 +35,8 @@
 //! All functions take scenes that passed [`Scene::validate`] and cannot fail on them; on an
 //! invalid scene they never panic (non-finite outlines are skipped). Work is split into row
 //! bands processed in parallel with rayon; per layer only its bounding box ∩ band is touched,
-//! and the tape keeps `5` floats per painted pixel per layer.
+//! and the tape keeps `5` floats per painted pixel per layer, plus 3 words per pixel an edge of
+//! a fill crosses (so the backward pass does not walk the edges again).
 
 // Index loops over small fixed arrays read clearer in numeric code; NaN-aware negated
 // comparisons are intentional (a NaN must take the early-out branch).
@@ -82,7 +83,7 @@ impl Tape {
     pub fn len_floats(&self) -> usize {
         self.bands
             .iter()
-            .map(|b| b.area.len() + b.dst.len() + b.group.len())
+            .map(|b| b.area.len() + b.dst.len() + b.group.len() + 3 * b.pieces.len())
             .sum()
     }
 
@@ -129,7 +130,11 @@ fn recycle(bands: Vec<engine::BandTape<f32>>) {
             bands
                 .into_iter()
                 .filter(|b| {
-                    b.area.capacity() + b.dst.capacity() + b.group.capacity()
+                    b.area.capacity()
+                        + b.dst.capacity()
+                        + b.group.capacity()
+                        + b.img.capacity()
+                        + b.grad.capacity()
                         <= POOL_BAND_MAX_FLOATS
                 })
                 .take(room),

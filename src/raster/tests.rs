@@ -376,3 +376,48 @@ fn fused_loss_pass_matches_render_then_backward() {
         assert!(rel < 1e-6, "seed {seed}: loss {loss} vs {want_loss}");
     }
 }
+
+#[test]
+fn recorded_pieces_give_the_walks_deposit_and_gradient_bit_for_bit() {
+    use super::walk::{Clip, deposit, deposit_record, edge_grad, edge_grad_recorded};
+    let mut rng = ChaCha8Rng::seed_from_u64(7);
+    let clip = Clip {
+        x0: 2,
+        x1: 13,
+        y0: 3,
+        y1: 11,
+    };
+    let (cw, rows) = (11usize, 8usize);
+    let g: Vec<f32> = (0..cw * rows)
+        .map(|i| {
+            if i % 5 == 0 {
+                0.0
+            } else {
+                rng.random_range(-1.0..1.0)
+            }
+        })
+        .collect();
+    let point = |rng: &mut ChaCha8Rng| [rng.random_range(-2.0..16.0), rng.random_range(0.0..14.0)];
+    for k in 0..300 {
+        let p0 = point(&mut rng);
+        // Some horizontal and vertical edges too.
+        let p1 = match k % 10 {
+            0 => [rng.random_range(-2.0..16.0), p0[1]],
+            1 => [p0[0], rng.random_range(0.0..14.0)],
+            _ => point(&mut rng),
+        };
+        let (mut a, mut b) = (vec![0.0f32; (cw + 1) * rows], vec![0.0f32; (cw + 1) * rows]);
+        deposit(p0, p1, clip, &mut a, cw + 1);
+        let mut pieces = Vec::new();
+        deposit_record(p0, p1, clip, &mut b, &mut pieces);
+        assert!(
+            a.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits()),
+            "{p0:?} {p1:?}"
+        );
+        let (mut d0, mut d1, mut e0, mut e1) = ([0.0f32; 2], [0.0; 2], [0.0; 2], [0.0; 2]);
+        edge_grad(p0, p1, clip, &g, cw, &mut d0, &mut d1);
+        edge_grad_recorded(p0, p1, &pieces, &g, &mut e0, &mut e1);
+        let bits = |v: [f32; 2]| v.map(f32::to_bits);
+        assert_eq!((bits(d0), bits(d1)), (bits(e0), bits(e1)), "{p0:?} {p1:?}");
+    }
+}

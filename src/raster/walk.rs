@@ -224,26 +224,106 @@ pub(crate) fn deposit<T: Real>(p0: [T; 2], p1: [T; 2], clip: Clip, acc: &mut [T]
     if p0[1] == p1[1] {
         return;
     }
-    let half = T::c(0.5);
     walk(p0, p1, clip, |col, row, a, b, _, _| {
-        let dy = b[1] - a[1];
         let r = (row - clip.y0) as usize * stride;
-        if col == LEFT {
-            acc[r] += dy;
-        } else {
-            let c = (col - clip.x0) as usize;
-            let fx = ((a[0] + b[0]) * half - T::c(col as f64))
-                .max(T::zero())
-                .min(T::one());
-            acc[r + c] += dy * (T::one() - fx);
-            acc[r + c + 1] += dy * fx;
-        }
+        add_piece(acc, r, col, clip, a, b);
     });
 }
 
-/// Backward: given `g[(row - y0) * width + (col - x0)] = dL/dA` over the clip, adds dL/dp0 and
-/// dL/dp1 of edge `p0 → p1`.
+/// Adds the piece `a → b` in cell `col` (or [`LEFT`]) of the accumulation row starting at
+/// `acc[r]`.
+#[inline(always)]
+fn add_piece<T: Real>(acc: &mut [T], r: usize, col: i32, clip: Clip, a: [T; 2], b: [T; 2]) {
+    let dy = b[1] - a[1];
+    if col == LEFT {
+        acc[r] += dy;
+    } else {
+        let c = (col - clip.x0) as usize;
+        let fx = ((a[0] + b[0]) * T::c(0.5) - T::c(col as f64))
+            .max(T::zero())
+            .min(T::one());
+        acc[r + c] += dy * (T::one() - fx);
+        acc[r + c + 1] += dy * fx;
+    }
+}
+
+/// One piece of an edge inside the clip, recorded by [`deposit_record`] for the backward pass:
+/// its cell `(row - y0) * width + (col - x0)` and the weights of dL/dA there for the edge's two
+/// end points (the integrals of `1 - s` and `s` over the piece's parameter range).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Piece<T> {
+    pub at: u32,
+    pub i0: T,
+    pub i1: T,
+}
+
+/// The weights of [`Piece`] for the parameter range `sa..sb`.
+#[inline(always)]
+fn piece_weights<T: Real>(sa: T, sb: T) -> (T, T) {
+    let i1 = T::c(0.5) * (sb * sb - sa * sa);
+    ((sb - sa) - i1, i1)
+}
+
+/// [`deposit`], also appending to `rec` every piece inside the clip (left of it is skipped, as
+/// in [`edge_grad`]) in walking order: [`edge_grad_recorded`] over them gives what
+/// [`edge_grad`] gives, bit for bit, without walking the edge again. Horizontal edges deposit
+/// nothing but their pieces are recorded.
 #[inline]
+pub(crate) fn deposit_record<T: Real>(
+    p0: [T; 2],
+    p1: [T; 2],
+    clip: Clip,
+    acc: &mut [T],
+    rec: &mut Vec<Piece<T>>,
+) {
+    let stride = (clip.x1 - clip.x0) as usize + 1;
+    let width = stride - 1;
+    let flat = p0[1] == p1[1];
+    walk(p0, p1, clip, |col, row, a, b, sa, sb| {
+        let r = (row - clip.y0) as usize;
+        if !flat {
+            add_piece(acc, r * stride, col, clip, a, b);
+        }
+        if col == LEFT {
+            return;
+        }
+        let c = (col - clip.x0) as usize;
+        let (i0, i1) = piece_weights(sa, sb);
+        let at = (r * width + c) as u32;
+        rec.push(Piece { at, i0, i1 });
+    });
+}
+
+/// [`edge_grad`] from the pieces [`deposit_record`] recorded for edge `p0 → p1`.
+#[inline]
+pub(crate) fn edge_grad_recorded<T: Real>(
+    p0: [T; 2],
+    p1: [T; 2],
+    pieces: &[Piece<T>],
+    g: &[T],
+    dp0: &mut [T; 2],
+    dp1: &mut [T; 2],
+) {
+    let n = [p1[1] - p0[1], p0[0] - p1[0]];
+    let (mut w0, mut w1) = (T::zero(), T::zero());
+    for pc in pieces {
+        let gv = g[pc.at as usize];
+        if gv == T::zero() {
+            continue;
+        }
+        w0 += gv * pc.i0;
+        w1 += gv * pc.i1;
+    }
+    dp0[0] -= w0 * n[0];
+    dp0[1] -= w0 * n[1];
+    dp1[0] -= w1 * n[0];
+    dp1[1] -= w1 * n[1];
+}
+
+/// Backward: given `g[(row - y0) * width + (col - x0)] = dL/dA` over the clip, adds dL/dp0 and
+/// dL/dp1 of edge `p0 → p1` (walking the edge; the passes use [`edge_grad_recorded`], the
+/// tests check the two agree bit for bit).
+#[cfg(test)]
 pub(crate) fn edge_grad<T: Real>(
     p0: [T; 2],
     p1: [T; 2],
@@ -254,7 +334,6 @@ pub(crate) fn edge_grad<T: Real>(
     dp1: &mut [T; 2],
 ) {
     let n = [p1[1] - p0[1], p0[0] - p1[0]];
-    let half = T::c(0.5);
     let (mut w0, mut w1) = (T::zero(), T::zero());
     walk(p0, p1, clip, |col, row, _, _, sa, sb| {
         if col == LEFT {
@@ -264,8 +343,7 @@ pub(crate) fn edge_grad<T: Real>(
         if gv == T::zero() {
             return;
         }
-        let i1 = half * (sb * sb - sa * sa);
-        let i0 = (sb - sa) - i1;
+        let (i0, i1) = piece_weights(sa, sb);
         w0 += gv * i0;
         w1 += gv * i1;
     });

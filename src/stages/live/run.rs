@@ -8,7 +8,9 @@ use super::{
 };
 use crate::image::Image;
 use crate::image::ops::resize;
-use crate::losses::{LossError, outline, udf_weights, weighted_l2_slices, xing_loss};
+use crate::losses::{
+    LossError, outline, udf_weights, weighted_l2_grad_slices, weighted_l2_slices, xing_loss,
+};
 use crate::optim::{Adam, AdamConfig, GroupSchedules, LrSchedule};
 use crate::progress::{CancelToken, Progress, ProgressSink, Stage};
 use crate::scene::{ParamGroup, Params, Rgba, Scene, Trainable};
@@ -116,7 +118,11 @@ impl Run<'_> {
             if it % UDF_EVERY == 0 {
                 weights = self.loss_weights(scene, &in_focus);
             }
-            let (loss, mut grad) = self.loss_and_grad(scene, &weights)?;
+            // The loss's value is needed where it is reported, checked or returned only.
+            let value = it + 1 == iters
+                || self.cfg.converge_tol > 0.0
+                || self.reports_at(self.step + 1).is_some();
+            let (loss, mut grad) = self.loss_and_grad(scene, &weights, value)?;
             let xing = if self.cfg.xing_weight > 0.0 {
                 xing_loss(
                     scene,
@@ -149,8 +155,14 @@ impl Run<'_> {
     }
 
     /// The weighted L2 loss of `scene`'s render against the target and its gradient, in one
-    /// fused forward, loss and backward pass over the rasteriser's row bands.
-    fn loss_and_grad(&self, scene: &Scene, weights: &[f32]) -> Result<(f64, Params), LiveError> {
+    /// fused forward, loss and backward pass over the rasteriser's row bands. Without `value`
+    /// the loss is not summed and 0 is returned in its place (the gradient is the same).
+    fn loss_and_grad(
+        &self,
+        scene: &Scene,
+        weights: &[f32],
+        value: bool,
+    ) -> Result<(f64, Params), LiveError> {
         let t = &self.target;
         if (scene.width, scene.height) != (t.width, t.height) {
             let e = LossError::SizeMismatch(scene.width, scene.height, t.width, t.height);
@@ -165,7 +177,12 @@ impl Run<'_> {
         }
         let band = |px: Range<usize>, img: &[f32], grad: &mut [f32]| {
             let target = &t.data[4 * px.start..4 * px.end];
-            weighted_l2_slices(img, target, &weights[px], grad)
+            if value {
+                weighted_l2_slices(img, target, &weights[px], grad)
+            } else {
+                weighted_l2_grad_slices(img, target, &weights[px], grad);
+                0.0
+            }
         };
         Ok(crate::raster::render_loss_backward(scene, &band))
     }
@@ -230,12 +247,17 @@ impl Run<'_> {
         done
     }
 
-    fn report(&self, scene: &Scene, stage: usize, loss: f64) {
+    /// Whether a progress event goes out after step `step` (`Some`), and with a snapshot.
+    fn reports_at(&self, step: u32) -> Option<bool> {
         let every = self.cfg.snapshot_every;
-        let snapshot = every > 0 && (self.step % every == 0 || self.step == self.total);
-        if !(snapshot || self.step % 10 == 0) {
+        let snapshot = every > 0 && (step % every == 0 || step == self.total);
+        (snapshot || step % 10 == 0).then_some(snapshot)
+    }
+
+    fn report(&self, scene: &Scene, stage: usize, loss: f64) {
+        let Some(snapshot) = self.reports_at(self.step) else {
             return;
-        }
+        };
         let mut ev = Progress::new(Stage::Live, self.step, self.total);
         ev.loss = Some(loss);
         ev.detail = Some(serde_json::json!({"live_stage": stage, "paths": scene.shapes.len()}));
