@@ -2,7 +2,7 @@
 //! need a layer, paths become shapes (see `import`), and what cannot be drawn is warned about.
 
 use super::import::{clip_path_shape, clip_shape, path_shapes};
-use crate::scene::{Clip, Content, Group, Mask, MaskKind, Shape};
+use crate::scene::{BlendMode, Clip, Content, Group, Mask, MaskKind, Shape};
 use resvg::usvg;
 use usvg::Transform;
 
@@ -54,18 +54,7 @@ impl Walk {
 
     /// Warns about what `g` asks for that the scene cannot draw (filters).
     fn unsupported(&mut self, g: &usvg::Group) {
-        // usvg gives the group of a `<g>` or `<use>` its id, and the single path of another
-        // element that needed a group (`<rect filter=…>`) the element's id.
-        let id = match g.children() {
-            _ if !g.id().is_empty() => g.id(),
-            [only] => only.id(),
-            _ => "",
-        };
-        let on = if id.is_empty() {
-            "an element without an id".to_string()
-        } else {
-            format!("#{id}")
-        };
+        let on = element(g);
         if !g.filters().is_empty() {
             self.warn(format!(
                 "filter on {on} ignored (filters are not drawn): drawn unfiltered"
@@ -95,7 +84,21 @@ impl Walk {
             Mode::Draw => g.mask().map(|m| self.mask(m, ts)),
             Mode::Clip => None,
         };
-        let layered = opacity < 1.0 || clip.is_some() || mask.is_some();
+        let blend = match mode {
+            Mode::Draw => blend_mode(g.blend_mode()).unwrap_or_else(|| {
+                self.warn(format!(
+                    "mix-blend-mode {} on {} not drawn (not a W3C Compositing Level 1 mode): \
+                     drawn as normal",
+                    g.blend_mode(),
+                    element(g)
+                ));
+                BlendMode::Normal
+            }),
+            Mode::Clip => BlendMode::Normal,
+        };
+        // `isolation: isolate` is a layer of its own (every scene group is isolated).
+        let isolated = mode == Mode::Draw && (g.isolate() || !blend.is_normal());
+        let layered = opacity < 1.0 || clip.is_some() || mask.is_some() || isolated;
         let (start, gi) = (out.shapes.len(), out.groups.len());
         if layered {
             // Reserved now so that it comes before the groups inside it.
@@ -126,7 +129,10 @@ impl Walk {
         let end = out.shapes.len();
         if end == start {
             out.groups.truncate(gi);
-        } else if clip.is_none() && mask.is_none() && end - start == 1 {
+        } else if clip.is_none() && mask.is_none() && !isolated && end - start == 1
+            // A group inside (a blend mode) needs this layer below it.
+            && out.groups.len() == gi + 1
+        {
             // One shape painting one layer: the opacity is exact on the shape itself.
             if fold_opacity(&mut out.shapes[start], opacity) {
                 out.groups.remove(gi);
@@ -140,6 +146,7 @@ impl Walk {
                 opacity,
                 clip: clip.map(Box::new),
                 mask: mask.map(Box::new),
+                blend,
             };
         }
     }
@@ -201,6 +208,46 @@ impl Walk {
         let axis = s.points.iter().all(on_side) && s.points.len() == 12;
         axis && lo.x <= 0.0 && lo.y <= 0.0 && hi.x >= w && hi.y >= h
     }
+}
+
+/// The element a group of usvg's stands for, as warnings name it.
+fn element(g: &usvg::Group) -> String {
+    // usvg gives the group of a `<g>` or `<use>` its id, and the single path of another
+    // element that needed a group (`<rect filter=…>`) the element's id.
+    let id = match g.children() {
+        _ if !g.id().is_empty() => g.id(),
+        [only] => only.id(),
+        _ => "",
+    };
+    if id.is_empty() {
+        "an element without an id".to_string()
+    } else {
+        format!("#{id}")
+    }
+}
+
+/// The scene's blend mode for usvg's (`None`: `plus-lighter`, which is not one of them).
+fn blend_mode(b: usvg::BlendMode) -> Option<BlendMode> {
+    use usvg::BlendMode as U;
+    Some(match b {
+        U::Normal => BlendMode::Normal,
+        U::Multiply => BlendMode::Multiply,
+        U::Screen => BlendMode::Screen,
+        U::Overlay => BlendMode::Overlay,
+        U::Darken => BlendMode::Darken,
+        U::Lighten => BlendMode::Lighten,
+        U::ColorDodge => BlendMode::ColorDodge,
+        U::ColorBurn => BlendMode::ColorBurn,
+        U::HardLight => BlendMode::HardLight,
+        U::SoftLight => BlendMode::SoftLight,
+        U::Difference => BlendMode::Difference,
+        U::Exclusion => BlendMode::Exclusion,
+        U::Hue => BlendMode::Hue,
+        U::Saturation => BlendMode::Saturation,
+        U::Color => BlendMode::Color,
+        U::Luminosity => BlendMode::Luminosity,
+        U::PlusLighter => return None,
+    })
 }
 
 /// Multiplies `opacity` into the one layer `s` paints; false when it paints two (a visible
