@@ -121,6 +121,16 @@ const CASES: &[(&str, &str)] = &[
         <path d="M50 60h30v15h-30z" fill="#69c" stroke="#fc0" stroke-width="3" style="mix-blend-mode:hue"/>
         <rect x="85" y="60" width="12" height="15" fill="#936" style="mix-blend-mode:luminosity"/>"##,
     ),
+    (
+        "paint_order_and_faded_gradient_in_mask",
+        r##"<defs>
+          <linearGradient id="fade"><stop offset="0" stop-color="#fff" stop-opacity="0"/>
+            <stop offset="1" stop-color="#fff"/></linearGradient>
+          <mask id="m"><rect x="5" y="5" width="90" height="70" fill="url(#fade)" opacity=".5"/></mask>
+        </defs>
+        <path d="M15 15H60V60H15Z" fill="#2a6" stroke="#36c" stroke-width="8" paint-order="stroke"/>
+        <rect x="0" y="0" width="100" height="80" fill="#c33" mask="url(#m)"/>"##,
+    ),
 ];
 
 fn import(name: &str, text: &str) -> Scene {

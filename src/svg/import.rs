@@ -154,10 +154,17 @@ pub(super) fn path_shapes(
     let stroke = p
         .stroke()
         .map_or(StrokeDraw::Nothing, |s| stroke_draw(p, s, ts, opacity));
+    // `paint-order: stroke`: the fill shape is moved after the stroke shapes.
+    let stroke_first = p.paint_order() == usvg::PaintOrder::StrokeAndFill
+        && fill.is_some()
+        && !matches!(stroke, StrokeDraw::Nothing);
+    let first = shapes.len();
     if let Some(f) = fill {
         // A single closed outline keeps its (undashed) stroke on the filled shape.
         let on_fill = match &stroke {
-            StrokeDraw::Strokes(st, sg, None) if subs.len() == 1 && subs[0].closed => {
+            StrokeDraw::Strokes(st, sg, None)
+                if subs.len() == 1 && subs[0].closed && !stroke_first =>
+            {
                 Some((*st, sg.clone()))
             }
             _ => None,
@@ -192,6 +199,9 @@ pub(super) fn path_shapes(
             gradients: gradients(paint.gradient, None),
             stage: None,
         }),
+    }
+    if stroke_first {
+        shapes[first..].rotate_left(1);
     }
 }
 

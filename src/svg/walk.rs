@@ -253,11 +253,27 @@ fn blend_mode(b: usvg::BlendMode) -> Option<BlendMode> {
 /// Multiplies `opacity` into the one layer `s` paints; false when it paints two (a visible
 /// fill and a stroke, which overlap).
 fn fold_opacity(s: &mut Shape, opacity: f32) -> bool {
-    match (&mut s.fill, &mut s.stroke) {
-        (Some(f), None) => f.a *= opacity,
-        (None, Some(st)) => st.color.a *= opacity,
-        (Some(f), Some(st)) if f.a == 0.0 => st.color.a *= opacity,
+    let on_fill = match (&mut s.fill, &mut s.stroke) {
+        (Some(f), None) => {
+            f.a *= opacity;
+            true
+        }
+        (None, Some(st)) => {
+            st.color.a *= opacity;
+            false
+        }
+        (Some(f), Some(st)) if f.a == 0.0 => {
+            st.color.a *= opacity;
+            false
+        }
         _ => return false,
+    };
+    // A gradient is drawn from its stops (the flat colour only stands in for it).
+    if let Some(g) = s.gradients.as_deref_mut() {
+        let g = if on_fill { &mut g.fill } else { &mut g.stroke };
+        for stop in g.iter_mut().flat_map(|g| g.stops.iter_mut()) {
+            stop.color.a *= opacity;
+        }
     }
     true
 }
