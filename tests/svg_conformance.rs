@@ -131,6 +131,14 @@ const CASES: &[(&str, &str)] = &[
         <path d="M15 15H60V60H15Z" fill="#2a6" stroke="#36c" stroke-width="8" paint-order="stroke"/>
         <rect x="0" y="0" width="100" height="80" fill="#c33" mask="url(#m)"/>"##,
     ),
+    (
+        "zero_length_square_caps_and_focal_radius_equal_to_radius",
+        r##"<defs><radialGradient id="same" fr=".5">
+          <stop offset="0" stop-color="#36c"/><stop offset="1" stop-color="#fc0"/></radialGradient></defs>
+        <rect x="50" y="10" width="45" height="60" fill="url(#same)"/>
+        <path d="M20 20L20 20L20 20" stroke="#2a6" stroke-width="12" stroke-linecap="square"/>
+        <path d="M20 50L20 50" stroke="#c33" stroke-width="12" stroke-linecap="square"/>"##,
+    ),
 ];
 
 fn import(name: &str, text: &str) -> Scene {

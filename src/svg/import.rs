@@ -100,6 +100,13 @@ fn subpaths(data: &usvg::tiny_skia_path::Path, ts: usvg::Transform) -> Vec<SubPa
         out.push(c);
     }
     out.retain(|s| !s.segs.is_empty());
+    // A subpath of zero length is one zero-length segment (SVG caps it as such), however many
+    // segments it was written with.
+    for s in &mut out {
+        if s.segs.iter().flatten().all(|p| *p == s.start) {
+            s.segs.truncate(1);
+        }
+    }
     let finite = |p: &Point| p.x.is_finite() && p.y.is_finite();
     out.retain(|s| finite(&s.start) && s.segs.iter().flatten().all(finite));
     out

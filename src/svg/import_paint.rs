@@ -80,6 +80,8 @@ pub(super) fn painted(paint: &usvg::Paint, opacity: f32, ts: usvg::Transform) ->
             })
             .collect(),
     };
+    let mut gradient = gradient;
+    degenerate_radial(&mut gradient);
     let color = gradient.mean_color();
     // A degenerate transform (a zero-size bounding box) paints nothing, as in resvg.
     match gradient.validate() {
@@ -92,6 +94,39 @@ pub(super) fn painted(paint: &usvg::Paint, opacity: f32, ts: usvg::Transform) ->
             gradient: None,
         },
     }
+}
+
+/// A padded radial gradient whose focal circle is its end circle (SVG 2's `fr = r`, which no
+/// spec defines) as resvg draws it: the first stop's colour inside the circle, the last one's
+/// outside.
+fn degenerate_radial(g: &mut Gradient) {
+    let GradientGeometry::Radial {
+        cx,
+        cy,
+        r,
+        fx,
+        fy,
+        fr,
+    } = &mut g.geometry
+    else {
+        return;
+    };
+    // tiny-skia's threshold, relative to the gradient's own units.
+    let near = |a: f32, b: f32| (a - b).abs() <= (1.0 / 32768.0) * (1.0 + a.abs().max(b.abs()));
+    let same = near(*cx, *fx) && near(*cy, *fy) && near(*r, *fr) && *r > 0.0;
+    let (Some(first), Some(last)) = (g.stops.first(), g.stops.last()) else {
+        return;
+    };
+    if g.spread != Spread::Pad || !same {
+        return;
+    }
+    let stop = |offset, color| GradientStop { offset, color };
+    g.stops = vec![
+        stop(0.0, first.color),
+        stop(1.0, first.color),
+        stop(1.0, last.color),
+    ];
+    *fr = 0.0;
 }
 
 /// The shape's gradients, or `None` when both paints are flat.
