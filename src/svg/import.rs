@@ -386,6 +386,7 @@ pub fn import_svg(text: &str) -> Result<SvgImport, SvgError> {
         Mode::Draw,
         &mut content,
     );
+    walk.text_warnings(text);
     let warnings = walk.finish();
     let Content {
         mut shapes,

@@ -137,16 +137,21 @@ pub(super) fn gradients(
     (fill.is_some() || stroke.is_some()).then(|| Box::new(Gradients { fill, stroke }))
 }
 
-/// One warning per `fill` or `stroke` (attribute or `style` declaration) that refers to no
-/// gradient or pattern: usvg draws its fallback colour, or nothing, silently. `text` already
-/// passed the guard (its size and node count are bounded).
-pub(super) fn dangling_paint_warnings(text: &str) -> Vec<String> {
+/// The XML tree of `text` (which passed the guard), for warnings about what usvg drops.
+pub(super) fn source_tree(text: &str) -> Option<resvg::usvg::roxmltree::Document<'_>> {
     use resvg::usvg::roxmltree;
     let opts = roxmltree::ParsingOptions {
         allow_dtd: true,
         ..Default::default()
     };
-    let Ok(doc) = roxmltree::Document::parse_with_options(text, opts) else {
+    roxmltree::Document::parse_with_options(text, opts).ok()
+}
+
+/// One warning per `fill` or `stroke` (attribute or `style` declaration) that refers to no
+/// gradient or pattern: usvg draws its fallback colour, or nothing, silently. `text` already
+/// passed the guard (its size and node count are bounded).
+pub(super) fn dangling_paint_warnings(text: &str) -> Vec<String> {
+    let Some(doc) = source_tree(text) else {
         return Vec::new();
     };
     let servers: std::collections::HashSet<&str> = doc

@@ -22,6 +22,8 @@ pub(super) struct Walk {
     warnings: Vec<String>,
     more_warnings: usize,
     canvas: (f32, f32),
+    /// Whether usvg laid out any text (it drops text when no font is loaded).
+    drew_text: bool,
 }
 
 impl Walk {
@@ -30,6 +32,7 @@ impl Walk {
             warnings: Vec::new(),
             more_warnings: 0,
             canvas,
+            drew_text: false,
         }
     }
 
@@ -41,6 +44,24 @@ impl Walk {
             self.warnings.push(w);
         } else {
             self.more_warnings += 1;
+        }
+    }
+
+    /// One warning per `<text>` element of the source `text` when usvg laid out none (no font
+    /// is loaded: text is out of scope), so a picture without its text says so.
+    pub(super) fn text_warnings(&mut self, text: &str) {
+        if self.drew_text {
+            return;
+        }
+        let Some(doc) = super::import_paint::source_tree(text) else {
+            return;
+        };
+        for node in doc.descendants().filter(|n| n.has_tag_name("text")) {
+            let on = match node.attribute("id") {
+                Some(id) => format!("<text id=\"{id}\">"),
+                None => "a <text>".to_string(),
+            };
+            self.warn(format!("{on} ignored (text is not drawn: no fonts)"));
         }
     }
 
@@ -120,7 +141,10 @@ impl Walk {
                         format!("<image> #{id} ignored (images are not drawn)")
                     });
                 }
-                usvg::Node::Text(t) => self.group(t.flattened(), ts, mode, out),
+                usvg::Node::Text(t) => {
+                    self.drew_text = true;
+                    self.group(t.flattened(), ts, mode, out)
+                }
             }
         }
         if !layered {
