@@ -105,18 +105,7 @@ impl Walk {
             Mode::Draw => g.mask().map(|m| self.mask(m, ts)),
             Mode::Clip => None,
         };
-        let blend = match mode {
-            Mode::Draw => blend_mode(g.blend_mode()).unwrap_or_else(|| {
-                self.warn(format!(
-                    "mix-blend-mode {} on {} not drawn (not a W3C Compositing Level 1 mode): \
-                     drawn as normal",
-                    g.blend_mode(),
-                    element(g)
-                ));
-                BlendMode::Normal
-            }),
-            Mode::Clip => BlendMode::Normal,
-        };
+        let blend = self.blend(g, mode);
         // `isolation: isolate` is a layer of its own (every scene group is isolated).
         let isolated = mode == Mode::Draw && (g.isolate() || !blend.is_normal());
         let layered = opacity < 1.0 || clip.is_some() || mask.is_some() || isolated;
@@ -173,6 +162,23 @@ impl Walk {
                 blend,
             };
         }
+    }
+
+    /// The blend mode of `g` (normal inside a clip path; `plus-lighter` drawn as normal with
+    /// a warning).
+    fn blend(&mut self, g: &usvg::Group, mode: Mode) -> BlendMode {
+        if mode == Mode::Clip {
+            return BlendMode::Normal;
+        }
+        blend_mode(g.blend_mode()).unwrap_or_else(|| {
+            self.warn(format!(
+                "mix-blend-mode {} on {} not drawn (not a W3C Compositing Level 1 mode): \
+                 drawn as normal",
+                g.blend_mode(),
+                element(g)
+            ));
+            BlendMode::Normal
+        })
     }
 
     /// A clip path applied in user space `ts`: its children (under its own transform) and the
