@@ -182,10 +182,11 @@ fn clip_color<X: Num>(c: [X; 3]) -> [X; 3] {
     let n = min(min(c[0], c[1]), c[2]);
     let x = max(max(c[0], c[1]), c[2]);
     let mut c = c;
-    if n.v() < 0.0 {
+    // (The second conditions only keep rounding from dividing by zero.)
+    if n.v() < 0.0 && (l - n).v() > 0.0 {
         c = c.map(|v| l + (v - l) * l / (l - n));
     }
-    if x.v() > 1.0 {
+    if x.v() > 1.0 && (x - l).v() > 0.0 {
         c = c.map(|v| l + (v - l) * (X::k(1.0) - l) / (x - l));
     }
     c
@@ -329,6 +330,31 @@ mod tests {
         assert!((lum(c) - 0.2).abs() < 1e-12, "{c:?}");
         let c = blend_rgb(Saturation, [0.2, 0.4, 0.6], [0.5; 3]);
         assert!(c.iter().all(|v| (v - 0.362).abs() < 1e-12), "{c:?}");
+    }
+
+    #[test]
+    fn extreme_pixels_give_finite_values_and_gradients() {
+        let vals = [0.0f32, 1e-30, 0.5, 1.0];
+        for mode in ALL {
+            for &a in &vals {
+                for &c in &vals {
+                    for &pa in &vals {
+                        // Grey and coloured, premultiplied (channel ≤ alpha).
+                        let g = [c * a, c * a * 0.3, c * a, a];
+                        let p = [pa * 0.7, pa, pa * c, pa];
+                        let mut o = p;
+                        blend_px(mode, &mut o, &g, 0.8);
+                        let (mut gp, mut gg) = ([1.0f32; 4], [0.0; 4]);
+                        let gm = blend_px_back(mode, (&p, &g, 0.8), &mut gp, &mut gg);
+                        let all = o.iter().chain(&gp).chain(&gg).chain([&gm]);
+                        assert!(
+                            all.clone().all(|v| v.is_finite()),
+                            "{mode:?} {g:?} {p:?}: {o:?} {gp:?} {gg:?} {gm}"
+                        );
+                    }
+                }
+            }
+        }
     }
 
     /// `[p, g, m]` of one pixel from `k` (premultiplied, varied enough to take every branch).
