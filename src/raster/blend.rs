@@ -48,19 +48,20 @@ impl<T: Real> Num for T {
     }
 }
 
-/// Tangents carried: `∂/∂Cb` (3) then `∂/∂Cs` (3).
+/// Tangents carried by the non-separable modes: `∂/∂Cb` (3) then `∂/∂Cs` (3); a separable
+/// mode carries `∂/∂Cb` and `∂/∂Cs` of one channel.
 const N: usize = 6;
 
-/// A forward-mode dual number: a value and its derivatives with respect to the six inputs.
+/// A forward-mode dual number: a value and its derivatives with respect to `K` inputs.
 #[derive(Clone, Copy, Debug)]
-struct Dual<T> {
+struct Dual<T, const K: usize> {
     v: T,
-    d: [T; N],
+    d: [T; K],
 }
 
-impl<T: Real> Dual<T> {
+impl<T: Real, const K: usize> Dual<T, K> {
     fn var(v: T, i: usize) -> Self {
-        let mut d = [T::zero(); N];
+        let mut d = [T::zero(); K];
         d[i] = T::one();
         Dual { v, d }
     }
@@ -74,35 +75,35 @@ impl<T: Real> Dual<T> {
 
     fn zip(self, o: Self, v: T, (ka, kb): (T, T)) -> Self {
         let mut d = self.d;
-        for i in 0..N {
+        for i in 0..K {
             d[i] = d[i] * ka + o.d[i] * kb;
         }
         Dual { v, d }
     }
 }
 
-impl<T: Real> Add for Dual<T> {
+impl<T: Real, const K: usize> Add for Dual<T, K> {
     type Output = Self;
     fn add(self, o: Self) -> Self {
         self.zip(o, self.v + o.v, (T::one(), T::one()))
     }
 }
 
-impl<T: Real> Sub for Dual<T> {
+impl<T: Real, const K: usize> Sub for Dual<T, K> {
     type Output = Self;
     fn sub(self, o: Self) -> Self {
         self.zip(o, self.v - o.v, (T::one(), -T::one()))
     }
 }
 
-impl<T: Real> Mul for Dual<T> {
+impl<T: Real, const K: usize> Mul for Dual<T, K> {
     type Output = Self;
     fn mul(self, o: Self) -> Self {
         self.zip(o, self.v * o.v, (o.v, self.v))
     }
 }
 
-impl<T: Real> Div for Dual<T> {
+impl<T: Real, const K: usize> Div for Dual<T, K> {
     type Output = Self;
     fn div(self, o: Self) -> Self {
         let q = self.v / o.v;
@@ -110,11 +111,11 @@ impl<T: Real> Div for Dual<T> {
     }
 }
 
-impl<T: Real> Num for Dual<T> {
+impl<T: Real, const K: usize> Num for Dual<T, K> {
     fn k(v: f64) -> Self {
         Dual {
             v: T::c(v),
-            d: [T::zero(); N],
+            d: [T::zero(); K],
         }
     }
     fn v(self) -> f64 {
@@ -251,6 +252,34 @@ pub(crate) fn blend_px<T: Real>(mode: BlendMode, p: &mut [T], g: &[T], m: T) {
     p[3] = sa + ba - sa * ba;
 }
 
+/// `B(cb, cs)` and `Σ_c go_c ∂B_c/∂x` for `x` = `cb` (3) then `cs` (3).
+fn blend_jacobian<T: Real>(mode: BlendMode, cb: [T; 3], cs: [T; 3], go: &[T]) -> ([T; 3], [T; N]) {
+    let mut jt = [T::zero(); N];
+    if matches!(
+        mode,
+        BlendMode::Hue | BlendMode::Saturation | BlendMode::Color | BlendMode::Luminosity
+    ) {
+        let db: [Dual<T, N>; 3] = [0, 1, 2].map(|k| Dual::var(cb[k], k));
+        let ds: [Dual<T, N>; 3] = [0, 1, 2].map(|k| Dual::var(cs[k], 3 + k));
+        let b = blend_rgb(mode, db, ds);
+        for c in 0..3 {
+            for i in 0..N {
+                jt[i] += go[c] * b[c].d[i];
+            }
+        }
+        return (b.map(|x| x.v), jt);
+    }
+    // Separable: channel `c` depends on `cb[c]` and `cs[c]` only.
+    let mut b = [T::zero(); 3];
+    for c in 0..3 {
+        let x = separable(mode, Dual::<T, 2>::var(cb[c], 0), Dual::var(cs[c], 1));
+        b[c] = x.v;
+        jt[c] = go[c] * x.d[0];
+        jt[3 + c] = go[c] * x.d[1];
+    }
+    (b, jt)
+}
+
 /// Backward of [`blend_px`] given what lay below (`p`), the group's layer (`g`) and `m`: `go`
 /// (the gradient of the result) becomes the gradient of `p`, `gi` is set to the gradient of
 /// `g`; returns the gradient of `m`.
@@ -264,21 +293,14 @@ pub(crate) fn blend_px_back<T: Real>(
     let (ga, ba) = (g[3], p[3]);
     let sa = m * ga;
     let (cb, cs) = (straight(p), straight(g));
-    let db: [Dual<T>; 3] = [0, 1, 2].map(|k| Dual::var(cb[k], k));
-    let ds: [Dual<T>; 3] = [0, 1, 2].map(|k| Dual::var(cs[k], 3 + k));
-    let b = blend_rgb(mode, db, ds);
+    let (b, jt) = blend_jacobian(mode, cb, cs, go);
     let one = T::one();
-    // Σ_c go_c ∂B_c/∂(input i), and the sums the chain rule needs.
-    let mut jt = [T::zero(); N];
     let (mut gb, mut gg, mut gpc, mut dm) = (T::zero(), T::zero(), T::zero(), T::zero());
     for c in 0..3 {
-        for i in 0..N {
-            jt[i] += go[c] * b[c].d[i];
-        }
-        gb += go[c] * b[c].v;
+        gb += go[c] * b[c];
         gg += go[c] * g[c];
         gpc += go[c] * p[c];
-        dm += go[c] * (g[c] * (one - ba) - p[c] * ga + ga * ba * b[c].v);
+        dm += go[c] * (g[c] * (one - ba) - p[c] * ga + ga * ba * b[c]);
     }
     dm += go[3] * ga * (one - ba);
     let jb_cb: T = (0..3).map(|k| jt[k] * cb[k]).fold(T::zero(), |a, v| a + v);
