@@ -11,14 +11,23 @@ fn blended(mode: BlendMode, range: std::ops::Range<usize>, opacity: f32) -> Grou
     g
 }
 
+/// Two squares `(x, y, side, colour)` on a 16 px canvas, the second in a multiply group.
+fn multiplied(bg: Rgba, a: (f32, f32, f32, Rgba), b: (f32, f32, f32, Rgba)) -> Scene {
+    let mut s = Scene::new(16, 16, bg).unwrap();
+    for (x, y, side, c) in [a, b] {
+        s.shapes.push(Shape::square(x, y, side, c).unwrap());
+    }
+    s.groups = vec![blended(BlendMode::Multiply, 1..2, 1.0)];
+    s
+}
+
 #[test]
 fn multiply_of_two_opaque_squares_multiplies_their_colours() {
-    let mut s = Scene::new(16, 16, Rgba::TRANSPARENT).unwrap();
-    s.shapes
-        .push(Shape::square(0.0, 0.0, 10.0, Rgba::new(0.5, 1.0, 0.2, 1.0)).unwrap());
-    s.shapes
-        .push(Shape::square(5.0, 5.0, 10.0, Rgba::new(0.4, 0.5, 1.0, 1.0)).unwrap());
-    s.groups = vec![blended(BlendMode::Multiply, 1..2, 1.0)];
+    let mut s = multiplied(
+        Rgba::TRANSPARENT,
+        (0.0, 0.0, 10.0, Rgba::new(0.5, 1.0, 0.2, 1.0)),
+        (5.0, 5.0, 10.0, Rgba::new(0.4, 0.5, 1.0, 1.0)),
+    );
     let im = render(&s);
     let p = im.pixel(7, 7);
     for (c, want) in [0.2, 0.5, 0.2, 1.0].into_iter().enumerate() {
@@ -39,12 +48,11 @@ fn multiply_of_two_opaque_squares_multiplies_their_colours() {
 #[test]
 fn an_isolated_group_blends_its_children_with_transparency_only() {
     // A multiply group inside an isolated group sees no backdrop: drawn as normal.
-    let mut s = Scene::new(16, 16, Rgba::WHITE).unwrap();
-    s.shapes
-        .push(Shape::square(0.0, 0.0, 16.0, Rgba::new(0.0, 0.5, 0.0, 1.0)).unwrap());
-    s.shapes
-        .push(Shape::square(4.0, 4.0, 8.0, Rgba::new(1.0, 1.0, 0.0, 1.0)).unwrap());
-    s.groups = vec![blended(BlendMode::Multiply, 1..2, 1.0)];
+    let mut s = multiplied(
+        Rgba::WHITE,
+        (0.0, 0.0, 16.0, Rgba::new(0.0, 0.5, 0.0, 1.0)),
+        (4.0, 4.0, 8.0, Rgba::new(1.0, 1.0, 0.0, 1.0)),
+    );
     assert!(
         (render(&s).pixel(8, 8)[0]).abs() < 1e-6,
         "multiplied with green"
