@@ -1,5 +1,5 @@
-//! Conformance: SVGs using clip paths, masks, group opacity, even-odd fills, nested viewports
-//! and gradient paint inside groups and masks, imported and drawn by our rasteriser, against resvg's render of the same text
+//! Conformance: SVGs using clip paths, masks, group opacity, even-odd fills, nested viewports,
+//! gradient paint inside groups and masks, blend modes and isolation, imported and drawn by our rasteriser, against resvg's render of the same text
 //! (the tolerance of resvg's test-suite harness; a triptych PNG in `$CARGO_TARGET_TMPDIR` on
 //! failure). Then each scene exported and imported again is the same scene, and resvg draws the
 //! export as we draw the scene.
@@ -101,6 +101,44 @@ const CASES: &[(&str, &str)] = &[
         </g>
         <g mask="url(#m)"><rect x="45" y="10" width="50" height="60" fill="url(#lin)"/></g>"##,
     ),
+    (
+        "blend_modes_and_isolation",
+        r##"<defs>
+          <linearGradient id="fade"><stop offset="0" stop-color="#fc0" stop-opacity=".2"/>
+            <stop offset="1" stop-color="#36c"/></linearGradient>
+        </defs>
+        <rect x="5" y="5" width="90" height="35" fill="#2a6"/>
+        <rect x="5" y="40" width="90" height="35" fill="#c33"/>
+        <circle cx="20" cy="40" r="15" fill="#fc0" style="mix-blend-mode:multiply"/>
+        <rect x="40" y="25" width="20" height="30" fill="url(#fade)" style="mix-blend-mode:color-dodge"/>
+        <g opacity=".7" style="mix-blend-mode:difference">
+          <circle cx="75" cy="30" r="12" fill="#fff"/>
+          <circle cx="75" cy="50" r="12" fill="#36c" style="mix-blend-mode:screen"/>
+        </g>
+        <g style="isolation:isolate">
+          <circle cx="30" cy="65" r="10" fill="#36c" style="mix-blend-mode:overlay"/>
+        </g>
+        <path d="M50 60h30v15h-30z" fill="#69c" stroke="#fc0" stroke-width="3" style="mix-blend-mode:hue"/>
+        <rect x="85" y="60" width="12" height="15" fill="#936" style="mix-blend-mode:luminosity"/>"##,
+    ),
+    (
+        "paint_order_and_faded_gradient_in_mask",
+        r##"<defs>
+          <linearGradient id="fade"><stop offset="0" stop-color="#fff" stop-opacity="0"/>
+            <stop offset="1" stop-color="#fff"/></linearGradient>
+          <mask id="m"><rect x="5" y="5" width="90" height="70" fill="url(#fade)" opacity=".5"/></mask>
+        </defs>
+        <path d="M15 15H60V60H15Z" fill="#2a6" stroke="#36c" stroke-width="8" paint-order="stroke"/>
+        <rect x="0" y="0" width="100" height="80" fill="#c33" mask="url(#m)"/>"##,
+    ),
+    (
+        "zero_length_square_caps_and_focal_radius_equal_to_radius",
+        r##"<defs><radialGradient id="same" fr=".5">
+          <stop offset="0" stop-color="#36c"/><stop offset="1" stop-color="#fc0"/></radialGradient></defs>
+        <rect x="50" y="10" width="45" height="60" fill="url(#same)"/>
+        <path d="M20 20L20 20L20 20" stroke="#2a6" stroke-width="12" stroke-linecap="square"/>
+        <path d="M20 50L20 50" stroke="#c33" stroke-width="12" stroke-linecap="square"/>"##,
+    ),
 ];
 
 fn import(name: &str, text: &str) -> Scene {
@@ -154,6 +192,23 @@ fn the_features_are_kept_in_the_scene() {
     assert_eq!(painted(&gr.shapes[g.start..g.end]), 2);
     let m = gr.groups.iter().find_map(|g| g.mask.as_ref()).unwrap();
     assert_eq!(painted(&m.content.shapes), 1);
+    // Blend modes on elements and groups, and an isolated group, are groups of their own.
+    let bl = count("blend_modes_and_isolation");
+    let modes: Vec<_> = bl.groups.iter().map(|g| g.blend.css_name()).collect();
+    assert_eq!(
+        modes,
+        [
+            "multiply",
+            "color-dodge",
+            "difference",
+            "screen",
+            "normal",
+            "overlay",
+            "hue",
+            "luminosity"
+        ]
+    );
+    assert_eq!(bl.groups[2].opacity, 0.7);
 }
 
 /// Points, colours and opacities equal within what the export's decimals keep; the structure

@@ -2,7 +2,8 @@
 //!
 //! A group's shapes are painted onto a transparent layer `G` (premultiplied), which is then
 //! composited over the layer below `P` with the per-pixel factor `m = opacity × f`:
-//! `out = P (1 - m G.a) + m G`. `f` is the product of the group's clip chain and mask chain,
+//! `out = P (1 - m G.a) + m G` (a group with another blend mode mixes the colours first, see
+//! `blend`). `f` is the product of the group's clip chain and mask chain,
 //! drawn once per scene over the whole canvas by this same rasteriser:
 //! - a clip's shapes are filled opaque (each by its fill rule) over transparency and its factor
 //!   is the alpha, i.e. the union `1 - Π(1 - coverage)`; a clip's own clip multiplies it;
@@ -16,6 +17,7 @@
 //! clipped and masked shapes and the opacity get exact gradients. The tape keeps `P` and `G`
 //! (8 floats per pixel of the group's box) per group and band.
 
+use super::blend::{blend_px, blend_px_back};
 use super::engine::{
     BandGrad, BandTape, GradScratch, PaintScratch, Rec, RecKind, backward_layer, box_clip,
     paint_layer,
@@ -23,7 +25,7 @@ use super::engine::{
 use super::geom::{Layer, SceneT};
 use super::real::Real;
 use super::walk::Clip;
-use crate::scene::{Clip as ClipPath, Content, Group, Mask, MaskKind, Rgba, Scene};
+use crate::scene::{BlendMode, Clip as ClipPath, Content, Group, Mask, MaskKind, Rgba, Scene};
 
 /// A group in the working precision, with its clip and mask drawn.
 #[derive(Clone, Debug)]
@@ -31,6 +33,7 @@ pub(crate) struct GroupT<T> {
     pub start: usize,
     pub end: usize,
     pub opacity: T,
+    pub blend: BlendMode,
     /// Clip × mask per canvas pixel (row-major, `width × height`); `None` when neither.
     pub factor: Option<Vec<T>>,
 }
@@ -45,6 +48,7 @@ pub(crate) fn groups_t<T: Real>(scene: &Scene, tol: f32) -> Vec<GroupT<T>> {
             start: g.start,
             end: g.end,
             opacity: T::of(g.opacity),
+            blend: g.blend,
             factor: group_factor(g, w, h, tol),
         })
         .collect()
@@ -236,7 +240,7 @@ pub(crate) fn forward_band<T: Real>(
                         r.extend_from_slice(p);
                         r.extend_from_slice(g);
                     }
-                    composite_row(p, g, group.opacity, f);
+                    composite_row(p, g, group, f);
                 }
                 spare.push(buf);
             }
@@ -274,7 +278,7 @@ pub(crate) fn backward_band<T: Real>(
                     let (p, gl) = (&tape.group[k..k + cw], &tape.group[k + cw..k + 2 * cw]);
                     k += 2 * cw;
                     let grads = (&mut g[base..base + cw], &mut inner[base..base + cw]);
-                    dop += composite_row_backward(p, gl, group.opacity, f, grads);
+                    dop += composite_row_backward(p, gl, group, f, grads);
                 }
                 out.dopacity[gi] += dop;
                 stack.push(std::mem::replace(g, inner));
@@ -288,13 +292,19 @@ pub(crate) fn backward_band<T: Real>(
     }
 }
 
-/// `p = p (1 - m g.a) + m g` over one row, `m = opacity × f` per pixel.
-fn composite_row<T: Real>(p: &mut [T], g: &[T], opacity: T, f: Option<&[T]>) {
+/// `p = p (1 - m g.a) + m g` over one row, `m = opacity × f` per pixel (or the group's blend
+/// mode).
+fn composite_row<T: Real>(p: &mut [T], g: &[T], group: &GroupT<T>, f: Option<&[T]>) {
+    let opacity = group.opacity;
     for (i, (pp, gp)) in p.chunks_exact_mut(4).zip(g.chunks_exact(4)).enumerate() {
         if gp[3] == T::zero() {
             continue;
         }
         let m = f.map_or(opacity, |f| opacity * f[i]);
+        if !group.blend.is_normal() {
+            blend_px(group.blend, pp, gp, m);
+            continue;
+        }
         let keep = T::one() - m * gp[3];
         for c in 0..4 {
             pp[c] = pp[c] * keep + m * gp[c];
@@ -308,16 +318,21 @@ fn composite_row<T: Real>(p: &mut [T], g: &[T], opacity: T, f: Option<&[T]>) {
 fn composite_row_backward<T: Real>(
     p: &[T],
     gl: &[T],
-    opacity: T,
+    group: &GroupT<T>,
     f: Option<&[T]>,
     (go, inner): (&mut [T], &mut [T]),
 ) -> T {
+    let opacity = group.opacity;
     let mut dop = T::zero();
     let px = p.chunks_exact(4).zip(gl.chunks_exact(4));
     let grads = go.chunks_exact_mut(4).zip(inner.chunks_exact_mut(4));
     for (i, ((p, gl), (go, gi))) in px.zip(grads).enumerate() {
         let fi = f.map_or(T::one(), |f| f[i]);
         let m = opacity * fi;
+        if !group.blend.is_normal() {
+            dop += blend_px_back(group.blend, (p, gl, m), go, gi) * fi;
+            continue;
+        }
         let (mut dm, mut gp) = (T::zero(), T::zero());
         for c in 0..4 {
             dm += go[c] * (gl[c] - gl[3] * p[c]);

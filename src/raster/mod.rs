@@ -19,8 +19,9 @@
 //!   `out = colour.rgb * alpha + below * (1 - alpha)` (premultiplied), over the background.
 //!   The colour is the flat one, or a gradient's colour at the pixel centre (`paint`).
 //! - A scene's groups ([`crate::scene::Group`]) paint their shapes onto a transparent layer,
-//!   composited with `opacity × clip × mask` per pixel (see `layer`); a flat scene takes the
-//!   same path as before, untouched.
+//!   composited with `opacity × clip × mask` per pixel (see `layer`), by the group's blend
+//!   mode (all sixteen of W3C Compositing Level 1, see `blend`); a flat scene takes the same
+//!   path as before, untouched.
 //!
 //! # Backward
 //! [`backward`] is the exact derivative of the forward function above (up to the measure-zero
@@ -42,6 +43,7 @@
 // comparisons are intentional (a NaN must take the early-out branch).
 #![allow(clippy::needless_range_loop, clippy::neg_cmp_op_on_partial_ord)]
 
+mod blend;
 mod composite;
 mod engine;
 mod geom;
@@ -54,6 +56,8 @@ mod walk;
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_blend;
 #[cfg(test)]
 mod tests_layer;
 #[cfg(test)]

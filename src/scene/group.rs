@@ -5,7 +5,10 @@
 //! works on [`Scene::shapes`] (LIVE, SDS, the palette, export) keeps working on it unchanged.
 //! A group only names a range of that list: its shapes are painted, in order, onto a
 //! transparent layer, and the layer is composited over what lies below with
-//! `alpha × opacity × clip × mask`, per pixel.
+//! `alpha × opacity × clip × mask`, per pixel, by its [`BlendMode`] (W3C Compositing: blend
+//! with what lies below, then source-over). Every group is an isolated group in that spec's
+//! sense (its layer starts transparent), so SVG's `isolation: isolate` is a group with nothing
+//! else set, and a shape's blend mode is a group of that one shape.
 //!
 //! # Invariants (checked by [`validate_groups`], from [`Scene::validate`])
 //! - Every group's range `start..end` is non-empty and inside its shape list.
@@ -84,6 +87,63 @@ pub struct Group {
     pub clip: Option<Box<Clip>>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub mask: Option<Box<Mask>>,
+    /// How the layer mixes with what lies below (CSS `mix-blend-mode`).
+    #[serde(default, skip_serializing_if = "BlendMode::is_normal")]
+    pub blend: BlendMode,
+}
+
+/// A blend mode of the W3C Compositing spec (CSS `mix-blend-mode`): how a group's colour is
+/// mixed with the colour below before source-over. The first eleven after `Normal` are
+/// separable (channel by channel); the last four mix hue, saturation and luminosity.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum BlendMode {
+    #[default]
+    Normal,
+    Multiply,
+    Screen,
+    Overlay,
+    Darken,
+    Lighten,
+    ColorDodge,
+    ColorBurn,
+    HardLight,
+    SoftLight,
+    Difference,
+    Exclusion,
+    Hue,
+    Saturation,
+    Color,
+    Luminosity,
+}
+
+impl BlendMode {
+    pub fn is_normal(&self) -> bool {
+        *self == BlendMode::Normal
+    }
+
+    /// The CSS keyword (`color-dodge`), as SVG's `mix-blend-mode` writes it.
+    pub fn css_name(self) -> &'static str {
+        use BlendMode::*;
+        match self {
+            Normal => "normal",
+            Multiply => "multiply",
+            Screen => "screen",
+            Overlay => "overlay",
+            Darken => "darken",
+            Lighten => "lighten",
+            ColorDodge => "color-dodge",
+            ColorBurn => "color-burn",
+            HardLight => "hard-light",
+            SoftLight => "soft-light",
+            Difference => "difference",
+            Exclusion => "exclusion",
+            Hue => "hue",
+            Saturation => "saturation",
+            Color => "color",
+            Luminosity => "luminosity",
+        }
+    }
 }
 
 impl Group {
@@ -95,6 +155,7 @@ impl Group {
             opacity,
             clip: None,
             mask: None,
+            blend: BlendMode::Normal,
         }
     }
 

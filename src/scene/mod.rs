@@ -20,7 +20,7 @@ mod group;
 pub mod paint;
 mod params;
 
-pub use group::{Clip, Content, FillRule, Group, Mask, MaskKind};
+pub use group::{BlendMode, Clip, Content, FillRule, Group, Mask, MaskKind};
 pub use paint::{Affine, Gradient, GradientGeometry, GradientStop, Gradients, Spread};
 pub use params::{ParamGroup, Params, Trainable};
 

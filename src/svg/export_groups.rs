@@ -1,5 +1,6 @@
 //! The SVG writer for scenes with groups: every group a `<g>` (with `opacity`, `clip-path`,
-//! `mask`), every clip a `<clipPath>` and every mask a `<mask>` in one `<defs>` before the
+//! `mask`, and `style="mix-blend-mode:…"` or, when nothing else isolates it,
+//! `style="isolation:isolate"`), every clip a `<clipPath>` and every mask a `<mask>` in one `<defs>` before the
 //! drawing, with ids `clip1`, `clip2`, … and `mask1`, … in the order they are first needed
 //! (so the same scene gives the same document). Everything is in canvas units
 //! (`clipPathUnits` and `maskUnits` `userSpaceOnUse`, a mask region of the whole canvas); paths
@@ -110,6 +111,14 @@ impl Layered {
         }
         if let Some(id) = mask {
             push_attr(out, "mask", &format!("url(#{id})"));
+        }
+        // Both are CSS properties, read from `style` only (as resvg and browsers do). Every
+        // scene group is isolated; one that nothing else isolates says so.
+        if !g.blend.is_normal() {
+            let css = format!("mix-blend-mode:{}", g.blend.css_name());
+            push_attr(out, "style", &css);
+        } else if g.opacity >= 1.0 && g.clip.is_none() && g.mask.is_none() {
+            push_attr(out, "style", "isolation:isolate");
         }
         out.push_str(">\n");
     }

@@ -100,6 +100,13 @@ fn subpaths(data: &usvg::tiny_skia_path::Path, ts: usvg::Transform) -> Vec<SubPa
         out.push(c);
     }
     out.retain(|s| !s.segs.is_empty());
+    // A subpath of zero length is one zero-length segment (SVG caps it as such), however many
+    // segments it was written with.
+    for s in &mut out {
+        if s.segs.iter().flatten().all(|p| *p == s.start) {
+            s.segs.truncate(1);
+        }
+    }
     let finite = |p: &Point| p.x.is_finite() && p.y.is_finite();
     out.retain(|s| finite(&s.start) && s.segs.iter().flatten().all(finite));
     out
@@ -154,10 +161,17 @@ pub(super) fn path_shapes(
     let stroke = p
         .stroke()
         .map_or(StrokeDraw::Nothing, |s| stroke_draw(p, s, ts, opacity));
+    // `paint-order: stroke`: the fill shape is moved after the stroke shapes.
+    let stroke_first = p.paint_order() == usvg::PaintOrder::StrokeAndFill
+        && fill.is_some()
+        && !matches!(stroke, StrokeDraw::Nothing);
+    let first = shapes.len();
     if let Some(f) = fill {
         // A single closed outline keeps its (undashed) stroke on the filled shape.
         let on_fill = match &stroke {
-            StrokeDraw::Strokes(st, sg, None) if subs.len() == 1 && subs[0].closed => {
+            StrokeDraw::Strokes(st, sg, None)
+                if subs.len() == 1 && subs[0].closed && !stroke_first =>
+            {
                 Some((*st, sg.clone()))
             }
             _ => None,
@@ -192,6 +206,9 @@ pub(super) fn path_shapes(
             gradients: gradients(paint.gradient, None),
             stage: None,
         }),
+    }
+    if stroke_first {
+        shapes[first..].rotate_left(1);
     }
 }
 
@@ -369,6 +386,7 @@ pub fn import_svg(text: &str) -> Result<SvgImport, SvgError> {
         Mode::Draw,
         &mut content,
     );
+    walk.text_warnings(text);
     let warnings = walk.finish();
     let Content {
         mut shapes,

@@ -80,6 +80,8 @@ pub(super) fn painted(paint: &usvg::Paint, opacity: f32, ts: usvg::Transform) ->
             })
             .collect(),
     };
+    let mut gradient = gradient;
+    degenerate_radial(&mut gradient);
     let color = gradient.mean_color();
     // A degenerate transform (a zero-size bounding box) paints nothing, as in resvg.
     match gradient.validate() {
@@ -94,6 +96,39 @@ pub(super) fn painted(paint: &usvg::Paint, opacity: f32, ts: usvg::Transform) ->
     }
 }
 
+/// A padded radial gradient whose focal circle is its end circle (SVG 2's `fr = r`, which no
+/// spec defines) as resvg draws it: the first stop's colour inside the circle, the last one's
+/// outside.
+fn degenerate_radial(g: &mut Gradient) {
+    let GradientGeometry::Radial {
+        cx,
+        cy,
+        r,
+        fx,
+        fy,
+        fr,
+    } = &mut g.geometry
+    else {
+        return;
+    };
+    // tiny-skia's threshold, relative to the gradient's own units.
+    let near = |a: f32, b: f32| (a - b).abs() <= (1.0 / 32768.0) * (1.0 + a.abs().max(b.abs()));
+    let same = near(*cx, *fx) && near(*cy, *fy) && near(*r, *fr) && *r > 0.0;
+    let (Some(first), Some(last)) = (g.stops.first(), g.stops.last()) else {
+        return;
+    };
+    if g.spread != Spread::Pad || !same {
+        return;
+    }
+    let stop = |offset, color| GradientStop { offset, color };
+    g.stops = vec![
+        stop(0.0, first.color),
+        stop(1.0, first.color),
+        stop(1.0, last.color),
+    ];
+    *fr = 0.0;
+}
+
 /// The shape's gradients, or `None` when both paints are flat.
 pub(super) fn gradients(
     fill: Option<Gradient>,
@@ -102,16 +137,21 @@ pub(super) fn gradients(
     (fill.is_some() || stroke.is_some()).then(|| Box::new(Gradients { fill, stroke }))
 }
 
-/// One warning per `fill` or `stroke` (attribute or `style` declaration) that refers to no
-/// gradient or pattern: usvg draws its fallback colour, or nothing, silently. `text` already
-/// passed the guard (its size and node count are bounded).
-pub(super) fn dangling_paint_warnings(text: &str) -> Vec<String> {
+/// The XML tree of `text` (which passed the guard), for warnings about what usvg drops.
+pub(super) fn source_tree(text: &str) -> Option<resvg::usvg::roxmltree::Document<'_>> {
     use resvg::usvg::roxmltree;
     let opts = roxmltree::ParsingOptions {
         allow_dtd: true,
         ..Default::default()
     };
-    let Ok(doc) = roxmltree::Document::parse_with_options(text, opts) else {
+    roxmltree::Document::parse_with_options(text, opts).ok()
+}
+
+/// One warning per `fill` or `stroke` (attribute or `style` declaration) that refers to no
+/// gradient or pattern: usvg draws its fallback colour, or nothing, silently. `text` already
+/// passed the guard (its size and node count are bounded).
+pub(super) fn dangling_paint_warnings(text: &str) -> Vec<String> {
+    let Some(doc) = source_tree(text) else {
         return Vec::new();
     };
     let servers: std::collections::HashSet<&str> = doc

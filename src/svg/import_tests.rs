@@ -86,3 +86,29 @@ fn reference_cycles_are_broken_with_a_warning() {
         import.warnings
     );
 }
+
+#[test]
+fn text_and_plus_lighter_are_named_in_warnings() {
+    let svg = r#"<svg xmlns="http://www.w3.org/2000/svg" width="20" height="20">
+        <text id="t1" x="2" y="10">Hi</text><text x="2" y="18">there</text>
+        <rect id="lit" width="10" height="10" style="mix-blend-mode:plus-lighter"/>
+        <rect id="mul" width="10" height="10" style="mix-blend-mode:multiply"/>
+    </svg>"#;
+    let import = import_svg(svg).unwrap();
+    let w = &import.warnings;
+    assert!(w.contains(&r#"<text id="t1"> ignored (text is not drawn: no fonts)"#.to_string()));
+    assert!(w.contains(&"a <text> ignored (text is not drawn: no fonts)".to_string()));
+    assert!(
+        w.iter()
+            .any(|w| w.starts_with("mix-blend-mode plus-lighter on #lit")),
+        "{w:?}"
+    );
+    assert_eq!(w.len(), 3, "{w:?}");
+    // plus-lighter is drawn as normal (no group); multiply is a group of its own.
+    let g = &import.scene.groups;
+    assert_eq!(g.len(), 1, "{g:?}");
+    assert_eq!(
+        (g[0].start, g[0].end, g[0].blend),
+        (1, 2, crate::scene::BlendMode::Multiply)
+    );
+}

@@ -31,7 +31,7 @@
 //! Gradients are written once each in a `<defs>` after it (`export_paint`: user-space
 //! coordinates, exact numbers, ids `g1, g2, …` in scene order) and referenced as `url(#gK)`
 //! (in a scene with groups, in the order the paths are written, mask content included). A scene
-//! with groups is written by `export_groups` (`<g opacity clip-path mask>`, `<clipPath>` and
+//! with groups is written by `export_groups` (`<g opacity clip-path mask style>`, `<clipPath>` and
 //! `<mask>` in `<defs>` with ids `clip<k>`/`mask<k>`); even-odd fills get `fill-rule="evenodd"`.
 //! [`crate::vector::export::compact_svg`] picks the fewest decimals that still render the same.
 //!
@@ -56,9 +56,10 @@
 //!   (skew, unequal scales) a stroke has no single width: its outline (dashes, caps and joins
 //!   included, computed by tiny-skia's stroker in the path's own units) is mapped through the
 //!   transform and filled in the stroke's colour.
-//! - **groups**: a group with an opacity below 1, a `clip-path` or a `mask` becomes a
-//!   [`crate::scene::Group`] over the range of shapes its children became (one shape painting one
-//!   layer takes the opacity itself instead). Clip paths (their children by `clip-rule`, a
+//! - **groups**: a group (or element) with an opacity below 1, a `clip-path`, a `mask`, a
+//!   `mix-blend-mode` or `isolation: isolate` becomes a [`crate::scene::Group`] over the range of
+//!   shapes its children became (one shape painting one layer takes a lone opacity itself
+//!   instead); `plus-lighter` is drawn as normal with a warning. Clip paths (their children by `clip-rule`, a
 //!   `clip-path` on a `<clipPath>` or on its children) and masks (luminance or alpha, a `mask` on
 //!   a `<mask>`, the mask region as a clip when it does not cover the canvas) are kept with their
 //!   units resolved in canvas pixels; nested `<svg>` and `<symbol>` viewports are the clip paths

@@ -2,7 +2,7 @@
 //! need a layer, paths become shapes (see `import`), and what cannot be drawn is warned about.
 
 use super::import::{clip_path_shape, clip_shape, path_shapes};
-use crate::scene::{Clip, Content, Group, Mask, MaskKind, Shape};
+use crate::scene::{BlendMode, Clip, Content, Group, Mask, MaskKind, Shape};
 use resvg::usvg;
 use usvg::Transform;
 
@@ -22,6 +22,8 @@ pub(super) struct Walk {
     warnings: Vec<String>,
     more_warnings: usize,
     canvas: (f32, f32),
+    /// Whether usvg laid out any text (it drops text when no font is loaded).
+    drew_text: bool,
 }
 
 impl Walk {
@@ -30,6 +32,7 @@ impl Walk {
             warnings: Vec::new(),
             more_warnings: 0,
             canvas,
+            drew_text: false,
         }
     }
 
@@ -44,6 +47,24 @@ impl Walk {
         }
     }
 
+    /// One warning per `<text>` element of the source `text` when usvg laid out none (no font
+    /// is loaded: text is out of scope), so a picture without its text says so.
+    pub(super) fn text_warnings(&mut self, text: &str) {
+        if self.drew_text {
+            return;
+        }
+        let Some(doc) = super::import_paint::source_tree(text) else {
+            return;
+        };
+        for node in doc.descendants().filter(|n| n.has_tag_name("text")) {
+            let on = match node.attribute("id") {
+                Some(id) => format!("<text id=\"{id}\">"),
+                None => "a <text>".to_string(),
+            };
+            self.warn(format!("{on} ignored (text is not drawn: no fonts)"));
+        }
+    }
+
     pub(super) fn finish(mut self) -> Vec<String> {
         if self.more_warnings > 0 {
             let n = self.more_warnings;
@@ -54,18 +75,7 @@ impl Walk {
 
     /// Warns about what `g` asks for that the scene cannot draw (filters).
     fn unsupported(&mut self, g: &usvg::Group) {
-        // usvg gives the group of a `<g>` or `<use>` its id, and the single path of another
-        // element that needed a group (`<rect filter=…>`) the element's id.
-        let id = match g.children() {
-            _ if !g.id().is_empty() => g.id(),
-            [only] => only.id(),
-            _ => "",
-        };
-        let on = if id.is_empty() {
-            "an element without an id".to_string()
-        } else {
-            format!("#{id}")
-        };
+        let on = element(g);
         if !g.filters().is_empty() {
             self.warn(format!(
                 "filter on {on} ignored (filters are not drawn): drawn unfiltered"
@@ -95,7 +105,10 @@ impl Walk {
             Mode::Draw => g.mask().map(|m| self.mask(m, ts)),
             Mode::Clip => None,
         };
-        let layered = opacity < 1.0 || clip.is_some() || mask.is_some();
+        let blend = self.blend(g, mode);
+        // `isolation: isolate` is a layer of its own (every scene group is isolated).
+        let isolated = mode == Mode::Draw && (g.isolate() || !blend.is_normal());
+        let layered = opacity < 1.0 || clip.is_some() || mask.is_some() || isolated;
         let (start, gi) = (out.shapes.len(), out.groups.len());
         if layered {
             // Reserved now so that it comes before the groups inside it.
@@ -117,7 +130,10 @@ impl Walk {
                         format!("<image> #{id} ignored (images are not drawn)")
                     });
                 }
-                usvg::Node::Text(t) => self.group(t.flattened(), ts, mode, out),
+                usvg::Node::Text(t) => {
+                    self.drew_text = true;
+                    self.group(t.flattened(), ts, mode, out)
+                }
             }
         }
         if !layered {
@@ -126,7 +142,10 @@ impl Walk {
         let end = out.shapes.len();
         if end == start {
             out.groups.truncate(gi);
-        } else if clip.is_none() && mask.is_none() && end - start == 1 {
+        } else if clip.is_none() && mask.is_none() && !isolated && end - start == 1
+            // A group inside (a blend mode) needs this layer below it.
+            && out.groups.len() == gi + 1
+        {
             // One shape painting one layer: the opacity is exact on the shape itself.
             if fold_opacity(&mut out.shapes[start], opacity) {
                 out.groups.remove(gi);
@@ -140,8 +159,26 @@ impl Walk {
                 opacity,
                 clip: clip.map(Box::new),
                 mask: mask.map(Box::new),
+                blend,
             };
         }
+    }
+
+    /// The blend mode of `g` (normal inside a clip path; `plus-lighter` drawn as normal with
+    /// a warning).
+    fn blend(&mut self, g: &usvg::Group, mode: Mode) -> BlendMode {
+        if mode == Mode::Clip {
+            return BlendMode::Normal;
+        }
+        blend_mode(g.blend_mode()).unwrap_or_else(|| {
+            self.warn(format!(
+                "mix-blend-mode {} on {} not drawn (not a W3C Compositing Level 1 mode): \
+                 drawn as normal",
+                g.blend_mode(),
+                element(g)
+            ));
+            BlendMode::Normal
+        })
     }
 
     /// A clip path applied in user space `ts`: its children (under its own transform) and the
@@ -203,14 +240,70 @@ impl Walk {
     }
 }
 
+/// The element a group of usvg's stands for, as warnings name it.
+fn element(g: &usvg::Group) -> String {
+    // usvg gives the group of a `<g>` or `<use>` its id, and the single path of another
+    // element that needed a group (`<rect filter=…>`) the element's id.
+    let id = match g.children() {
+        _ if !g.id().is_empty() => g.id(),
+        [only] => only.id(),
+        _ => "",
+    };
+    if id.is_empty() {
+        "an element without an id".to_string()
+    } else {
+        format!("#{id}")
+    }
+}
+
+/// The scene's blend mode for usvg's (`None`: `plus-lighter`, which is not one of them).
+fn blend_mode(b: usvg::BlendMode) -> Option<BlendMode> {
+    use usvg::BlendMode as U;
+    Some(match b {
+        U::Normal => BlendMode::Normal,
+        U::Multiply => BlendMode::Multiply,
+        U::Screen => BlendMode::Screen,
+        U::Overlay => BlendMode::Overlay,
+        U::Darken => BlendMode::Darken,
+        U::Lighten => BlendMode::Lighten,
+        U::ColorDodge => BlendMode::ColorDodge,
+        U::ColorBurn => BlendMode::ColorBurn,
+        U::HardLight => BlendMode::HardLight,
+        U::SoftLight => BlendMode::SoftLight,
+        U::Difference => BlendMode::Difference,
+        U::Exclusion => BlendMode::Exclusion,
+        U::Hue => BlendMode::Hue,
+        U::Saturation => BlendMode::Saturation,
+        U::Color => BlendMode::Color,
+        U::Luminosity => BlendMode::Luminosity,
+        U::PlusLighter => return None,
+    })
+}
+
 /// Multiplies `opacity` into the one layer `s` paints; false when it paints two (a visible
 /// fill and a stroke, which overlap).
 fn fold_opacity(s: &mut Shape, opacity: f32) -> bool {
-    match (&mut s.fill, &mut s.stroke) {
-        (Some(f), None) => f.a *= opacity,
-        (None, Some(st)) => st.color.a *= opacity,
-        (Some(f), Some(st)) if f.a == 0.0 => st.color.a *= opacity,
+    let on_fill = match (&mut s.fill, &mut s.stroke) {
+        (Some(f), None) => {
+            f.a *= opacity;
+            true
+        }
+        (None, Some(st)) => {
+            st.color.a *= opacity;
+            false
+        }
+        (Some(f), Some(st)) if f.a == 0.0 => {
+            st.color.a *= opacity;
+            false
+        }
         _ => return false,
+    };
+    // A gradient is drawn from its stops (the flat colour only stands in for it).
+    if let Some(g) = s.gradients.as_deref_mut() {
+        let g = if on_fill { &mut g.fill } else { &mut g.stroke };
+        for stop in g.iter_mut().flat_map(|g| g.stops.iter_mut()) {
+            stop.color.a *= opacity;
+        }
     }
     true
 }
