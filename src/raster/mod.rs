@@ -49,6 +49,7 @@ mod layer;
 mod paint;
 mod real;
 mod stroke;
+mod texture;
 mod walk;
 
 #[cfg(test)]

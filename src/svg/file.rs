@@ -1,7 +1,7 @@
 //! Scene files: the benchmark scene JSON format, and loading a scene (SVG or JSON) from disk with
 //! a size cap.
 
-use super::{SvgError, SvgImport, import_svg};
+use super::{ImageLimits, SvgError, SvgImport, import_svg_in};
 use crate::scene::{Point, Rgba, Scene, Shape};
 use std::path::Path;
 
@@ -83,7 +83,7 @@ pub fn load_import(path: &Path) -> Result<SvgImport, SvgError> {
             warnings: Vec::new(),
         })
     } else {
-        import_svg(&text)
+        import_svg_in(&text, path.parent(), ImageLimits::DEFAULT)
     }
 }
 

@@ -99,7 +99,13 @@ pub(super) fn gradients(
     fill: Option<Gradient>,
     stroke: Option<Gradient>,
 ) -> Option<Box<Gradients>> {
-    (fill.is_some() || stroke.is_some()).then(|| Box::new(Gradients { fill, stroke }))
+    (fill.is_some() || stroke.is_some()).then(|| {
+        Box::new(Gradients {
+            fill,
+            stroke,
+            texture: None,
+        })
+    })
 }
 
 /// One warning per `fill` or `stroke` (attribute or `style` declaration) that refers to no

@@ -78,7 +78,9 @@ mod export_groups;
 mod export_paint;
 mod file;
 mod guard;
+mod images;
 mod import;
+mod import_image;
 mod import_paint;
 mod path_data;
 mod profile;
@@ -88,7 +90,8 @@ pub use export::{MAX_PRECISION, SvgOptions, to_svg, with_metadata, written_color
 
 pub use file::{SCENE_FILE_MAX_BYTES, load_import, load_scene, read_text_capped, scene_from_json};
 pub use guard::{Parsed, SvgLimits, SvgRejected};
-pub use import::{SvgImport, from_svg, import_svg};
+pub use images::ImageLimits;
+pub use import::{SvgImport, from_svg, import_svg, import_svg_in};
 pub use profile::{ProfileViolation, check_safe_output};
 
 use crate::scene::{MAX_SIDE, SceneError};

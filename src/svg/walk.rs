@@ -1,9 +1,11 @@
 //! The walk over usvg's tree: groups become scene [`Group`]s (opacity, clip, mask) where they
 //! need a layer, paths become shapes (see `import`), and what cannot be drawn is warned about.
 
+use super::images::Images;
 use super::import::{clip_path_shape, clip_shape, path_shapes};
 use crate::scene::{Clip, Content, Group, Mask, MaskKind, Shape};
 use resvg::usvg;
+use std::sync::Arc;
 use usvg::Transform;
 
 /// Most warnings one import reports; the rest are counted in a last one.
@@ -22,14 +24,17 @@ pub(super) struct Walk {
     warnings: Vec<String>,
     more_warnings: usize,
     canvas: (f32, f32),
+    /// Where this import's images come from (see `images`).
+    images: Arc<Images>,
 }
 
 impl Walk {
-    pub(super) fn new(canvas: (f32, f32)) -> Self {
+    pub(super) fn new(canvas: (f32, f32), images: Arc<Images>) -> Self {
         Walk {
             warnings: Vec::new(),
             more_warnings: 0,
             canvas,
+            images,
         }
     }
 
@@ -109,13 +114,11 @@ impl Walk {
                     Mode::Clip => clip_shape(p, ts, &mut out.shapes),
                 },
                 usvg::Node::Path(_) => {}
+                // A clip path clips by shapes and text only.
+                usvg::Node::Image(_) if mode == Mode::Clip => {}
                 usvg::Node::Image(i) => {
-                    let id = i.id();
-                    self.warn(if id.is_empty() {
-                        "an <image> ignored (images are not drawn)".to_string()
-                    } else {
-                        format!("<image> #{id} ignored (images are not drawn)")
-                    });
+                    let images = Arc::clone(&self.images);
+                    super::import_image::image(self, &images, i, ts, out);
                 }
                 usvg::Node::Text(t) => self.group(t.flattened(), ts, mode, out),
             }
@@ -216,7 +219,7 @@ fn fold_opacity(s: &mut Shape, opacity: f32) -> bool {
 }
 
 /// The rectangle `r` in user space `ts`, as the clip shape of a `<rect>` there.
-fn rect_shape(r: usvg::NonZeroRect, ts: Transform) -> Option<Shape> {
+pub(super) fn rect_shape(r: usvg::NonZeroRect, ts: Transform) -> Option<Shape> {
     let path = usvg::tiny_skia_path::PathBuilder::from_rect(r.to_rect());
     let mut shapes = Vec::new();
     clip_path_shape(&path, ts, crate::scene::FillRule::NonZero, &mut shapes);
