@@ -171,7 +171,7 @@ pub(super) fn path_shapes(
             fill: Some(f.color),
             stroke: st,
             fill_rule: fill_rule(p),
-            gradients: gradients(f.gradient, sg.flatten()),
+            gradients: with_texture(gradients(f.gradient, sg.flatten()), f.texture),
             stage: None,
         });
         if on_fill.is_some() {
@@ -191,7 +191,7 @@ pub(super) fn path_shapes(
             fill: Some(paint.color),
             stroke: None,
             fill_rule: FillRule::NonZero,
-            gradients: gradients(paint.gradient, None),
+            gradients: with_texture(gradients(paint.gradient, None), paint.texture),
             stage: None,
         }),
     }
@@ -410,6 +410,19 @@ pub fn import_svg_in(
     };
     scene.validate()?;
     Ok(SvgImport { scene, warnings })
+}
+
+/// `g` with the fill texture `t`, if there is one.
+fn with_texture(
+    g: Option<Box<crate::scene::Gradients>>,
+    t: Option<Box<crate::scene::Texture>>,
+) -> Option<Box<crate::scene::Gradients>> {
+    let Some(t) = t else {
+        return g;
+    };
+    let mut g = g.unwrap_or_default();
+    g.texture = Some(t);
+    Some(g)
 }
 
 fn is_canvas_rect(s: &Shape, w: f32, h: f32) -> bool {

@@ -76,12 +76,14 @@
 mod export;
 mod export_groups;
 mod export_paint;
+mod export_texture;
 mod file;
 mod guard;
 mod images;
 mod import;
 mod import_image;
 mod import_paint;
+mod import_pattern;
 mod path_data;
 mod profile;
 mod walk;
