@@ -22,7 +22,15 @@ pub struct RenderArgs {
 pub fn run(args: RenderArgs) -> Result<(), CliError> {
     // The input is the user's: a file that is missing, unreadable or not a valid scene is bad
     // input (2), as README's exit codes say; only writing the output is a runtime failure (1).
-    let import = svg::load_import(&args.input).map_err(|e| CliError::Usage(e.to_string()))?;
+    let usage = |e: svg::SvgError| CliError::Usage(e.to_string());
+    let mut import = svg::load_import(&args.input).map_err(usage)?;
+    // Pattern tiles are drawn at the output's resolution: import again when it differs.
+    if let Some(n) = args.size {
+        let res = n as f32 / import.scene.width as f32;
+        if res != 1.0 && import.scene.width > 0 {
+            import = svg::load_import_at(&args.input, res).map_err(usage)?;
+        }
+    }
     for w in &import.warnings {
         eprintln!("warning: {w}");
     }

@@ -23,6 +23,23 @@ const MAX_TILE_PIXELS: f32 = 1024.0 * 1024.0;
 
 thread_local! {
     static DEPTH: Cell<u32> = const { Cell::new(0) };
+    /// Device pixels per canvas pixel the imported scene will be drawn at (see [`at_resolution`]).
+    static RESOLUTION: Cell<f32> = const { Cell::new(1.0) };
+}
+
+/// Runs `f` (an import on this thread) with pattern tiles drawn at `resolution` device pixels
+/// per canvas pixel, for a scene that will be drawn scaled (`render --size`): a tile drawn at
+/// the canvas's own resolution and magnified would be blurred.
+pub fn at_resolution<R>(resolution: f32, f: impl FnOnce() -> R) -> R {
+    let r = if resolution.is_finite() && resolution > 0.0 {
+        resolution.min(16.0)
+    } else {
+        1.0
+    };
+    let old = RESOLUTION.with(|c| c.replace(r));
+    let out = f();
+    RESOLUTION.with(|c| c.set(old));
+    out
 }
 
 /// The texture that paints `p` at `opacity` on a path in user space `ts`; `None` when the tile
@@ -42,6 +59,8 @@ fn tile(p: &usvg::Pattern, ts: Transform, opacity: f32) -> Option<Texture> {
     let m = ts.pre_concat(p.transform());
     let rect = p.rect();
     let (mut sx, mut sy) = m.get_scale();
+    let res = RESOLUTION.with(Cell::get);
+    (sx, sy) = (sx * res, sy * res);
     // Keep the tile within its bounds, at one scale for both axes.
     let (w, h) = (rect.width() * sx, rect.height() * sy);
     let k = (MAX_TILE_SIDE / w.max(h))

@@ -90,7 +90,10 @@ mod walk;
 
 pub use export::{MAX_PRECISION, SvgOptions, to_svg, with_metadata, written_color};
 
-pub use file::{SCENE_FILE_MAX_BYTES, load_import, load_scene, read_text_capped, scene_from_json};
+pub use file::{
+    SCENE_FILE_MAX_BYTES, load_import, load_import_at, load_scene, read_text_capped,
+    scene_from_json,
+};
 pub use guard::{Parsed, SvgLimits, SvgRejected};
 pub use images::ImageLimits;
 pub use import::{SvgImport, from_svg, import_svg, import_svg_in};
