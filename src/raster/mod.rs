@@ -62,6 +62,8 @@ mod tests_layer_paint;
 mod tests_paint;
 #[cfg(test)]
 mod tests_stroke;
+#[cfg(test)]
+mod tests_texture;
 
 use crate::image::Image;
 use crate::scene::{ParamGroup, Params, Point, Scene, Shape};

@@ -209,6 +209,10 @@ impl Walk {
 /// Multiplies `opacity` into the one layer `s` paints; false when it paints two (a visible
 /// fill and a stroke, which overlap).
 fn fold_opacity(s: &mut Shape, opacity: f32) -> bool {
+    // A gradient or texture paints instead of the flat colour that would carry it.
+    if s.gradients.is_some() {
+        return false;
+    }
     match (&mut s.fill, &mut s.stroke) {
         (Some(f), None) => f.a *= opacity,
         (None, Some(st)) => st.color.a *= opacity,
