@@ -90,7 +90,7 @@ fn finite_differences_over_and_under_an_image() {
             Point::new(1.0, 12.0),
             Point::new(6.0, 3.0),
             Point::new(10.0, 13.0),
-            Point::new(15.0, 2.5),
+            Point::new(12.6, 4.2),
         ],
         Stroke::round(Rgba::new(0.9, 0.1, 0.1, 0.7), 2.0),
     )
