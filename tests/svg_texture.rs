@@ -8,7 +8,9 @@ mod golden;
 use base64::Engine;
 use golden::{Tolerance, compare, resvg_render};
 use vectorfusion::raster;
-use vectorfusion::svg::{ImageLimits, SvgOptions, from_svg, import_svg, import_svg_in, to_svg};
+use vectorfusion::svg::{
+    ImageLimits, SvgOptions, check_safe_output, from_svg, import_svg, import_svg_in, to_svg,
+};
 
 /// A smooth `w × h` RGBA picture (bilinear and resvg's bicubic filter agree on it), encoded.
 fn picture(w: u32, h: u32, format: image::ImageFormat) -> Vec<u8> {
@@ -141,6 +143,17 @@ fn textures_export_and_import_again_as_drawn() {
         compare(name, &ib, &ia, &Tolerance::SUITE);
         // resvg draws the export as we draw the scene.
         compare(name, &ia, &resvg_render(&out), &Tolerance::SUITE);
+    }
+    // The safe-output profile takes an embedded PNG only.
+    for href in [
+        "https://example.com/a.png",
+        "data:image/svg+xml;base64,PHN2Zy8+",
+        "a.png",
+    ] {
+        let bad = format!(
+            r#"<svg xmlns="http://www.w3.org/2000/svg" width="4" height="4" viewBox="0 0 4 4"><defs><pattern id="g1" width="1" height="1"><image width="1" height="1" href="{href}"/></pattern></defs><path d="M0 0H4V4Z" fill="url(#g1)"/></svg>"#
+        );
+        assert!(check_safe_output(&bad).is_err(), "{href}");
     }
 }
 

@@ -1,7 +1,8 @@
 //! `vectorfusion render IN.svg -o OUT.png [--size N]`: renders an SVG (or scene JSON) through
 //! our own import path and forward rasteriser, so it can be compared with resvg or a browser.
-//! What the import could not draw (filters, clip paths, masks, images, broken reference
-//! cycles) is printed on stderr, one `warning: …` line each.
+//! What the import could not draw (filters, images it may not read or decode, broken reference
+//! cycles) is printed on stderr, one `warning: …` line each. Images are read beside the input
+//! file; pattern tiles are drawn at the output's resolution.
 
 use super::CliError;
 use crate::{raster, svg};

@@ -17,7 +17,8 @@
 //!   drawn as SVG draws them, as a union of per-edge pieces (see `stroke`).
 //! - Per shape the fill is painted first, then the stroke. `alpha = coverage * colour.a`,
 //!   `out = colour.rgb * alpha + below * (1 - alpha)` (premultiplied), over the background.
-//!   The colour is the flat one, or a gradient's colour at the pixel centre (`paint`).
+//!   The colour is the flat one, or a gradient's colour at the pixel centre (`paint`), or a
+//!   texture's (`texture`: imported images and patterns, constants for the backward).
 //! - A scene's groups ([`crate::scene::Group`]) paint their shapes onto a transparent layer,
 //!   composited with `opacity × clip × mask` per pixel (see `layer`); a flat scene takes the
 //!   same path as before, untouched.

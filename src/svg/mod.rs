@@ -67,9 +67,15 @@
 //!   [`crate::scene::Gradient`]s in canvas pixels, as usvg resolved them (`href` inheritance,
 //!   units, stop clamping; see `import_paint`), the flat colour beside them being the mean stop
 //!   colour; a stroke drawn as a filled outline keeps its gradient as the outline's fill.
-//!   Patterns become grey; images, text without fonts and filters are ignored, each with a
-//!   warning naming the element (`filter on #id ignored …`; at most 16, then a count): the
-//!   content is drawn as it is, unfiltered.
+//! - **images and patterns** become [`crate::scene::Texture`]s: an `<image>` its rectangle
+//!   filled with its pixels (`import_image`; where it may come from and the bounds on decoding
+//!   it in `images`: `data:` URLs, files only beside an SVG file the caller names), an SVG image
+//!   its content clipped to its viewport; a pattern on a fill its tile drawn by our rasteriser,
+//!   repeated (`import_pattern`; on a stroke its mean colour). They export as image-filled
+//!   `<pattern>`s (`export_texture`).
+//!   Text without fonts and filters are ignored, each with a warning naming the element
+//!   (`filter on #id ignored …`; at most 16, then a count): the content is drawn as it is,
+//!   unfiltered.
 //! - if the first shape is a filled rectangle covering the whole canvas (what [`to_svg`] writes
 //!   for the background) it becomes the scene background.
 
