@@ -36,9 +36,9 @@ fn png_base64(t: &Texture) -> String {
     let mut straight = t.pixels.clone();
     for p in straight.chunks_exact_mut(4) {
         let a = u16::from(p[3]);
-        if a > 0 {
-            for c in &mut p[..3] {
-                *c = ((u16::from(*c) * 255 + a / 2) / a).min(255) as u8;
+        for c in &mut p[..3] {
+            if let Some(v) = (u16::from(*c) * 255 + a / 2).checked_div(a) {
+                *c = v.min(255) as u8;
             }
         }
     }
