@@ -34,6 +34,16 @@ fn picture(w: u32, h: u32, format: image::ImageFormat) -> Vec<u8> {
     out.into_inner()
 }
 
+/// Our import and rasteriser draw `text` as resvg does (the suite's tolerance).
+fn drawn_as_resvg(name: &str, scene: &vectorfusion::scene::Scene, text: &str) {
+    compare(
+        name,
+        &raster::render(scene),
+        &resvg_render(text),
+        &Tolerance::SUITE,
+    );
+}
+
 fn data_url(mime: &str, bytes: &[u8]) -> String {
     let b64 = base64::engine::general_purpose::STANDARD.encode(bytes);
     format!("data:{mime};base64,{b64}")
@@ -80,8 +90,7 @@ fn images_render_as_resvg() {
         let text = doc(&body);
         let import = import_svg(&text).unwrap_or_else(|e| panic!("{name}: {e}"));
         assert!(import.warnings.is_empty(), "{name}: {:?}", import.warnings);
-        let ours = raster::render(&import.scene);
-        compare(name, &ours, &resvg_render(&text), &Tolerance::SUITE);
+        drawn_as_resvg(name, &import.scene, &text);
     }
 }
 
@@ -116,12 +125,7 @@ fn patterns_render_as_resvg() {
         let scene = from_svg(&text).unwrap_or_else(|e| panic!("{name}: {e}"));
         let tex = scene.shapes.iter().filter_map(|s| s.gradients.as_deref());
         assert!(tex.filter(|g| g.texture.is_some()).count() >= 1, "{name}");
-        compare(
-            name,
-            &raster::render(&scene),
-            &resvg_render(&text),
-            &Tolerance::SUITE,
-        );
+        drawn_as_resvg(name, &scene, &text);
     }
 }
 
@@ -224,12 +228,7 @@ fn svg_images_nest_within_the_depth_limit() {
     // Drawn as its content, clipped to its viewport.
     assert_eq!(s.shapes.len(), 1);
     assert!(s.groups.iter().any(|g| g.clip.is_some()));
-    compare(
-        "svg_image",
-        &raster::render(&s),
-        &resvg_render(&one),
-        &Tolerance::SUITE,
-    );
+    drawn_as_resvg("svg_image", &s, &one);
     let limits = ImageLimits {
         max_svg_depth: 0,
         ..ImageLimits::DEFAULT

@@ -6,7 +6,7 @@
 //! backward of a texture layer only carries the coverage part, so the shape's outline and the
 //! shapes above and below it get their gradients as usual.
 
-use super::paint::Shade;
+use super::paint::{Shade, inverse};
 use super::real::Real;
 use crate::scene::{Texture, TextureEdge};
 
@@ -24,18 +24,8 @@ pub(crate) struct TextureT<T> {
 
 impl<T: Real> TextureT<T> {
     pub fn of(t: &Texture) -> Self {
-        let [a, b, c, d, e, f] = t.transform.0.map(f64::from);
-        let det = a * d - b * c;
-        let inv = [
-            d / det,
-            -b / det,
-            -c / det,
-            a / det,
-            (c * f - d * e) / det,
-            (b * e - a * f) / det,
-        ];
         TextureT {
-            inv: inv.map(T::c),
+            inv: inverse(&t.transform),
             width: t.width as i32,
             height: t.height as i32,
             texels: t
