@@ -180,10 +180,11 @@ fn render_png_scaled(svg: &str, scale: impl Fn(f32) -> f32) -> Result<Vec<u8>, R
         .map_err(|e| RenderError::Png(e.to_string()))
 }
 
-/// Parses untrusted SVG text with usvg. This is the only place the crate parses SVG: it checks
-/// [`SvgLimits::DEFAULT`] before any geometry work ([`guard`]), never reads files and never decodes
-/// embedded images (`<image href="/dev/zero">` must not be followed), so every caller — HTTP
-/// submissions, previews, the worker, evaluation, tracing — is bounded on hostile input.
+/// Parses untrusted SVG text with usvg. It checks [`SvgLimits::DEFAULT`] before any geometry
+/// work ([`guard`]), never reads files and never decodes embedded images (`<image
+/// href="/dev/zero">` must not be followed), so every caller — HTTP submissions, previews, the
+/// worker, evaluation, tracing — is bounded on hostile input. The import ([`import_svg`]) is
+/// the one other parse: the same guard, with the image sources and bounds of `images`.
 pub fn parse_usvg(text: &str) -> Result<usvg::Tree, SvgRejected> {
     parse_usvg_repaired(text).map(|p| p.tree)
 }
