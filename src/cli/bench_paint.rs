@@ -68,6 +68,7 @@ pub fn with_gradients(scene: &Scene, paint: BenchPaint) -> Scene {
         sh.gradients = Some(Box::new(Gradients {
             fill: Some(g),
             stroke: None,
+            texture: None,
         }));
     }
     out

@@ -1,7 +1,8 @@
 //! `vectorfusion render IN.svg -o OUT.png [--size N]`: renders an SVG (or scene JSON) through
 //! our own import path and forward rasteriser, so it can be compared with resvg or a browser.
-//! What the import could not draw (filters, clip paths, masks, images, broken reference
-//! cycles) is printed on stderr, one `warning: …` line each.
+//! What the import could not draw (filters, images it may not read or decode, broken reference
+//! cycles) is printed on stderr, one `warning: …` line each. Images are read beside the input
+//! file; pattern tiles are drawn at the output's resolution.
 
 use super::CliError;
 use crate::{raster, svg};
@@ -22,7 +23,15 @@ pub struct RenderArgs {
 pub fn run(args: RenderArgs) -> Result<(), CliError> {
     // The input is the user's: a file that is missing, unreadable or not a valid scene is bad
     // input (2), as README's exit codes say; only writing the output is a runtime failure (1).
-    let import = svg::load_import(&args.input).map_err(|e| CliError::Usage(e.to_string()))?;
+    let usage = |e: svg::SvgError| CliError::Usage(e.to_string());
+    let mut import = svg::load_import(&args.input).map_err(usage)?;
+    // Pattern tiles are drawn at the output's resolution: import again when it differs.
+    if let Some(n) = args.size {
+        let res = n as f32 / import.scene.width as f32;
+        if res != 1.0 && import.scene.width > 0 {
+            import = svg::load_import_at(&args.input, res).map_err(usage)?;
+        }
+    }
     for w in &import.warnings {
         eprintln!("warning: {w}");
     }

@@ -9,6 +9,7 @@ use super::grad::{GradT, reduce};
 use super::paint::{Flat, GradientShade};
 use super::real::Real;
 use super::stroke;
+use super::texture::TextureShade;
 use super::walk::{Clip, Piece, deposit, deposit_record, edge_grad_recorded};
 use rayon::prelude::*;
 
@@ -224,6 +225,9 @@ pub(crate) fn paint_layer<T: Real>(
         fill: l.kind == LayerKind::Fill,
         even_odd: l.even_odd,
     };
+    if let Some(ti) = l.texture {
+        return composite(&at, out, img, dst_buf, &TextureShade(&sc.textures[ti]));
+    }
     match l.paint {
         None => {
             let flat = Flat {
@@ -359,8 +363,16 @@ pub(crate) fn backward_layer<T: Real>(
         even_odd: l.even_odd,
     };
     let gb = &mut st.gbuf[..cw * rows];
-    let any = match l.paint {
-        None => {
+    let any = match (l.texture, l.paint) {
+        (Some(ti), _) => composite_back(
+            &at,
+            rec.offset,
+            tape,
+            g,
+            gb,
+            &mut TextureShade(&sc.textures[ti]),
+        ),
+        (None, None) => {
             let mut flat = Flat {
                 c: l.color,
                 dc: [T::zero(); 4],
@@ -371,7 +383,7 @@ pub(crate) fn backward_layer<T: Real>(
             }
             any
         }
-        Some(pi) => {
+        (None, Some(pi)) => {
             let mut sh = GradientShade::new(&sc.paints[pi]);
             let any = composite_back(&at, rec.offset, tape, g, gb, &mut sh);
             let dp = &mut out.dpaint[pi];

@@ -12,6 +12,7 @@ use super::layer::GroupT;
 use super::paint::PaintT;
 use super::real::Real;
 use super::stroke::Style;
+use super::texture::TextureT;
 use crate::scene::{FillRule, Rgba, Scene, ShapeKind, Stroke};
 
 /// Flattening tolerance in pixels (max distance between curve and polyline, approximately).
@@ -51,6 +52,8 @@ pub(crate) struct ShapeT<T> {
     /// Indices into [`SceneT::paints`] of the fill's and the stroke's gradient.
     pub fill_paint: Option<usize>,
     pub stroke_paint: Option<usize>,
+    /// Index into [`SceneT::textures`] of the fill's texture.
+    pub fill_texture: Option<usize>,
 }
 
 /// A scene's parameters in the working precision, plus the fixed flattening plan.
@@ -65,6 +68,8 @@ pub(crate) struct SceneT<T> {
     /// Every gradient, shape by shape, fill before stroke (the parameter order of
     /// [`crate::scene::paint::scene_gradient_params`]).
     pub paints: Vec<PaintT<T>>,
+    /// Every fill texture, shape by shape (constants, see `texture`).
+    pub textures: Vec<TextureT<T>>,
 }
 
 fn seg_f32(kind: ShapeKind, p: &[[f32; 2]], i: usize) -> [[f32; 2]; 4] {
@@ -86,31 +91,39 @@ impl<T: Real> SceneT<T> {
                 paints.len() - 1
             })
         };
-        let shapes = scene
-            .shapes
-            .iter()
-            .map(|s| {
-                let p32: Vec<[f32; 2]> = s.points.iter().map(|p| [p.x, p.y]).collect();
-                let nseg = s.num_segments();
-                let pieces = (0..nseg)
-                    .map(|i| match s.kind {
-                        ShapeKind::Polygon => 1,
-                        k => pieces_for(seg_f32(k, &p32, i), tol),
-                    })
-                    .collect();
-                ShapeT {
-                    kind: s.kind,
-                    pts: p32.iter().map(|p| [T::of(p[0]), T::of(p[1])]).collect(),
-                    fill: s.fill.map(c4),
-                    stroke: s.stroke.map(|st| (c4(st.color), T::of(st.width))),
-                    style: Style::of(&s.stroke.unwrap_or(Stroke::round(Rgba::BLACK, 0.0))),
-                    pieces,
-                    even_odd: s.fill_rule == FillRule::EvenOdd,
-                    fill_paint: add(s.gradients.as_ref().and_then(|g| g.fill.as_ref())),
-                    stroke_paint: add(s.gradients.as_ref().and_then(|g| g.stroke.as_ref())),
-                }
-            })
-            .collect();
+        let mut textures = Vec::new();
+        let shapes =
+            scene
+                .shapes
+                .iter()
+                .map(|s| {
+                    let p32: Vec<[f32; 2]> = s.points.iter().map(|p| [p.x, p.y]).collect();
+                    let nseg = s.num_segments();
+                    let pieces = (0..nseg)
+                        .map(|i| match s.kind {
+                            ShapeKind::Polygon => 1,
+                            k => pieces_for(seg_f32(k, &p32, i), tol),
+                        })
+                        .collect();
+                    ShapeT {
+                        kind: s.kind,
+                        pts: p32.iter().map(|p| [T::of(p[0]), T::of(p[1])]).collect(),
+                        fill: s.fill.map(c4),
+                        stroke: s.stroke.map(|st| (c4(st.color), T::of(st.width))),
+                        style: Style::of(&s.stroke.unwrap_or(Stroke::round(Rgba::BLACK, 0.0))),
+                        pieces,
+                        even_odd: s.fill_rule == FillRule::EvenOdd,
+                        fill_paint: add(s.gradients.as_ref().and_then(|g| g.fill.as_ref())),
+                        stroke_paint: add(s.gradients.as_ref().and_then(|g| g.stroke.as_ref())),
+                        fill_texture: s.gradients.as_ref().and_then(|g| g.texture.as_ref()).map(
+                            |t| {
+                                textures.push(TextureT::of(t));
+                                textures.len() - 1
+                            },
+                        ),
+                    }
+                })
+                .collect();
         SceneT {
             width: scene.width,
             height: scene.height,
@@ -118,6 +131,7 @@ impl<T: Real> SceneT<T> {
             shapes,
             groups: super::layer::groups_t(scene, tol),
             paints,
+            textures,
         }
     }
 }
@@ -208,6 +222,8 @@ pub(crate) struct Layer<T> {
     pub color: [T; 4],
     /// The gradient painted instead of `color` (index into [`SceneT::paints`]).
     pub paint: Option<usize>,
+    /// The texture painted instead of `color` (index into [`SceneT::textures`]).
+    pub texture: Option<usize>,
     pub verts: Vec<[T; 2]>,
     /// `(start, len)` of each closed contour in `verts`.
     pub contours: Vec<(u32, u32)>,
@@ -260,6 +276,7 @@ pub(crate) fn layers<T: Real>(sc: &SceneT<T>) -> Vec<Layer<T>> {
                 kind: LayerKind::Fill,
                 color: c,
                 paint: s.fill_paint,
+                texture: s.fill_texture,
                 contours: vec![(0, poly.len() as u32)],
                 verts: poly.clone(),
                 bbox: bb,
@@ -283,6 +300,7 @@ pub(crate) fn layers<T: Real>(sc: &SceneT<T>) -> Vec<Layer<T>> {
                 kind: LayerKind::Stroke,
                 color: c,
                 paint: s.stroke_paint,
+                texture: None,
                 verts: Vec::new(),
                 contours: Vec::new(),
                 bbox: bb,

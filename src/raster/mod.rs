@@ -17,7 +17,8 @@
 //!   drawn as SVG draws them, as a union of per-edge pieces (see `stroke`).
 //! - Per shape the fill is painted first, then the stroke. `alpha = coverage * colour.a`,
 //!   `out = colour.rgb * alpha + below * (1 - alpha)` (premultiplied), over the background.
-//!   The colour is the flat one, or a gradient's colour at the pixel centre (`paint`).
+//!   The colour is the flat one, or a gradient's colour at the pixel centre (`paint`), or a
+//!   texture's (`texture`: imported images and patterns, constants for the backward).
 //! - A scene's groups ([`crate::scene::Group`]) paint their shapes onto a transparent layer,
 //!   composited with `opacity × clip × mask` per pixel (see `layer`), by the group's blend
 //!   mode (all sixteen of W3C Compositing Level 1, see `blend`); a flat scene takes the same
@@ -52,6 +53,7 @@ mod layer;
 mod paint;
 mod real;
 mod stroke;
+mod texture;
 mod walk;
 
 #[cfg(test)]
@@ -66,6 +68,8 @@ mod tests_layer_paint;
 mod tests_paint;
 #[cfg(test)]
 mod tests_stroke;
+#[cfg(test)]
+mod tests_texture;
 
 use crate::image::Image;
 use crate::scene::{ParamGroup, Params, Point, Scene, Shape};

@@ -8,7 +8,7 @@
 //! derivative of `t`). The gradient transform is fixed (not a parameter).
 
 use super::real::Real;
-use crate::scene::{Gradient, GradientGeometry, Spread};
+use crate::scene::{Affine, Gradient, GradientGeometry, Spread};
 
 /// The colour source of one layer's compositing.
 pub(crate) trait Shade<T: Real> {
@@ -37,6 +37,21 @@ impl<T: Real> Shade<T> for Flat<T> {
     }
 }
 
+/// The inverse of an invertible affine map (canvas → paint space), computed in f64.
+pub(crate) fn inverse<T: Real>(m: &Affine) -> [T; 6] {
+    let [a, b, c, d, e, f] = m.0.map(f64::from);
+    let det = a * d - b * c;
+    [
+        d / det,
+        -b / det,
+        -c / det,
+        a / det,
+        (c * f - d * e) / det,
+        (b * e - a * f) / det,
+    ]
+    .map(T::c)
+}
+
 /// A gradient in the working precision; parameters in [`Gradient::params`] order.
 #[derive(Clone, Debug)]
 pub(crate) struct PaintT<T> {
@@ -52,16 +67,6 @@ pub(crate) struct PaintT<T> {
 
 impl<T: Real> PaintT<T> {
     pub fn of(g: &Gradient) -> Self {
-        let [a, b, c, d, e, f] = g.transform.0.map(f64::from);
-        let det = a * d - b * c;
-        let inv = [
-            d / det,
-            -b / det,
-            -c / det,
-            a / det,
-            (c * f - d * e) / det,
-            (b * e - a * f) / det,
-        ];
         let mut geom = [T::zero(); 6];
         for (k, v) in g.geometry.values().into_iter().enumerate() {
             geom[k] = T::of(v);
@@ -69,7 +74,7 @@ impl<T: Real> PaintT<T> {
         PaintT {
             radial: matches!(g.geometry, GradientGeometry::Radial { .. }),
             geom,
-            inv: inv.map(T::c),
+            inv: inverse(&g.transform),
             spread: g.spread,
             offsets: g.stops.iter().map(|s| T::of(s.offset)).collect(),
             colors: g

@@ -56,7 +56,11 @@ pub(super) fn radial(spread: Spread, fr: f32) -> Gradient {
 }
 
 pub(super) fn with(mut s: Shape, fill: Option<Gradient>, stroke: Option<Gradient>) -> Shape {
-    s.gradients = Some(Box::new(Gradients { fill, stroke }));
+    s.gradients = Some(Box::new(Gradients {
+        fill,
+        stroke,
+        texture: None,
+    }));
     s
 }
 

@@ -19,10 +19,12 @@
 mod group;
 pub mod paint;
 mod params;
+pub mod texture;
 
 pub use group::{BlendMode, Clip, Content, FillRule, Group, Mask, MaskKind};
 pub use paint::{Affine, Gradient, GradientGeometry, GradientStop, Gradients, Spread};
 pub use params::{ParamGroup, Params, Trainable};
+pub use texture::{Texture, TextureEdge};
 
 use serde::{Deserialize, Serialize};
 
@@ -235,6 +237,7 @@ impl Shape {
             Box::new(Gradients {
                 fill: g.fill.as_ref().map(|g| g.mapped(&m)),
                 stroke: g.stroke.as_ref().map(|g| g.mapped(&m)),
+                texture: g.texture.as_ref().map(|t| Box::new(t.mapped(&m))),
             })
         });
         Shape {
@@ -450,7 +453,7 @@ impl Shape {
             }
             s.validate().map_err(|e| format!("stroke {e}"))?;
         }
-        Ok(())
+        texture::validate_on(g, self.fill.is_some())
     }
 }
 

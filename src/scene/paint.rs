@@ -76,7 +76,7 @@ impl Affine {
         a * d - b * c
     }
 
-    fn is_valid(&self) -> bool {
+    pub(crate) fn is_valid(&self) -> bool {
         let det = self.det();
         self.0.iter().all(|v| v.is_finite()) && det.is_finite() && det != 0.0
     }
@@ -168,13 +168,16 @@ pub struct Gradient {
     pub stops: Vec<GradientStop>,
 }
 
-/// The gradients of one shape; `None` paints the flat colour.
+/// The paints of one shape beyond its flat colours: gradients, or a fill texture.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Gradients {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub fill: Option<Gradient>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub stroke: Option<Gradient>,
+    /// A sampled raster painting the fill instead ([`super::texture`]; no fill gradient then).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub texture: Option<Box<super::Texture>>,
 }
 
 impl Gradients {

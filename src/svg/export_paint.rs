@@ -9,7 +9,7 @@ use crate::scene::{Gradient, GradientGeometry, Scene, Spread};
 use std::fmt::Write;
 
 /// `v` as the shortest decimal that reads back as the same `f32` (`-0` as `0`).
-fn exact(v: f32) -> String {
+pub(super) fn exact(v: f32) -> String {
     if v == 0.0 { "0".into() } else { format!("{v}") }
 }
 
@@ -27,27 +27,33 @@ pub(super) fn gradient_ids(scene: &Scene) -> Vec<(Option<String>, Option<String>
         .iter()
         .map(|sh| {
             let g = sh.gradients.as_deref();
-            let f = next(g.is_some_and(|g| g.fill.is_some()));
+            let f = next(g.is_some_and(|g| g.fill.is_some() || g.texture.is_some()));
             let s = next(g.is_some_and(|g| g.stroke.is_some()));
             (f, s)
         })
         .collect()
 }
 
-/// Writes the `<defs>` of every gradient of `scene` (nothing when there is none).
+/// Writes the `<defs>` of every gradient and texture of `scene` (nothing when there is none),
+/// in the order of [`gradient_ids`].
 pub(super) fn push_defs(out: &mut String, scene: &Scene) {
-    let all: Vec<&Gradient> = scene
-        .shapes
-        .iter()
-        .filter_map(|s| s.gradients.as_deref())
-        .flat_map(|g| g.iter())
-        .collect();
-    if all.is_empty() {
+    let paints = scene.shapes.iter().filter_map(|s| s.gradients.as_deref());
+    if paints.clone().next().is_none() {
         return;
     }
     out.push_str("<defs>\n");
-    for (k, g) in all.iter().enumerate() {
-        push_gradient(out, g, &format!("g{}", k + 1));
+    let mut k = 0;
+    let mut id = || {
+        k += 1;
+        format!("g{k}")
+    };
+    for g in paints {
+        if let Some(t) = &g.texture {
+            super::export_texture::push_texture(out, t, &id());
+        }
+        for g in g.iter() {
+            push_gradient(out, g, &id());
+        }
     }
     out.push_str("</defs>\n");
 }

@@ -1,7 +1,7 @@
 //! Scene files: the benchmark scene JSON format, and loading a scene (SVG or JSON) from disk with
 //! a size cap.
 
-use super::{SvgError, SvgImport, import_svg};
+use super::{ImageLimits, SvgError, SvgImport, import_svg_in};
 use crate::scene::{Point, Rgba, Scene, Shape};
 use std::path::Path;
 
@@ -71,6 +71,12 @@ pub fn load_scene(path: &Path) -> Result<Scene, SvgError> {
     load_import(path).map(|i| i.scene)
 }
 
+/// [`load_import`] for a scene that will be drawn at `resolution` device pixels per canvas
+/// pixel: pattern tiles are drawn that finely.
+pub fn load_import_at(path: &Path, resolution: f32) -> Result<SvgImport, SvgError> {
+    super::import_pattern::at_resolution(resolution, || load_import(path))
+}
+
 /// [`load_scene`], with the SVG import's warnings (none for JSON).
 pub fn load_import(path: &Path) -> Result<SvgImport, SvgError> {
     let text = read_text_capped(path, SCENE_FILE_MAX_BYTES)?;
@@ -83,7 +89,7 @@ pub fn load_import(path: &Path) -> Result<SvgImport, SvgError> {
             warnings: Vec::new(),
         })
     } else {
-        import_svg(&text)
+        import_svg_in(&text, path.parent(), ImageLimits::DEFAULT)
     }
 }
 

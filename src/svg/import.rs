@@ -1,13 +1,15 @@
 //! SVG text → [`Scene`] (the walk over usvg's tree that [`super`]'s module docs describe).
 
+use super::SvgError;
+use super::images::{ImageLimits, Images};
 use super::import_paint::{Painted, gradients, painted};
 use super::walk::{Mode, Walk};
-use super::{SvgError, parse_usvg_repaired};
 use crate::scene::{
     Content, FillRule, Gradient, LineCap, LineJoin, MAX_SIDE, Point, Rgba, Scene, Shape, ShapeKind,
     Stroke,
 };
 use resvg::usvg;
+use std::sync::Arc;
 
 /// One subpath as cubic segments `[p1, p2, p3]` after a start point.
 #[derive(Clone, Debug)]
@@ -183,7 +185,7 @@ pub(super) fn path_shapes(
             fill: Some(f.color),
             stroke: st,
             fill_rule: fill_rule(p),
-            gradients: gradients(f.gradient, sg.flatten()),
+            gradients: with_texture(gradients(f.gradient, sg.flatten()), f.texture),
             stage: None,
         });
         if on_fill.is_some() {
@@ -203,7 +205,7 @@ pub(super) fn path_shapes(
             fill: Some(paint.color),
             stroke: None,
             fill_rule: FillRule::NonZero,
-            gradients: gradients(paint.gradient, None),
+            gradients: with_texture(gradients(paint.gradient, None), paint.texture),
             stage: None,
         }),
     }
@@ -362,9 +364,21 @@ pub fn from_svg(text: &str) -> Result<Scene, SvgError> {
     import_svg(text).map(|i| i.scene)
 }
 
-/// [`from_svg`], with the import's warnings.
+/// [`from_svg`], with the import's warnings. Reads no file: an `<image>` naming one is dropped
+/// with a warning.
 pub fn import_svg(text: &str) -> Result<SvgImport, SvgError> {
-    let parsed = parse_usvg_repaired(text).map_err(SvgError::Parse)?;
+    import_svg_in(text, None, ImageLimits::DEFAULT)
+}
+
+/// [`import_svg`] for an SVG file in `base_dir`: its `<image>`s may name files there (relative
+/// paths); `limits` bound every image (see `images`).
+pub fn import_svg_in(
+    text: &str,
+    base_dir: Option<&std::path::Path>,
+    limits: ImageLimits,
+) -> Result<SvgImport, SvgError> {
+    let images = Arc::new(Images::new(base_dir, limits));
+    let parsed = images.parse(text, 0).map_err(SvgError::Parse)?;
     let tree = parsed.tree;
     let size = tree.size();
     let (fw, fh) = (size.width(), size.height());
@@ -372,8 +386,8 @@ pub fn import_svg(text: &str) -> Result<SvgImport, SvgError> {
     if !(1.0..=MAX_SIDE as f32).contains(&w) || !(1.0..=MAX_SIDE as f32).contains(&h) {
         return Err(SvgError::Size(fw, fh));
     }
-    let mut walk = Walk::new((w, h));
-    for w in parsed.warnings {
+    let mut walk = Walk::new((w, h), Arc::clone(&images));
+    for w in parsed.warnings.into_iter().chain(images.take_warnings()) {
         walk.warn(w);
     }
     for w in super::import_paint::dangling_paint_warnings(text) {
@@ -414,6 +428,19 @@ pub fn import_svg(text: &str) -> Result<SvgImport, SvgError> {
     };
     scene.validate()?;
     Ok(SvgImport { scene, warnings })
+}
+
+/// `g` with the fill texture `t`, if there is one.
+fn with_texture(
+    g: Option<Box<crate::scene::Gradients>>,
+    t: Option<Box<crate::scene::Texture>>,
+) -> Option<Box<crate::scene::Gradients>> {
+    let Some(t) = t else {
+        return g;
+    };
+    let mut g = g.unwrap_or_default();
+    g.texture = Some(t);
+    Some(g)
 }
 
 fn is_canvas_rect(s: &Shape, w: f32, h: f32) -> bool {

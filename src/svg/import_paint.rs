@@ -6,9 +6,12 @@
 //! path's fill, also for strokes), a gradient with one stop as that stop's colour, `r = 0` as
 //! the last stop's colour, and a missing or invalid reference as the fallback colour or none.
 //! Here the gradient's transform is composed with the path's canvas transform and the paint
-//! opacity multiplied into every stop. Patterns are not drawn: they become grey.
+//! opacity multiplied into every stop. A pattern becomes a repeating texture (`import_pattern`) on fills; on strokes (which take no
+//! texture) its flat stand-in, the tile's mean colour.
 
-use crate::scene::{Affine, Gradient, GradientGeometry, GradientStop, Gradients, Rgba, Spread};
+use crate::scene::{
+    Affine, Gradient, GradientGeometry, GradientStop, Gradients, Rgba, Spread, Texture,
+};
 use resvg::usvg;
 
 /// A path's paint as the scene draws it: the flat colour (a gradient's stand-in) and the
@@ -16,6 +19,8 @@ use resvg::usvg;
 pub(super) struct Painted {
     pub color: Rgba,
     pub gradient: Option<Gradient>,
+    /// A pattern's tile (see `import_pattern`), painted instead of `color` on fills.
+    pub texture: Option<Box<Texture>>,
 }
 
 fn c8(c: usvg::Color, a: f32) -> Rgba {
@@ -34,12 +39,17 @@ pub(super) fn painted(paint: &usvg::Paint, opacity: f32, ts: usvg::Transform) ->
             return Painted {
                 color: c8(*c, opacity),
                 gradient: None,
+                texture: None,
             };
         }
-        usvg::Paint::Pattern(_) => {
+        usvg::Paint::Pattern(p) => {
+            let texture = super::import_pattern::texture(p, ts, opacity);
             return Painted {
-                color: Rgba::new(0.5, 0.5, 0.5, opacity).clamped(),
+                color: texture
+                    .as_ref()
+                    .map_or(Rgba::TRANSPARENT, Texture::mean_color),
                 gradient: None,
+                texture: texture.map(Box::new),
             };
         }
         usvg::Paint::LinearGradient(g) => (
@@ -88,10 +98,12 @@ pub(super) fn painted(paint: &usvg::Paint, opacity: f32, ts: usvg::Transform) ->
         Ok(()) => Painted {
             color,
             gradient: Some(gradient),
+            texture: None,
         },
         Err(_) => Painted {
             color: Rgba::TRANSPARENT,
             gradient: None,
+            texture: None,
         },
     }
 }
@@ -134,7 +146,13 @@ pub(super) fn gradients(
     fill: Option<Gradient>,
     stroke: Option<Gradient>,
 ) -> Option<Box<Gradients>> {
-    (fill.is_some() || stroke.is_some()).then(|| Box::new(Gradients { fill, stroke }))
+    (fill.is_some() || stroke.is_some()).then(|| {
+        Box::new(Gradients {
+            fill,
+            stroke,
+            texture: None,
+        })
+    })
 }
 
 /// The XML tree of `text` (which passed the guard), for warnings about what usvg drops.

@@ -68,28 +68,42 @@
 //!   [`crate::scene::Gradient`]s in canvas pixels, as usvg resolved them (`href` inheritance,
 //!   units, stop clamping; see `import_paint`), the flat colour beside them being the mean stop
 //!   colour; a stroke drawn as a filled outline keeps its gradient as the outline's fill.
-//!   Patterns become grey; images, text without fonts and filters are ignored, each with a
-//!   warning naming the element (`filter on #id ignored …`; at most 16, then a count): the
-//!   content is drawn as it is, unfiltered.
+//! - **images and patterns** become [`crate::scene::Texture`]s: an `<image>` its rectangle
+//!   filled with its pixels (`import_image`; where it may come from and the bounds on decoding
+//!   it in `images`: `data:` URLs, files only beside an SVG file the caller names), an SVG image
+//!   its content clipped to its viewport; a pattern on a fill its tile drawn by our rasteriser,
+//!   repeated (`import_pattern`; on a stroke its mean colour). They export as image-filled
+//!   `<pattern>`s (`export_texture`).
+//!   Text without fonts and filters are ignored, each with a warning naming the element
+//!   (`filter on #id ignored …`; at most 16, then a count): the content is drawn as it is,
+//!   unfiltered.
 //! - if the first shape is a filled rectangle covering the whole canvas (what [`to_svg`] writes
 //!   for the background) it becomes the scene background.
 
 mod export;
 mod export_groups;
 mod export_paint;
+mod export_texture;
 mod file;
 mod guard;
+mod images;
 mod import;
+mod import_image;
 mod import_paint;
+mod import_pattern;
 mod path_data;
 mod profile;
 mod walk;
 
 pub use export::{MAX_PRECISION, SvgOptions, to_svg, with_metadata, written_color};
 
-pub use file::{SCENE_FILE_MAX_BYTES, load_import, load_scene, read_text_capped, scene_from_json};
+pub use file::{
+    SCENE_FILE_MAX_BYTES, load_import, load_import_at, load_scene, read_text_capped,
+    scene_from_json,
+};
 pub use guard::{Parsed, SvgLimits, SvgRejected};
-pub use import::{SvgImport, from_svg, import_svg};
+pub use images::ImageLimits;
+pub use import::{SvgImport, from_svg, import_svg, import_svg_in};
 pub use profile::{ProfileViolation, check_safe_output};
 
 use crate::scene::{MAX_SIDE, SceneError};
@@ -167,10 +181,11 @@ fn render_png_scaled(svg: &str, scale: impl Fn(f32) -> f32) -> Result<Vec<u8>, R
         .map_err(|e| RenderError::Png(e.to_string()))
 }
 
-/// Parses untrusted SVG text with usvg. This is the only place the crate parses SVG: it checks
-/// [`SvgLimits::DEFAULT`] before any geometry work ([`guard`]), never reads files and never decodes
-/// embedded images (`<image href="/dev/zero">` must not be followed), so every caller — HTTP
-/// submissions, previews, the worker, evaluation, tracing — is bounded on hostile input.
+/// Parses untrusted SVG text with usvg. It checks [`SvgLimits::DEFAULT`] before any geometry
+/// work ([`guard`]), never reads files and never decodes embedded images (`<image
+/// href="/dev/zero">` must not be followed), so every caller — HTTP submissions, previews, the
+/// worker, evaluation, tracing — is bounded on hostile input. The import ([`import_svg`]) is
+/// the one other parse: the same guard, with the image sources and bounds of `images`.
 pub fn parse_usvg(text: &str) -> Result<usvg::Tree, SvgRejected> {
     parse_usvg_repaired(text).map(|p| p.tree)
 }

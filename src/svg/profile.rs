@@ -4,9 +4,10 @@
 //!
 //! - XML without a DTD, entities or processing instructions other than the XML declaration;
 //! - elements from an allowlist (`svg`, `g`, `path`, `rect`, `metadata`, `title`, `desc`, and
-//!   the gradient paint: `defs`, `linearGradient`, `radialGradient`, `stop`) in the SVG
-//!   namespace, each with attributes from its allowlist: no `<script>`, `<foreignObject>`,
-//!   `<image>`, `<use>`, event handlers (`on*`), `href` or `style`, and no `url(…)` value but a
+//!   the paint servers: `defs`, `linearGradient`, `radialGradient`, `stop`, and `pattern` with
+//!   one `image` for textures) in the SVG namespace, each with attributes from its allowlist: no
+//!   `<script>`, `<foreignObject>`, `<use>`, event handlers (`on*`), `style`, no `href` but an
+//!   image's embedded PNG (`data:image/png;base64,…`), and no `url(…)` value but a
 //!   fill or stroke naming a gradient of the same file (`url(#id)`), so nothing runs and nothing
 //!   outside the file is fetched; `id` only on `<g>`, `<path>` and gradients, and only a plain
 //!   name (a letter, then letters, digits, `_`, `-`);
@@ -55,6 +56,14 @@ fn allowed(tag: &str, attr: &str) -> bool {
                 | "fr"
         ),
         "stop" => matches!(attr, "offset" | "stop-color" | "stop-opacity"),
+        "pattern" => matches!(
+            attr,
+            "id" | "patternUnits" | "width" | "height" | "patternTransform"
+        ),
+        "image" => matches!(
+            attr,
+            "width" | "height" | "preserveAspectRatio" | "image-rendering" | "href"
+        ),
         _ => false,
     }
 }
@@ -134,6 +143,14 @@ fn local_paint_ref(attr: &str, value: &str) -> bool {
             .is_some_and(plain_id)
 }
 
+/// An image's `href`: a PNG inside the file (`data:image/png;base64,…`), nothing fetched.
+fn embedded_png(v: &str) -> bool {
+    v.strip_prefix("data:image/png;base64,").is_some_and(|b| {
+        b.bytes()
+            .all(|c| c.is_ascii_alphanumeric() || matches!(c, b'+' | b'/' | b'='))
+    })
+}
+
 fn check_element(node: Node) -> Result<(), ProfileViolation> {
     let tag = node.tag_name().name();
     if node.tag_name().namespace() != Some(SVG_NS) {
@@ -152,6 +169,8 @@ fn check_element(node: Node) -> Result<(), ProfileViolation> {
             | "linearGradient"
             | "radialGradient"
             | "stop"
+            | "pattern"
+            | "image"
     ) {
         return Err(ProfileViolation::Element(tag.to_string()));
     }
@@ -167,6 +186,13 @@ fn check_element(node: Node) -> Result<(), ProfileViolation> {
             return Err(ProfileViolation::Attribute { tag, name });
         }
         let v = a.value();
+        if name == "href" {
+            if !embedded_png(v) {
+                let name = owned(name);
+                return Err(ProfileViolation::Reference { tag, name });
+            }
+            continue;
+        }
         if name == "id" && !plain_id(v) {
             let id = owned(v);
             return Err(ProfileViolation::Id { tag, id });

@@ -1,9 +1,11 @@
 //! The walk over usvg's tree: groups become scene [`Group`]s (opacity, clip, mask) where they
 //! need a layer, paths become shapes (see `import`), and what cannot be drawn is warned about.
 
+use super::images::Images;
 use super::import::{clip_path_shape, clip_shape, path_shapes};
 use crate::scene::{BlendMode, Clip, Content, Group, Mask, MaskKind, Shape};
 use resvg::usvg;
+use std::sync::Arc;
 use usvg::Transform;
 
 /// Most warnings one import reports; the rest are counted in a last one.
@@ -24,15 +26,18 @@ pub(super) struct Walk {
     canvas: (f32, f32),
     /// Whether usvg laid out any text (it drops text when no font is loaded).
     drew_text: bool,
+    /// Where this import's images come from (see `images`).
+    images: Arc<Images>,
 }
 
 impl Walk {
-    pub(super) fn new(canvas: (f32, f32)) -> Self {
+    pub(super) fn new(canvas: (f32, f32), images: Arc<Images>) -> Self {
         Walk {
             warnings: Vec::new(),
             more_warnings: 0,
             canvas,
             drew_text: false,
+            images,
         }
     }
 
@@ -122,13 +127,11 @@ impl Walk {
                     Mode::Clip => clip_shape(p, ts, &mut out.shapes),
                 },
                 usvg::Node::Path(_) => {}
+                // A clip path clips by shapes and text only.
+                usvg::Node::Image(_) if mode == Mode::Clip => {}
                 usvg::Node::Image(i) => {
-                    let id = i.id();
-                    self.warn(if id.is_empty() {
-                        "an <image> ignored (images are not drawn)".to_string()
-                    } else {
-                        format!("<image> #{id} ignored (images are not drawn)")
-                    });
+                    let images = Arc::clone(&self.images);
+                    super::import_image::image(self, &images, i, ts, out);
                 }
                 usvg::Node::Text(t) => {
                     self.drew_text = true;
@@ -283,6 +286,10 @@ fn blend_mode(b: usvg::BlendMode) -> Option<BlendMode> {
 /// Multiplies `opacity` into the one layer `s` paints; false when it paints two (a visible
 /// fill and a stroke, which overlap).
 fn fold_opacity(s: &mut Shape, opacity: f32) -> bool {
+    // A texture paints instead of the flat colour that would carry its opacity: a layer does.
+    if s.gradients.as_ref().is_some_and(|g| g.texture.is_some()) {
+        return false;
+    }
     let on_fill = match (&mut s.fill, &mut s.stroke) {
         (Some(f), None) => {
             f.a *= opacity;
@@ -309,7 +316,7 @@ fn fold_opacity(s: &mut Shape, opacity: f32) -> bool {
 }
 
 /// The rectangle `r` in user space `ts`, as the clip shape of a `<rect>` there.
-fn rect_shape(r: usvg::NonZeroRect, ts: Transform) -> Option<Shape> {
+pub(super) fn rect_shape(r: usvg::NonZeroRect, ts: Transform) -> Option<Shape> {
     let path = usvg::tiny_skia_path::PathBuilder::from_rect(r.to_rect());
     let mut shapes = Vec::new();
     clip_path_shape(&path, ts, crate::scene::FillRule::NonZero, &mut shapes);

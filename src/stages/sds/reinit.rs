@@ -87,5 +87,6 @@ fn restart_paint(scene: &Scene, i: usize, fresh: &mut Shape, params: &mut Params
     fresh.gradients = Some(Box::new(crate::scene::Gradients {
         fill: Some(g),
         stroke: None,
+        texture: None,
     }));
 }

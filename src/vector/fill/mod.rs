@@ -101,6 +101,7 @@ impl FillKind {
             sh.gradients = Some(Box::new(Gradients {
                 fill: Some(g),
                 stroke,
+                texture: None,
             }));
             n += 1;
         }

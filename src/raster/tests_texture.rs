@@ -1,0 +1,102 @@
+//! Texture fills: sampling (bilinear, nearest, pad, repeat) and the finite-difference check of
+//! a path drawn over and under an image (the texels are constants; every shape parameter,
+//! the textured shape's own outline included, gets its gradient).
+
+use super::tests::fd_check;
+use super::*;
+use crate::scene::{Affine, Gradients, Rgba, Stroke, Texture, TextureEdge};
+
+/// A 2×2 texture (red, green / blue, half-transparent white) scaled by `k` and moved to `at`.
+fn texture(k: f32, at: (f32, f32), edge: TextureEdge, smooth: bool) -> Texture {
+    Texture {
+        width: 2,
+        height: 2,
+        pixels: vec![
+            255, 0, 0, 255, 0, 255, 0, 255, 0, 0, 255, 255, 128, 128, 128, 128,
+        ],
+        transform: Affine([k, 0.0, 0.0, k, at.0, at.1]),
+        edge,
+        smooth,
+    }
+}
+
+fn textured(mut s: Shape, t: Texture) -> Shape {
+    s.fill = Some(t.mean_color());
+    s.gradients = Some(Box::new(Gradients {
+        fill: None,
+        stroke: None,
+        texture: Some(Box::new(t)),
+    }));
+    s
+}
+
+fn pixel(img: &crate::image::Image, x: u32, y: u32) -> [f32; 4] {
+    let i = 4 * (y * img.width + x) as usize;
+    [
+        img.data[i],
+        img.data[i + 1],
+        img.data[i + 2],
+        img.data[i + 3],
+    ]
+}
+
+#[test]
+fn nearest_and_bilinear_sampling_with_pad_and_repeat() {
+    let mut s = Scene::new(8, 8, Rgba::TRANSPARENT).unwrap();
+    let rect = Shape::square(0.0, 0.0, 8.0, Rgba::BLACK).unwrap();
+    s.shapes.push(textured(
+        rect.clone(),
+        texture(2.0, (0.0, 0.0), TextureEdge::Pad, false),
+    ));
+    s.validate().unwrap();
+    let img = render(&s);
+    assert_eq!(pixel(&img, 0, 0), [1.0, 0.0, 0.0, 1.0]);
+    assert_eq!(pixel(&img, 3, 0), [0.0, 1.0, 0.0, 1.0]);
+    // Pad: the last texel continues.
+    assert_eq!(pixel(&img, 7, 0), [0.0, 1.0, 0.0, 1.0]);
+    let w = pixel(&img, 7, 7);
+    assert!(
+        (w[3] - 128.0 / 255.0).abs() < 1e-3 && (w[0] - w[3]).abs() < 1e-3,
+        "{w:?}"
+    );
+    // Repeat: the tile starts again at x = 4.
+    s.shapes[0] = textured(
+        rect.clone(),
+        texture(2.0, (0.0, 0.0), TextureEdge::Repeat, false),
+    );
+    assert_eq!(pixel(&render(&s), 4, 0), [1.0, 0.0, 0.0, 1.0]);
+    // Bilinear: halfway between the red and green texel centres (x = 1 and 3, pixel 2's
+    // centre at 2.5 is 3/4 of the way).
+    s.shapes[0] = textured(rect, texture(2.0, (0.0, 0.0), TextureEdge::Pad, true));
+    let p = pixel(&render(&s), 2, 0);
+    assert!(
+        (p[0] - 0.25).abs() < 1e-3 && (p[1] - 0.75).abs() < 1e-3,
+        "{p:?}"
+    );
+}
+
+#[test]
+fn finite_differences_over_and_under_an_image() {
+    let mut s = Scene::new(16, 14, Rgba::new(0.9, 0.9, 0.8, 1.0)).unwrap();
+    s.shapes
+        .push(Shape::circle(5.2, 6.1, 4.3, 4, Rgba::new(0.2, 0.4, 0.9, 0.8)).unwrap());
+    let img = Shape::circle(8.3, 7.1, 5.6, 4, Rgba::BLACK).unwrap();
+    s.shapes.push(textured(
+        img,
+        texture(3.1, (2.3, 1.7), TextureEdge::Pad, true),
+    ));
+    let line = Shape::open_cubic(
+        vec![
+            Point::new(1.0, 12.0),
+            Point::new(6.0, 3.0),
+            Point::new(10.0, 13.0),
+            Point::new(12.6, 4.2),
+        ],
+        Stroke::round(Rgba::new(0.9, 0.1, 0.1, 0.7), 2.0),
+    )
+    .unwrap();
+    s.shapes.push(line);
+    let (checked, bad) = fd_check(&s, 5);
+    assert!(checked > 30, "{checked}");
+    assert!(bad.is_empty(), "{bad:#?}");
+}

@@ -1,0 +1,115 @@
+//! `<pattern>` paint → a repeating [`Texture`]: the pattern's tile is imported by the same walk
+//! (usvg has resolved `href` inheritance of attributes and children, `patternUnits`,
+//! `patternContentUnits`, `viewBox` and `preserveAspectRatio`) and drawn by our own rasteriser
+//! at the resolution the tile has on the canvas (as resvg does: the tile's size times the scale
+//! of the path's transform and `patternTransform`, rounded to whole pixels), then sampled with
+//! [`TextureEdge::Repeat`]. The content overflowing the tile is cut (`overflow` is ignored, as
+//! in resvg). Patterns inside pattern tiles nest [`MAX_DEPTH`] deep; deeper ones paint
+//! nothing.
+
+use super::images::{ImageLimits, Images};
+use super::walk::{Mode, Walk};
+use crate::scene::{Affine, Content, Rgba, Scene, Texture, TextureEdge};
+use resvg::usvg;
+use std::cell::Cell;
+use std::sync::Arc;
+use usvg::Transform;
+
+/// Patterns inside pattern tiles inside …, at most this deep.
+pub const MAX_DEPTH: u32 = 4;
+/// Largest tile side and tile area, in pixels.
+const MAX_TILE_SIDE: f32 = 2048.0;
+const MAX_TILE_PIXELS: f32 = 1024.0 * 1024.0;
+
+thread_local! {
+    static DEPTH: Cell<u32> = const { Cell::new(0) };
+    /// Device pixels per canvas pixel the imported scene will be drawn at (see [`at_resolution`]).
+    static RESOLUTION: Cell<f32> = const { Cell::new(1.0) };
+}
+
+/// Runs `f` (an import on this thread) with pattern tiles drawn at `resolution` device pixels
+/// per canvas pixel, for a scene that will be drawn scaled (`render --size`): a tile drawn at
+/// the canvas's own resolution and magnified would be blurred.
+pub fn at_resolution<R>(resolution: f32, f: impl FnOnce() -> R) -> R {
+    let r = if resolution.is_finite() && resolution > 0.0 {
+        resolution.min(16.0)
+    } else {
+        1.0
+    };
+    let old = RESOLUTION.with(|c| c.replace(r));
+    let out = f();
+    RESOLUTION.with(|c| c.set(old));
+    out
+}
+
+/// The texture that paints `p` at `opacity` on a path in user space `ts`; `None` when the tile
+/// is empty, degenerate or nested too deep.
+pub(super) fn texture(p: &usvg::Pattern, ts: Transform, opacity: f32) -> Option<Texture> {
+    let depth = DEPTH.with(Cell::get);
+    if depth >= MAX_DEPTH {
+        return None;
+    }
+    DEPTH.with(|d| d.set(depth + 1));
+    let t = tile(p, ts, opacity);
+    DEPTH.with(|d| d.set(depth));
+    t
+}
+
+fn tile(p: &usvg::Pattern, ts: Transform, opacity: f32) -> Option<Texture> {
+    let m = ts.pre_concat(p.transform());
+    let rect = p.rect();
+    let (mut sx, mut sy) = m.get_scale();
+    let res = RESOLUTION.with(Cell::get);
+    (sx, sy) = (sx * res, sy * res);
+    // Keep the tile within its bounds, at one scale for both axes.
+    let (w, h) = (rect.width() * sx, rect.height() * sy);
+    let k = (MAX_TILE_SIDE / w.max(h))
+        .min((MAX_TILE_PIXELS / (w * h)).sqrt())
+        .min(1.0);
+    if !(k.is_finite() && k > 0.0) {
+        return None;
+    }
+    (sx, sy) = (sx * k, sy * k);
+    let tw = (rect.width() * sx).round();
+    let th = (rect.height() * sy).round();
+    if !(tw >= 1.0 && th >= 1.0) {
+        return None;
+    }
+    let mut walk = Walk::new((tw, th), Arc::new(Images::new(None, ImageLimits::DEFAULT)));
+    let mut content = Content::default();
+    walk.group(
+        p.root(),
+        Transform::from_scale(sx, sy),
+        Mode::Draw,
+        &mut content,
+    );
+    let scene = Scene {
+        width: tw as u32,
+        height: th as u32,
+        background: Rgba::TRANSPARENT,
+        shapes: content.shapes,
+        groups: content.groups,
+    };
+    scene.validate().ok()?;
+    let img = crate::raster::render(&scene);
+    let q = |v: f32| (v * opacity * 255.0).round().clamp(0.0, 255.0) as u8;
+    let to_canvas = m
+        .pre_translate(rect.x(), rect.y())
+        .pre_scale(1.0 / sx, 1.0 / sy);
+    let t = Texture {
+        width: scene.width,
+        height: scene.height,
+        pixels: img.data.iter().map(|v| q(*v)).collect(),
+        transform: Affine([
+            to_canvas.sx,
+            to_canvas.ky,
+            to_canvas.kx,
+            to_canvas.sy,
+            to_canvas.tx,
+            to_canvas.ty,
+        ]),
+        edge: TextureEdge::Repeat,
+        smooth: true,
+    };
+    t.validate().ok().map(|()| t)
+}
