@@ -461,6 +461,40 @@ impl Tools {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::cli::bench::BenchCommand as BenchCommandAlias;
+
+    #[test]
+    fn small_runs_start_from_both_inits_and_trim_to_each_byte_budget() {
+        use clap::Parser;
+        let argv = [
+            "vectorfusion",
+            "bench",
+            "vectorize",
+            "--rd",
+            "--images",
+            "x",
+            "--vtracer-init",
+        ];
+        let cmd = crate::cli::Cli::parse_from(argv).command;
+        let crate::cli::Command::Bench(BenchCommandAlias::Vectorize(a)) = cmd else {
+            panic!("not bench vectorize");
+        };
+        let base = live_base(&a);
+        let runs = small_runs(&a, &base, &[8, 16], &[2048]);
+        let labels: Vec<&str> = runs.iter().map(|(l, _)| l.as_str()).collect();
+        let want = [
+            "bytes 2048",
+            "vtracer-init paths 8",
+            "vtracer-init paths 16",
+            "vtracer-init bytes 2048",
+        ];
+        assert_eq!(labels, want);
+        let (_, last) = &runs[3];
+        assert_eq!(last.init, InitMode::Vtracer);
+        assert_eq!((last.max_bytes, last.budget.max_paths()), (Some(2048), 16));
+        assert_eq!(runs[0].1.init, base.init);
+        assert!(small_runs(&a, &base, &[8], &[]).len() == 1);
+    }
 
     #[test]
     fn lists_are_checked() {
