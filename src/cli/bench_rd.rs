@@ -44,7 +44,7 @@ use super::bench_vectorize::{
 };
 use super::vectorize::load_input;
 use super::{CliError, ResultExt};
-use crate::stages::live::{LiveConfig, PathBudget};
+use crate::stages::live::{InitMode, LiveConfig, PathBudget};
 use peers::{ImageTracer, probe_potrace};
 use serde::Serialize;
 use sets::{select_sets, spread};
@@ -98,6 +98,10 @@ pub struct RdArgs {
     /// Print every setting's means, not only live's and the peers' envelope points.
     #[arg(long)]
     pub all_rows: bool,
+    /// Also run ours under each of these byte budgets (`--max-bytes`, comma-separated), from
+    /// the largest `--paths` budget; with `--vtracer-init` also started from vtracer's trace.
+    #[arg(long)]
+    pub max_bytes: Option<String>,
     /// Sizes (KB, raw or gzip) at which the summary compares envelopes.
     #[arg(long, default_value = "2,4,8,12,16")]
     pub kb: String,
@@ -184,6 +188,43 @@ fn names(text: &str) -> Vec<String> {
         .collect()
 }
 
+/// Our small-budget runs besides the plain `--paths` ones: each path budget started from
+/// vtracer's trace (`--vtracer-init`), and each `--max-bytes` budget from the largest path
+/// budget (from both starts with `--vtracer-init`).
+fn small_runs(
+    a: &BenchVectorizeArgs,
+    base: &LiveConfig,
+    budgets: &[usize],
+    byte_budgets: &[usize],
+) -> Vec<(String, LiveConfig)> {
+    let mut inits = vec![("", base.init)];
+    if a.vtracer_init && base.init != InitMode::Vtracer {
+        inits.push(("vtracer-init ", InitMode::Vtracer));
+    }
+    let mut out = Vec::new();
+    for &(prefix, init) in &inits {
+        let start = LiveConfig {
+            init,
+            ..base.clone()
+        };
+        if !prefix.is_empty() {
+            for &b in budgets {
+                let cfg = with_budget(&start, PathBudget::fixed(b));
+                out.push((format!("{prefix}paths {b}"), cfg));
+            }
+        }
+        let most = budgets.iter().copied().max().unwrap_or(24);
+        for &m in byte_budgets {
+            let cfg = LiveConfig {
+                max_bytes: Some(m),
+                ..with_budget(&start, PathBudget::fixed(most))
+            };
+            out.push((format!("{prefix}bytes {m}"), cfg));
+        }
+    }
+    out
+}
+
 /// Entry point of `bench vectorize --rd`.
 pub fn run(a: &BenchVectorizeArgs) -> Result<(), CliError> {
     let budgets = parse_budgets(&a.paths)?;
@@ -192,7 +233,16 @@ pub fn run(a: &BenchVectorizeArgs) -> Result<(), CliError> {
         return Err(CliError::Usage("--limit: must be at least 1".into()));
     }
     let sets = select_sets(a)?;
-    let tools = Tools::probe(a, &grid, &sets, &budgets);
+    let byte_budgets = match &a.rd.max_bytes {
+        Some(text) => parse_list(
+            "--max-bytes",
+            text,
+            |&v| crate::vector::check_max_bytes(v).is_ok(),
+            "a byte budget the vector stage accepts",
+        )?,
+        None => Vec::new(),
+    };
+    let tools = Tools::probe(a, &grid, &sets, &budgets, &byte_budgets);
     let mut samples: Vec<RdSample> = Vec::new();
     let mut set_sizes: Vec<(String, usize)> = Vec::new();
     for (set, files) in sets {
@@ -318,6 +368,7 @@ impl Tools {
         grid: &Grid,
         sets: &[(String, Vec<PathBuf>)],
         budgets: &[usize],
+        byte_budgets: &[usize],
     ) -> Self {
         let mut skipped: Vec<(String, String)> = Vec::new();
         let imagetracer = grid
@@ -355,6 +406,7 @@ impl Tools {
                 live_runs.push((label, with_budget(&base, PathBudget::fixed(b))));
             }
         }
+        live_runs.extend(small_runs(a, &base, budgets, byte_budgets));
         if a.auto {
             live_runs.push(("auto".into(), with_budget(&base, PathBudget::auto())));
         }
@@ -409,6 +461,40 @@ impl Tools {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::cli::bench::BenchCommand as BenchCommandAlias;
+
+    #[test]
+    fn small_runs_start_from_both_inits_and_trim_to_each_byte_budget() {
+        use clap::Parser;
+        let argv = [
+            "vectorfusion",
+            "bench",
+            "vectorize",
+            "--rd",
+            "--images",
+            "x",
+            "--vtracer-init",
+        ];
+        let cmd = crate::cli::Cli::parse_from(argv).command;
+        let crate::cli::Command::Bench(BenchCommandAlias::Vectorize(a)) = cmd else {
+            panic!("not bench vectorize");
+        };
+        let base = live_base(&a);
+        let runs = small_runs(&a, &base, &[8, 16], &[2048]);
+        let labels: Vec<&str> = runs.iter().map(|(l, _)| l.as_str()).collect();
+        let want = [
+            "bytes 2048",
+            "vtracer-init paths 8",
+            "vtracer-init paths 16",
+            "vtracer-init bytes 2048",
+        ];
+        assert_eq!(labels, want);
+        let (_, last) = &runs[3];
+        assert_eq!(last.init, InitMode::Vtracer);
+        assert_eq!((last.max_bytes, last.budget.max_paths()), (Some(2048), 16));
+        assert_eq!(runs[0].1.init, base.init);
+        assert!(small_runs(&a, &base, &[8], &[]).len() == 1);
+    }
 
     #[test]
     fn lists_are_checked() {
