@@ -19,6 +19,7 @@ pub mod prune;
 pub mod schedule;
 pub mod tracer;
 
+mod border;
 mod config;
 mod run;
 
@@ -34,9 +35,10 @@ use crate::progress::{CancelToken, CheckpointError, ProgressSink};
 use crate::scene::{Rgba, Scene};
 use crate::vector::check::Editability;
 use crate::vector::palette::{self, Background};
+use border::{border_alpha, border_colour};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use run::{Run, border_alpha, border_colour};
+use run::Run;
 
 /// What one stage did.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
