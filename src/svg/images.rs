@@ -188,13 +188,13 @@ impl Images {
 
     /// Decodes a raster image into premultiplied RGBA8 (first frame of a GIF), under the
     /// allocation limit.
-    pub(super) fn decode(&self, kind: &ImageKind) -> Result<(u32, u32, Vec<u8>), String> {
+    pub(super) fn decode(&self, kind: &ImageKind) -> Result<(u32, u32, Vec<u8>), ImageError> {
         let (data, format) = match kind {
             ImageKind::PNG(d) => (d, image::ImageFormat::Png),
             ImageKind::JPEG(d) => (d, image::ImageFormat::Jpeg),
             ImageKind::GIF(d) => (d, image::ImageFormat::Gif),
             ImageKind::WEBP(d) => (d, image::ImageFormat::WebP),
-            ImageKind::SVG(_) => return Err("an SVG image is not a raster".into()),
+            ImageKind::SVG(_) => return Err(ImageError::NotRaster),
         };
         let mut reader = image::ImageReader::with_format(std::io::Cursor::new(&data[..]), format);
         let mut limits = image::Limits::default();
@@ -203,7 +203,7 @@ impl Images {
         limits.max_image_width = Some(side);
         limits.max_image_height = Some(side);
         reader.limits(limits);
-        let img = reader.decode().map_err(|e| e.to_string())?.into_rgba8();
+        let img = reader.decode()?.into_rgba8();
         let (w, h) = img.dimensions();
         let mut px = img.into_raw();
         for p in px.chunks_exact_mut(4) {
@@ -214,6 +214,24 @@ impl Images {
         }
         Ok((w, h, px))
     }
+}
+
+/// Why an image's bytes were not read or decoded; the import warning that drops the image names
+/// it.
+#[derive(Debug, thiserror::Error)]
+pub(super) enum ImageError {
+    #[error("{0}")]
+    Read(#[from] std::io::Error),
+    #[error("cannot inflate: {0}")]
+    Inflate(std::io::Error),
+    #[error("{0}")]
+    Decode(#[from] image::ImageError),
+    #[error("larger than {0} bytes")]
+    TooLarge(u64),
+    #[error("not UTF-8 text")]
+    NotUtf8,
+    #[error("an SVG image is not a raster")]
+    NotRaster,
 }
 
 /// The raster format of `data` by its magic bytes.
@@ -231,33 +249,31 @@ fn looks_like_svg(data: &[u8]) -> bool {
 }
 
 /// SVG text from plain or gzip-compressed bytes, at most `max` bytes.
-fn inflate(data: &[u8], max: u64) -> Result<String, String> {
+fn inflate(data: &[u8], max: u64) -> Result<String, ImageError> {
     use std::io::Read;
     let mut out = Vec::new();
     if data.starts_with(&[0x1f, 0x8b]) {
         flate2::read::GzDecoder::new(data)
             .take(max + 1)
             .read_to_end(&mut out)
-            .map_err(|e| format!("cannot inflate: {e}"))?;
+            .map_err(ImageError::Inflate)?;
     } else {
         out.extend_from_slice(data);
     }
     if out.len() as u64 > max {
-        return Err(format!("more than {max} bytes of SVG"));
+        return Err(ImageError::TooLarge(max));
     }
-    String::from_utf8(out).map_err(|_| "not UTF-8 text".into())
+    String::from_utf8(out).map_err(|_| ImageError::NotUtf8)
 }
 
 /// At most `max` bytes of the file at `path`.
-fn read_capped(path: &Path, max: u64) -> Result<Vec<u8>, String> {
+fn read_capped(path: &Path, max: u64) -> Result<Vec<u8>, ImageError> {
     use std::io::Read;
-    let f = std::fs::File::open(path).map_err(|e| e.to_string())?;
+    let f = std::fs::File::open(path)?;
     let mut out = Vec::new();
-    f.take(max + 1)
-        .read_to_end(&mut out)
-        .map_err(|e| e.to_string())?;
+    f.take(max + 1).read_to_end(&mut out)?;
     if out.len() as u64 > max {
-        return Err(format!("larger than {max} bytes"));
+        return Err(ImageError::TooLarge(max));
     }
     Ok(out)
 }
