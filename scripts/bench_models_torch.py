@@ -75,6 +75,8 @@ def main():
     ap.add_argument("--unet-reps", type=int, default=1)
     ap.add_argument("--warmup", type=int, default=1)
     ap.add_argument("--only", default="")
+    ap.add_argument("--unet-precision", choices=["f32", "bf16"], default="f32",
+                    help="the UNet's weights and activations (bf16: the baseline for bf16 compute)")
     ap.add_argument("--json", action="store_true")
     a = ap.parse_args()
     only = [x for x in a.only.split(",") if x]
@@ -134,6 +136,12 @@ def main():
         if want("unet"):
             unet, ctx, added = unet_for(a.arch, s)
             z2 = torch.cat([lat, lat])
+            if a.unet_precision == "bf16":
+                bf = torch.bfloat16
+                unet, ctx, z2 = unet.to(bf), ctx.to(bf), z2.to(bf)
+                if added:
+                    added = {k: v.to(bf) for k, v in added.items()}
+            r["unet_precision"] = a.unet_precision
 
             def step():
                 out = unet(z2, 500, encoder_hidden_states=ctx, added_cond_kwargs=added).sample
