@@ -3,8 +3,8 @@
 //!
 //! Two paths are chosen at run time, per process: the `gemm` crate's micro-kernels (every
 //! matrix product, the im2col and Winograd convolutions' products, and candle's own `matmul`),
-//! built with its AVX-512 kernels (`x86-v4`) beside the AVX2 + FMA ones and picking AVX-512 where
-//! the CPU has `avx512f`; and our element-wise kernels ([`super::math::vectorised`]), which use
+//! with its AVX2 + FMA kernels (and, in a build with the `avx512` feature, its AVX-512 ones,
+//! picked where the CPU has `avx512f`); and our element-wise kernels ([`super::math::vectorised`]), which use
 //! AVX2 + FMA where present. Neither needs a `target-cpu` flag: one binary runs everywhere.
 
 use serde::Serialize;
@@ -17,7 +17,8 @@ pub struct CpuReport {
     /// The SIMD features the kernels could use that this CPU has, among AVX2, FMA, AVX-512F,
     /// AVX-512 BF16, AVX-512 VNNI and AMX (x86-64 only; empty elsewhere).
     pub features: Vec<String>,
-    /// The `gemm` crate's micro-kernel: `avx512f`, `avx2+fma`, or `generic`.
+    /// The `gemm` crate's micro-kernel: `avx512f` (a build with the `avx512` feature on a CPU
+    /// with AVX-512F), `avx2+fma`, or `generic`.
     pub gemm: String,
     /// Our element-wise kernels: `avx2+fma` or `generic`.
     pub elementwise: String,
@@ -37,7 +38,7 @@ impl CpuReport {
         );
         let has = |f: &str| features.iter().any(|x| x == f);
         let avx2 = has("avx2") && has("fma");
-        let gemm = if has("avx512f") {
+        let gemm = if cfg!(feature = "avx512") && has("avx512f") {
             "avx512f"
         } else if avx2 {
             "avx2+fma"
@@ -106,7 +107,7 @@ mod tests {
     fn the_gemm_path_follows_the_features() {
         let r = CpuReport::detect();
         let has = |f: &str| r.features.iter().any(|x| x == f);
-        let want = if has("avx512f") {
+        let want = if cfg!(feature = "avx512") && has("avx512f") {
             "avx512f"
         } else if has("avx2") && has("fma") {
             "avx2+fma"
