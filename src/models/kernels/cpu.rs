@@ -4,8 +4,9 @@
 //! Two paths are chosen at run time, per process: the `gemm` crate's micro-kernels (every
 //! matrix product, the im2col and Winograd convolutions' products, and candle's own `matmul`),
 //! with its AVX2 + FMA kernels (and, in a build with the `avx512` feature, its AVX-512 ones,
-//! picked where the CPU has `avx512f`); and our element-wise kernels ([`super::math::vectorised`]), which use
-//! AVX2 + FMA where present. Neither needs a `target-cpu` flag: one binary runs everywhere.
+//! picked where the CPU has `avx512f`); and our element-wise kernels
+//! ([`super::math::vectorised`]), which use AVX2 + FMA where present. Neither needs a
+//! `target-cpu` flag: one binary runs everywhere.
 
 use serde::Serialize;
 
