@@ -79,7 +79,7 @@ fn plain(scene: &Scene, prec: usize) -> String {
 
 fn main() {
     println!(
-        "file paths | old p1 | new p1 | old p2 | new p2 | new p2 grouped | compact (decimals)  [bytes per path]"
+        "file paths | old p1 | new p1 | old p2 | new p2 | new p2 grouped | compact (1/k px grid: k)  [bytes per path]"
     );
     for path in std::env::args().skip(1) {
         let text = match std::fs::read_to_string(&path) {
@@ -118,7 +118,7 @@ fn main() {
             per(&new(2, false)),
             per(&new(2, true)),
             per(&c.svg),
-            c.precision
+            c.units_per_px
         );
     }
 }

@@ -59,8 +59,9 @@ pub struct VectorizeArgs {
     /// 0, every step].
     #[arg(long)]
     pub converge: Option<f32>,
-    /// Decimal places in the SVG [default: the fewest that keep the render within 0.5/255 and
-    /// every outline simple].
+    /// Decimal places in the SVG, in pixel units [default: integers on the coarsest grid (1 to
+    /// 1/1000 px, the viewBox scaled to it) that keeps the render within 0.5/255 and every
+    /// outline simple].
     #[arg(long)]
     pub precision: Option<u8>,
     /// Also write our render of the result as PNG.

@@ -512,6 +512,20 @@ impl Scene {
         }
     }
 
+    /// The scene `k` times larger: canvas, geometry and stroke widths (the user units of an
+    /// SVG whose `viewBox` is `k` times its size in pixels).
+    pub fn scaled_by(&self, k: u32) -> Scene {
+        let s = k as f32;
+        let f = |p: &Point| Point::new(p.x * s, p.y * s);
+        Scene {
+            width: self.width.saturating_mul(k),
+            height: self.height.saturating_mul(k),
+            background: self.background,
+            shapes: self.shapes.iter().map(|sh| sh.mapped(f, s)).collect(),
+            groups: self.groups.iter().map(|g| g.mapped(&f, s)).collect(),
+        }
+    }
+
     /// Removes shape `i` (if there is one), keeping every group on the shapes it had; a group
     /// left without shapes is dropped.
     pub fn remove_shape(&mut self, i: usize) {

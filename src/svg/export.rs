@@ -27,6 +27,12 @@ pub struct SvgOptions {
     /// with the id `s<k>` (`k` = the stage; a later run of the same stage `s<k>-<n>`, `n` = 2,
     /// 3, …); shapes without a stage stay outside any group.
     pub group_by_stage: bool,
+    /// User units per pixel (`1..=`[`MAX_UNITS_PER_PX`]; 0 counts as 1): with `k > 1` the
+    /// document keeps its `width` and `height` in pixels but its `viewBox` is `k` times larger,
+    /// and every coordinate and stroke width is written `k` times larger. With `precision` 0
+    /// this puts coordinates on a grid of `1/k` px written as integers: no decimal point, and
+    /// grids between the powers of ten (1/2, 1/4, 1/20 px …) that decimals cannot express.
+    pub units_per_px: u32,
 }
 
 impl Default for SvgOptions {
@@ -36,9 +42,13 @@ impl Default for SvgOptions {
             group_by_color: false,
             ids: false,
             group_by_stage: false,
+            units_per_px: 1,
         }
     }
 }
+
+/// Largest [`SvgOptions::units_per_px`] written (larger values are capped).
+pub const MAX_UNITS_PER_PX: u32 = 1000;
 
 /// Largest number of decimals written.
 pub const MAX_PRECISION: u8 = 6;
@@ -294,9 +304,19 @@ fn common<T: PartialEq + Clone>(mut items: impl Iterator<Item = T>) -> Option<T>
 /// Writes `scene` as a standalone SVG document (see the docs of [`crate::svg`]). Never fails
 /// for a scene that passes [`Scene::validate`]; invalid values are written as they are.
 pub fn to_svg(scene: &Scene, opts: &SvgOptions) -> String {
+    let k = opts.units_per_px.clamp(1, MAX_UNITS_PER_PX);
+    let scaled;
+    let size = (scene.width, scene.height);
+    let scene = if k > 1 {
+        scaled = scene.scaled_by(k);
+        &scaled
+    } else {
+        scene
+    };
     let mut w = Writer {
         out: String::with_capacity(128 + 96 * scene.shapes.len()),
         scene,
+        size,
         opts,
         p: opts.precision.min(MAX_PRECISION) as usize,
         groups: 0,
@@ -336,7 +356,10 @@ pub fn to_svg(scene: &Scene, opts: &SvgOptions) -> String {
 /// One scene being written.
 pub(super) struct Writer<'a> {
     pub(super) out: String,
+    /// The scene in user units (`units_per_px` times the pixel scene).
     pub(super) scene: &'a Scene,
+    /// The document's `width` and `height` in pixels.
+    size: (u32, u32),
     opts: &'a SvgOptions,
     /// Decimals of coordinates.
     pub(super) p: usize,
@@ -350,10 +373,11 @@ impl Writer<'_> {
     /// The `<svg>` element and the background rectangle (when the background shows).
     pub(super) fn header(&mut self) {
         let (w, h) = (self.scene.width, self.scene.height);
+        let (pw, ph) = self.size;
         let out = &mut self.out;
         let _ = write!(
             out,
-            r#"<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" viewBox="0 0 {w} {h}">"#
+            r#"<svg xmlns="http://www.w3.org/2000/svg" width="{pw}" height="{ph}" viewBox="0 0 {w} {h}">"#
         );
         out.push('\n');
         let background = self.scene.background;

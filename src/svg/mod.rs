@@ -1,8 +1,10 @@
 //! Scene ⇄ SVG text, plus the benchmark scene JSON format.
 //!
 //! # Export ([`to_svg`], in `export.rs`)
-//! The best picture per byte, deterministic and exact to the chosen decimals
-//! ([`SvgOptions::precision`]):
+//! The best picture per byte, deterministic and exact to the chosen grid
+//! ([`SvgOptions::precision`] decimals of [`SvgOptions::units_per_px`] user units per pixel;
+//! with `k > 1` units per pixel the `viewBox` is `k` times `width` × `height`, which stay in
+//! pixels):
 //! - every coordinate is rounded once to an integer number of `10^-precision` units; each path
 //!   command then takes the shorter of its absolute and relative form, the relative numbers being
 //!   differences of those integers (exact: no error builds up along a path);
@@ -33,7 +35,8 @@
 //! (in a scene with groups, in the order the paths are written, mask content included). A scene
 //! with groups is written by `export_groups` (`<g opacity clip-path mask style>`, `<clipPath>` and
 //! `<mask>` in `<defs>` with ids `clip<k>`/`mask<k>`); even-odd fills get `fill-rule="evenodd"`.
-//! [`crate::vector::export::compact_svg`] picks the fewest decimals that still render the same.
+//! [`crate::vector::export::compact_svg`] picks the coarsest grid (1 px to 1/1000 px, written as
+//! integers) that still renders the same.
 //!
 //! # Import ([`from_svg`], [`import_svg`] with warnings; in `import.rs`)
 //! Parsing, CSS/style attributes, `<rect>`/`<circle>`/`<ellipse>`/`<polygon>`/`<line>`, arcs,

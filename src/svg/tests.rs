@@ -233,6 +233,57 @@ fn export_import_round_trip() {
 }
 
 #[test]
+fn user_units_per_pixel_scale_the_view_box_and_keep_the_scene() {
+    let s = sample_scene();
+    let opts = SvgOptions {
+        precision: 0,
+        units_per_px: 20,
+        ..Default::default()
+    };
+    let svg = to_svg(&s, &opts);
+    assert!(
+        svg.contains(r#"width="64" height="48" viewBox="0 0 1280 960""#),
+        "{svg}"
+    );
+    assert!(svg.contains(r#"<rect width="1280" height="960""#), "{svg}");
+    assert!(svg.contains(r#"stroke-width="60""#), "{svg}");
+    for d in svg.split(r#" d=""#).skip(1) {
+        assert!(!d[..d.find('"').unwrap()].contains('.'), "{d}");
+    }
+    // Read back in pixels: every point on the 1/20 px grid, the stroke width exact.
+    let back = from_svg(&svg).unwrap();
+    assert_eq!((back.width, back.height), (64, 48));
+    // (The triangle comes back as three cubics.)
+    for i in [0, 2] {
+        let (a, b) = (&s.shapes[i], &back.shapes[i]);
+        assert_eq!(a.points.len(), b.points.len());
+        for (p, q) in a.points.iter().zip(&b.points) {
+            assert!((p.x - q.x).abs() <= 0.025 + 1e-4 && (p.y - q.y).abs() <= 0.025 + 1e-4);
+        }
+    }
+    assert!((back.shapes[2].stroke.unwrap().width - 3.0).abs() < 1e-4);
+    // The same picture as the pixel-unit document with two decimals.
+    let px = from_svg(&to_svg(&s, &SvgOptions::default())).unwrap();
+    let (a, b) = (crate::raster::render(&back), crate::raster::render(&px));
+    let mean = a
+        .data
+        .iter()
+        .zip(&b.data)
+        .map(|(x, y)| (x - y).abs() as f64)
+        .sum::<f64>()
+        / a.data.len() as f64;
+    assert!(mean < 0.5 / 255.0, "{mean}");
+    // 0 and 1 unit per pixel write pixels.
+    for k in [0, 1] {
+        let o = SvgOptions {
+            units_per_px: k,
+            ..Default::default()
+        };
+        assert_eq!(to_svg(&s, &o), to_svg(&s, &SvgOptions::default()));
+    }
+}
+
+#[test]
 fn import_handles_primitives_groups_transforms_and_styles() {
     let svg = r#"<svg xmlns="http://www.w3.org/2000/svg" width="100" height="50" viewBox="0 0 200 100">
       <style>.c { fill: #00ff00; }</style>

@@ -1,12 +1,16 @@
-//! Compact SVG text: the fewest decimals that still render like the scene.
+//! Compact SVG text: the coarsest coordinate grid that still renders like the scene.
 //!
-//! [`compact_svg`] writes the scene with [`crate::svg::to_svg`] at 0, 1, 2 and 3 decimals, reads
-//! each back with [`crate::svg::from_svg`], renders it with [`crate::raster::render`] at the
-//! scene's size and keeps the first whose render is within [`Tolerance`] of the reference.
+//! [`compact_svg`] writes the scene with [`crate::svg::to_svg`] on each grid of [`GRIDS`] in
+//! turn, from 1 px down to 1/1000 px, reads each back with [`crate::svg::from_svg`], renders it
+//! with [`crate::raster::render`] at the scene's size and keeps the first whose render is within
+//! [`Tolerance`] of the reference. A grid of `1/k` px is written as integers in a `viewBox` `k`
+//! times the pixel size ([`SvgOptions::units_per_px`]; `width` and `height` stay in pixels):
+//! `1234` instead of `12.34`, one character less per number than decimals on the same grid, and
+//! grids of 1/2, 1/4, 1/5, 1/20, 1/50 px between the powers of ten that decimals cannot write.
 //!
 //! The reference is the scene at full (f32) precision with its colours as the SVG holds them
 //! (8-bit RGB, opacity to 1/1000: [`crate::svg::written_color`]), so the choice is about
-//! coordinates and stroke widths only; colour rounding is the same at every precision.
+//! coordinates and stroke widths only; colour rounding is the same on every grid.
 //!
 //! # Tolerance
 //! Both over the premultiplied RGBA values (0..=1, all four channels of every pixel):
@@ -20,8 +24,12 @@ use crate::image::Image;
 use crate::scene::Scene;
 use crate::svg::{SvgOptions, from_svg, to_svg, written_color};
 
-/// Most decimals [`compact_svg`] tries.
+/// Decimals of the opacities [`compact_svg`] writes (as [`crate::svg::written_color`] at this
+/// precision).
 pub const MAX_DECIMALS: u8 = 3;
+
+/// The grids [`compact_svg`] tries, coarsest first, as user units per pixel (a grid of `1/k` px).
+pub const GRIDS: [u32; 11] = [1, 2, 4, 5, 10, 20, 25, 50, 100, 200, 1000];
 
 /// How close the re-imported render must stay to the reference (see the module docs).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -46,58 +54,78 @@ impl Default for Tolerance {
 pub struct CompactSvg {
     /// The SVG document.
     pub svg: String,
-    /// The decimals used (`0..=MAX_DECIMALS`).
-    pub precision: u8,
+    /// User units per pixel: coordinates lie on a grid of `1/units_per_px` px, written as
+    /// integers (one of [`GRIDS`]).
+    pub units_per_px: u32,
     /// Mean absolute difference of its render from the reference (0..=1 scale).
     pub mean_abs: f64,
     /// Largest absolute difference of its render from the reference (0..=1 scale).
     pub max_abs: f64,
-    /// Whether it is within the tolerance. `false` only when even [`MAX_DECIMALS`] decimals are
-    /// not (then `svg` is written with `MAX_DECIMALS`), e.g. for shapes too thin to survive
-    /// rounding or a scene the importer reads back differently.
+    /// Whether it is within the tolerance (and accepted, see [`compact_svg_checked`]). `false` only when even the finest grid is not (then
+    /// `svg` is written on it), e.g. for shapes too thin to survive rounding or a scene the
+    /// importer reads back differently.
     pub within: bool,
 }
 
-/// The scene written with the fewest decimals (0..=3) whose render stays within
-/// [`Tolerance::default`] of the scene's own render; `opts.precision` is ignored, the other
-/// options are kept. See the module docs.
+/// The scene written on the coarsest grid of [`GRIDS`] whose render stays within
+/// [`Tolerance::default`] of the scene's own render; `opts.precision` and `opts.units_per_px`
+/// are ignored, the other options are kept. See the module docs.
 pub fn compact_svg(scene: &Scene, opts: &SvgOptions) -> CompactSvg {
     compact_svg_within(scene, opts, Tolerance::default())
 }
 
 /// [`compact_svg`] with another tolerance.
 pub fn compact_svg_within(scene: &Scene, opts: &SvgOptions, tol: Tolerance) -> CompactSvg {
+    compact_svg_checked(scene, opts, tol, |_| true)
+}
+
+/// [`compact_svg_within`] where a grid also needs `accept` to hold for the scene read back from
+/// its text (e.g. that rounding made no outline meet itself).
+pub fn compact_svg_checked(
+    scene: &Scene,
+    opts: &SvgOptions,
+    tol: Tolerance,
+    accept: impl Fn(&Scene) -> bool,
+) -> CompactSvg {
     let reference = crate::raster::render(&colors_as_written(scene));
-    let mut last = None;
-    for precision in 0..=MAX_DECIMALS {
-        let o = SvgOptions { precision, ..*opts };
-        let svg = to_svg(scene, &o);
-        let (mean_abs, max_abs) = match from_svg(&svg) {
-            Ok(back) if (back.width, back.height) == (scene.width, scene.height) => {
-                diff(&reference, &crate::raster::render(&back))
-            }
-            _ => (f64::INFINITY, f64::INFINITY),
+    let attempt = |units_per_px: u32| {
+        let o = SvgOptions {
+            precision: 0,
+            units_per_px,
+            ..*opts
         };
-        let within = mean_abs <= tol.mean_abs && max_abs <= tol.max_abs;
-        let out = CompactSvg {
+        let svg = to_svg(scene, &o);
+        let (mean_abs, max_abs, accepted) = match from_svg(&svg) {
+            Ok(back) if (back.width, back.height) == (scene.width, scene.height) => {
+                let (mean, max) = diff(&reference, &crate::raster::render(&back));
+                (mean, max, accept(&back))
+            }
+            _ => (f64::INFINITY, f64::INFINITY, false),
+        };
+        CompactSvg {
             svg,
-            precision,
+            units_per_px,
             mean_abs,
             max_abs,
-            within,
-        };
-        if within {
-            return out;
+            within: mean_abs <= tol.mean_abs && max_abs <= tol.max_abs && accepted,
         }
-        last = Some(out);
+    };
+    // A finer grid stays closer to the scene, so the first grid within is found by bisection
+    // (four tries of eleven); the grid before the one returned was tried and is not within.
+    let (mut lo, mut hi) = (0, GRIDS.len());
+    let mut best: Option<CompactSvg> = None;
+    while lo < hi {
+        let mid = (lo + hi) / 2;
+        let c = attempt(GRIDS[mid]);
+        if c.within {
+            hi = mid;
+            best = Some(c);
+        } else {
+            lo = mid + 1;
+        }
     }
-    last.unwrap_or_else(|| CompactSvg {
-        svg: to_svg(scene, opts),
-        precision: opts.precision,
-        mean_abs: f64::INFINITY,
-        max_abs: f64::INFINITY,
-        within: false,
-    })
+    // None within: the finest grid, marked as not within.
+    best.unwrap_or_else(|| attempt(GRIDS[GRIDS.len() - 1]))
 }
 
 /// `scene` with every colour as the SVG holds it.
@@ -166,7 +194,7 @@ mod tests {
     }
 
     #[test]
-    fn integer_scenes_need_no_decimals_and_fractional_ones_do() {
+    fn integer_scenes_stay_in_pixels_and_fractional_ones_get_a_finer_grid() {
         // The circle's control points are not integers; make every point one.
         let mut int = scene(0.0);
         for sh in &mut int.shapes {
@@ -175,12 +203,21 @@ mod tests {
             }
         }
         let c = compact_svg(&int, &SvgOptions::default());
-        assert_eq!(c.precision, 0, "{c:?}");
+        assert_eq!(c.units_per_px, 1, "{c:?}");
+        assert!(c.svg.contains(r#"viewBox="0 0 64 64""#), "{}", c.svg);
         assert!(c.within && c.max_abs < 1e-4, "{c:?}");
 
         let frac = scene(0.237);
         let c = compact_svg(&frac, &SvgOptions::default());
-        assert!(c.precision >= 1 && c.within, "{c:?}");
+        assert!(c.units_per_px > 1 && c.within, "{c:?}");
+        // Pixels outside, user units inside; integers only.
+        let k = c.units_per_px;
+        let head = format!(r#"width="64" height="64" viewBox="0 0 {} {}""#, 64 * k, 64 * k);
+        assert!(c.svg.contains(&head), "{}", c.svg);
+        for d in c.svg.split(r#" d=""#).skip(1) {
+            let d = &d[..d.find('"').unwrap()];
+            assert!(!d.contains('.'), "{d}");
+        }
         let tol = Tolerance::default();
         assert!(c.mean_abs <= tol.mean_abs && c.max_abs <= tol.max_abs);
         // Check the claim independently: the text it returns renders within the tolerance.
@@ -190,11 +227,13 @@ mod tests {
             &crate::raster::render(&back),
         );
         assert!(mean <= tol.mean_abs && max <= tol.max_abs, "{mean} {max}");
-        // One decimal fewer is out of tolerance (that is why it was not chosen).
+        // The next coarser grid is out of tolerance (that is why it was not chosen).
+        let i = GRIDS.iter().position(|&g| g == k).unwrap();
         let fewer = to_svg(
             &frac,
             &SvgOptions {
-                precision: c.precision - 1,
+                precision: 0,
+                units_per_px: GRIDS[i - 1],
                 ..Default::default()
             },
         );
@@ -212,6 +251,6 @@ mod tests {
             },
         );
         assert!(grouped.svg.contains(r#"id="p1""#));
-        assert_eq!(grouped.precision, c.precision);
+        assert_eq!(grouped.units_per_px, c.units_per_px);
     }
 }

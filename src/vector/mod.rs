@@ -160,14 +160,19 @@ pub fn drop_unseen(scene: &mut Scene, scale: f32) -> usize {
     before - scene.shapes.len()
 }
 
-/// The SVG text of a finished scene: the fewest decimals whose render stays within
-/// [`export::Tolerance`] (see [`export::compact_svg`]), grouped by colour or LIVE stage with
-/// stable ids when `colors.group` says so. Rounding can make an outline meet itself: the text is read back, and
-/// while any outline does, those are made simple again ([`make_simple`]) at the rounded
-/// coordinates and the scene is written anew (three rounds at most).
+/// The SVG text of a finished scene: the coarsest coordinate grid whose render stays within
+/// [`export::Tolerance`] (see [`export::compact_svg`]) and on which no outline that was simple
+/// meets itself, grouped by colour or LIVE stage with stable ids when `colors.group` says so.
+/// Should even the finest grid make an outline meet itself, the text is read back, and while any
+/// outline does, those are made simple again ([`make_simple`]) at the rounded coordinates and
+/// the scene is written anew (three rounds at most).
 pub fn write_svg(scene: &Scene, colors: &ColorPlan) -> String {
     let opts = colors.group.svg_options();
-    let mut text = export::compact_svg(scene, &opts).svg;
+    // A grid that makes a simple outline meet itself is passed over for a finer one.
+    let all_simple = scene.shapes.iter().all(simple::is_simple);
+    let stays_simple = |back: &Scene| !all_simple || back.shapes.iter().all(simple::is_simple);
+    let tol = export::Tolerance::default();
+    let mut text = export::compact_svg_checked(scene, &opts, tol, stays_simple).svg;
     for _ in 0..3 {
         let Ok(mut back) = crate::svg::from_svg(&text) else {
             break;
