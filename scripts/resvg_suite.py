@@ -3,12 +3,15 @@
 resvg's reference PNG at the reference's size.
 
 Usage:
-    git --git-dir=<resvg checkout>/.git archive HEAD crates/resvg/tests/tests | tar -x -C /tmp/resvg-suite
+    git --git-dir=<resvg checkout>/.git archive HEAD crates/resvg/tests/tests \
+        crates/resvg/tests/resources crates/resvg/tests/fonts | tar -x -C /tmp/resvg-suite
     scripts/resvg_suite.py /tmp/resvg-suite/crates/resvg/tests/tests \
-        [--bin target/release/vectorfusion] [--json out.json] [--fails] [--jobs N]
+        [--bin target/release/vectorfusion] [--json out.json] [--fails] [--jobs N] [--fonts DIR]
 
-Reads the folders shapes, painting, structure, paint-servers and masking (filters and text are
-out of scope). A test passes when, over premultiplied RGBA in 0..255 units, the mean absolute
+Reads the folders shapes, painting, structure, paint-servers and masking (filters and the
+`text` folder are out of scope; text inside the other folders is drawn). Text is drawn with the
+fonts of `--fonts` (default: `../fonts` beside TESTS, resvg's test fonts, when it exists) and
+no system fonts (`VF_FONT_DIRS`, `VF_SYSTEM_FONTS=0`), as resvg's harness draws it. A test passes when, over premultiplied RGBA in 0..255 units, the mean absolute
 difference is at most 1.5 and at most 1 % of the pixels differ by more than 16 in some channel;
 an SVG that `render` refuses fails. Prints the pass counts per folder and per feature
 (sub-folder) as Markdown tables; `--fails` lists every failing test with its numbers or error
@@ -125,7 +128,7 @@ def compare(ours, ref):
     return total / (4 * n), off / n
 
 
-def run_one(binary, root, svg, tmp):
+def run_one(binary, root, svg, tmp, env):
     rel = os.path.relpath(svg, root)
     parts = rel.split(os.sep)
     result = {
@@ -143,6 +146,7 @@ def run_one(binary, root, svg, tmp):
             capture_output=True,
             text=True,
             timeout=60,
+            env=env,
         )
         result["warnings"] = [
             line[len("warning: ") :]
@@ -181,7 +185,14 @@ def main():
     ap.add_argument("--json")
     ap.add_argument("--fails", action="store_true")
     ap.add_argument("--jobs", type=int, default=os.cpu_count() or 2)
+    ap.add_argument("--fonts", help="font directory (default: TESTS/../fonts if it exists)")
     args = ap.parse_args()
+    fonts = args.fonts or os.path.join(args.tests, os.pardir, "fonts")
+    env = dict(os.environ, VF_SYSTEM_FONTS="0")
+    if os.path.isdir(fonts):
+        env["VF_FONT_DIRS"] = os.path.abspath(fonts)
+    else:
+        print(f"note: no font directory {fonts}: text is not drawn", file=sys.stderr)
     svgs = []
     for folder in FOLDERS:
         for d, _, files in os.walk(os.path.join(args.tests, folder)):
@@ -191,7 +202,7 @@ def main():
                     svgs.append(p)
     svgs.sort()
     with tempfile.TemporaryDirectory() as tmp, ThreadPoolExecutor(args.jobs) as pool:
-        results = list(pool.map(lambda s: run_one(args.bin, args.tests, s, tmp), svgs))
+        results = list(pool.map(lambda s: run_one(args.bin, args.tests, s, tmp, env), svgs))
     folders, features = {}, {}
     for r in results:
         for rows, key in ((folders, r["folder"]), (features, r["feature"])):

@@ -148,7 +148,10 @@ fn generate_writes_a_16_9_svg_and_refuses_bad_canvas_flags() {
     assert!(svg.contains(r#"width="320" height="180""#), "{svg}");
     let [x, y, w, h] = view_box(&svg);
     let k = w / 320.0;
-    assert!(x == 0.0 && y == 0.0 && k >= 1.0 && k == k.round() && h == 180.0 * k, "{svg}");
+    assert!(
+        x == 0.0 && y == 0.0 && k >= 1.0 && k == k.round() && h == 180.0 * k,
+        "{svg}"
+    );
     for (flags, field) in [
         (
             &["--aspect", "16:9", "--width", "320", "--height", "180"][..],

@@ -50,15 +50,22 @@ impl ImageLimits {
 /// One import's image sources and budget, shared by the resolvers of nested SVG images.
 pub(super) struct Images {
     base_dir: Option<PathBuf>,
+    /// The fonts text is laid out with (see `fonts`).
+    fonts: Arc<usvg::fontdb::Database>,
     limits: ImageLimits,
     pixels: AtomicU64,
     warnings: Mutex<Vec<String>>,
 }
 
 impl Images {
-    pub(super) fn new(base_dir: Option<&Path>, limits: ImageLimits) -> Self {
+    pub(super) fn new(
+        base_dir: Option<&Path>,
+        limits: ImageLimits,
+        fonts: Arc<usvg::fontdb::Database>,
+    ) -> Self {
         Images {
             base_dir: base_dir.map(Path::to_path_buf),
+            fonts,
             limits,
             pixels: AtomicU64::new(0),
             warnings: Mutex::new(Vec::new()),
@@ -87,6 +94,7 @@ impl Images {
                 resolve_data: Box::new(move |mime, data, _| self.data(mime, &data, depth)),
                 resolve_string: Box::new(move |href, _| self.file(href, depth)),
             },
+            fontdb: Arc::clone(&self.fonts),
             ..usvg::Options::default()
         };
         guard::parse_repaired(text, &SvgLimits::DEFAULT, &opts)

@@ -377,7 +377,17 @@ pub fn import_svg_in(
     base_dir: Option<&std::path::Path>,
     limits: ImageLimits,
 ) -> Result<SvgImport, SvgError> {
-    let images = Arc::new(Images::new(base_dir, limits));
+    import_svg_with_fonts(text, base_dir, limits, super::fonts::database())
+}
+
+/// [`import_svg_in`] with these fonts instead of the process's ([`super::fonts::database`]).
+pub fn import_svg_with_fonts(
+    text: &str,
+    base_dir: Option<&std::path::Path>,
+    limits: ImageLimits,
+    fonts: Arc<usvg::fontdb::Database>,
+) -> Result<SvgImport, SvgError> {
+    let images = Arc::new(Images::new(base_dir, limits, fonts));
     let parsed = images.parse(text, 0).map_err(SvgError::Parse)?;
     let tree = parsed.tree;
     let size = tree.size();

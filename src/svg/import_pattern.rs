@@ -75,7 +75,8 @@ fn tile(p: &usvg::Pattern, ts: Transform, opacity: f32) -> Option<Texture> {
     if !(tw >= 1.0 && th >= 1.0) {
         return None;
     }
-    let mut walk = Walk::new((tw, th), Arc::new(Images::new(None, ImageLimits::DEFAULT)));
+    let images = Images::new(None, ImageLimits::DEFAULT, super::fonts::database());
+    let mut walk = Walk::new((tw, th), Arc::new(images));
     let mut content = Content::default();
     walk.group(
         p.root(),

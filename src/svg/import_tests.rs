@@ -94,7 +94,10 @@ fn text_and_plus_lighter_are_named_in_warnings() {
         <rect id="lit" width="10" height="10" style="mix-blend-mode:plus-lighter"/>
         <rect id="mul" width="10" height="10" style="mix-blend-mode:multiply"/>
     </svg>"#;
-    let import = import_svg(svg).unwrap();
+    // No fonts at all: the text is dropped, with a warning each.
+    let no_fonts = std::sync::Arc::new(crate::svg::fonts::load(None, false));
+    let import =
+        super::import_svg_with_fonts(svg, None, super::ImageLimits::DEFAULT, no_fonts).unwrap();
     let w = &import.warnings;
     assert!(w.contains(&r#"<text id="t1"> ignored (text is not drawn: no fonts)"#.to_string()));
     assert!(w.contains(&"a <text> ignored (text is not drawn: no fonts)".to_string()));

@@ -77,6 +77,8 @@
 //!   its content clipped to its viewport; a pattern on a fill its tile drawn by our rasteriser,
 //!   repeated (`import_pattern`; on a stroke its mean colour). They export as image-filled
 //!   `<pattern>`s (`export_texture`).
+//! - **text** is laid out by usvg with the fonts of [`fonts`] (`VF_FONT_DIRS`, the system's) and
+//!   kept as the glyphs' outlines, filled and stroked as the text was.
 //!   Text without fonts and filters are ignored, each with a warning naming the element
 //!   (`filter on #id ignored …`; at most 16, then a count): the content is drawn as it is,
 //!   unfiltered.
@@ -88,6 +90,7 @@ mod export_groups;
 mod export_paint;
 mod export_texture;
 mod file;
+pub mod fonts;
 mod guard;
 mod images;
 mod import;
@@ -106,7 +109,7 @@ pub use file::{
 };
 pub use guard::{Parsed, SvgLimits, SvgRejected};
 pub use images::ImageLimits;
-pub use import::{SvgImport, from_svg, import_svg, import_svg_in};
+pub use import::{SvgImport, from_svg, import_svg, import_svg_in, import_svg_with_fonts};
 pub use profile::{ProfileViolation, check_safe_output};
 
 use crate::scene::{MAX_SIDE, SceneError};
@@ -201,6 +204,7 @@ pub fn parse_usvg_repaired(text: &str) -> Result<Parsed, SvgRejected> {
             resolve_data: Box::new(|_, _, _| None),
             resolve_string: Box::new(|_, _| None),
         },
+        fontdb: fonts::database(),
         ..usvg::Options::default()
     };
     guard::parse_repaired(text, &SvgLimits::DEFAULT, &opts)

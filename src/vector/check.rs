@@ -128,6 +128,27 @@ pub fn check_svg(svg: &str) -> Result<Editability, CheckError> {
     Ok(counts)
 }
 
+/// How many filled paths of `svg` have an outline that meets itself: [`check_svg`]'s
+/// `self_intersecting` count (the same rings, the same test), without rendering anything.
+pub fn self_intersecting_svg(svg: &str) -> Result<usize, CheckError> {
+    fn walk(g: &usvg::Group, n: &mut usize) {
+        for node in g.children() {
+            match node {
+                usvg::Node::Group(child) => walk(child, n),
+                usvg::Node::Path(p) if p.is_visible() && p.fill().is_some() => {
+                    *n += usize::from(!rings_valid(&rings_of(p.data(), p.abs_transform())));
+                }
+                usvg::Node::Text(t) => walk(t.flattened(), n),
+                _ => {}
+            }
+        }
+    }
+    let tree = crate::svg::parse_usvg(svg).map_err(|e| CheckError::Parse(e.to_string()))?;
+    let mut n = 0;
+    walk(tree.root(), &mut n);
+    Ok(n)
+}
+
 struct Walk {
     w: u32,
     h: u32,

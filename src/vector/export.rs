@@ -76,16 +76,16 @@ pub fn compact_svg(scene: &Scene, opts: &SvgOptions) -> CompactSvg {
 
 /// [`compact_svg`] with another tolerance.
 pub fn compact_svg_within(scene: &Scene, opts: &SvgOptions, tol: Tolerance) -> CompactSvg {
-    compact_svg_checked(scene, opts, tol, |_| true)
+    compact_svg_checked(scene, opts, tol, |_, _| true)
 }
 
-/// [`compact_svg_within`] where a grid also needs `accept` to hold for the scene read back from
-/// its text (e.g. that rounding made no outline meet itself).
+/// [`compact_svg_within`] where a grid also needs `accept` to hold for its text and the scene
+/// read back from it (e.g. that rounding made no outline meet itself).
 pub fn compact_svg_checked(
     scene: &Scene,
     opts: &SvgOptions,
     tol: Tolerance,
-    accept: impl Fn(&Scene) -> bool,
+    accept: impl Fn(&str, &Scene) -> bool,
 ) -> CompactSvg {
     let reference = crate::raster::render(&colors_as_written(scene));
     let attempt = |units_per_px: u32| {
@@ -98,7 +98,7 @@ pub fn compact_svg_checked(
         let (mean_abs, max_abs, accepted) = match from_svg(&svg) {
             Ok(back) if (back.width, back.height) == (scene.width, scene.height) => {
                 let (mean, max) = diff(&reference, &crate::raster::render(&back));
-                (mean, max, accept(&back))
+                (mean, max, accept(&svg, &back))
             }
             _ => (f64::INFINITY, f64::INFINITY, false),
         };
@@ -212,7 +212,11 @@ mod tests {
         assert!(c.units_per_px > 1 && c.within, "{c:?}");
         // Pixels outside, user units inside; integers only.
         let k = c.units_per_px;
-        let head = format!(r#"width="64" height="64" viewBox="0 0 {} {}""#, 64 * k, 64 * k);
+        let head = format!(
+            r#"width="64" height="64" viewBox="0 0 {} {}""#,
+            64 * k,
+            64 * k
+        );
         assert!(c.svg.contains(&head), "{}", c.svg);
         for d in c.svg.split(r#" d=""#).skip(1) {
             let d = &d[..d.find('"').unwrap()];

@@ -16,7 +16,7 @@ pub mod merge;
 pub mod palette;
 pub mod simple;
 
-use crate::scene::{Rgba, Scene};
+use crate::scene::{Point, Rgba, Scene, Shape, ShapeKind};
 use palette::{Background, ColorPlan};
 use serde::{Deserialize, Serialize};
 
@@ -95,7 +95,8 @@ pub const SIMPLE_TOLERANCE: f32 = 0.1;
 pub const SIMPLE_MIN_AREA: f32 = 0.5;
 
 /// Replaces every closed path whose outline meets itself by simple pieces, in place (same
-/// place in the paint order): its lobes, cut exactly out of its outline
+/// place in the paint order): without its segments too short to see when that is enough
+/// ([`without_tiny_segments`]: a fold back and forth), else its lobes, cut exactly out of its outline
 /// ([`lobes::split_lobes`]); a lobe that is still not simple (a cusp or a fold without a
 /// crossing) by the union repair ([`simple::split_simple`]). Pieces under `min_area` px² are
 /// dropped. Returns how many paths were repaired. The scene never grows past `MAX_PATHS`.
@@ -109,11 +110,17 @@ pub fn make_simple(scene: &mut Scene, min_area: f32) -> usize {
             out.push(s.clone());
         } else {
             repaired += 1;
-            for l in lobes::split_lobes(s, min_area) {
-                if simple::is_simple(&l) {
-                    out.push(l);
-                } else {
-                    out.extend(simple::split_simple(&l, SIMPLE_TOLERANCE, min_area));
+            // A spike of a segment too short to see (a fold back and forth) is dropped first.
+            let s = without_tiny_segments(s);
+            if simple::is_simple(&s) {
+                out.push(s);
+            } else {
+                for l in lobes::split_lobes(&s, min_area) {
+                    if simple::is_simple(&l) {
+                        out.push(l);
+                    } else {
+                        out.extend(simple::split_simple(&l, SIMPLE_TOLERANCE, min_area));
+                    }
                 }
             }
         }
@@ -124,6 +131,42 @@ pub fn make_simple(scene: &mut Scene, min_area: f32) -> usize {
     // Groups stay on the pieces of their shapes.
     scene.replace_shapes(pieces);
     repaired
+}
+
+/// Segments whose control points all lie within this of their start (px) are dropped by
+/// [`without_tiny_segments`].
+pub const TINY_SEGMENT: f32 = 0.125;
+
+/// A closed cubic path without its segments shorter than [`TINY_SEGMENT`] (all four points
+/// within it of the segment's start), each next segment starting where the last kept one ends;
+/// the path itself when it has no such segment, when fewer than two would be left, or when it
+/// is not a closed cubic.
+pub fn without_tiny_segments(shape: &Shape) -> Shape {
+    let n = shape.num_segments();
+    if shape.kind != ShapeKind::ClosedCubic || n < 3 {
+        return shape.clone();
+    }
+    let tiny = |seg: &[Point; 4]| {
+        seg.iter()
+            .all(|p| (p.x - seg[0].x).hypot(p.y - seg[0].y) < TINY_SEGMENT)
+    };
+    let kept: Vec<[Point; 4]> = (0..n)
+        .map(|i| shape.segment(i))
+        .filter(|seg| !tiny(seg))
+        .collect();
+    if kept.len() == n || kept.len() < 2 {
+        return shape.clone();
+    }
+    let mut points = Vec::with_capacity(3 * kept.len());
+    for (j, seg) in kept.iter().enumerate() {
+        // Each segment starts where the previous kept one ended; the last one closes at the
+        // first one's start.
+        points.push(if j == 0 { seg[0] } else { kept[j - 1][3] });
+        points.extend([seg[1], seg[2]]);
+    }
+    let mut out = shape.clone();
+    out.points = points;
+    out
 }
 
 /// Removes the paths a designer would find hidden or too small to see or edit, by the
@@ -168,22 +211,33 @@ pub fn drop_unseen(scene: &mut Scene, scale: f32) -> usize {
 /// the scene is written anew (three rounds at most).
 pub fn write_svg(scene: &Scene, colors: &ColorPlan) -> String {
     let opts = colors.group.svg_options();
-    // A grid that makes a simple outline meet itself is passed over for a finer one.
-    let all_simple = scene.shapes.iter().all(simple::is_simple);
-    let stays_simple = |back: &Scene| !all_simple || back.shapes.iter().all(simple::is_simple);
     let tol = export::Tolerance::default();
-    let mut text = export::compact_svg_checked(scene, &opts, tol, stays_simple).svg;
+    // A grid that makes a simple outline meet itself is passed over for a finer one.
+    let write = |s: &Scene| {
+        let all_simple = s.shapes.iter().all(simple::is_simple);
+        let stays_simple = |text: &str, back: &Scene| {
+            !all_simple || (back.shapes.iter().all(simple::is_simple) && outlines_simple(text))
+        };
+        export::compact_svg_checked(s, &opts, tol, stays_simple).svg
+    };
+    let mut text = write(scene);
     for _ in 0..3 {
         let Ok(mut back) = crate::svg::from_svg(&text) else {
             break;
         };
-        if back.shapes.iter().all(simple::is_simple) {
+        if back.shapes.iter().all(simple::is_simple) && outlines_simple(&text) {
             break;
         }
         make_simple(&mut back, SIMPLE_MIN_AREA);
-        text = export::compact_svg(&back, &opts).svg;
+        text = write(&back);
     }
     text
+}
+
+/// Whether no outline of `svg` meets itself by the editability check's own test
+/// ([`check::self_intersecting_svg`]: its flattening of the text as written).
+fn outlines_simple(svg: &str) -> bool {
+    check::self_intersecting_svg(svg) == Ok(0)
 }
 
 /// Removes, from the top of the paint order down, every path whose removal changes no pixel of

@@ -282,3 +282,27 @@ fn random_deformed_circles_repair_to_simple_pieces() {
         "only {broken} of 60 random shapes needed repair"
     );
 }
+
+#[test]
+fn a_fold_of_a_segment_too_short_to_see_is_dropped_whole() {
+    // Along the top edge: to x = 60, a 0.05 px step back, on to 80: a fold 0.05 px long.
+    let s = straight(&[
+        (10.0, 10.0),
+        (60.0, 10.0),
+        (59.95, 10.0),
+        (80.0, 10.0),
+        (80.0, 60.0),
+        (10.0, 60.0),
+    ]);
+    assert!(!is_simple(&s));
+    let t = crate::vector::without_tiny_segments(&s);
+    assert_eq!(t.num_segments(), s.num_segments() - 1);
+    assert!(is_simple(&t));
+    // make_simple takes that one piece, the same shape less the step.
+    let mut scene = scene_of(vec![s.clone()]);
+    assert_eq!(crate::vector::make_simple(&mut scene, 0.5), 1);
+    assert_eq!(scene.shapes, vec![t]);
+    // A path with no such segment is left as it is.
+    let sq = straight(&[(10.0, 10.0), (60.0, 10.0), (60.0, 60.0), (10.0, 60.0)]);
+    assert_eq!(crate::vector::without_tiny_segments(&sq), sq);
+}
