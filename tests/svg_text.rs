@@ -8,7 +8,7 @@
 mod common;
 
 use common::golden::{Tolerance, compare};
-use resvg::{tiny_skia, usvg};
+use resvg::usvg;
 use std::path::PathBuf;
 use std::process::Command;
 use std::sync::Arc;
@@ -39,15 +39,7 @@ fn resvg_with(db: Arc<usvg::fontdb::Database>) -> Image {
         fontdb: db,
         ..usvg::Options::default()
     };
-    let tree = usvg::Tree::from_str(SVG, &opts).unwrap();
-    let size = tree.size().to_int_size();
-    let mut pm = tiny_skia::Pixmap::new(size.width(), size.height()).unwrap();
-    resvg::render(&tree, tiny_skia::Transform::default(), &mut pm.as_mut());
-    Image {
-        width: size.width(),
-        height: size.height(),
-        data: pm.data().iter().map(|&b| b as f32 / 255.0).collect(),
-    }
+    common::golden::resvg_render_with(SVG, &opts)
 }
 
 #[test]

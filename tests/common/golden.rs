@@ -36,7 +36,12 @@ impl Tolerance {
 
 /// resvg's render of `svg_text` at its own size (premultiplied RGBA in 0..1).
 pub fn resvg_render(svg_text: &str) -> Image {
-    let tree = usvg::Tree::from_str(svg_text, &usvg::Options::default()).unwrap();
+    resvg_render_with(svg_text, &usvg::Options::default())
+}
+
+/// [`resvg_render`] with these options (e.g. a font database).
+pub fn resvg_render_with(svg_text: &str, opts: &usvg::Options) -> Image {
+    let tree = usvg::Tree::from_str(svg_text, opts).unwrap();
     let size = tree.size().to_int_size();
     let mut pm = tiny_skia::Pixmap::new(size.width(), size.height()).unwrap();
     resvg::render(&tree, tiny_skia::Transform::default(), &mut pm.as_mut());
