@@ -100,3 +100,23 @@ fn finite_differences_over_and_under_an_image() {
     assert!(checked > 30, "{checked}");
     assert!(bad.is_empty(), "{bad:#?}");
 }
+
+#[test]
+fn a_texture_drawn_one_to_one_is_not_resampled() {
+    // Moved by half a pixel, not scaled: each pixel shows the texel under its centre (crisp),
+    // not a half-and-half mix, although the texture asks for bilinear sampling.
+    let mut s = Scene::new(4, 2, Rgba::TRANSPARENT).unwrap();
+    let rect = Shape::square(0.0, 0.0, 4.0, Rgba::BLACK).unwrap();
+    s.shapes.push(textured(
+        rect.clone(),
+        texture(1.0, (0.5, 0.0), TextureEdge::Repeat, true),
+    ));
+    let img = render(&s);
+    // Pixel 1's centre 1.5 is texel 1.0: green; pixel 0's centre 0.5 is texel 0.0: red.
+    assert_eq!(pixel(&img, 0, 0), [1.0, 0.0, 0.0, 1.0]);
+    assert_eq!(pixel(&img, 1, 0), [0.0, 1.0, 0.0, 1.0]);
+    // Scaled, the same texture is blended.
+    s.shapes[0] = textured(rect, texture(1.5, (0.5, 0.0), TextureEdge::Repeat, true));
+    let p = pixel(&render(&s), 1, 0);
+    assert!(p[0] > 0.05 && p[1] > 0.05, "{p:?}");
+}

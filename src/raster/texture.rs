@@ -1,5 +1,6 @@
 //! Texture fills ([`crate::scene::texture`]): the colour of a pixel is the texture sampled at the
-//! pixel centre mapped into texel space (bilinear in premultiplied RGBA, or nearest texel),
+//! pixel centre mapped into texel space (bilinear in premultiplied RGBA, or nearest texel; a
+//! texture drawn 1:1, moved but not scaled, always nearest),
 //! handed to the compositing as straight RGBA like every other [`Shade`].
 //!
 //! Gradients do not flow into texels (imported image pixels are constants, not parameters): the
@@ -34,7 +35,7 @@ impl<T: Real> TextureT<T> {
                 .map(|p| [p[0], p[1], p[2], p[3]])
                 .collect(),
             edge: t.edge,
-            smooth: t.smooth,
+            smooth: t.smooth && !is_translation(&t.transform),
         }
     }
 
@@ -78,6 +79,15 @@ impl<T: Real> TextureT<T> {
             top * (one - wy) + bottom * wy
         })
     }
+}
+
+/// Whether `m` only moves texels (exactly: no scale, rotation or skew): a texture drawn 1:1 is
+/// not resampled, so a tile placed at a half pixel stays crisp instead of blurring every edge
+/// into a half-tone line (tiny-skia makes the same choice, by the same exact test).
+#[allow(clippy::float_cmp)]
+fn is_translation(m: &crate::scene::Affine) -> bool {
+    let [a, b, c, d, _, _] = m.0;
+    a == 1.0 && d == 1.0 && b == 0.0 && c == 0.0
 }
 
 /// A texture layer's shader (no parameters: its backward is empty).
