@@ -251,8 +251,8 @@ enum StrokeDraw {
     /// along these dashes.
     Strokes(Stroke, Option<Gradient>, Option<Vec<SubPath>>),
     /// Under a transform that is no similarity (skew, unequal scales) a stroke of one width
-    /// cannot be drawn: its outline (computed in the path's own units, dashes, caps and joins
-    /// included) is filled in this paint instead.
+    /// cannot be drawn, nor a stroke painted with a pattern: its outline (computed in the
+    /// path's own units, dashes, caps and joins included) is filled in this paint instead.
     Outline(Painted, Vec<SubPath>),
 }
 
@@ -269,7 +269,8 @@ fn stroke_draw(p: &usvg::Path, s: &usvg::Stroke, ts: usvg::Transform, opacity: f
         .dasharray()
         .and_then(|a| usvg::tiny_skia_path::StrokeDash::new(a.to_vec(), s.dashoffset()))
         .map(|d| p.data().dash(&d, res));
-    if !is_similarity(ts) {
+    // A pattern (a texture, which strokes do not take) paints the stroke's outline as a fill.
+    if !is_similarity(ts) || paint.texture.is_some() {
         let mut outline_stroke = s.to_tiny_skia();
         outline_stroke.dash = None;
         let data = match &dashed {

@@ -6,8 +6,8 @@
 //! path's fill, also for strokes), a gradient with one stop as that stop's colour, `r = 0` as
 //! the last stop's colour, and a missing or invalid reference as the fallback colour or none.
 //! Here the gradient's transform is composed with the path's canvas transform and the paint
-//! opacity multiplied into every stop. A pattern becomes a repeating texture (`import_pattern`) on fills; on strokes (which take no
-//! texture) its flat stand-in, the tile's mean colour.
+//! opacity multiplied into every stop. A pattern becomes a repeating texture (`import_pattern`);
+//! a stroke painted with one is drawn as its outline, filled with the texture.
 
 use crate::scene::{
     Affine, Gradient, GradientGeometry, GradientStop, Gradients, Rgba, Spread, Texture,
@@ -19,7 +19,8 @@ use resvg::usvg;
 pub(super) struct Painted {
     pub color: Rgba,
     pub gradient: Option<Gradient>,
-    /// A pattern's tile (see `import_pattern`), painted instead of `color` on fills.
+    /// A pattern's tile (see `import_pattern`), painted instead of `color` (a stroke with one
+    /// is drawn as its filled outline).
     pub texture: Option<Box<Texture>>,
 }
 
