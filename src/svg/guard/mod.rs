@@ -340,6 +340,18 @@ enum Link {
     Sheet,
 }
 
+/// Whether `link` is an `href` by which `from` inherits attributes and content from `to`, both
+/// paint servers or filters of the same family (usvg resolves a ring of these itself).
+fn inherits_by_href(from: Node, to: Node, link: &Link) -> bool {
+    let family = |n: Node| match n.tag_name().name() {
+        "linearGradient" | "radialGradient" => Some(0),
+        "pattern" => Some(1),
+        "filter" => Some(2),
+        _ => None,
+    };
+    matches!(link, Link::Href(_)) && family(from).is_some() && family(from) == family(to)
+}
+
 /// `<tag id="…">` for warnings.
 fn describe(node: Node) -> String {
     match node.attribute("id") {
@@ -489,6 +501,11 @@ impl<'a, 'i> Expansion<'_, 'a, 'i> {
         }
         for (r, link) in refs {
             if self.visiting.contains(&r.id()) {
+                if inherits_by_href(node, r, &link) {
+                    // usvg follows such a chain from each element only until it comes back to
+                    // that element: every element keeps what the rest of the ring gives it.
+                    continue;
+                }
                 self.cycle = break_cycle(node, r, &link);
                 return Err(cycle());
             }

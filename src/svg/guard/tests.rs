@@ -210,6 +210,14 @@ fn paths(g: &usvg::Group) -> usize {
         .sum()
 }
 
+fn first_fill(g: &usvg::Group) -> Option<usvg::Paint> {
+    g.children().iter().find_map(|n| match n {
+        usvg::Node::Group(c) => first_fill(c),
+        usvg::Node::Path(p) => p.fill().map(|f| f.paint().clone()),
+        _ => None,
+    })
+}
+
 #[test]
 fn breaks_reference_cycles_where_they_close() {
     // Two uses that contain each other: the inner link is dropped, the rest drawn.
@@ -228,6 +236,18 @@ fn breaks_reference_cycles_where_they_close() {
     let p = repaired(&pattern).unwrap();
     assert_eq!(p.warnings.len(), 1, "{:?}", p.warnings);
     assert!(p.warnings[0].contains("<rect>"), "{}", p.warnings[0]);
+    // A ring of gradients inheriting through `href`: nothing dropped, each element inherits
+    // from the rest of the ring (usvg stops where the chain returns), so `g3` gets g2's stops.
+    let ring = svg(
+        r##"<linearGradient id="g1" href="#g2"/><linearGradient id="g2" href="#g3"><stop offset="0" stop-color="white"/><stop offset="1" stop-color="black"/></linearGradient><linearGradient id="g3" href="#g1"/><rect width="9" height="9" fill="url(#g3)"/>"##,
+    );
+    let p = repaired(&ring).unwrap();
+    assert!(p.warnings.is_empty(), "{:?}", p.warnings);
+    let fill = first_fill(p.tree.root()).expect("a filled path");
+    match fill {
+        usvg::Paint::LinearGradient(g) => assert_eq!(g.stops().len(), 2),
+        other => panic!("{other:?}"),
+    }
     // More cycles than MAX_REPAIRS: refused (each repair re-reads the text).
     let many: String = (0..=MAX_REPAIRS)
         .map(|i| format!(r##"<g id="g{i}"><use href="#g{i}"/></g>"##))
