@@ -186,6 +186,11 @@ def main():
     ap.add_argument("--fails", action="store_true")
     ap.add_argument("--jobs", type=int, default=os.cpu_count() or 2)
     ap.add_argument("--fonts", help="font directory (default: TESTS/../fonts if it exists)")
+    ap.add_argument(
+        "--only",
+        help="only the tests whose path under TESTS starts with one of these (comma-separated, "
+        "e.g. paint-servers/pattern,painting/stroke)",
+    )
     args = ap.parse_args()
     fonts = args.fonts or os.path.join(args.tests, os.pardir, "fonts")
     env = dict(os.environ, VF_SYSTEM_FONTS="0")
@@ -200,6 +205,9 @@ def main():
                 p = os.path.join(d, f)
                 if f.endswith(".svg") and os.path.exists(p[:-4] + ".png"):
                     svgs.append(p)
+    if args.only:
+        keep = tuple(args.only.split(","))
+        svgs = [p for p in svgs if os.path.relpath(p, args.tests).startswith(keep)]
     svgs.sort()
     with tempfile.TemporaryDirectory() as tmp, ThreadPoolExecutor(args.jobs) as pool:
         results = list(pool.map(lambda s: run_one(args.bin, args.tests, s, tmp, env), svgs))
