@@ -118,15 +118,13 @@ impl Cursor {
     }
 }
 
-/// Whether the cubic `seg` (original coordinates) is, within half a unit per coordinate, the
-/// straight segment a reader builds for `L` from the rounded ends `a`, `b`: its control points
-/// at 1/3 and 2/3 of the chord.
+/// Whether the cubic `seg` (original coordinates) is, within half a unit, the straight segment
+/// a reader builds for `L` from the rounded ends `a`, `b`: its control points on the chord
+/// between the ends (spaced anyhow: such a cubic traces the chord and nothing else).
 fn is_straight(seg: &[Point; 4], a: U2, b: U2, scale: f64) -> bool {
-    let near = |c: Point, t: f64| {
-        let at = |i: usize| a[i] as f64 + (b[i] - a[i]) as f64 * t;
-        (c.x as f64 * scale - at(0)).abs() <= 0.5 && (c.y as f64 * scale - at(1)).abs() <= 0.5
-    };
-    near(seg[1], 1.0 / 3.0) && near(seg[2], 2.0 / 3.0)
+    let at = |c: Point| [c.x as f64 * scale, c.y as f64 * scale];
+    let end = |u: U2| [u[0] as f64, u[1] as f64];
+    crate::vector::straight::collinear_inside(end(a), at(seg[1]), at(seg[2]), end(b), 0.5)
 }
 
 pub(super) fn push_path_data(out: &mut String, sh: &Shape, p: usize) {

@@ -7,6 +7,7 @@
 //! | [`check`] | editability counts of any SVG (self-intersecting, hidden, slivers, colours) |
 //! | [`export`] | compact, exact SVG text (fewest decimals within a render tolerance) |
 //! | [`palette`] | a small palette: k-means of the target, user palettes, snapping fills |
+//! | [`straight`] | near-straight segments made straight, so that they are written as lines |
 
 pub mod check;
 pub mod export;
@@ -15,6 +16,7 @@ pub mod lobes;
 pub mod merge;
 pub mod palette;
 pub mod simple;
+pub mod straight;
 
 use crate::scene::{Point, Rgba, Scene, Shape, ShapeKind};
 use palette::{Background, ColorPlan};
@@ -286,7 +288,8 @@ pub struct FinishReport {
 /// (not for styles whose cells are meant to be one pixel: pixel art, strokes), fills reduced as `colors`
 /// says (a user palette: each fill to its nearest entry; a colour cap: k-means of the fills
 /// weighted by what they show; otherwise near-equal fills merged), touching paths of one fill
-/// merged ([`merge`]; with `drop_small` only), and the background set.
+/// merged ([`merge`]; with `drop_small` only), near-straight segments made straight
+/// ([`straight`]), and the background set.
 pub fn finish_scene(scene: &mut Scene, colors: &ColorPlan, drop_small: bool) -> FinishReport {
     let split = make_simple(scene, SIMPLE_MIN_AREA);
     let mut dropped = drop_hidden(scene);
@@ -308,6 +311,8 @@ pub fn finish_scene(scene: &mut Scene, colors: &ColorPlan, drop_small: bool) -> 
     } else {
         0
     };
+    // Last, so that no choice above sees the (sub-pixel) change; outlines stay simple.
+    straight::straighten(scene, straight::STRAIGHT_TOLERANCE);
     match colors.background {
         Background::Transparent => scene.background = Rgba::TRANSPARENT,
         Background::Color(c) => scene.background = c.to_rgba(),

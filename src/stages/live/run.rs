@@ -536,7 +536,8 @@ impl Run<'_> {
 
     /// The end of a trace after `stages` stages: colours settled, the final pass, then faint,
     /// unseen paths dropped, overlapping paths of one fill merged ([`crate::vector::merge`]),
-    /// paths past `max_bytes` and hidden paths dropped, outlines made simple.
+    /// paths past `max_bytes` and hidden paths dropped, near-straight segments made straight,
+    /// outlines made simple.
     /// Returns the scene at the target's size, the number of paths pruned and of merges.
     pub(super) fn finish(
         &mut self,
@@ -580,6 +581,7 @@ impl Run<'_> {
         }
         // At the output size: flattening is finer there, and hidden paths are judged there.
         let mut out = output_scene(&scene, tw, th);
+        crate::vector::straight::straighten(&mut out, crate::vector::straight::STRAIGHT_TOLERANCE);
         crate::vector::make_simple(&mut out, crate::vector::SIMPLE_MIN_AREA);
         pruned += crate::vector::drop_hidden(&mut out);
         if !cfg.fill.is_flat() {
