@@ -269,3 +269,45 @@ fn external_images_are_read_only_beside_a_named_file() {
         1
     );
 }
+
+/// `render --size` draws pattern tiles at the output's resolution, a pattern nested in a tile
+/// once (not twice): at 2× the nested pattern still matches resvg's render at 2×.
+#[test]
+fn nested_patterns_render_as_resvg_when_scaled() {
+    let body = PATTERNS
+        .iter()
+        .find(|(n, _)| *n == "nested_pattern")
+        .map(|(_, b)| *b)
+        .unwrap();
+    let text = doc(body);
+    let dir = std::env::temp_dir().join(format!("vf-nested-pattern-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (svg, png) = (dir.join("nested.svg"), dir.join("nested.png"));
+    std::fs::write(&svg, &text).unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_vectorfusion"))
+        .args(["render", svg.to_str().unwrap(), "-o", png.to_str().unwrap()])
+        .args(["--size", "240"])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let ours = vectorfusion::image::Image::open(&png).unwrap();
+    // The same picture at 2× for resvg: twice the size, the same viewBox (opaque, so straight
+    // and premultiplied colours agree).
+    let twice = text.replacen(
+        r#"width="120" height="90">"#,
+        r#"width="240" height="180" viewBox="0 0 120 90">"#,
+        1,
+    );
+    assert_ne!(twice, text);
+    compare(
+        "nested_pattern_2x",
+        &ours,
+        &resvg_render(&twice),
+        &Tolerance::SUITE,
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -4,8 +4,8 @@
 //! at the resolution the tile has on the canvas (as resvg does: the tile's size times the scale
 //! of the path's transform and `patternTransform`, rounded to whole pixels), then sampled with
 //! [`TextureEdge::Repeat`]. The content overflowing the tile is cut (`overflow` is ignored, as
-//! in resvg). Patterns inside pattern tiles nest [`MAX_DEPTH`] deep; deeper ones paint
-//! nothing.
+//! in resvg). Patterns inside pattern tiles nest [`MAX_DEPTH`] deep (each drawn at its tile's
+//! resolution, which includes the [`at_resolution`] factor once); deeper ones paint nothing.
 
 use super::images::{ImageLimits, Images};
 use super::walk::{Mode, Walk};
@@ -78,12 +78,15 @@ fn tile(p: &usvg::Pattern, ts: Transform, opacity: f32) -> Option<Texture> {
     let images = Images::new(None, ImageLimits::DEFAULT, super::fonts::database());
     let mut walk = Walk::new((tw, th), Arc::new(images));
     let mut content = Content::default();
-    walk.group(
-        p.root(),
-        Transform::from_scale(sx, sy),
-        Mode::Draw,
-        &mut content,
-    );
+    // The tile is drawn at device resolution already: patterns inside it take no more.
+    at_resolution(1.0, || {
+        walk.group(
+            p.root(),
+            Transform::from_scale(sx, sy),
+            Mode::Draw,
+            &mut content,
+        )
+    });
     let scene = Scene {
         width: tw as u32,
         height: th as u32,
