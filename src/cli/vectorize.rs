@@ -51,7 +51,7 @@ pub struct VectorizeArgs {
     #[arg(long)]
     pub target_psnr: Option<f64>,
     /// Keep the SVG at most this many bytes: stop adding paths, then drop the paths whose
-    /// removal costs least.
+    /// removal costs least (one path always stays, even where it alone is larger).
     #[arg(long)]
     pub max_bytes: Option<usize>,
     /// End each stage early once 20 steps improve the loss by less than this fraction of the

@@ -31,7 +31,7 @@ pub struct VectorOptions {
     /// Vectorize runs: stop adding paths once the PSNR (dB) reaches this.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub target_psnr: Option<f64>,
-    /// Vectorize runs: the SVG at most this many bytes.
+    /// Vectorize runs: the SVG at most this many bytes (one path always stays).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub max_bytes: Option<usize>,
     /// What the trace (and SDS) paint fills with; `flat` is left out of the JSON.

@@ -144,7 +144,7 @@ pub struct LiveConfig {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub target_psnr: Option<f64>,
     /// Keep the SVG at most this many bytes: stop adding paths when it is reached, then drop
-    /// the paths whose removal costs least until it fits.
+    /// the paths whose removal costs least until it fits (one path always stays).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub max_bytes: Option<usize>,
     /// End a stage (and the final pass) early once the mean loss of 20 steps improves on the

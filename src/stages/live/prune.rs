@@ -32,9 +32,10 @@ pub fn prune_paths(
 }
 
 /// Removes the paths whose removal costs least (MSE against `target`, over white) until
-/// `bytes(scene)` is at most `max` or no path is left. Each round ranks every path once and
-/// removes as many of the cheapest as the excess asks for at the scene's mean bytes per path
-/// (at least one). Returns how many paths were removed.
+/// `bytes(scene)` is at most `max` or one path is left (an empty picture is no answer: the path
+/// whose removal would cost most stays, even over the budget). Each round ranks every path once
+/// and removes as many of the cheapest as the excess asks for at the scene's mean bytes per
+/// path (at least one). Returns how many paths were removed.
 pub fn trim_to_bytes(
     scene: &mut Scene,
     target: &Image,
@@ -45,7 +46,7 @@ pub fn trim_to_bytes(
     loop {
         let size = bytes(scene);
         let n = scene.shapes.len();
-        if size <= max || n == 0 {
+        if size <= max || n <= 1 {
             return removed;
         }
         let mut cost: Vec<(f64, usize)> = (0..n)
@@ -58,7 +59,7 @@ pub fn trim_to_bytes(
             .collect();
         cost.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
         let per_path = (size / n).max(1);
-        let k = (size - max).div_ceil(per_path).clamp(1, n);
+        let k = (size - max).div_ceil(per_path).clamp(1, n - 1);
         let mut drop: Vec<usize> = cost[..k].iter().map(|c| c.1).collect();
         drop.sort_unstable();
         for &i in drop.iter().rev() {
@@ -134,6 +135,32 @@ mod tests {
         let mut s2 = scene.clone();
         let removed = prune_paths(&mut s2, 1.0, boxes);
         assert_eq!(removed.len(), 2);
+    }
+
+    #[test]
+    fn trim_keeps_the_most_valuable_path_when_none_fits() {
+        let mut scene = Scene::new(32, 32, Rgba::WHITE).unwrap();
+        scene
+            .shapes
+            .push(Shape::square(2.0, 2.0, 4.0, Rgba::BLACK).unwrap());
+        scene
+            .shapes
+            .push(Shape::square(10.0, 10.0, 16.0, Rgba::BLACK).unwrap());
+        scene
+            .shapes
+            .push(Shape::square(20.0, 2.0, 6.0, Rgba::BLACK).unwrap());
+        let target = boxes(&scene);
+        let bytes = |s: &Scene| 100 * s.shapes.len();
+        // Within budget: nothing goes; two fit: the smallest square goes.
+        assert_eq!(trim_to_bytes(&mut scene.clone(), &target, 300, bytes), 0);
+        let mut s = scene.clone();
+        assert_eq!(trim_to_bytes(&mut s, &target, 200, bytes), 1);
+        assert_eq!(s.shapes.len(), 2);
+        // No path fits: the largest square stays.
+        let mut s = scene.clone();
+        assert_eq!(trim_to_bytes(&mut s, &target, 10, bytes), 2);
+        assert_eq!(s.shapes.len(), 1);
+        assert_eq!(s.shapes[0].control_bounds().0.x, 10.0);
     }
 
     #[test]
