@@ -46,6 +46,13 @@ impl Point {
     pub const fn new(x: f32, y: f32) -> Self {
         Self { x, y }
     }
+
+    /// The control points of the cubic that is the straight segment from `a` to `b`: its
+    /// thirds (how a polygon edge, an SVG `L` and a straightened segment are drawn).
+    pub fn line_controls(a: Point, b: Point) -> [Point; 2] {
+        let at = |t: f32| Point::new(a.x + (b.x - a.x) * t, a.y + (b.y - a.y) * t);
+        [at(1.0 / 3.0), at(2.0 / 3.0)]
+    }
 }
 
 /// Straight-alpha RGBA colour, each channel in `[0, 1]`.
@@ -358,8 +365,8 @@ impl Shape {
             ShapeKind::Polygon => {
                 let a = p[i];
                 let b = p[(i + 1) % n];
-                let lerp = |t: f32| Point::new(a.x + (b.x - a.x) * t, a.y + (b.y - a.y) * t);
-                [a, lerp(1.0 / 3.0), lerp(2.0 / 3.0), b]
+                let [c1, c2] = Point::line_controls(a, b);
+                [a, c1, c2, b]
             }
         }
     }

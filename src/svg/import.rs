@@ -25,8 +25,8 @@ impl SubPath {
     }
 
     fn line(a: Point, b: Point) -> [Point; 3] {
-        let l = |t: f32| Point::new(a.x + (b.x - a.x) * t, a.y + (b.y - a.y) * t);
-        [l(1.0 / 3.0), l(2.0 / 3.0), b]
+        let [c1, c2] = Point::line_controls(a, b);
+        [c1, c2, b]
     }
 
     /// Adds the closing straight segment if the subpath does not end at its start.

@@ -73,8 +73,7 @@ fn straighten_shape(sh: &mut crate::scene::Shape, tol: f32) -> usize {
         if !collinear_inside(xy(a), xy(c1), xy(c2), xy(b), f64::from(tol)) {
             continue;
         }
-        let at = |t: f32| Point::new(a.x + (b.x - a.x) * t, a.y + (b.y - a.y) * t);
-        let (t1, t2) = (at(1.0 / 3.0), at(2.0 / 3.0));
+        let [t1, t2] = Point::line_controls(a, b);
         if (c1, c2) != (t1, t2) {
             sh.points[3 * i + 1] = t1;
             sh.points[3 * i + 2] = t2;
