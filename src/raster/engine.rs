@@ -250,13 +250,7 @@ pub(crate) fn forward<T: Real>(
     let w = sc.width as usize;
     let bs = bands(sc.height);
     let mut img = vec![T::zero(); 4 * w * sc.height as usize];
-    let mut chunks: Vec<&mut [T]> = Vec::with_capacity(bs.len());
-    let mut rest: &mut [T] = &mut img;
-    for &(y0, y1) in &bs {
-        let (head, tail) = rest.split_at_mut(4 * w * (y1 - y0) as usize);
-        chunks.push(head);
-        rest = tail;
-    }
+    let chunks = band_chunks(&mut img, w, &bs);
     recycled.resize_with(bs.len(), BandTape::default);
     recycled.truncate(bs.len());
     let tapes: Vec<BandTape<T>> = chunks
@@ -269,6 +263,43 @@ pub(crate) fn forward<T: Real>(
         })
         .collect();
     (img, tapes)
+}
+
+/// `img` (whole rows, 4 channels, `w` wide, from the first band's first row) cut into the
+/// rows of each band of `bs` (consecutive).
+fn band_chunks<'a, T>(img: &'a mut [T], w: usize, bs: &[(i32, i32)]) -> Vec<&'a mut [T]> {
+    let mut chunks = Vec::with_capacity(bs.len());
+    let mut rest = img;
+    for &(y0, y1) in bs {
+        let (head, tail) = rest.split_at_mut(4 * w * (y1 - y0) as usize);
+        chunks.push(head);
+        rest = tail;
+    }
+    chunks
+}
+
+/// The bands of [`forward`] that meet the rows `rows`, painted as [`forward`] paints them (so
+/// their pixels are [`forward`]'s bit for bit). Returns the first row painted and the painted
+/// rows (whole bands, full width); no rows when `rows` meets no band.
+pub(crate) fn forward_rows<T: Real>(
+    sc: &SceneT<T>,
+    ls: &[Layer<T>],
+    rows: std::ops::Range<i32>,
+) -> (i32, Vec<T>) {
+    let w = sc.width as usize;
+    let bs: Vec<(i32, i32)> = bands(sc.height)
+        .into_iter()
+        .filter(|&(y0, y1)| y0 < rows.end && rows.start < y1)
+        .collect();
+    let (Some(&(first, _)), Some(&(_, last))) = (bs.first(), bs.last()) else {
+        return (0, Vec::new());
+    };
+    let mut img = vec![T::zero(); 4 * w * (last - first) as usize];
+    band_chunks(&mut img, w, &bs)
+        .into_par_iter()
+        .zip(bs.par_iter())
+        .for_each(|(chunk, &band)| forward_band(sc, ls, band, chunk, None));
+    (first, img)
 }
 
 /// Per-band gradient partial sums.

@@ -170,6 +170,44 @@ pub fn render(scene: &Scene) -> Image {
     }
 }
 
+/// Per shape, the rows of the canvas its fill and stroke can paint (their pixel bounds; empty
+/// where a shape paints nothing on the canvas). Removing shape `i` changes no pixel outside
+/// its rows.
+pub fn shape_rows(scene: &Scene) -> Vec<std::ops::Range<u32>> {
+    let sc = SceneT::<f32>::from_scene(scene, FLATTEN_TOLERANCE);
+    let mut rows = vec![0..0; scene.shapes.len()];
+    for l in geom::layers(&sc) {
+        let [_, y0, _, y1] = l.bbox;
+        let (y0, y1) = (y0.max(0) as u32, y1.max(0) as u32);
+        if y0 >= y1 {
+            continue;
+        }
+        if let Some(r) = rows.get_mut(l.shape) {
+            *r = if r.start >= r.end {
+                y0..y1
+            } else {
+                r.start.min(y0)..r.end.max(y1)
+            };
+        }
+    }
+    rows
+}
+
+/// Part of [`render`]'s image: every row band of the full render that meets `rows`, computed as
+/// the full render computes it, so its pixels are [`render`]'s bit for bit. Returns the first
+/// row computed and the premultiplied RGBA of the computed rows (full width, whole bands); no
+/// pixels when `rows` is empty or off the canvas.
+pub fn render_rows(scene: &Scene, rows: std::ops::Range<u32>) -> (u32, Vec<f32>) {
+    if rows.is_empty() {
+        return (0, Vec::new());
+    }
+    let sc = SceneT::<f32>::from_scene(scene, FLATTEN_TOLERANCE);
+    let ls = geom::layers(&sc);
+    let clamp = |v: u32| v.min(scene.height) as i32;
+    let (first, data) = engine::forward_rows(&sc, &ls, clamp(rows.start)..clamp(rows.end));
+    (first as u32, data)
+}
+
 /// Renders `scene` and records what [`backward`] needs.
 pub fn render_tape(scene: &Scene) -> (Image, Tape) {
     let sc = SceneT::<f32>::from_scene(scene, FLATTEN_TOLERANCE);

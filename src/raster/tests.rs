@@ -421,3 +421,44 @@ fn recorded_pieces_give_the_walks_deposit_and_gradient_bit_for_bit() {
         assert_eq!((bits(d0), bits(d1)), (bits(e0), bits(e1)), "{p0:?} {p1:?}");
     }
 }
+
+#[test]
+fn row_renders_are_the_whole_renders_rows_bit_for_bit() {
+    // 96x80: several row bands; ranges inside one band, across bands, at the edges and past them.
+    for seed in 0..3u64 {
+        let s = random_scene(seed).scaled_to_width(96);
+        let whole = render(&s);
+        let row = 4 * s.width as usize;
+        for rows in [0..1, 3..9, 17..50, 70..80, 79..200, 0..80] {
+            let (first, data) = render_rows(&s, rows.clone());
+            assert!(
+                first <= rows.start,
+                "seed {seed} {rows:?}: starts at {first}"
+            );
+            assert!(first as usize * row + data.len() >= rows.end.min(80) as usize * row);
+            let at = first as usize * row;
+            assert!(
+                data == whole.data[at..at + data.len()],
+                "seed {seed} {rows:?}: not the whole render's rows"
+            );
+        }
+        assert!(render_rows(&s, 5..5).1.is_empty());
+        assert!(render_rows(&s, 80..90).1.is_empty());
+        // Removing a shape changes no pixel outside its rows.
+        let rows = shape_rows(&s);
+        assert_eq!(rows.len(), s.shapes.len());
+        for (i, r) in rows.iter().enumerate() {
+            let mut trial = s.clone();
+            trial.remove_shape(i);
+            let after = render(&trial);
+            for y in (0..80usize).filter(|y| !r.contains(&(*y as u32))) {
+                assert!(
+                    after.data[y * row..(y + 1) * row] == whole.data[y * row..(y + 1) * row],
+                    "seed {seed}: removing shape {i} ({r:?}) changed row {y}"
+                );
+            }
+        }
+        // The random scene's shapes reach into the canvas.
+        assert!(rows.iter().filter(|r| !r.is_empty()).count() >= 5);
+    }
+}

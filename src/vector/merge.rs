@@ -271,18 +271,32 @@ fn joined(segs: &[CubicBez]) -> Option<Vec<crate::scene::Point>> {
     Some(out)
 }
 
-/// Mean and largest absolute difference of two same-size images over `bx` (px, clipped).
-fn box_diff(a: &Image, b: &Image, bx: &Box2) -> (f64, f64) {
-    let (w, h) = (a.width as f64, a.height as f64);
-    let x0 = (bx[0] - BOX_MARGIN).floor().clamp(0.0, w) as usize;
-    let y0 = (bx[1] - BOX_MARGIN).floor().clamp(0.0, h) as usize;
-    let x1 = (bx[2] + BOX_MARGIN).ceil().clamp(0.0, w) as usize;
-    let y1 = (bx[3] + BOX_MARGIN).ceil().clamp(0.0, h) as usize;
+/// The pixel rows and columns `[x0, x1) × [y0, y1)` of `bx` grown by [`BOX_MARGIN`], clipped to a
+/// `w × h` canvas.
+fn box_pixels(bx: &Box2, w: u32, h: u32) -> [usize; 4] {
+    let (w, h) = (w as f64, h as f64);
+    [
+        (bx[0] - BOX_MARGIN).floor().clamp(0.0, w) as usize,
+        (bx[1] - BOX_MARGIN).floor().clamp(0.0, h) as usize,
+        (bx[2] + BOX_MARGIN).ceil().clamp(0.0, w) as usize,
+        (bx[3] + BOX_MARGIN).ceil().clamp(0.0, h) as usize,
+    ]
+}
+
+/// Mean and largest absolute difference of `a` and the rows of the same image size `b` holds
+/// from row `b_first` on, over `bx` (px, grown by the margin and clipped); those rows must hold
+/// the box's.
+fn box_diff(a: &Image, b_first: usize, b: &[f32], bx: &Box2) -> (f64, f64) {
+    let [x0, y0, x1, y1] = box_pixels(bx, a.width, a.height);
+    let row = 4 * a.width as usize;
     let (mut sum, mut max, mut n) = (0.0f64, 0.0f64, 0usize);
     for y in y0..y1 {
-        let row = 4 * (y * a.width as usize);
-        for i in row + 4 * x0..row + 4 * x1 {
-            let d = (a.data[i] as f64 - b.data[i] as f64).abs();
+        let (ra, rb) = (y * row, (y - b_first) * row);
+        for (x, y) in a.data[ra + 4 * x0..ra + 4 * x1]
+            .iter()
+            .zip(&b[rb + 4 * x0..rb + 4 * x1])
+        {
+            let d = (*x as f64 - *y as f64).abs();
             sum += d;
             max = max.max(d);
             n += 1;
@@ -346,11 +360,22 @@ fn merge_one(
             boxes[i][2].max(boxes[j][2]),
             boxes[i][3].max(boxes[j][3]),
         ];
+        let [_, y0, _, y1] = box_pixels(&bx, scene.width, scene.height);
         for p in pos {
             let trial = with_merged(scene, i, j, p, merged.clone());
-            let img = crate::raster::render(&trial);
-            let (mean, max) = box_diff(current, &img, &bx);
+            // Only the box's rows can change (the union stays within the two paths' control
+            // points); a flat scene renders just the row bands holding them, as a whole render
+            // would. With groups, the whole render.
+            let (first, rows) = if trial.groups.is_empty() {
+                crate::raster::render_rows(&trial, y0 as u32..y1 as u32)
+            } else {
+                (0, crate::raster::render(&trial).data)
+            };
+            let (mean, max) = box_diff(current, first as usize, &rows, &bx);
             if mean <= tol.mean_abs && max <= tol.max_abs {
+                let mut img = current.clone();
+                let at = first as usize * 4 * scene.width as usize;
+                img.data[at..at + rows.len()].copy_from_slice(&rows);
                 return Some((trial, img));
             }
         }

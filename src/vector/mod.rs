@@ -220,9 +220,15 @@ pub fn write_svg(scene: &Scene, colors: &ColorPlan) -> String {
         let stays_simple = |text: &str, back: &Scene| {
             !all_simple || (back.shapes.iter().all(simple::is_simple) && outlines_simple(text))
         };
-        export::compact_svg_checked(s, &opts, tol, stays_simple).svg
+        let c = export::compact_svg_checked(s, &opts, tol, stays_simple);
+        (c.svg, c.within && all_simple)
     };
-    let mut text = write(scene);
+    let (mut text, checked) = write(scene);
+    // A grid within the tolerance was accepted with every outline read back simple: the text
+    // is what the loop below would keep.
+    if checked {
+        return text;
+    }
     for _ in 0..3 {
         let Ok(mut back) = crate::svg::from_svg(&text) else {
             break;
@@ -231,7 +237,7 @@ pub fn write_svg(scene: &Scene, colors: &ColorPlan) -> String {
             break;
         }
         make_simple(&mut back, SIMPLE_MIN_AREA);
-        text = write(&back);
+        text = write(&back).0;
     }
     text
 }
@@ -245,24 +251,35 @@ fn outlines_simple(svg: &str) -> bool {
 /// Removes, from the top of the paint order down, every path whose removal changes no pixel of
 /// the render by more than [`check::VISIBLE_STEP`] (a path hidden under others, or painted
 /// over a region of its own colour). Returns how many.
+///
+/// A flat scene's trial renders cover only the rows the path can paint
+/// ([`crate::raster::render_rows`], the same pixels as a whole render): nothing else changes.
 pub fn drop_hidden(scene: &mut Scene) -> usize {
     let step = check::VISIBLE_STEP;
-    let mut current = crate::raster::render(scene);
+    let mut current = crate::raster::render(scene).data;
+    let row = 4 * scene.width as usize;
+    // Going down the paint order, path `i` is tried after only paths above it were removed:
+    // the rows of the paths below it do not change.
+    let rows = crate::raster::shape_rows(scene);
     let mut removed = 0;
     let mut i = scene.shapes.len();
     while i > 0 {
         i -= 1;
         let mut trial = scene.clone();
         trial.remove_shape(i);
-        let img = crate::raster::render(&trial);
+        let (start, img) = if scene.groups.is_empty() {
+            crate::raster::render_rows(&trial, rows[i].clone())
+        } else {
+            (0, crate::raster::render(&trial).data)
+        };
+        let at = start as usize * row;
         let unchanged = img
-            .data
             .iter()
-            .zip(&current.data)
+            .zip(&current[at..at + img.len()])
             .all(|(a, b)| (a - b).abs() <= step);
         if unchanged {
             *scene = trial;
-            current = img;
+            current[at..at + img.len()].copy_from_slice(&img);
             removed += 1;
         }
     }
@@ -329,3 +346,7 @@ pub fn finish_scene(scene: &mut Scene, colors: &ColorPlan, drop_small: bool) -> 
         colors: palette::distinct_fills(scene),
     }
 }
+
+#[cfg(test)]
+#[path = "tests_finish.rs"]
+mod tests;
