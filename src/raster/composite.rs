@@ -43,13 +43,36 @@ pub(crate) struct Area {
 }
 
 impl Area {
-    #[inline(always)]
-    fn coverage<T: Real>(&self, v: T) -> T {
-        if self.fill {
-            coverage(v, self.even_odd)
-        } else {
-            v
+    /// The per-pixel rule as a constant for [`composite_as`] and [`composite_back_as`]: 0 a
+    /// stroke's coverage, 1 a nonzero fill, 2 an even-odd fill.
+    fn mode(&self) -> u8 {
+        match (self.fill, self.even_odd) {
+            (false, _) => STROKE,
+            (true, false) => NONZERO,
+            (true, true) => EVEN_ODD,
         }
+    }
+}
+
+const STROKE: u8 = 0;
+const NONZERO: u8 = 1;
+const EVEN_ODD: u8 = 2;
+
+/// Whether all four channels are zero: `gp == [0; 4]` without short-circuiting, so that the
+/// four comparisons can run as one.
+#[inline(always)]
+pub(crate) fn all_zero<T: Real>(gp: &[T]) -> bool {
+    let z = T::zero();
+    (gp[0] == z) & (gp[1] == z) & (gp[2] == z) & (gp[3] == z)
+}
+
+/// The coverage of a pixel's value under rule `MODE` (see [`Area::mode`]).
+#[inline(always)]
+fn coverage_as<T: Real, const MODE: u8>(v: T) -> T {
+    match MODE {
+        STROKE => v,
+        NONZERO => coverage(v, false),
+        _ => coverage(v, true),
     }
 }
 
@@ -57,6 +80,22 @@ impl Area {
 /// underneath into `dst` when taping.
 #[inline(always)]
 pub(crate) fn composite<T: Real, S: Shade<T>>(
+    at: &Area,
+    out: &[T],
+    img: &mut [T],
+    dst: Option<&mut Vec<T>>,
+    shade: &S,
+) {
+    // The rule is a constant of each copy of the pixel loop.
+    match at.mode() {
+        STROKE => composite_as::<T, S, STROKE>(at, out, img, dst, shade),
+        NONZERO => composite_as::<T, S, NONZERO>(at, out, img, dst, shade),
+        _ => composite_as::<T, S, EVEN_ODD>(at, out, img, dst, shade),
+    }
+}
+
+#[inline(always)]
+fn composite_as<T: Real, S: Shade<T>, const MODE: u8>(
     at: &Area,
     out: &[T],
     img: &mut [T],
@@ -75,7 +114,7 @@ pub(crate) fn composite<T: Real, S: Shade<T>>(
         }
         let y = clip.y0 + row as i32;
         for (ix, (&v, p)) in vrow.iter().zip(prow.chunks_exact_mut(4)).enumerate() {
-            let cov = at.coverage(v);
+            let cov = coverage_as::<T, MODE>(v);
             if cov == T::zero() {
                 continue;
             }
@@ -105,7 +144,23 @@ pub(crate) fn composite_back<T: Real, S: Shade<T>>(
     gbuf: &mut [T],
     shade: &mut S,
 ) -> bool {
-    let (clip, fill) = (at.clip, at.fill);
+    match at.mode() {
+        STROKE => composite_back_as::<T, S, STROKE>(at, offset, tape, g, gbuf, shade),
+        NONZERO => composite_back_as::<T, S, NONZERO>(at, offset, tape, g, gbuf, shade),
+        _ => composite_back_as::<T, S, EVEN_ODD>(at, offset, tape, g, gbuf, shade),
+    }
+}
+
+#[inline(always)]
+fn composite_back_as<T: Real, S: Shade<T>, const MODE: u8>(
+    at: &Area,
+    offset: usize,
+    tape: &BandTape<T>,
+    g: &mut [T],
+    gbuf: &mut [T],
+    shade: &mut S,
+) -> bool {
+    let clip = at.clip;
     let cw = (clip.x1 - clip.x0) as usize;
     let mut any = false;
     for row in 0..(clip.y1 - clip.y0) as usize {
@@ -125,7 +180,7 @@ pub(crate) fn composite_back<T: Real, S: Shade<T>>(
             .enumerate()
         {
             *gbv = T::zero();
-            if a == T::zero() || gp == [T::zero(); 4] {
+            if a == T::zero() || all_zero(gp) {
                 // No coverage and no edge inside, or no gradient from above (under an opaque
                 // layer): nothing flows through this layer here (the skipped updates would add
                 // and scale zeros only).
@@ -133,7 +188,7 @@ pub(crate) fn composite_back<T: Real, S: Shade<T>>(
             }
             let x = clip.x0 + ix as i32;
             let [cr, cg, cb, ca] = shade.color(x, y);
-            let cov = at.coverage(a);
+            let cov = coverage_as::<T, MODE>(a);
             let alpha = cov * ca;
             let galpha = gp[0] * (cr - d[0])
                 + gp[1] * (cg - d[1])
@@ -144,10 +199,10 @@ pub(crate) fn composite_back<T: Real, S: Shade<T>>(
                 y,
                 [gp[0] * alpha, gp[1] * alpha, gp[2] * alpha, galpha * cov],
             );
-            let slope = if fill {
-                coverage_slope(a, at.even_odd)
-            } else {
-                T::one()
+            let slope = match MODE {
+                STROKE => T::one(),
+                NONZERO => coverage_slope(a, false),
+                _ => coverage_slope(a, true),
             };
             if slope != T::zero() {
                 let dcov = galpha * ca;

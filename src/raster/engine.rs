@@ -351,7 +351,7 @@ fn backward_band<T: Real>(
     let bg = sc.bg;
     for gp in g.chunks_exact(4) {
         // Where nothing reaches the background (under opaque paint) the sums would take zeros.
-        if gp == [T::zero(); 4] {
+        if super::composite::all_zero(gp) {
             continue;
         }
         out.dbg[0] += gp[0] * bg[3];
