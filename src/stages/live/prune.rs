@@ -1,29 +1,39 @@
 //! Pruning: drop paths whose removal barely changes the render, and find faint or tiny paths.
 
-use crate::image::{Image, mse_rgb_over_white};
+use crate::image::{Image, mse_rgb_over_white, sq_err_rgb_over_white};
 use crate::losses::{outline, polygon_area};
 use crate::scene::Scene;
 
 /// Removes, one at a time from the top of the stack down, every path whose removal changes the
-/// render by less than `tolerance` (mean squared RGB difference over white). `render` draws a
-/// scene. Returns the indices (in the original scene) of the removed paths, ascending.
-pub fn prune_paths(
-    scene: &mut Scene,
-    tolerance: f64,
-    mut render: impl FnMut(&Scene) -> Image,
-) -> Vec<usize> {
-    let mut current = render(scene);
+/// render by less than `tolerance` (mean squared RGB difference over white). Returns the indices
+/// (in the original scene) of the removed paths, ascending.
+///
+/// A flat scene's trials render only the row bands a path can change
+/// ([`crate::raster::render_rows`]); the pixels elsewhere are equal and add nothing to the
+/// difference, so every decision is the whole render's.
+pub fn prune_paths(scene: &mut Scene, tolerance: f64) -> Vec<usize> {
+    let mut current = crate::raster::render(scene);
+    let pixels = 3.0 * current.len_pixels() as f64;
+    let row = 4 * scene.width as usize;
+    // Top-down, path `i` is tried after only paths above it went: the rows below stay valid.
+    let rows = crate::raster::shape_rows(scene);
     let mut alive: Vec<usize> = (0..scene.shapes.len()).collect();
     let mut removed = Vec::new();
     let mut i = scene.shapes.len();
     while i > 0 {
         i -= 1;
         let mut trial = scene.clone();
-        trial.shapes.remove(i);
-        let img = render(&trial);
-        if mse_rgb_over_white(&img, &current) < tolerance {
+        trial.remove_shape(i);
+        let (start, img) = if scene.groups.is_empty() {
+            crate::raster::render_rows(&trial, rows[i].clone())
+        } else {
+            (0, crate::raster::render(&trial).data)
+        };
+        let at = start as usize * row;
+        let was = &mut current.data[at..at + img.len()];
+        if sq_err_rgb_over_white(&img, was) / pixels < tolerance {
+            was.copy_from_slice(&img);
             *scene = trial;
-            current = img;
             removed.push(alive.remove(i));
         }
     }
@@ -126,15 +136,61 @@ mod tests {
         scene
             .shapes
             .push(Shape::square(14.0, 2.0, 6.0, Rgba::WHITE).unwrap());
-        let before = boxes(&scene);
-        let removed = prune_paths(&mut scene, 1e-6, boxes);
+        let before = crate::raster::render(&scene);
+        let removed = prune_paths(&mut scene, 1e-6);
         assert_eq!(removed, vec![0, 3]);
         assert_eq!(scene.shapes.len(), 2);
-        assert!(mse_rgb_over_white(&boxes(&scene), &before) < 1e-6);
+        assert!(mse_rgb_over_white(&crate::raster::render(&scene), &before) < 1e-6);
         // A large tolerance removes everything small enough.
         let mut s2 = scene.clone();
-        let removed = prune_paths(&mut s2, 1.0, boxes);
+        let removed = prune_paths(&mut s2, 1.0);
         assert_eq!(removed.len(), 2);
+    }
+
+    /// [`prune_paths`]'s rule with a whole render per trial.
+    fn prune_whole(scene: &mut Scene, tolerance: f64) -> usize {
+        let mut current = crate::raster::render(scene);
+        let mut removed = 0;
+        for i in (0..scene.shapes.len()).rev() {
+            let mut trial = scene.clone();
+            trial.remove_shape(i);
+            let img = crate::raster::render(&trial);
+            if mse_rgb_over_white(&img, &current) < tolerance {
+                *scene = trial;
+                current = img;
+                removed += 1;
+            }
+        }
+        removed
+    }
+
+    #[test]
+    fn pruning_decides_as_whole_renders_do() {
+        use rand::{RngExt, SeedableRng};
+        for seed in 0..6u64 {
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+            let mut s = Scene::new(96, 80, Rgba::WHITE).unwrap();
+            for _ in 0..16 {
+                let (x, y) = (rng.random_range(-10.0..90.0), rng.random_range(-10.0..75.0));
+                let c = Rgba::new(rng.random(), rng.random(), rng.random(), 1.0);
+                let r = rng.random_range(0.5..20.0);
+                s.shapes.push(Shape::circle(x, y, r, 4, c).unwrap());
+            }
+            for tol in [1e-6, 2e-5, 1e-3] {
+                let (mut a, mut b) = (s.clone(), s.clone());
+                let removed = prune_paths(&mut a, tol);
+                assert_eq!(
+                    removed.len(),
+                    prune_whole(&mut b, tol),
+                    "seed {seed} tol {tol}"
+                );
+                assert_eq!(a, b, "seed {seed} tol {tol}");
+                assert!(
+                    tol < 1e-3 || !removed.is_empty(),
+                    "seed {seed}: nothing pruned"
+                );
+            }
+        }
     }
 
     #[test]

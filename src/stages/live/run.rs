@@ -572,7 +572,7 @@ impl Run<'_> {
             prune_tolerance, ..
         } = cfg.budget
         {
-            pruned += prune::prune_paths(&mut scene, prune_tolerance, crate::raster::render).len();
+            pruned += prune::prune_paths(&mut scene, prune_tolerance).len();
         }
         if let Some(max) = cfg.max_bytes {
             pruned += prune::trim_to_bytes(&mut scene, &self.target, max, |s| {
