@@ -265,13 +265,7 @@ pub fn drop_hidden(scene: &mut Scene) -> usize {
     let mut i = scene.shapes.len();
     while i > 0 {
         i -= 1;
-        let mut trial = scene.clone();
-        trial.remove_shape(i);
-        let (start, img) = if scene.groups.is_empty() {
-            crate::raster::render_rows(&trial, rows[i].clone())
-        } else {
-            (0, crate::raster::render(&trial).data)
-        };
+        let (trial, start, img) = without_shape(scene, i, rows[i].clone());
         let at = start as usize * row;
         let unchanged = img
             .iter()
@@ -284,6 +278,24 @@ pub fn drop_hidden(scene: &mut Scene) -> usize {
         }
     }
     removed
+}
+
+/// `scene` without shape `i`, and the rows of its render that removing the shape can change,
+/// given the shape's `rows` ([`crate::raster::shape_rows`]): the first row and the pixels of
+/// [`crate::raster::render_rows`] (a scene with groups: row 0 and the whole render).
+pub(crate) fn without_shape(
+    scene: &Scene,
+    i: usize,
+    rows: std::ops::Range<u32>,
+) -> (Scene, u32, Vec<f32>) {
+    let mut trial = scene.clone();
+    trial.remove_shape(i);
+    let (start, img) = if scene.groups.is_empty() {
+        crate::raster::render_rows(&trial, rows)
+    } else {
+        (0, crate::raster::render(&trial).data)
+    };
+    (trial, start, img)
 }
 
 /// What [`finish_scene`] did.

@@ -22,13 +22,7 @@ pub fn prune_paths(scene: &mut Scene, tolerance: f64) -> Vec<usize> {
     let mut i = scene.shapes.len();
     while i > 0 {
         i -= 1;
-        let mut trial = scene.clone();
-        trial.remove_shape(i);
-        let (start, img) = if scene.groups.is_empty() {
-            crate::raster::render_rows(&trial, rows[i].clone())
-        } else {
-            (0, crate::raster::render(&trial).data)
-        };
+        let (trial, start, img) = crate::vector::without_shape(scene, i, rows[i].clone());
         let at = start as usize * row;
         let was = &mut current.data[at..at + img.len()];
         if sq_err_rgb_over_white(&img, was) / pixels < tolerance {
