@@ -292,11 +292,11 @@ fn box_diff(a: &Image, b_first: usize, b: &[f32], bx: &Box2) -> (f64, f64) {
     let (mut sum, mut max, mut n) = (0.0f64, 0.0f64, 0usize);
     for y in y0..y1 {
         let (ra, rb) = (y * row, (y - b_first) * row);
-        for (x, y) in a.data[ra + 4 * x0..ra + 4 * x1]
+        for (p, q) in a.data[ra + 4 * x0..ra + 4 * x1]
             .iter()
             .zip(&b[rb + 4 * x0..rb + 4 * x1])
         {
-            let d = (*x as f64 - *y as f64).abs();
+            let d = (*p as f64 - *q as f64).abs();
             sum += d;
             max = max.max(d);
             n += 1;
@@ -364,13 +364,8 @@ fn merge_one(
         for p in pos {
             let trial = with_merged(scene, i, j, p, merged.clone());
             // Only the box's rows can change (the union stays within the two paths' control
-            // points); a flat scene renders just the row bands holding them, as a whole render
-            // would. With groups, the whole render.
-            let (first, rows) = if trial.groups.is_empty() {
-                crate::raster::render_rows(&trial, y0 as u32..y1 as u32)
-            } else {
-                (0, crate::raster::render(&trial).data)
-            };
+            // points).
+            let (first, rows) = super::changed_rows(scene, &trial, y0 as u32..y1 as u32);
             let (mean, max) = box_diff(current, first as usize, &rows, &bx);
             if mean <= tol.mean_abs && max <= tol.max_abs {
                 let mut img = current.clone();

@@ -281,8 +281,7 @@ pub fn drop_hidden(scene: &mut Scene) -> usize {
 }
 
 /// `scene` without shape `i`, and the rows of its render that removing the shape can change,
-/// given the shape's `rows` ([`crate::raster::shape_rows`]): the first row and the pixels of
-/// [`crate::raster::render_rows`] (a scene with groups: row 0 and the whole render).
+/// given the shape's `rows` ([`crate::raster::shape_rows`]; see [`changed_rows`]).
 pub(crate) fn without_shape(
     scene: &Scene,
     i: usize,
@@ -290,12 +289,23 @@ pub(crate) fn without_shape(
 ) -> (Scene, u32, Vec<f32>) {
     let mut trial = scene.clone();
     trial.remove_shape(i);
-    let (start, img) = if scene.groups.is_empty() {
-        crate::raster::render_rows(&trial, rows)
-    } else {
-        (0, crate::raster::render(&trial).data)
-    };
+    let (start, img) = changed_rows(scene, &trial, rows);
     (trial, start, img)
+}
+
+/// The render of `trial`, an edit of `before` that changes no pixel outside `rows`, where it
+/// can differ: the first row and the pixels of [`crate::raster::render_rows`] when `before` is
+/// flat, else row 0 and the whole render.
+pub(crate) fn changed_rows(
+    before: &Scene,
+    trial: &Scene,
+    rows: std::ops::Range<u32>,
+) -> (u32, Vec<f32>) {
+    if before.groups.is_empty() {
+        crate::raster::render_rows(trial, rows)
+    } else {
+        (0, crate::raster::render(trial).data)
+    }
 }
 
 /// What [`finish_scene`] did.
