@@ -3,8 +3,8 @@
 //!
 //! Two paths are chosen at run time, per process: the `gemm` crate's micro-kernels (every
 //! matrix product, the im2col and Winograd convolutions' products, and candle's own `matmul`),
-//! with its AVX2 + FMA kernels (and, in a build with the `avx512` feature, its AVX-512 ones,
-//! picked where the CPU has `avx512f`); and our element-wise kernels
+//! with its AVX2 + FMA kernels and, in a build with the `avx512` feature (the default), its
+//! AVX-512 ones, picked where the CPU has `avx512f`; and our element-wise kernels
 //! ([`super::math::vectorised`]), which use AVX2 + FMA where present. Neither needs a
 //! `target-cpu` flag: one binary runs everywhere.
 
@@ -18,8 +18,8 @@ pub struct CpuReport {
     /// The SIMD features the kernels could use that this CPU has, among AVX2, FMA, AVX-512F,
     /// AVX-512 BF16, AVX-512 VNNI and AMX (x86-64 only; empty elsewhere).
     pub features: Vec<String>,
-    /// The `gemm` crate's micro-kernel: `avx512f` (a build with the `avx512` feature on a CPU
-    /// with AVX-512F), `avx2+fma`, or `generic`.
+    /// The `gemm` crate's micro-kernel: `avx512f` (a build with the `avx512` feature, the
+    /// default, on a CPU with AVX-512F), `avx2+fma`, or `generic`.
     pub gemm: String,
     /// Our element-wise kernels: `avx2+fma` or `generic`.
     pub elementwise: String,
