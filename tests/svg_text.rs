@@ -111,3 +111,34 @@ fn the_cli_draws_text_with_the_fonts_it_is_given() {
     assert!(stderr.contains("no fonts"), "{stderr}");
     let _ = std::fs::remove_dir_all(&tmp);
 }
+
+/// Text inside a pattern tile is drawn with the tile, and the import says nothing about it
+/// (it once warned that the text was ignored, as when no font is loaded).
+#[test]
+fn text_in_a_pattern_tile_is_drawn_without_a_warning() {
+    let Some(dir) = font_dir() else {
+        return common::skip("text_in_a_pattern_tile", "no TrueType font directory");
+    };
+    let svg = r##"<svg xmlns="http://www.w3.org/2000/svg" width="80" height="80">
+      <pattern id="p" patternUnits="userSpaceOnUse" width="40" height="40">
+        <text x="2" y="30" font-family="sans-serif" font-size="30">W</text>
+      </pattern>
+      <rect width="80" height="80" fill="url(#p)"/>
+    </svg>"##;
+    let db = Arc::new(fonts::load(Some(dir.into_os_string()), false));
+    let import = import_svg_with_fonts(svg, None, ImageLimits::DEFAULT, Arc::clone(&db)).unwrap();
+    assert!(import.warnings.is_empty(), "{:?}", import.warnings);
+    let ours = raster::render(&import.scene);
+    let opts = usvg::Options {
+        fontdb: db,
+        ..usvg::Options::default()
+    };
+    let want = common::golden::resvg_render_with(svg, &opts);
+    let ink = |img: &Image| img.data.chunks(4).filter(|p| p[3] > 0.5).count();
+    assert!(
+        ink(&ours) > 100,
+        "the glyphs are drawn: {} pixels",
+        ink(&ours)
+    );
+    compare("text_in_a_pattern_tile", &ours, &want, &Tolerance::GOLDEN);
+}

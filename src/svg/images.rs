@@ -72,6 +72,11 @@ impl Images {
         }
     }
 
+    /// Whether any font is loaded (usvg drops every text without one).
+    pub(super) fn has_fonts(&self) -> bool {
+        self.fonts.faces().next().is_some()
+    }
+
     fn warn(&self, w: String) {
         if let Ok(mut v) = self.warnings.lock() {
             v.push(w);

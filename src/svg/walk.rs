@@ -24,8 +24,6 @@ pub(super) struct Walk {
     warnings: Vec<String>,
     more_warnings: usize,
     canvas: (f32, f32),
-    /// Whether usvg laid out any text (it drops text when no font is loaded).
-    drew_text: bool,
     /// Where this import's images come from (see `images`).
     images: Arc<Images>,
 }
@@ -36,7 +34,6 @@ impl Walk {
             warnings: Vec::new(),
             more_warnings: 0,
             canvas,
-            drew_text: false,
             images,
         }
     }
@@ -52,10 +49,11 @@ impl Walk {
         }
     }
 
-    /// One warning per `<text>` element of the source `text` when usvg laid out none (no font
-    /// is loaded: text is out of scope), so a picture without its text says so.
+    /// One warning per `<text>` element of the source `text` when no font is loaded (usvg then
+    /// lays out none: text is out of scope), so a picture without its text says so. With fonts,
+    /// text anywhere (pattern tiles and nested SVG images too) is drawn and nothing is said.
     pub(super) fn text_warnings(&mut self, text: &str) {
-        if self.drew_text {
+        if self.images.has_fonts() {
             return;
         }
         let Some(doc) = super::import_paint::source_tree(text) else {
@@ -133,10 +131,7 @@ impl Walk {
                     let images = Arc::clone(&self.images);
                     super::import_image::image(self, &images, i, ts, out);
                 }
-                usvg::Node::Text(t) => {
-                    self.drew_text = true;
-                    self.group(t.flattened(), ts, mode, out)
-                }
+                usvg::Node::Text(t) => self.group(t.flattened(), ts, mode, out),
             }
         }
         if !layered {
