@@ -19,7 +19,8 @@
 //!    [`SvgLimits::max_depth`] deep, at most [`SvgLimits::max_layers`] clip-path, mask, filter
 //!    and pattern uses (each costs the renderer a layer). A reference cycle is broken where it
 //!    closes, as usvg breaks it: that `href` is dropped, that `url(#…)` becomes `none`, with a
-//!    warning, and the text is checked again (at most [`MAX_REPAIRS`] times);
+//!    warning, and the text is checked again (at most [`MAX_REPAIRS`] times); a marker inside
+//!    its own drawing is passed over, as usvg passes it over (nothing to repair);
 //! 6. after conversion, the drawing's layer bounding box (strokes and filter regions included,
 //!    through every transform) and every pattern tile within ±[`SvgLimits::max_coord_ratio`] ×
 //!    the canvas size.
@@ -307,6 +308,8 @@ fn check_document(
         sheet_targets,
         memo: HashMap::new(),
         visiting: HashSet::new(),
+        markers: Vec::new(),
+        skipped_markers: 0,
         limits,
         marker_cost: 0,
         cycle: None,
@@ -318,7 +321,8 @@ fn check_document(
                 .filter(|n| n.is_element() && n.tag_name().name() == "marker")
                 .collect();
             for m in markers {
-                e.marker_cost = e.marker_cost.max(e.cost(m, 1)?.elements);
+                let c = e.in_marker(m, 1)?;
+                e.marker_cost = e.marker_cost.max(c.elements);
             }
         }
         e.cost(doc.root_element(), 1).map(|_| ())
@@ -451,6 +455,11 @@ struct Expansion<'d, 'a, 'i> {
     sheet_targets: Vec<Node<'a, 'i>>,
     memo: HashMap<NodeId, Cost>,
     visiting: HashSet<NodeId>,
+    /// The markers being drawn, outermost first (usvg's `parent_markers`).
+    markers: Vec<NodeId>,
+    /// How many marker references were passed over because that marker was being drawn: a
+    /// cost computed while this grew depends on the markers around it and is not memoised.
+    skipped_markers: usize,
     limits: &'d SvgLimits,
     /// Elements of the largest marker, charged per vertex of every drawn shape.
     marker_cost: u64,
@@ -499,7 +508,22 @@ impl<'a, 'i> Expansion<'_, 'a, 'i> {
                     .saturating_add((vertices as u64).saturating_mul(self.marker_cost));
             }
         }
+        let skipped_before = self.skipped_markers;
         for (r, link) in refs {
+            if matches!(link, Link::Url(_)) && r.tag_name().name() == "marker" {
+                // usvg draws a marker's content anew at every vertex and, inside it, passes
+                // over a marker already being drawn (not a cycle to repair).
+                if self.markers.contains(&r.id()) {
+                    self.skipped_markers += 1;
+                    continue;
+                }
+                let rc = self.in_marker(r, depth + 1)?;
+                c.elements = c.elements.saturating_add(rc.elements);
+                c.layers = c.layers.saturating_add(rc.layers);
+                c.height = c.height.max(rc.height + 1);
+                self.within(&c)?;
+                continue;
+            }
             if self.visiting.contains(&r.id()) {
                 if inherits_by_href(node, r, &link) {
                     // usvg follows such a chain from each element only until it comes back to
@@ -528,8 +552,23 @@ impl<'a, 'i> Expansion<'_, 'a, 'i> {
         }
         self.within(&c)?;
         self.visiting.remove(&node.id());
-        self.memo.insert(node.id(), c);
+        if self.skipped_markers == skipped_before {
+            self.memo.insert(node.id(), c);
+        }
         Ok(c)
+    }
+
+    /// The cost of marker `m` drawn where a shape refers to it: its content is a new instance
+    /// (the elements on the way to the shape are not its ancestors), and inside it `m` and the
+    /// markers around it are passed over, as usvg does. Without memoised reuse such nesting is
+    /// walked in full, so the work stays within the element limit it is checked against.
+    fn in_marker(&mut self, m: Node<'a, 'i>, depth: usize) -> Result<Cost, SvgRejected> {
+        let outer = std::mem::take(&mut self.visiting);
+        self.markers.push(m.id());
+        let c = self.cost(m, depth);
+        self.markers.pop();
+        self.visiting = outer;
+        c
     }
 
     /// The elements `node` refers to, and how.

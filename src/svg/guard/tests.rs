@@ -268,3 +268,39 @@ fn entities_with_markup_expand_and_nested_entities_are_dropped() {
     assert!(p.warnings[0].contains("\"a\""), "{}", p.warnings[0]);
     assert_eq!(paths(p.tree.root()), 1);
 }
+
+#[test]
+fn markers_inside_their_own_drawing_are_passed_over_as_usvg_does() {
+    // Two markers drawing a path that carries both (resvg's `marker/recursive-5`): nothing is
+    // repaired; the outer marker draws the path with the other marker once, the inner one the
+    // bare path.
+    let nested = svg(
+        r##"<marker id="m1" markerWidth="6" markerHeight="6" orient="auto"><use href="#p1"/></marker>
+        <marker id="m2" markerWidth="6" markerHeight="6" orient="auto"><use href="#p1"/></marker>
+        <path id="p1" d="M1 1 5 3 1 5" fill="none" stroke="blue" marker-start="url(#m1)" marker-end="url(#m2)"/>
+        <path d="M2 2 20 20" stroke="green" marker-start="url(#m1)" marker-end="url(#m2)"/>"##,
+    );
+    let p = repaired(&nested).unwrap();
+    assert!(p.warnings.is_empty(), "{:?}", p.warnings);
+    // usvg itself: the same tree as without the guard.
+    let plain = usvg::Tree::from_str(&nested, &usvg::Options::default()).unwrap();
+    assert_eq!(paths(p.tree.root()), paths(plain.root()));
+    assert!(paths(p.tree.root()) >= 6, "{}", paths(p.tree.root()));
+    // Eight markers each drawing every other one: 8! nestings, refused by the element limit
+    // (quickly: the walk stops at the limit).
+    let k = 8;
+    let mut bomb = String::new();
+    for i in 0..k {
+        bomb.push_str(&format!(
+            r##"<marker id="n{i}" markerWidth="4" markerHeight="4">{}</marker>"##,
+            (0..k)
+                .map(|j| format!(r##"<path d="M0 0 1 1 2 0" marker-start="url(#n{j})"/>"##))
+                .collect::<String>()
+        ));
+    }
+    bomb.push_str(r##"<path d="M0 0 9 9 18 0" marker-start="url(#n0)"/>"##);
+    let t = std::time::Instant::now();
+    let e = check(&svg(&bomb)).unwrap_err();
+    assert!(e.to_string().contains("expands"), "{e}");
+    assert!(t.elapsed().as_secs() < 10, "{:?}", t.elapsed());
+}
