@@ -307,6 +307,7 @@ fn check_document(
         ids: &ids,
         sheet_targets,
         memo: HashMap::new(),
+        own: HashMap::new(),
         visiting: HashSet::new(),
         markers: Vec::new(),
         skipped_markers: 0,
@@ -440,6 +441,23 @@ fn href_target<'a, 'i>(
     Some((*target, Link::Href(attr.range())))
 }
 
+/// The vertices a marker is drawn at on `node` (0 for elements that carry no markers).
+fn vertices(node: Node) -> u64 {
+    if !svg_element(node) {
+        return 0;
+    }
+    match node.tag_name().name() {
+        "path" | "polygon" | "polyline" => {
+            let d = node.attribute("d").or_else(|| node.attribute("points"));
+            d.map_or(0, |d| {
+                scan_numbers(d, true, |_| Ok(())).unwrap_or(0) as u64 / 2 + 1
+            })
+        }
+        "line" | "rect" | "circle" | "ellipse" => 5,
+        _ => 0,
+    }
+}
+
 /// What one element costs once its references are expanded.
 #[derive(Clone, Copy, Debug, Default)]
 struct Cost {
@@ -454,6 +472,8 @@ struct Expansion<'d, 'a, 'i> {
     ids: &'d HashMap<&'a str, Node<'a, 'i>>,
     sheet_targets: Vec<Node<'a, 'i>>,
     memo: HashMap<NodeId, Cost>,
+    /// Each element's own references and marker vertices ([`Expansion::own`]).
+    own: HashMap<NodeId, (Vec<(Node<'a, 'i>, Link)>, u64)>,
     visiting: HashSet<NodeId>,
     /// The markers being drawn, outermost first (usvg's `parent_markers`).
     markers: Vec<NodeId>,
@@ -489,32 +509,20 @@ impl<'a, 'i> Expansion<'_, 'a, 'i> {
             layers: 0,
             height: 1,
         };
-        let refs = self.refs(node);
-        if svg_element(node) {
-            let tag = node.tag_name().name();
-            if self.marker_cost > 0 {
-                let vertices = match tag {
-                    "path" | "polygon" | "polyline" => {
-                        let d = node.attribute("d").or_else(|| node.attribute("points"));
-                        d.map_or(0, |d| {
-                            scan_numbers(d, true, |_| Ok(())).unwrap_or(0) / 2 + 1
-                        })
-                    }
-                    "line" | "rect" | "circle" | "ellipse" => 5,
-                    _ => 0,
-                };
-                c.elements = c
-                    .elements
-                    .saturating_add((vertices as u64).saturating_mul(self.marker_cost));
-            }
-        }
+        let (refs, vertices) = self.own(node);
+        c.elements = c
+            .elements
+            .saturating_add(vertices.saturating_mul(self.marker_cost));
         let skipped_before = self.skipped_markers;
         for (r, link) in refs {
             if matches!(link, Link::Url(_)) && r.tag_name().name() == "marker" {
                 // usvg draws a marker's content anew at every vertex and, inside it, passes
-                // over a marker already being drawn (not a cycle to repair).
+                // over a marker already being drawn (not a cycle to repair). The reference is
+                // charged as one element, so a walk without memo stays within the limit.
                 if self.markers.contains(&r.id()) {
                     self.skipped_markers += 1;
+                    c.elements = c.elements.saturating_add(1);
+                    self.within(&c)?;
                     continue;
                 }
                 let rc = self.in_marker(r, depth + 1)?;
@@ -571,8 +579,30 @@ impl<'a, 'i> Expansion<'_, 'a, 'i> {
         c
     }
 
-    /// The elements `node` refers to, and how.
-    fn refs(&self, node: Node<'a, 'i>) -> Vec<(Node<'a, 'i>, Link)> {
+    /// The elements `node` refers to, and how, and the vertices a marker is drawn at on it
+    /// (its own attributes are read once per element, however often a marker redraws it).
+    fn own(&mut self, node: Node<'a, 'i>) -> (Vec<(Node<'a, 'i>, Link)>, u64) {
+        let (mut refs, vertices) = match self.own.get(&node.id()) {
+            Some(o) => o.clone(),
+            None => {
+                let o = (self.attribute_refs(node), vertices(node));
+                self.own.insert(node.id(), o.clone());
+                o
+            }
+        };
+        // A sheet's rule charges every element; it need not apply to its own target (usvg
+        // breaks cycles through sheets itself).
+        refs.extend(
+            self.sheet_targets
+                .iter()
+                .filter(|t| !self.visiting.contains(&t.id()))
+                .map(|t| (*t, Link::Sheet)),
+        );
+        (refs, vertices)
+    }
+
+    /// The `href` and `url(#…)` references of `node`'s own attributes.
+    fn attribute_refs(&self, node: Node<'a, 'i>) -> Vec<(Node<'a, 'i>, Link)> {
         let mut refs: Vec<(Node<'a, 'i>, Link)> = href_target(node, self.ids).into_iter().collect();
         if !svg_element(node) {
             return refs;
@@ -584,14 +614,6 @@ impl<'a, 'i> Expansion<'_, 'a, 'i> {
                 Some((*target, Link::Url(at + r.start..at + r.end)))
             }));
         }
-        // A sheet's rule charges every element; it need not apply to its own target (usvg
-        // breaks cycles through sheets itself).
-        refs.extend(
-            self.sheet_targets
-                .iter()
-                .filter(|t| !self.visiting.contains(&t.id()))
-                .map(|t| (*t, Link::Sheet)),
-        );
         refs
     }
 
