@@ -127,6 +127,31 @@ impl ClipEncoder {
         Ok(Self { layers })
     }
 
+    /// The same stack with its weights stored for inputs of few rows (the text towers' 77
+    /// tokens): every linear weight [`Linear::stored_for_few_rows`] (transposed where the
+    /// kernels' short-product path reads it).
+    pub fn for_few_rows(self) -> Result<Self> {
+        let layers = self
+            .layers
+            .into_iter()
+            .map(|l| {
+                Ok(EncoderLayer {
+                    attn: Attention {
+                        q: l.attn.q.stored_for_few_rows()?,
+                        k: l.attn.k.stored_for_few_rows()?,
+                        v: l.attn.v.stored_for_few_rows()?,
+                        out: l.attn.out.stored_for_few_rows()?,
+                        heads: l.attn.heads,
+                    },
+                    fc1: l.fc1.stored_for_few_rows()?,
+                    fc2: l.fc2.stored_for_few_rows()?,
+                    ..l
+                })
+            })
+            .collect::<Result<Vec<_>>>()?;
+        Ok(Self { layers })
+    }
+
     pub fn num_layers(&self) -> usize {
         self.layers.len()
     }
@@ -196,7 +221,7 @@ impl ClipTextTransformer {
                 c.hidden_size,
                 emb.pp("position_embedding"),
             )?,
-            encoder: ClipEncoder::new(vb.pp("encoder"), &shape)?,
+            encoder: ClipEncoder::new(vb.pp("encoder"), &shape)?.for_few_rows()?,
             final_layer_norm: LayerNorm::load(
                 vb.pp("final_layer_norm"),
                 c.hidden_size,

@@ -101,16 +101,42 @@ fn check_weight(w: &[f32], o: usize, i: usize, bias: Option<&[f32]>) -> KernelRe
     Ok(())
 }
 
+/// A linear layer's weight `W [out, in]` as it is stored.
+#[derive(Clone, Copy, Debug)]
+pub enum Weight<'a> {
+    /// PyTorch's layout: row `o` holds the weights of output `o`.
+    OutIn(&'a [f32]),
+    /// Transposed, `[in, out]`: what a product of few rows reads fastest (`gemm` packs it
+    /// with vector copies instead of a strided gather).
+    InOut(&'a [f32]),
+}
+
+impl<'a> Weight<'a> {
+    fn data(self) -> &'a [f32] {
+        match self {
+            Weight::OutIn(w) | Weight::InOut(w) => w,
+        }
+    }
+
+    /// `Wᵀ [i, o]` as a strided matrix.
+    fn view(self, i: usize, o: usize) -> KernelResult<View<'a>> {
+        match self {
+            Weight::OutIn(w) => View::new(w, i, o, 1, i),
+            Weight::InOut(w) => View::new(w, i, o, o, 1),
+        }
+    }
+}
+
 /// Token rows: `x [rows, i] -> x·Wᵀ + bias (+ residual [rows, o])`.
 pub fn linear(
     x: &[f32],
     i: usize,
-    w: &[f32],
+    w: Weight,
     o: usize,
     bias: Option<&[f32]>,
     residual: Option<&[f32]>,
 ) -> KernelResult<Vec<f32>> {
-    check_weight(w, o, i, bias)?;
+    check_weight(w.data(), o, i, bias)?;
     if i == 0 || x.len() % i != 0 {
         return Err(KernelError::Rows {
             op: "linear",
@@ -136,12 +162,16 @@ pub fn linear(
             .for_each(|r| r.iter_mut().zip(b).for_each(|(y, b)| *y += b));
     }
     let threads = rayon::current_num_threads();
-    let block = if rows <= 128 { 32 } else { 96 };
+    let block = match w {
+        Weight::OutIn(_) if rows <= 128 => 32,
+        _ => 96,
+    };
     if threads > 1 && rows <= FEW_ROWS && i >= MIN_DEPTH && o >= 2 * block {
         // A short product (a text encoder's 77 tokens): `gemm` splits its few rows poorly over
-        // the threads, so the threads take blocks of output columns (rows of `w`), 32 wide for
-        // up to 128 rows, else 96 (fastest in a sweep of 32–384 on 77 and 154 rows, AVX-512).
-        let (x, w) = (View::new(x, rows, i, i, 1)?, View::new(w, i, o, 1, i)?);
+        // the threads, so the threads take blocks of output columns, 96 wide (32 for up to 128
+        // rows of an `[out, in]` weight): the fastest in a sweep of 32–384 on 77 and 154 rows
+        // with AVX-512.
+        let (x, w) = (View::new(x, rows, i, i, 1)?, w.view(i, o)?);
         let blocks = o.div_ceil(block);
         let dst = SendPtr(y.as_mut_ptr());
         (0..blocks).into_par_iter().for_each(|blk| {
@@ -149,7 +179,7 @@ pub fn linear(
             let cols = block.min(o - c0);
             let dst = &dst;
             // SAFETY: the views were bounds-checked for the whole product; block `blk` reads
-            // columns c0..c0+cols of `w` (its rows c0..) and writes only those columns of `y`
+            // columns c0..c0+cols of `Wᵀ` and writes only those columns of `y`
             // (rows × o, row stride o), which no other block writes.
             unsafe {
                 gemm_strided(
@@ -170,7 +200,7 @@ pub fn linear(
         o,
         (rows, o, i),
         View::new(x, rows, i, i, 1)?,
-        View::new(w, i, o, 1, i)?,
+        w.view(i, o)?,
         Parallelism::Rayon(threads),
     )?;
     Ok(y)
@@ -291,7 +321,7 @@ mod tests {
         let x = test_values(b * n * i, 3);
         let res = test_values(b * n * o, 4);
         // tokens
-        let y = linear(&x, i, &w, o, Some(&bias), Some(&res)).unwrap();
+        let y = linear(&x, i, Weight::OutIn(&w), o, Some(&bias), Some(&res)).unwrap();
         let want = naive(|r, k| x[r * i + k], b * n, i, &w, o);
         for (idx, v) in y.iter().enumerate() {
             assert!((v - (want[idx] + bias[idx % o] + res[idx])).abs() < 1e-5);
@@ -314,30 +344,35 @@ mod tests {
                 }
             }
         }
-        assert!(linear(&x, i, &w[1..], o, None, None).is_err());
-        assert!(linear(&x, i, &w, o, None, Some(&res[1..])).is_err());
+        assert!(linear(&x, i, Weight::OutIn(&w[1..]), o, None, None).is_err());
+        assert!(linear(&x, i, Weight::InOut(&w[1..]), o, None, None).is_err());
+        assert!(linear(&x, i, Weight::OutIn(&w), o, None, Some(&res[1..])).is_err());
         assert!(linear_to_channels(&x, (b, n, i), &w, o, None, &res[1..]).is_err());
         assert!(View::new(&x, 100, 1, 1, 1).is_err());
     }
 
     /// Short products split by column blocks over two threads (77 rows, 32-wide blocks and a
-    /// partial last one; 150 rows, 96-wide) give the naive product with bias and residual.
+    /// partial last one; 150 rows, 96-wide), from either weight layout, and the unsplit
+    /// product of the transposed layout give the naive product with bias and residual.
     #[test]
     fn column_blocks_of_short_products_match_a_naive_product() {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(2)
             .build()
             .unwrap();
-        for (rows, i, o) in [(77, 512, 100), (150, 520, 200)] {
+        for (rows, i, o) in [(77, 512, 100), (150, 520, 200), (77, 512, 300), (20, 7, 5)] {
             let w = test_values(o * i, 5);
+            let wt: Vec<f32> = (0..i * o).map(|n| w[(n % o) * i + n / o]).collect();
             let bias = test_values(o, 6);
             let x = test_values(rows * i, 7);
             let res = test_values(rows * o, 8);
-            let y = pool.install(|| linear(&x, i, &w, o, Some(&bias), Some(&res)).unwrap());
             let want = naive(|r, k| x[r * i + k], rows, i, &w, o);
-            for (idx, v) in y.iter().enumerate() {
-                let exp = want[idx] + bias[idx % o] + res[idx];
-                assert!((v - exp).abs() < 1e-3, "{rows}x{o}: {v} vs {exp} at {idx}");
+            for weight in [Weight::OutIn(&w), Weight::InOut(&wt)] {
+                let y = pool.install(|| linear(&x, i, weight, o, Some(&bias), Some(&res)).unwrap());
+                for (idx, v) in y.iter().enumerate() {
+                    let exp = want[idx] + bias[idx % o] + res[idx];
+                    assert!((v - exp).abs() < 1e-3, "{rows}x{o}: {v} vs {exp} at {idx}");
+                }
             }
         }
     }
