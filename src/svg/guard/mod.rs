@@ -515,37 +515,37 @@ impl<'a, 'i> Expansion<'_, 'a, 'i> {
             .saturating_add(vertices.saturating_mul(self.marker_cost));
         let skipped_before = self.skipped_markers;
         for (r, link) in refs {
-            if matches!(link, Link::Url(_)) && r.tag_name().name() == "marker" {
+            let rc = if matches!(link, Link::Url(_)) && r.tag_name().name() == "marker" {
                 // usvg draws a marker's content anew at every vertex and, inside it, passes
                 // over a marker already being drawn (not a cycle to repair). The reference is
                 // charged as one element, so a walk without memo stays within the limit.
                 if self.markers.contains(&r.id()) {
                     self.skipped_markers += 1;
-                    c.elements = c.elements.saturating_add(1);
-                    self.within(&c)?;
-                    continue;
+                    Cost {
+                        elements: 1,
+                        layers: 0,
+                        height: 0,
+                    }
+                } else {
+                    self.in_marker(r, depth + 1)?
                 }
-                let rc = self.in_marker(r, depth + 1)?;
-                c.elements = c.elements.saturating_add(rc.elements);
-                c.layers = c.layers.saturating_add(rc.layers);
-                c.height = c.height.max(rc.height + 1);
-                self.within(&c)?;
-                continue;
-            }
-            if self.visiting.contains(&r.id()) {
-                if inherits_by_href(node, r, &link) {
-                    // usvg follows such a chain from each element only until it comes back to
-                    // that element: every element keeps what the rest of the ring gives it.
-                    continue;
+            } else {
+                if self.visiting.contains(&r.id()) {
+                    if inherits_by_href(node, r, &link) {
+                        // usvg follows such a chain from each element only until it comes
+                        // back to that element: every element keeps what the rest of the ring
+                        // gives it.
+                        continue;
+                    }
+                    self.cycle = break_cycle(node, r, &link);
+                    return Err(cycle());
                 }
-                self.cycle = break_cycle(node, r, &link);
-                return Err(cycle());
-            }
+                self.cost(r, depth + 1)?
+            };
             let layer = matches!(
                 r.tag_name().name(),
                 "clipPath" | "mask" | "filter" | "pattern"
             );
-            let rc = self.cost(r, depth + 1)?;
             c.elements = c.elements.saturating_add(rc.elements);
             c.layers = c.layers.saturating_add(rc.layers + u64::from(layer));
             c.height = c.height.max(rc.height + 1);
