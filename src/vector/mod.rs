@@ -369,6 +369,29 @@ pub fn finish_scene(scene: &mut Scene, colors: &ColorPlan, drop_small: bool) -> 
     }
 }
 
+/// Removes shapes from the top of the stack down with a whole render per trial, keeping each
+/// removal `keep(new render, current render)` accepts; returns how many went. The reference
+/// that the row-band trials of [`drop_hidden`] and the `auto` pruning are tested against.
+#[cfg(test)]
+pub(crate) fn remove_by_whole_renders(
+    scene: &mut Scene,
+    keep: impl Fn(&crate::image::Image, &crate::image::Image) -> bool,
+) -> usize {
+    let mut current = crate::raster::render(scene);
+    let mut removed = 0;
+    for i in (0..scene.shapes.len()).rev() {
+        let mut trial = scene.clone();
+        trial.remove_shape(i);
+        let img = crate::raster::render(&trial);
+        if keep(&img, &current) {
+            *scene = trial;
+            current = img;
+            removed += 1;
+        }
+    }
+    removed
+}
+
 #[cfg(test)]
 #[path = "tests_finish.rs"]
 mod tests;

@@ -7,24 +7,12 @@ use rand_chacha::ChaCha8Rng;
 
 /// [`drop_hidden`]'s rule with a whole render per trial.
 fn drop_hidden_whole(scene: &mut Scene) -> usize {
-    let mut current = crate::raster::render(scene);
-    let mut removed = 0;
-    for i in (0..scene.shapes.len()).rev() {
-        let mut trial = scene.clone();
-        trial.remove_shape(i);
-        let img = crate::raster::render(&trial);
-        let same = img
-            .data
+    remove_by_whole_renders(scene, |img, current| {
+        img.data
             .iter()
             .zip(&current.data)
-            .all(|(a, b)| (a - b).abs() <= check::VISIBLE_STEP);
-        if same {
-            *scene = trial;
-            current = img;
-            removed += 1;
-        }
-    }
-    removed
+            .all(|(a, b)| (a - b).abs() <= check::VISIBLE_STEP)
+    })
 }
 
 fn opaque(rng: &mut ChaCha8Rng) -> Rgba {

@@ -143,19 +143,9 @@ mod tests {
 
     /// [`prune_paths`]'s rule with a whole render per trial.
     fn prune_whole(scene: &mut Scene, tolerance: f64) -> usize {
-        let mut current = crate::raster::render(scene);
-        let mut removed = 0;
-        for i in (0..scene.shapes.len()).rev() {
-            let mut trial = scene.clone();
-            trial.remove_shape(i);
-            let img = crate::raster::render(&trial);
-            if mse_rgb_over_white(&img, &current) < tolerance {
-                *scene = trial;
-                current = img;
-                removed += 1;
-            }
-        }
-        removed
+        crate::vector::remove_by_whole_renders(scene, |img, current| {
+            mse_rgb_over_white(img, current) < tolerance
+        })
     }
 
     #[test]
