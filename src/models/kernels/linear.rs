@@ -210,7 +210,7 @@ pub fn linear(
 const FEW_ROWS: usize = 256;
 /// ... when each output sums at least this many products (the full-size text encoders' 768 and
 /// more; the tiny test models stay on `gemm`'s own threading).
-const MIN_DEPTH: usize = 512;
+pub const MIN_DEPTH: usize = 512;
 
 /// A raw pointer the column blocks of [`linear`] share; each writes only its own columns.
 struct SendPtr(*mut f32);

@@ -26,10 +26,11 @@ impl Linear {
     }
 
     /// The same layer with its weight stored transposed (`[in, out]`, read through a view as
-    /// `[out, in]`) where the kernels' short-product path reads it (`in` ≥ 512): faster for
-    /// inputs of few rows, such as a text encoder's tokens; the same values, no more memory.
+    /// `[out, in]`) where the kernels' short-product path reads it (`in` ≥
+    /// [`linear::MIN_DEPTH`]): faster for inputs of few rows, such as a text encoder's tokens;
+    /// the same values, no more memory.
     pub fn stored_for_few_rows(self) -> R<Self> {
-        if self.weight.dim(1)? < 512 {
+        if self.weight.dim(1)? < linear::MIN_DEPTH {
             return Ok(self);
         }
         Ok(Self {
