@@ -45,6 +45,29 @@ fn render_writes_png_of_requested_size() {
     assert_eq!(o.status.code(), Some(2), "bad input exits 2 (README)");
     assert!(String::from_utf8_lossy(&o.stderr).contains("cannot parse SVG"));
 
+    // An old Illustrator file in ISO-8859-1 is read by its declaration; bytes that are not
+    // UTF-8 without one are bad input (2), named.
+    let mut latin = b"<?xml version=\"1.0\" encoding=\"iso-8859-1\"?><svg xmlns=\"http://www.w3.org/2000/svg\" width=\"8\" height=\"8\"><title>caf".to_vec();
+    latin.extend_from_slice(&[0xE9]);
+    latin.extend_from_slice(b"</title><rect width=\"8\" height=\"8\" fill=\"red\"/></svg>");
+    std::fs::write(&svg, &latin).unwrap();
+    let o = bin()
+        .args(["render", svg.to_str().unwrap(), "-o", out.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    std::fs::write(
+        &svg,
+        &latin[latin.iter().position(|b| *b == b'>').unwrap() + 1..],
+    )
+    .unwrap();
+    let o = bin()
+        .args(["render", svg.to_str().unwrap(), "-o", out.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("not valid UTF-8"));
+
     // A missing input file is bad input too (2), with a message naming it.
     let missing = dir.join("missing.svg");
     let o = bin()

@@ -270,6 +270,56 @@ fn external_images_are_read_only_beside_a_named_file() {
     );
 }
 
+/// As usvg: an SVG image reads no files, so an SVG file drawing itself is drawn once (its own
+/// `href` dropped), and a picture beside it is not read from inside a `data:` SVG image.
+#[test]
+fn an_svg_image_reads_no_files() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        dir.path().join("pic.png"),
+        picture(8, 8, image::ImageFormat::Png),
+    )
+    .unwrap();
+    let selfish = doc(
+        r##"<rect width="4" height="4" fill="#123"/><image x="8" y="8" width="20" height="20" href="self.svg"/>"##,
+    );
+    std::fs::write(dir.path().join("self.svg"), &selfish).unwrap();
+    let i = import_svg_in(&selfish, Some(dir.path()), ImageLimits::DEFAULT).unwrap();
+    // Drawn as the same document whose image holds the picture without its image.
+    let once = doc(&format!(
+        r##"<rect width="4" height="4" fill="#123"/><image x="8" y="8" width="20" height="20" href="{}"/>"##,
+        data_url(
+            "image/svg+xml",
+            doc(r##"<rect width="4" height="4" fill="#123"/>"##).as_bytes()
+        )
+    ));
+    let expected = import_svg_in(&once, None, ImageLimits::DEFAULT).unwrap();
+    assert_eq!(i.scene, expected.scene, "{:?}", i.warnings);
+    assert!(
+        i.warnings
+            .iter()
+            .any(|w| w.contains("self.svg") && w.contains("inside an SVG image")),
+        "{:?}",
+        i.warnings
+    );
+    let inner = doc(r#"<image width="40" height="40" href="pic.png"/>"#);
+    let outer = doc(&format!(
+        r#"<image width="40" height="40" href="{}"/>"#,
+        data_url("image/svg+xml", inner.as_bytes())
+    ));
+    let i = import_svg_in(&outer, Some(dir.path()), ImageLimits::DEFAULT).unwrap();
+    let empty = doc(&format!(
+        r#"<image width="40" height="40" href="{}"/>"#,
+        data_url("image/svg+xml", doc("").as_bytes())
+    ));
+    let expected = import_svg_in(&empty, None, ImageLimits::DEFAULT).unwrap();
+    assert_eq!(i.scene, expected.scene, "{:?}", i.warnings);
+    // The same picture at the top level is read.
+    let top = import_svg_in(&inner, Some(dir.path()), ImageLimits::DEFAULT).unwrap();
+    let without = import_svg_in(&doc(""), None, ImageLimits::DEFAULT).unwrap();
+    assert_eq!(top.scene.shapes.len(), without.scene.shapes.len() + 1);
+}
+
 /// `render --size` draws pattern tiles at the output's resolution, a pattern nested in a tile
 /// once (not twice): at 2× the nested pattern still matches resvg's render at 2×.
 #[test]

@@ -96,25 +96,29 @@ pub fn load_import(path: &Path) -> Result<SvgImport, SvgError> {
 /// Largest scene file `load_scene` reads (an SVG is further held to [`SvgLimits::max_bytes`]).
 pub const SCENE_FILE_MAX_BYTES: u64 = 64 << 20;
 
-/// Reads UTF-8 text from `path`, refusing more than `max` bytes (so `/dev/zero` or a huge file is
-/// an error, not unbounded memory).
+/// Reads SVG text from `path` (UTF-8, UTF-16 by its byte-order mark, or the encoding its XML
+/// declaration names: [`super::encoding`]), refusing more than `max` bytes (so `/dev/zero` or a
+/// huge file is an error, not unbounded memory).
 pub fn read_text_capped(path: &Path, max: u64) -> Result<String, SvgError> {
     use std::io::Read;
     let io = |source| SvgError::Io {
         path: path.display().to_string(),
         source,
     };
-    let mut text = String::new();
+    let mut bytes = Vec::new();
     std::fs::File::open(path)
         .map_err(io)?
         .take(max + 1)
-        .read_to_string(&mut text)
+        .read_to_end(&mut bytes)
         .map_err(io)?;
-    if text.len() as u64 > max {
+    if bytes.len() as u64 > max {
         return Err(SvgError::TooLarge {
             path: path.display().to_string(),
             max,
         });
     }
-    Ok(text)
+    super::encoding::decode(&bytes).map_err(|source| SvgError::Text {
+        path: path.display().to_string(),
+        source,
+    })
 }

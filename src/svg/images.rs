@@ -7,7 +7,8 @@
 //!   SVG images deep (deeper ones are dropped).
 //! - other `href`s are files, read only when the caller names the directory of the SVG file
 //!   (the command line reading a file): relative paths from there, at most
-//!   [`ImageLimits::max_bytes`] read. Everywhere else (the service, every text input) nothing is
+//!   [`ImageLimits::max_bytes`] read; never from inside an SVG image (as usvg, which resolves
+//!   only `data:` URLs there). Everywhere else (the service, every text input) nothing is
 //!   read and the image is dropped with a warning naming its `href`.
 //! - an image declaring more than [`ImageLimits::max_pixels`] pixels, or more than
 //!   [`ImageLimits::max_total_pixels`] over the whole import, is dropped with a warning before
@@ -114,6 +115,15 @@ impl Images {
     }
 
     fn file(&self, href: &str, depth: u32) -> Option<ImageKind> {
+        if depth > 0 {
+            // As usvg: an SVG image is drawn from its own bytes, so a file it names (itself, too)
+            // is not read.
+            self.warn(format!(
+                "<image href=\"{}\"> inside an SVG image dropped (an SVG image reads no files)",
+                clip_text(href)
+            ));
+            return None;
+        }
         let Some(dir) = &self.base_dir else {
             self.warn(format!(
                 "<image href=\"{}\"> dropped (external images are read only from an SVG file \
@@ -241,8 +251,8 @@ pub(super) enum ImageError {
     Decode(#[from] image::ImageError),
     #[error("larger than {0} bytes")]
     TooLarge(u64),
-    #[error("not UTF-8 text")]
-    NotUtf8,
+    #[error("{0}")]
+    Text(#[from] super::encoding::TextError),
     #[error("an SVG image is not a raster")]
     NotRaster,
 }
@@ -276,7 +286,7 @@ fn inflate(data: &[u8], max: u64) -> Result<String, ImageError> {
     if out.len() as u64 > max {
         return Err(ImageError::TooLarge(max));
     }
-    String::from_utf8(out).map_err(|_| ImageError::NotUtf8)
+    Ok(super::encoding::decode(&out)?)
 }
 
 /// At most `max` bytes of the file at `path`.

@@ -39,6 +39,8 @@
 //! integers) that still renders the same.
 //!
 //! # Import ([`from_svg`], [`import_svg`] with warnings; in `import.rs`)
+//! A file's bytes become text by [`encoding`]: UTF-8, UTF-16 by its byte-order mark, or the
+//! legacy encoding its XML declaration names.
 //! Parsing, CSS/style attributes, `<rect>`/`<circle>`/`<ellipse>`/`<polygon>`/`<line>`, arcs,
 //! `<use>`, groups and transforms are normalised by `usvg` (after the guard, which breaks
 //! reference cycles and drops entity texts that refer to entities, with a warning each); we then
@@ -85,6 +87,7 @@
 //! - if the first shape is a filled rectangle covering the whole canvas (what [`to_svg`] writes
 //!   for the background) it becomes the scene background.
 
+pub mod encoding;
 mod export;
 mod export_groups;
 mod export_paint;
@@ -132,6 +135,11 @@ pub enum SvgError {
     Io {
         path: String,
         source: std::io::Error,
+    },
+    #[error("{path} is not SVG text: {source}")]
+    Text {
+        path: String,
+        source: encoding::TextError,
     },
 }
 
