@@ -117,13 +117,16 @@ pub fn attention(
                 );
             }
             let mut inv = [0f32; 256];
-            math::vectorised(|| {
-                for (r, row) in s.chunks_exact_mut(m).enumerate() {
-                    let seen = if causal { (q0 + r + 1).min(m) } else { m };
-                    inv[r] = 1.0 / math::exp_shifted_sum(&mut row[..seen]);
-                    row[seen..].fill(0.0);
-                }
-            });
+            math::vectorised(
+                #[inline(always)]
+                || {
+                    for (r, row) in s.chunks_exact_mut(m).enumerate() {
+                        let seen = if causal { (q0 + r + 1).min(m) } else { m };
+                        inv[r] = 1.0 / math::exp_shifted_sum(&mut row[..seen]);
+                        row[seen..].fill(0.0);
+                    }
+                },
+            );
             // SAFETY: as above: this task's output window, v read inside its checked length.
             unsafe {
                 let o = dst.get().add(qoff);

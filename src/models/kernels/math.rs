@@ -150,7 +150,10 @@ mod tests {
         let mut a: Vec<f32> = (0..37).map(|i| (i as f32 * 0.7).sin() * 9.0).collect();
         let mut b = a.clone();
         let sa = exp_shifted_sum(&mut a);
-        let sb = vectorised(|| exp_shifted_sum(&mut b));
+        let sb = vectorised(
+            #[inline(always)]
+            || exp_shifted_sum(&mut b),
+        );
         assert!((sa - sb).abs() < 1e-5 * sa);
         assert!(a.contains(&1.0), "the maximum maps to e^0");
         for (x, y) in a.iter().zip(&b) {

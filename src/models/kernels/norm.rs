@@ -175,7 +175,10 @@ pub fn group_norm(
     }
     let one = |idx: usize, yc: &mut [f32], xh: Option<&mut [f32]>, inv_out: &mut f32| {
         let xc = &x[idx * len..(idx + 1) * len];
-        vectorised(|| group_forward(g, idx, xc, (yc, xh), inv_out, silu))
+        vectorised(
+            #[inline(always)]
+            || group_forward(g, idx, xc, (yc, xh), inv_out, silu),
+        )
     };
     if keep_xhat {
         y.par_chunks_mut(len)
@@ -255,7 +258,10 @@ pub fn group_norm_input_grad(
     dx.par_chunks_mut(len).enumerate().for_each(|(idx, dxc)| {
         let r = idx * len..(idx + 1) * len;
         let (dyc, xh) = (&dy[r.clone()], &xhat[r]);
-        vectorised(|| group_backward(g, idx, (dyc, xh), dxc, inv_std[idx], silu));
+        vectorised(
+            #[inline(always)]
+            || group_backward(g, idx, (dyc, xh), dxc, inv_std[idx], silu),
+        );
     });
     Ok(dx)
 }

@@ -14,8 +14,12 @@ pub fn relu_inplace(v: &mut [f32]) {
 
 /// `v = f(v)` in place (compiled for AVX2 + FMA when available, so `f` may vectorise).
 pub fn map_inplace(v: &mut [f32], f: impl Fn(f32) -> f32 + Sync) {
-    v.par_chunks_mut(CHUNK)
-        .for_each(|c| math::vectorised(|| c.iter_mut().for_each(|x| *x = f(*x))));
+    v.par_chunks_mut(CHUNK).for_each(|c| {
+        math::vectorised(
+            #[inline(always)]
+            || c.iter_mut().for_each(|x| *x = f(*x)),
+        )
+    });
 }
 
 /// `max(a + b, 0)`.
@@ -69,14 +73,17 @@ pub fn geglu(h: &[f32], inner: usize) -> KernelResult<Vec<f32>> {
     out.par_chunks_mut(per * inner)
         .zip(h.par_chunks(per * 2 * inner))
         .for_each(|(o, hc)| {
-            math::vectorised(|| {
-                for (orow, hrow) in o.chunks_exact_mut(inner).zip(hc.chunks_exact(2 * inner)) {
-                    let (a, gate) = hrow.split_at(inner);
-                    for ((o, &a), &g) in orow.iter_mut().zip(a).zip(gate) {
-                        *o = a * math::gelu(g);
+            math::vectorised(
+                #[inline(always)]
+                || {
+                    for (orow, hrow) in o.chunks_exact_mut(inner).zip(hc.chunks_exact(2 * inner)) {
+                        let (a, gate) = hrow.split_at(inner);
+                        for ((o, &a), &g) in orow.iter_mut().zip(a).zip(gate) {
+                            *o = a * math::gelu(g);
+                        }
                     }
-                }
-            })
+                },
+            )
         });
     Ok(out)
 }
