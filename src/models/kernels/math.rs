@@ -56,7 +56,9 @@ pub fn gelu(x: f32) -> f32 {
 }
 
 /// Runs `f`, compiled for AVX2 + FMA when the CPU has them (the body is inlined into a copy with
-/// those target features), else as built. The results differ only by FMA rounding.
+/// those target features), else as built. Pass the body as an `#[inline(always)]` closure: a
+/// closure LLVM does not inline is compiled apart, for the baseline (SSE). Rust does not fuse
+/// `a * b + c` into an FMA, so both copies give the same bits.
 #[inline(always)]
 pub fn vectorised<T>(f: impl FnOnce() -> T) -> T {
     #[cfg(target_arch = "x86_64")]
