@@ -122,7 +122,7 @@ pub fn attention(
                 || {
                     for (r, row) in s.chunks_exact_mut(m).enumerate() {
                         let seen = if causal { (q0 + r + 1).min(m) } else { m };
-                        inv[r] = 1.0 / math::exp_shifted_sum(&mut row[..seen]);
+                        inv[r] = 1.0 / math::exp_shifted_sum_wide(&mut row[..seen]);
                         row[seen..].fill(0.0);
                     }
                 },
