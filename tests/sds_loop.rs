@@ -207,7 +207,7 @@ impl Teacher for NanTeacher {
     ) -> Result<Latent, TeacherError> {
         let k = self.calls.fetch_add(1, Ordering::SeqCst);
         let mut e = self.inner.predict_noise(z, t, c, g)?;
-        if k % self.every == 0 {
+        if k.is_multiple_of(self.every) {
             let n = e.data.len();
             e.data[k as usize % n] = f32::NAN;
         }

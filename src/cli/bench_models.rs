@@ -420,7 +420,7 @@ fn text_config(sd21: bool) -> Result<ClipTextConfig, CliError> {
 }
 
 pub fn run(args: BenchModelsArgs) -> Result<(), CliError> {
-    if args.size == 0 || args.size % 64 != 0 {
+    if args.size == 0 || !args.size.is_multiple_of(64) {
         return Err(CliError::Usage(format!(
             "--size must be a positive multiple of 64, got {}",
             args.size

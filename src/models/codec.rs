@@ -193,7 +193,7 @@ impl Codec {
                 };
             }
         };
-        if image_side == 0 || image_side % down != 0 {
+        if image_side == 0 || !image_side.is_multiple_of(down) {
             return Err(ConfigIssue::Inconsistent(format!(
                 "image size {image_side} must be a positive multiple of the {}'s downsampling {down}",
                 self.kind().as_str().to_uppercase()

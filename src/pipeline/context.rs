@@ -81,7 +81,7 @@ impl JobContext {
 
     /// Whether `step` (1-based) is one at which a checkpoint is due.
     pub fn checkpoint_due(&self, step: u32) -> bool {
-        step > 0 && step % self.checkpoint_every == 0
+        step > 0 && step.is_multiple_of(self.checkpoint_every)
     }
 
     /// Saves resumable state (current SVG, step, optimiser state). A failure to save is a

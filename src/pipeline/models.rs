@@ -373,7 +373,7 @@ impl Models {
                 .analytic_dir
                 .as_deref()
                 .ok_or(PipelineError::NotReady(NotReady::NoModelGiven))?;
-            let pool = if size >= 64 && size % 64 == 0 {
+            let pool = if size >= 64 && size.is_multiple_of(64) {
                 size / 64
             } else {
                 1

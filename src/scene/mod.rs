@@ -391,12 +391,12 @@ impl Shape {
         };
         let n = self.points.len();
         match self.kind {
-            ShapeKind::ClosedCubic if n == 0 || n % 3 != 0 => {
+            ShapeKind::ClosedCubic if n == 0 || !n.is_multiple_of(3) => {
                 return Err(err(format!(
                     "closed cubic path needs a positive multiple of 3 points, got {n}"
                 )));
             }
-            ShapeKind::OpenCubic if n < 4 || (n - 1) % 3 != 0 => {
+            ShapeKind::OpenCubic if n < 4 || !(n - 1).is_multiple_of(3) => {
                 return Err(err(format!(
                     "open cubic path needs 3n+1 points (n >= 1), got {n}"
                 )));

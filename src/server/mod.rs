@@ -334,7 +334,7 @@ async fn depth_loop(state: AppState) {
     let mut ticks = 0u32;
     loop {
         ticks = ticks.wrapping_add(1);
-        if ticks % 5 == 0
+        if ticks.is_multiple_of(5)
             && let Err(e) = state.store.checkpoint().await
         {
             warn!(error = %e, "WAL checkpoint failed");

@@ -71,7 +71,10 @@ impl AnalyticTeacher {
                 "the analytic test teacher needs at least one target image".into(),
             ));
         }
-        if config.image_size == 0 || config.pool == 0 || config.image_size % config.pool != 0 {
+        if config.image_size == 0
+            || config.pool == 0
+            || !config.image_size.is_multiple_of(config.pool)
+        {
             return Err(TeacherError::Setup(format!(
                 "pool factor {} must be positive and divide the image size {}",
                 config.pool, config.image_size

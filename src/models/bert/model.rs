@@ -29,7 +29,7 @@ pub fn read_config(path: &Path) -> Result<BertConfig, BertError> {
     }
     if cfg.hidden_size == 0
         || cfg.num_attention_heads == 0
-        || cfg.hidden_size % cfg.num_attention_heads != 0
+        || !cfg.hidden_size.is_multiple_of(cfg.num_attention_heads)
     {
         return Err(BertError::Config {
             path: path.display().to_string(),

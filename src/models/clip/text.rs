@@ -51,7 +51,7 @@ struct Attention {
 impl Attention {
     fn new(vb: VarBuilder, s: &EncoderShape) -> Result<Self> {
         let h = s.hidden_size;
-        if s.num_heads == 0 || h % s.num_heads != 0 {
+        if s.num_heads == 0 || !h.is_multiple_of(s.num_heads) {
             candle_core::bail!("{h} hidden units not divisible by {} heads", s.num_heads);
         }
         Ok(Self {

@@ -27,7 +27,7 @@ pub struct AttentionGeom {
 
 impl AttentionGeom {
     pub fn new(b: usize, n: usize, m: usize, c: usize, heads: usize) -> KernelResult<Self> {
-        if heads == 0 || c % heads != 0 {
+        if heads == 0 || !c.is_multiple_of(heads) {
             return Err(KernelError::Geometry {
                 op: "attention",
                 reason: format!("{c} channels not divisible by {heads} heads"),

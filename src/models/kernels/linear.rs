@@ -137,7 +137,7 @@ pub fn linear(
     residual: Option<&[f32]>,
 ) -> KernelResult<Vec<f32>> {
     check_weight(w.data(), o, i, bias)?;
-    if i == 0 || x.len() % i != 0 {
+    if i == 0 || !x.len().is_multiple_of(i) {
         return Err(KernelError::Rows {
             op: "linear",
             len: x.len(),

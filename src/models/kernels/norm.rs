@@ -275,7 +275,7 @@ pub fn layer_norm(
     beta: &[f32],
     eps: f64,
 ) -> KernelResult<Vec<f32>> {
-    if c == 0 || x.len() % c != 0 {
+    if c == 0 || !x.len().is_multiple_of(c) {
         return Err(KernelError::Rows {
             op: "layer norm",
             len: x.len(),

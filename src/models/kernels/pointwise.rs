@@ -60,7 +60,7 @@ pub fn add_per_channel(x: &mut [f32], v: &[f32], n: usize) -> KernelResult<()> {
 
 /// GEGLU: `h [rows, 2·inner] -> h[:, ..inner] · gelu(h[:, inner..])` (exact GELU).
 pub fn geglu(h: &[f32], inner: usize) -> KernelResult<Vec<f32>> {
-    if inner == 0 || h.len() % (2 * inner) != 0 {
+    if inner == 0 || !h.len().is_multiple_of(2 * inner) {
         return Err(KernelError::Rows {
             op: "geglu",
             len: h.len(),
@@ -97,7 +97,7 @@ pub fn upsample_nearest(
     oh: usize,
     ow: usize,
 ) -> KernelResult<Vec<f32>> {
-    if h == 0 || w == 0 || x.len() % (h * w) != 0 {
+    if h == 0 || w == 0 || !x.len().is_multiple_of(h * w) {
         return Err(KernelError::Rows {
             op: "upsample",
             len: x.len(),

@@ -63,12 +63,13 @@ impl Conv2d {
     /// weights: 9/25 of the memory the two took together. [`Conv2d::backward`] then fails.
     pub fn forward_only(mut self) -> R<Self> {
         let (co, ci, k) = self.dims;
-        if k == 3 && self.stride == 1 {
-            if let Some(w) = self.weight.take_if(|w| kernels::applies(&[w])) {
-                let u = kernels::with_f32(&w, |w| Ok(winograd::transform_kernel(w, co, ci)))?;
-                if self.cache.wino.set(u).is_err() {
-                    candle_core::bail!("conv2d: Winograd kernel computed twice");
-                }
+        if k == 3
+            && self.stride == 1
+            && let Some(w) = self.weight.take_if(|w| kernels::applies(&[w]))
+        {
+            let u = kernels::with_f32(&w, |w| Ok(winograd::transform_kernel(w, co, ci)))?;
+            if self.cache.wino.set(u).is_err() {
+                candle_core::bail!("conv2d: Winograd kernel computed twice");
             }
         }
         Ok(self)

@@ -25,7 +25,7 @@ pub struct GroupNormTape {
 
 impl GroupNorm {
     pub fn load(vb: VarBuilder, groups: usize, channels: usize, eps: f64) -> R<Self> {
-        if groups == 0 || channels % groups != 0 {
+        if groups == 0 || !channels.is_multiple_of(groups) {
             candle_core::bail!("group norm: {channels} channels not divisible by {groups} groups");
         }
         Ok(Self {

@@ -26,7 +26,7 @@ pub struct AttentionTape {
 
 impl SpatialSelfAttention {
     pub fn load(vb: VarBuilder, c: usize, groups: usize, eps: f64, heads: usize) -> R<Self> {
-        if heads == 0 || c % heads != 0 {
+        if heads == 0 || !c.is_multiple_of(heads) {
             candle_core::bail!("attention: {c} channels not divisible by {heads} heads");
         }
         // current diffusers names; older checkpoints use query/key/value/proj_attn

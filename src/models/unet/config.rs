@@ -411,7 +411,7 @@ impl UnetConfig {
         // the transformer of level i (its down and up blocks; the mid block uses the last)
         let attn = |i: usize| -> std::result::Result<AttnArch, ConfigIssue> {
             let c = self.block_out_channels[i];
-            if heads[i] == 0 || c % heads[i] != 0 || layers[i] == 0 {
+            if heads[i] == 0 || !c.is_multiple_of(heads[i]) || layers[i] == 0 {
                 return Err(ConfigIssue::Inconsistent(format!(
                     "{c} channels, {} heads, {} transformer layers in block {i}",
                     heads[i], layers[i]
@@ -425,7 +425,7 @@ impl UnetConfig {
         let mut levels = Vec::with_capacity(n);
         for i in 0..n {
             let c = self.block_out_channels[i];
-            if c % self.norm_num_groups != 0 {
+            if !c.is_multiple_of(self.norm_num_groups) {
                 return Err(ConfigIssue::Inconsistent(format!(
                     "{c} channels not divisible by norm_num_groups {}",
                     self.norm_num_groups

@@ -250,8 +250,8 @@ impl Run<'_> {
     /// Whether a progress event goes out after step `step` (`Some`), and with a snapshot.
     fn reports_at(&self, step: u32) -> Option<bool> {
         let every = self.cfg.snapshot_every;
-        let snapshot = every > 0 && (step % every == 0 || step == self.total);
-        (snapshot || step % 10 == 0).then_some(snapshot)
+        let snapshot = every > 0 && (step.is_multiple_of(every) || step == self.total);
+        (snapshot || step.is_multiple_of(10)).then_some(snapshot)
     }
 
     fn report(&self, scene: &Scene, stage: usize, loss: f64) {

@@ -417,7 +417,7 @@ impl<B: Backend> Fixed<'_, B> {
         let cfg = self.cfg;
         let mut ev = Progress::new(Stage::Sds, step + 1, cfg.steps);
         ev.loss = Some(loss);
-        if cfg.snapshot_every > 0 && (step + 1) % cfg.snapshot_every == 0 {
+        if cfg.snapshot_every > 0 && (step + 1).is_multiple_of(cfg.snapshot_every) {
             ev.svg = Some(self.backend.svg(&m.scene));
         }
         if m.stats.skipped_nonfinite + m.stats.lr_halvings > 0 {
