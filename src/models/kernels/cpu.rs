@@ -21,7 +21,8 @@ pub struct CpuReport {
     /// The `gemm` crate's micro-kernel: `avx512f` (a build with the `avx512` feature, the
     /// default, on a CPU with AVX-512F), `avx2+fma`, or `generic`.
     pub gemm: String,
-    /// Our element-wise kernels: `avx2+fma` or `generic`.
+    /// Our element-wise kernels: `avx2+fma` (attention's softmax pass with `avx512f` where the
+    /// CPU has it: `avx2+fma, softmax avx512f`) or `generic`.
     pub elementwise: String,
 }
 
@@ -49,7 +50,12 @@ impl CpuReport {
         CpuReport {
             model: model_name(&cpuinfo).unwrap_or_else(|| std::env::consts::ARCH.to_string()),
             gemm: gemm.into(),
-            elementwise: if avx2 { "avx2+fma" } else { "generic" }.into(),
+            elementwise: match (avx2, has("avx512f")) {
+                (true, true) => "avx2+fma, softmax avx512f",
+                (true, false) => "avx2+fma",
+                _ => "generic",
+            }
+            .into(),
             features,
         }
     }
