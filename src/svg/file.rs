@@ -100,25 +100,26 @@ pub const SCENE_FILE_MAX_BYTES: u64 = 64 << 20;
 /// declaration names: [`super::encoding`]), refusing more than `max` bytes (so `/dev/zero` or a
 /// huge file is an error, not unbounded memory).
 pub fn read_text_capped(path: &Path, max: u64) -> Result<String, SvgError> {
-    use std::io::Read;
-    let io = |source| SvgError::Io {
-        path: path.display().to_string(),
-        source,
-    };
-    let mut bytes = Vec::new();
-    std::fs::File::open(path)
-        .map_err(io)?
-        .take(max + 1)
-        .read_to_end(&mut bytes)
-        .map_err(io)?;
-    if bytes.len() as u64 > max {
-        return Err(SvgError::TooLarge {
-            path: path.display().to_string(),
-            max,
-        });
-    }
+    let name = || path.display().to_string();
+    let bytes = read_bytes_capped(path, max)
+        .map_err(|source| SvgError::Io {
+            path: name(),
+            source,
+        })?
+        .ok_or_else(|| SvgError::TooLarge { path: name(), max })?;
     super::encoding::decode(&bytes).map_err(|source| SvgError::Text {
-        path: path.display().to_string(),
+        path: name(),
         source,
     })
+}
+
+/// The bytes of the file at `path`, `None` when it holds more than `max` (at most `max + 1` are
+/// read).
+pub(super) fn read_bytes_capped(path: &Path, max: u64) -> std::io::Result<Option<Vec<u8>>> {
+    use std::io::Read;
+    let mut bytes = Vec::new();
+    std::fs::File::open(path)?
+        .take(max + 1)
+        .read_to_end(&mut bytes)?;
+    Ok((bytes.len() as u64 <= max).then_some(bytes))
 }

@@ -133,7 +133,9 @@ impl Images {
             return None;
         };
         let path = dir.join(href);
-        let bytes = match read_capped(&path, self.limits.max_bytes) {
+        let max = self.limits.max_bytes;
+        let read = super::file::read_bytes_capped(&path, max).map_err(ImageError::Read);
+        let bytes = match read.and_then(|b| b.ok_or(ImageError::TooLarge(max))) {
             Ok(b) => b,
             Err(e) => {
                 self.warn(format!("<image href=\"{}\"> dropped: {e}", clip_text(href)));
@@ -287,18 +289,6 @@ fn inflate(data: &[u8], max: u64) -> Result<String, ImageError> {
         return Err(ImageError::TooLarge(max));
     }
     Ok(super::encoding::decode(&out)?)
-}
-
-/// At most `max` bytes of the file at `path`.
-fn read_capped(path: &Path, max: u64) -> Result<Vec<u8>, ImageError> {
-    use std::io::Read;
-    let f = std::fs::File::open(path)?;
-    let mut out = Vec::new();
-    f.take(max + 1).read_to_end(&mut out)?;
-    if out.len() as u64 > max {
-        return Err(ImageError::TooLarge(max));
-    }
-    Ok(out)
 }
 
 /// `href`s in warnings: a data URL or a long name cut short.
