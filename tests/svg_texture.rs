@@ -6,7 +6,7 @@
 mod golden;
 
 use base64::Engine;
-use golden::{Tolerance, compare, resvg_render};
+use golden::{Tolerance, compare, mean_abs_diff, resvg_render};
 use vectorfusion::raster;
 use vectorfusion::svg::{
     ImageLimits, SvgOptions, check_safe_output, from_svg, import_svg, import_svg_in, to_svg,
@@ -94,6 +94,96 @@ fn images_render_as_resvg() {
     }
 }
 
+/// A `n × n` checkerboard of hard-edged red and translucent blue texels, encoded as a PNG: every
+/// filter draws it differently when it is magnified.
+fn checkerboard(n: u32) -> Vec<u8> {
+    let img = image::RgbaImage::from_fn(n, n, |x, y| {
+        if (x + y) % 2 == 0 {
+            image::Rgba([220, 30, 30, 255])
+        } else {
+            image::Rgba([20, 60, 200, 150])
+        }
+    });
+    let mut out = std::io::Cursor::new(Vec::new());
+    img.write_to(&mut out, image::ImageFormat::Png).unwrap();
+    out.into_inner()
+}
+
+#[test]
+fn each_image_rendering_filters_as_resvg() {
+    // A magnified, rotated checkerboard: bicubic (the default `optimizeQuality` and
+    // `high-quality`), bilinear (`smooth`) and nearest (`optimizeSpeed`, `pixelated`) each match
+    // resvg closely, and each is far from what the other filters draw.
+    use vectorfusion::scene::TextureFilter;
+    let png = data_url("image/png", &checkerboard(6));
+    let tight = Tolerance {
+        mean: 0.25 / 255.0,
+        large: 16.0 / 255.0,
+        max_share: 0.002,
+    };
+    for (rendering, want) in [
+        ("", TextureFilter::Bicubic),
+        ("high-quality", TextureFilter::Bicubic),
+        ("smooth", TextureFilter::Bilinear),
+        ("optimizeSpeed", TextureFilter::Nearest),
+        ("pixelated", TextureFilter::Nearest),
+    ] {
+        let attr = if rendering.is_empty() {
+            String::new()
+        } else {
+            // CSS's values (`smooth`, `high-quality`, `pixelated`) count only in a style.
+            format!(r#" style="image-rendering:{rendering}""#)
+        };
+        let text = doc(&format!(
+            r#"<image x="22" y="8" width="74" height="74" transform="rotate(9 60 45)"{attr} href="{png}"/>"#
+        ));
+        let import = import_svg(&text).unwrap();
+        assert!(
+            import.warnings.is_empty(),
+            "{rendering}: {:?}",
+            import.warnings
+        );
+        let theirs = resvg_render(&text);
+        let name = format!(
+            "image_rendering_{}",
+            if rendering.is_empty() {
+                "default"
+            } else {
+                rendering
+            }
+        );
+        let d = compare(&name, &raster::render(&import.scene), &theirs, &tight);
+        let texture = |s: &mut vectorfusion::scene::Scene| {
+            let t = s
+                .shapes
+                .iter_mut()
+                .find_map(|s| s.gradients.as_mut()?.texture.as_mut());
+            t.expect("the image is a textured shape").filter
+        };
+        let mut other = import.scene.clone();
+        assert_eq!(texture(&mut other), want, "{rendering}");
+        for f in [
+            TextureFilter::Nearest,
+            TextureFilter::Bilinear,
+            TextureFilter::Bicubic,
+        ] {
+            if f == want {
+                continue;
+            }
+            for s in &mut other.shapes {
+                if let Some(t) = s.gradients.as_mut().and_then(|g| g.texture.as_mut()) {
+                    t.filter = f;
+                }
+            }
+            let wrong = mean_abs_diff(&raster::render(&other), &theirs);
+            assert!(
+                wrong > 3.0 * d.max(0.05 / 255.0),
+                "{rendering} drawn {f:?}: {wrong} vs {d}"
+            );
+        }
+    }
+}
+
 const PATTERNS: &[(&str, &str)] = &[
     (
         "user_space_transform",
@@ -129,6 +219,13 @@ fn patterns_render_as_resvg() {
     }
 }
 
+/// A written texture whose image has `style="STYLE"`.
+fn out_with_style(style: &str) -> String {
+    format!(
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="4" height="4" viewBox="0 0 4 4"><defs><pattern id="g1" width="1" height="1"><image width="1" height="1" style="{style}" href="data:image/png;base64,AAAA"/></pattern></defs><path d="M0 0H4V4Z" fill="url(#g1)"/></svg>"#
+    )
+}
+
 #[test]
 fn textures_export_and_import_again_as_drawn() {
     let png = data_url("image/png", &picture(24, 16, image::ImageFormat::Png));
@@ -148,6 +245,41 @@ fn textures_export_and_import_again_as_drawn() {
         // resvg draws the export as we draw the scene.
         compare(name, &ia, &resvg_render(&out), &Tolerance::SUITE);
     }
+    // Each filter is written so that it draws as itself, within the safe-output profile.
+    use vectorfusion::scene::TextureFilter;
+    let mut scene = from_svg(&doc(&image)).unwrap();
+    for f in [
+        TextureFilter::Nearest,
+        TextureFilter::Bilinear,
+        TextureFilter::Bicubic,
+    ] {
+        for s in &mut scene.shapes {
+            if let Some(t) = s.gradients.as_mut().and_then(|g| g.texture.as_mut()) {
+                t.filter = f;
+            }
+        }
+        let out = to_svg(&scene, &SvgOptions::default());
+        check_safe_output(&out).unwrap_or_else(|e| panic!("{f:?}: {e}"));
+        let back = from_svg(&out).unwrap();
+        let name = format!("export_{f:?}");
+        compare(
+            &name,
+            &raster::render(&back),
+            &raster::render(&scene),
+            &Tolerance::SUITE,
+        );
+        compare(
+            &name,
+            &raster::render(&scene),
+            &resvg_render(&out),
+            &Tolerance::SUITE,
+        );
+    }
+    let styled = out_with_style("fill:red");
+    assert!(
+        check_safe_output(&styled).is_err(),
+        "another style is refused"
+    );
     // The safe-output profile takes an embedded PNG only.
     for href in [
         "https://example.com/a.png",

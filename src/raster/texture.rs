@@ -1,6 +1,7 @@
 //! Texture fills ([`crate::scene::texture`]): the colour of a pixel is the texture sampled at the
-//! pixel centre mapped into texel space (bilinear in premultiplied RGBA, or nearest texel; a
-//! texture drawn 1:1, moved but not scaled, always nearest),
+//! pixel centre mapped into texel space by the texture's [`TextureFilter`] (nearest texel,
+//! bilinear, or Mitchell–Netravali bicubic, in premultiplied RGBA; a texture drawn 1:1, moved
+//! but not scaled, always nearest),
 //! handed to the compositing as straight RGBA like every other [`Shade`].
 //!
 //! Gradients do not flow into texels (imported image pixels are constants, not parameters): the
@@ -9,7 +10,7 @@
 
 use super::paint::{Shade, inverse};
 use super::real::Real;
-use crate::scene::{Texture, TextureEdge};
+use crate::scene::{Texture, TextureEdge, TextureFilter};
 
 /// A texture in the working precision: canvas → texel space, and the texels.
 #[derive(Clone, Debug)]
@@ -20,7 +21,7 @@ pub(crate) struct TextureT<T> {
     /// Premultiplied RGBA8 (4 bytes a texel: a large image stays small).
     texels: Vec<[u8; 4]>,
     edge: TextureEdge,
-    smooth: bool,
+    filter: TextureFilter,
 }
 
 impl<T: Real> TextureT<T> {
@@ -35,7 +36,11 @@ impl<T: Real> TextureT<T> {
                 .map(|p| [p[0], p[1], p[2], p[3]])
                 .collect(),
             edge: t.edge,
-            smooth: t.smooth && !is_translation(&t.transform),
+            filter: if is_translation(&t.transform) {
+                TextureFilter::Nearest
+            } else {
+                t.filter
+            },
         }
     }
 
@@ -63,21 +68,57 @@ impl<T: Real> TextureT<T> {
         // Far outside the texture the edge mode decides alone; keep the index in i32 range.
         let lim = T::c(1e6);
         let (u, v) = (u.max(-lim).min(lim), v.max(-lim).min(lim));
-        if !self.smooth {
-            return self.texel(u.floor().as_f32() as i32, v.floor().as_f32() as i32);
+        let (fu, fv) = match self.filter {
+            TextureFilter::Nearest => {
+                return self.texel(u.floor().as_f32() as i32, v.floor().as_f32() as i32);
+            }
+            TextureFilter::Bilinear | TextureFilter::Bicubic => (u - h, v - h),
+        };
+        // Texel centres sit at i + 1/2: `(i, j)` is the centre at or before the point, `(wx, wy)`
+        // how far past it the point lies.
+        let (iu, iv) = (fu.floor(), fv.floor());
+        let (i, j) = (iu.as_f32() as i32, iv.as_f32() as i32);
+        let (wx, wy) = (fu - iu, fv - iv);
+        if self.filter == TextureFilter::Bilinear {
+            let (a, b) = (self.texel(i, j), self.texel(i + 1, j));
+            let (c, d) = (self.texel(i, j + 1), self.texel(i + 1, j + 1));
+            let one = T::one();
+            return std::array::from_fn(|k| {
+                let top = a[k] * (one - wx) + b[k] * wx;
+                let bottom = c[k] * (one - wx) + d[k] * wx;
+                top * (one - wy) + bottom * wy
+            });
         }
-        let (u, v) = (u - h, v - h);
-        let (fu, fv) = (u.floor(), v.floor());
-        let (i, j) = (fu.as_f32() as i32, fv.as_f32() as i32);
-        let (wx, wy) = (u - fu, v - fv);
-        let (a, b) = (self.texel(i, j), self.texel(i + 1, j));
-        let (c, d) = (self.texel(i, j + 1), self.texel(i + 1, j + 1));
+        // Bicubic: the centres at i − 1 … i + 2 lie 1 + w, w, 1 − w, 2 − w from the point.
         let one = T::one();
-        std::array::from_fn(|k| {
-            let top = a[k] * (one - wx) + b[k] * wx;
-            let bottom = c[k] * (one - wx) + d[k] * wx;
-            top * (one - wy) + bottom * wy
-        })
+        let two = T::c(2.0);
+        let kx = [one + wx, wx, one - wx, two - wx].map(mitchell);
+        let ky = [one + wy, wy, one - wy, two - wy].map(mitchell);
+        let mut acc = [T::zero(); 4];
+        for (dj, &wj) in ky.iter().enumerate() {
+            for (di, &wi) in kx.iter().enumerate() {
+                let t = self.texel(i - 1 + di as i32, j - 1 + dj as i32);
+                let w = wi * wj;
+                for k in 0..4 {
+                    acc[k] += t[k] * w;
+                }
+            }
+        }
+        // The filter's negative lobes can overshoot: clamp as a colour.
+        acc.map(|c| c.max(T::zero()).min(one))
+    }
+}
+
+/// The Mitchell–Netravali cubic with B = C = 1/3 at distance `d` ≥ 0 (zero from 2 on): weights at
+/// distances 1 + w, w, 1 − w, 2 − w sum to one for every w in [0, 1).
+fn mitchell<T: Real>(d: T) -> T {
+    let c = |v: f64| T::c(v);
+    if d < T::one() {
+        ((c(7.0 / 6.0) * d - c(2.0)) * d) * d + c(8.0 / 9.0)
+    } else if d < c(2.0) {
+        ((c(-7.0 / 18.0) * d + c(2.0)) * d - c(10.0 / 3.0)) * d + c(16.0 / 9.0)
+    } else {
+        T::zero()
     }
 }
 

@@ -24,7 +24,7 @@ pub mod texture;
 pub use group::{BlendMode, Clip, Content, FillRule, Group, Mask, MaskKind};
 pub use paint::{Affine, Gradient, GradientGeometry, GradientStop, Gradients, Spread};
 pub use params::{ParamGroup, Params, Trainable};
-pub use texture::{Texture, TextureEdge};
+pub use texture::{Texture, TextureEdge, TextureFilter};
 
 use serde::{Deserialize, Serialize};
 

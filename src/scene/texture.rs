@@ -6,10 +6,12 @@
 //! the flat fill colour stays beside it as its stand-in (the mean texel colour), read by
 //! colour-only code and ignored when drawing, exactly as for gradients.
 //!
-//! The rasteriser samples it at each pixel centre mapped into texel space: bilinearly between
-//! the four nearest texel centres in premultiplied RGBA ([`Texture::smooth`]) or the texel under
-//! the point (SVG `image-rendering: optimizeSpeed`, `pixelated`, `crisp-edges`). Texels are
-//! constants: no parameter, no gradient (see `raster::texture`).
+//! The rasteriser samples it at each pixel centre mapped into texel space, by its
+//! [`TextureFilter`]: the texel under the point (SVG `image-rendering: optimizeSpeed`,
+//! `pixelated`, `crisp-edges`), bilinearly between the four nearest texel centres (`smooth`), or
+//! with the bicubic Mitchell–Netravali filter (B = C = 1/3) over the sixteen nearest (the default
+//! `optimizeQuality`, and patterns), in premultiplied RGBA. Texels are constants: no parameter,
+//! no gradient (see `raster::texture`).
 //!
 //! # Invariants (checked by [`Texture::validate`], part of [`super::Scene::validate`])
 //! - `1 <= width, height <= MAX_SIDE` and `pixels.len() == 4 · width · height`;
@@ -31,8 +33,23 @@ pub enum TextureEdge {
     Repeat,
 }
 
+/// How a texture is sampled between its texels (SVG `image-rendering`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TextureFilter {
+    /// The texel under the point (`optimizeSpeed`, `pixelated`, `crisp-edges`).
+    Nearest,
+    /// Bilinear between the four nearest texel centres (`smooth`).
+    Bilinear,
+    /// Mitchell–Netravali bicubic (B = C = 1/3) over the sixteen nearest texel centres, clamped
+    /// to [0, 1] (`optimizeQuality`, `high-quality`, and pattern tiles).
+    #[default]
+    Bicubic,
+}
+
 /// A sampled raster fill (see the module docs).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(from = "TextureWire")]
 pub struct Texture {
     pub width: u32,
     pub height: u32,
@@ -43,8 +60,44 @@ pub struct Texture {
     pub transform: Affine,
     #[serde(default)]
     pub edge: TextureEdge,
-    /// Bilinear (true) or nearest-texel sampling.
-    pub smooth: bool,
+    pub filter: TextureFilter,
+}
+
+/// A serialised texture, as written now (`filter`) or before filters had names (`smooth`: true
+/// was bilinear, false nearest), so a stored scene draws as it did.
+#[derive(Deserialize)]
+struct TextureWire {
+    width: u32,
+    height: u32,
+    #[serde(with = "b64")]
+    pixels: Vec<u8>,
+    transform: Affine,
+    #[serde(default)]
+    edge: TextureEdge,
+    #[serde(default)]
+    filter: Option<TextureFilter>,
+    #[serde(default)]
+    smooth: Option<bool>,
+}
+
+impl From<TextureWire> for Texture {
+    fn from(w: TextureWire) -> Self {
+        let legacy = w.smooth.map(|s| {
+            if s {
+                TextureFilter::Bilinear
+            } else {
+                TextureFilter::Nearest
+            }
+        });
+        Texture {
+            width: w.width,
+            height: w.height,
+            pixels: w.pixels,
+            transform: w.transform,
+            edge: w.edge,
+            filter: w.filter.or(legacy).unwrap_or_default(),
+        }
+    }
 }
 
 impl Texture {
@@ -138,7 +191,7 @@ mod tests {
             pixels,
             transform: Affine::IDENTITY,
             edge: TextureEdge::Pad,
-            smooth: true,
+            filter: TextureFilter::Bicubic,
         }
     }
 
@@ -159,7 +212,23 @@ mod tests {
         assert_eq!((m.r, m.g, m.a), (1.0, 0.0, 0.5));
         let json = serde_json::to_string(&t).unwrap();
         assert!(json.contains("\"pixels\":\"/wAA/wAAAAA=\""), "{json}");
+        assert!(json.contains("\"filter\":\"bicubic\""), "{json}");
         let back: Texture = serde_json::from_str(&json).unwrap();
         assert_eq!(back, t);
+    }
+
+    #[test]
+    fn a_scene_stored_before_filters_had_names_samples_as_it_did() {
+        let t = tex(vec![255, 0, 0, 255, 0, 0, 0, 0]);
+        let json = serde_json::to_string(&t).unwrap();
+        for (smooth, filter) in [
+            ("true", TextureFilter::Bilinear),
+            ("false", TextureFilter::Nearest),
+        ] {
+            let old = json.replace("\"filter\":\"bicubic\"", &format!("\"smooth\":{smooth}"));
+            assert!(!old.contains("filter"), "{old}");
+            let back: Texture = serde_json::from_str(&old).unwrap();
+            assert_eq!(back.filter, filter);
+        }
     }
 }

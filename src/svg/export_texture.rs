@@ -1,13 +1,14 @@
 //! Texture paint → SVG: a texture ([`crate::scene::Texture`]) is written as a
 //! `<pattern patternUnits="userSpaceOnUse">` one texture wide and high, its transform as the
 //! `patternTransform`, holding one `<image>` with the texels re-encoded as a PNG `data:` URL
-//! (straight alpha, 8 bits; `image-rendering="optimizeSpeed"` for nearest sampling). The shape
+//! (straight alpha, 8 bits; `image-rendering="optimizeSpeed"` for nearest sampling,
+//! `style="image-rendering:smooth"` for bilinear, nothing for the default bicubic). The shape
 //! refers to it as `url(#gK)` like to a gradient. A pattern repeats where the texture pads: the
 //! two differ only outside the image's rectangle, which an imported image's shape never covers.
 
 use super::export::push_attr;
 use super::export_paint::exact;
-use crate::scene::Texture;
+use crate::scene::{Texture, TextureFilter};
 use base64::Engine;
 use std::fmt::Write;
 
@@ -24,8 +25,10 @@ pub(super) fn push_texture(out: &mut String, t: &Texture, id: &str) {
     push_attr(out, "width", &w);
     push_attr(out, "height", &h);
     push_attr(out, "preserveAspectRatio", "none");
-    if !t.smooth {
-        push_attr(out, "image-rendering", "optimizeSpeed");
+    match t.filter {
+        TextureFilter::Nearest => push_attr(out, "image-rendering", "optimizeSpeed"),
+        TextureFilter::Bilinear => push_attr(out, "style", super::profile::SMOOTH_STYLE),
+        TextureFilter::Bicubic => {}
     }
     let _ = writeln!(out, " href=\"data:image/png;base64,{}\"/>", png_base64(t));
     out.push_str("</pattern>\n");

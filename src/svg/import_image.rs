@@ -6,7 +6,7 @@
 
 use super::images::Images;
 use super::walk::{Mode, Walk, rect_shape};
-use crate::scene::{Affine, Clip, Content, Gradients, Group, Texture, TextureEdge};
+use crate::scene::{Affine, Clip, Content, Gradients, Group, Texture, TextureEdge, TextureFilter};
 use resvg::usvg;
 use usvg::{ImageKind, ImageRendering, Transform};
 
@@ -72,10 +72,13 @@ pub(super) fn image(
         pixels,
         transform: user.then_after(&texel),
         edge: TextureEdge::Pad,
-        smooth: !matches!(
-            img.rendering_mode(),
-            ImageRendering::OptimizeSpeed | ImageRendering::CrispEdges | ImageRendering::Pixelated
-        ),
+        filter: match img.rendering_mode() {
+            ImageRendering::OptimizeQuality | ImageRendering::HighQuality => TextureFilter::Bicubic,
+            ImageRendering::Smooth => TextureFilter::Bilinear,
+            ImageRendering::OptimizeSpeed
+            | ImageRendering::CrispEdges
+            | ImageRendering::Pixelated => TextureFilter::Nearest,
+        },
     };
     if let Err(e) = texture.validate() {
         walk.warn(format!("{} ignored: {e}", name(img)));

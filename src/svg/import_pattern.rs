@@ -9,7 +9,7 @@
 
 use super::images::{ImageLimits, Images};
 use super::walk::{Mode, Walk};
-use crate::scene::{Affine, Content, Rgba, Scene, Texture, TextureEdge};
+use crate::scene::{Affine, Content, Rgba, Scene, Texture, TextureEdge, TextureFilter};
 use resvg::usvg;
 use std::cell::Cell;
 use std::sync::Arc;
@@ -113,7 +113,7 @@ fn tile(p: &usvg::Pattern, ts: Transform, opacity: f32) -> Option<Texture> {
             to_canvas.ty,
         ]),
         edge: TextureEdge::Repeat,
-        smooth: true,
+        filter: TextureFilter::Bicubic,
     };
     t.validate().ok().map(|()| t)
 }

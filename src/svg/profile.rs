@@ -6,7 +6,8 @@
 //! - elements from an allowlist (`svg`, `g`, `path`, `rect`, `metadata`, `title`, `desc`, and
 //!   the paint servers: `defs`, `linearGradient`, `radialGradient`, `stop`, and `pattern` with
 //!   one `image` for textures) in the SVG namespace, each with attributes from its allowlist: no
-//!   `<script>`, `<foreignObject>`, `<use>`, event handlers (`on*`), `style`, no `href` but an
+//!   `<script>`, `<foreignObject>`, `<use>`, event handlers (`on*`), no `style` but an image's
+//!   `image-rendering:smooth` (a CSS-only value: bilinear sampling), no `href` but an
 //!   image's embedded PNG (`data:image/png;base64,…`), and no `url(…)` value but a
 //!   fill or stroke naming a gradient of the same file (`url(#id)`), so nothing runs and nothing
 //!   outside the file is fetched; `id` only on `<g>`, `<path>` and gradients, and only a plain
@@ -19,6 +20,10 @@
 use resvg::usvg::roxmltree::{self, Node, NodeType};
 
 const SVG_NS: &str = "http://www.w3.org/2000/svg";
+
+/// The one `style` the writer uses: bilinear sampling of an image, a value CSS allows only in
+/// a style (`image-rendering="smooth"` as an attribute is ignored by renderers).
+pub(crate) const SMOOTH_STYLE: &str = "image-rendering:smooth";
 
 /// Attributes allowed on each element (presentation attributes our writer uses).
 fn allowed(tag: &str, attr: &str) -> bool {
@@ -62,7 +67,7 @@ fn allowed(tag: &str, attr: &str) -> bool {
         ),
         "image" => matches!(
             attr,
-            "width" | "height" | "preserveAspectRatio" | "image-rendering" | "href"
+            "width" | "height" | "preserveAspectRatio" | "image-rendering" | "style" | "href"
         ),
         _ => false,
     }
@@ -192,6 +197,10 @@ fn check_element(node: Node) -> Result<(), ProfileViolation> {
                 return Err(ProfileViolation::Reference { tag, name });
             }
             continue;
+        }
+        if name == "style" && v != SMOOTH_STYLE {
+            let name = owned(name);
+            return Err(ProfileViolation::Attribute { tag, name });
         }
         if name == "id" && !plain_id(v) {
             let id = owned(v);
