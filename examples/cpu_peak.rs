@@ -29,61 +29,53 @@ fn rate(n: usize, lanes: usize, f: impl Fn(usize) -> f32) -> f64 {
 mod x86 {
     use std::arch::x86_64::*;
 
-    macro_rules! twelve {
-        ($zero:expr, $n:expr, |$acc:ident| $step:expr, $sum:expr) => {{
-            let mut accs = [$zero; 12];
-            for _ in 0..$n {
-                for $acc in accs.iter_mut() {
-                    *$acc = $step;
+    /// `unsafe fn NAME(n)`: `n` rounds of one `STEP` (on the operand `X = INIT`, opaque to the
+    /// optimiser) on each of twelve accumulators, compiled for `FEATURES` (the caller checks the
+    /// CPU has them), returning their sum through `SUM`.
+    macro_rules! peak {
+        ($name:ident, $features:literal, $zero:expr, $x:ident = $init:expr,
+         |$acc:ident| $step:expr, $sum:path) => {
+            /// # Safety
+            /// The CPU has the target features this function is compiled for.
+            #[target_feature(enable = $features)]
+            pub unsafe fn $name(n: usize) -> f32 {
+                let $x = std::hint::black_box($init);
+                let mut accs = [$zero; 12];
+                for _ in 0..n {
+                    for $acc in accs.iter_mut() {
+                        *$acc = $step;
+                    }
                 }
+                accs.into_iter().fold(0.0f32, |s, a| s + $sum(a))
             }
-            accs.into_iter().fold(0.0f32, |s, a| s + $sum(a))
-        }};
+        };
     }
 
-    /// # Safety
-    /// The CPU has AVX2 and FMA.
-    #[target_feature(enable = "avx2,fma")]
-    pub unsafe fn fma256(n: usize) -> f32 {
-        let a = std::hint::black_box(_mm256_set1_ps(1.000_000_1));
-        let first = |v: __m256| _mm256_cvtss_f32(v);
-        twelve!(
-            _mm256_setzero_ps(),
-            n,
-            |acc| _mm256_fmadd_ps(a, a, *acc),
-            first
-        )
-    }
-
-    /// # Safety
-    /// The CPU has AVX-512F.
-    #[target_feature(enable = "avx512f")]
-    pub unsafe fn fma512(n: usize) -> f32 {
-        let a = std::hint::black_box(_mm512_set1_ps(1.000_000_1));
-        let first = |v: __m512| _mm512_reduce_add_ps(v);
-        twelve!(
-            _mm512_setzero_ps(),
-            n,
-            |acc| _mm512_fmadd_ps(a, a, *acc),
-            first
-        )
-    }
-
-    /// # Safety
-    /// The CPU has AVX-512F and AVX-512 BF16.
-    #[target_feature(enable = "avx512f,avx512bf16")]
-    pub unsafe fn dpbf16(n: usize) -> f32 {
-        // 1.0 in bf16 in both halves of every 32-bit lane.
-        let one = _mm512_set1_ps(1.0);
-        let a = std::hint::black_box(_mm512_cvtne2ps_pbh(one, one));
-        let first = |v: __m512| _mm512_reduce_add_ps(v);
-        twelve!(
-            _mm512_setzero_ps(),
-            n,
-            |acc| _mm512_dpbf16_ps(*acc, a, a),
-            first
-        )
-    }
+    peak!(
+        fma256,
+        "avx2,fma",
+        _mm256_setzero_ps(),
+        a = _mm256_set1_ps(1.000_000_1),
+        |acc| _mm256_fmadd_ps(a, a, *acc),
+        _mm256_cvtss_f32
+    );
+    peak!(
+        fma512,
+        "avx512f",
+        _mm512_setzero_ps(),
+        a = _mm512_set1_ps(1.000_000_1),
+        |acc| _mm512_fmadd_ps(a, a, *acc),
+        _mm512_reduce_add_ps
+    );
+    // 1.0 in bf16 in both halves of every 32-bit lane.
+    peak!(
+        dpbf16,
+        "avx512f,avx512bf16",
+        _mm512_setzero_ps(),
+        a = _mm512_cvtne2ps_pbh(_mm512_set1_ps(1.0), _mm512_set1_ps(1.0)),
+        |acc| _mm512_dpbf16_ps(*acc, a, a),
+        _mm512_reduce_add_ps
+    );
 }
 
 fn main() {
