@@ -219,6 +219,41 @@ fn patterns_render_as_resvg() {
     }
 }
 
+#[test]
+fn the_png_of_a_written_svg_draws_its_textures() {
+    // `result.png` and `-o out.png` render the written SVG with resvg: its embedded PNGs are
+    // decoded (within the image limits), so the picture shows the image, as our render does.
+    let png = data_url("image/png", &picture(24, 16, image::ImageFormat::Png));
+    let scene = from_svg(&doc(&format!(
+        r#"<image x="10" y="5" width="96" height="80" href="{png}"/>"#
+    )))
+    .unwrap();
+    let out = to_svg(&scene, &SvgOptions::default());
+    let bytes = vectorfusion::svg::render_png(&out, 512.0).unwrap();
+    let rgba = image::load_from_memory(&bytes).unwrap().into_rgba8();
+    assert_eq!(rgba.dimensions(), (120, 90));
+    let theirs = vectorfusion::image::Image {
+        width: 120,
+        height: 90,
+        data: rgba
+            .pixels()
+            .flat_map(|p| {
+                let a = f32::from(p[3]) / 255.0;
+                [0, 1, 2]
+                    .map(|c| f32::from(p[c]) / 255.0 * a)
+                    .into_iter()
+                    .chain([a])
+            })
+            .collect(),
+    };
+    compare(
+        "result_png",
+        &raster::render(&scene),
+        &theirs,
+        &Tolerance::SUITE,
+    );
+}
+
 /// A written texture whose image has `style="STYLE"`.
 fn out_with_style(style: &str) -> String {
     format!(

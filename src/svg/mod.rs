@@ -179,7 +179,10 @@ pub fn render_png_at(svg: &str, side: u32) -> Result<Vec<u8>, RenderError> {
 /// Renders `svg` to PNG at the scale `scale(its longest side)` gives.
 fn render_png_scaled(svg: &str, scale: impl Fn(f32) -> f32) -> Result<Vec<u8>, RenderError> {
     use resvg::tiny_skia;
-    let tree = parse_usvg(svg)?;
+    // A written SVG carries its textures as embedded PNGs (`data:` URLs): decode those, within
+    // the image limits and never from a file, so the picture shows them.
+    let images = images::Images::new(None, ImageLimits::DEFAULT, fonts::database());
+    let tree = images.parse(svg, 0)?.tree;
     let size = tree.size();
     let scale = scale(size.width().max(size.height()));
     let w = (size.width() * scale).ceil().max(1.0) as u32;
@@ -197,9 +200,10 @@ fn render_png_scaled(svg: &str, scale: impl Fn(f32) -> f32) -> Result<Vec<u8>, R
 
 /// Parses untrusted SVG text with usvg. It checks [`SvgLimits::DEFAULT`] before any geometry
 /// work ([`guard`]), never reads files and never decodes embedded images (`<image
-/// href="/dev/zero">` must not be followed), so every caller — HTTP submissions, previews, the
-/// worker, evaluation, tracing — is bounded on hostile input. The import ([`import_svg`]) is
-/// the one other parse: the same guard, with the image sources and bounds of `images`.
+/// href="/dev/zero">` must not be followed), so every caller — HTTP submissions, the worker,
+/// evaluation, tracing — is bounded on hostile input. The import ([`import_svg`]) and the PNG
+/// renders ([`render_png`]) are the other parses: the same guard, with the image sources and
+/// bounds of `images` (for the renders `data:` URLs only, never a file).
 pub fn parse_usvg(text: &str) -> Result<usvg::Tree, SvgRejected> {
     parse_usvg_repaired(text).map(|p| p.tree)
 }
