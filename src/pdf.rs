@@ -1,16 +1,19 @@
-//! Scene → vector PDF (PDF 1.4, one page, no dependencies): every path stays a path, so a
-//! designer's tool opens it as editable vectors, as it opens the SVG.
+//! Scene → vector PDF (PDF 1.4, one page): every path stays a path, so a designer's tool opens
+//! it as editable vectors, as it opens the SVG.
 //!
 //! The page has the SVG's size at CSS resolution (96 px = 72 pt, so 1 px = 0.75 pt); the content
 //! stream flips y once (`cm`) and then draws in canvas pixels, in scene order: the background as
 //! a full-page rectangle when it is not transparent, then each shape's fill (nonzero rule, as the
 //! rasteriser and the SVG) and stroke (round caps and joins, as the rasteriser draws them).
 //! Opacities go through one `ExtGState` per distinct alpha (`/ca` for fills, `/CA` for strokes).
+//! A textured fill (an imported image or pattern) is a tiling pattern whose cell is the texture
+//! (an RGB image with its alpha as a soft mask, deflated), placed by the texture's transform:
+//! the texels repeat as in the SVG export, and an image's shape covers just its one tile.
 //!
 //! Invariant: the output is a complete PDF whose cross-reference offsets are exact; writing
 //! cannot fail for a valid [`Scene`] (non-finite numbers are written as `0`).
 
-use crate::scene::{Point, Rgba, Scene, Shape, ShapeKind};
+use crate::scene::{Point, Rgba, Scene, Shape, ShapeKind, Texture, TextureFilter};
 use std::fmt::Write as _;
 
 /// PDF points per canvas pixel (CSS: 96 px per inch, PDF: 72 pt per inch).
@@ -98,11 +101,12 @@ fn color(out: &mut String, c: Rgba, operator: &str) {
     op(out, &[c.r, c.g, c.b], operator);
 }
 
-/// The page's content stream and the alphas it names.
-fn content(scene: &Scene) -> (String, Alphas) {
+/// The page's content stream, the alphas it names and the textures its patterns `/P{i}` show.
+fn content(scene: &Scene) -> (String, Alphas, Vec<&Texture>) {
     let (w, h) = (scene.width as f32, scene.height as f32);
     let mut out = String::new();
     let mut alphas = Alphas::default();
+    let mut textures = Vec::new();
     // Canvas pixels, y down, onto the page in points, y up.
     op(
         &mut out,
@@ -117,7 +121,13 @@ fn content(scene: &Scene) -> (String, Alphas) {
         out.push_str("f Q\n");
     }
     for shape in &scene.shapes {
-        if let Some(f) = shape.fill.filter(|f| f.a > 0.0) {
+        let texture = shape.gradients.as_ref().and_then(|g| g.texture.as_deref());
+        if let (Some(t), Some(_)) = (texture, shape.fill) {
+            let _ = writeln!(out, "q /Pattern cs /P{} scn", textures.len());
+            textures.push(t);
+            path(&mut out, shape);
+            out.push_str("f Q\n");
+        } else if let Some(f) = shape.fill.filter(|f| f.a > 0.0) {
             let _ = writeln!(out, "q {} gs", alphas.name(f.a));
             color(&mut out, f, "rg");
             path(&mut out, shape);
@@ -131,12 +141,83 @@ fn content(scene: &Scene) -> (String, Alphas) {
             out.push_str("S Q\n");
         }
     }
-    (out, alphas)
+    (out, alphas, textures)
+}
+
+/// `data` deflated (zlib, as `/FlateDecode` reads it).
+fn deflate(data: &[u8]) -> Vec<u8> {
+    use std::io::Write as _;
+    let mut z = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::default());
+    // Writing into memory cannot fail.
+    let _ = z.write_all(data);
+    z.finish().unwrap_or_default()
+}
+
+/// A stream object: `dict` (without `/Length`) and the bytes, then the end-of-line that
+/// `endstream` follows (not counted in the length).
+fn stream_object(dict: &str, data: &[u8]) -> Vec<u8> {
+    let sep = if dict.is_empty() { "" } else { " " };
+    let mut o = format!("<< {dict}{sep}/Length {} >>\nstream\n", data.len()).into_bytes();
+    o.extend_from_slice(data);
+    o.extend_from_slice(b"\nendstream");
+    o
+}
+
+/// The three objects that draw texture `t` as a tiling pattern on a page `page_h` points high:
+/// the texels' colours (straight RGB), their alpha (the soft mask, object `first + 1`), and the
+/// pattern (cell = the texture, placed by its transform and the page's flip); `first` is the
+/// colour image's object number.
+fn texture_objects(t: &Texture, first: usize, page_h: f32) -> [Vec<u8>; 3] {
+    let (w, h) = (t.width, t.height);
+    let mut rgb = Vec::with_capacity(3 * t.pixels.len() / 4);
+    let mut alpha = Vec::with_capacity(t.pixels.len() / 4);
+    for p in t.pixels.chunks_exact(4) {
+        let a = u16::from(p[3]);
+        for &c in &p[..3] {
+            rgb.push(
+                (u16::from(c) * 255 + a / 2)
+                    .checked_div(a)
+                    .map_or(0, |v| v.min(255)) as u8,
+            );
+        }
+        alpha.push(p[3]);
+    }
+    let interpolate = t.filter != TextureFilter::Nearest;
+    let image = |space: &str, extra: &str, data: &[u8]| {
+        stream_object(
+            &format!(
+                "/Type /XObject /Subtype /Image /Width {w} /Height {h} /ColorSpace {space} \
+                 /BitsPerComponent 8 /Interpolate {interpolate} /Filter /FlateDecode{extra}"
+            ),
+            &deflate(data),
+        )
+    };
+    let color = image("/DeviceRGB", &format!(" /SMask {} 0 R", first + 1), &rgb);
+    let mask = image("/DeviceGray", "", &alpha);
+    // Texel space → canvas (the texture's transform) → page points (y up).
+    let [a, b, c, d, e, f] = t.transform.0;
+    let k = PT_PER_PX;
+    let mut matrix = String::new();
+    for v in [k * a, -k * b, k * c, -k * d, k * e, page_h - k * f] {
+        matrix.push(' ');
+        num(&mut matrix, v);
+    }
+    // The image's unit square onto the cell, its first row at texel row 0.
+    let cell = format!("q {w} 0 0 -{h} 0 {h} cm /I Do Q");
+    let pattern = stream_object(
+        &format!(
+            "/Type /Pattern /PatternType 1 /PaintType 1 /TilingType 1 /BBox [0 0 {w} {h}] \
+             /XStep {w} /YStep {h} /Matrix [{}] /Resources << /XObject << /I {first} 0 R >> >>",
+            matrix.trim_start()
+        ),
+        cell.as_bytes(),
+    );
+    [color, mask, pattern]
 }
 
 /// `scene` as a one-page vector PDF (see the module docs).
 pub fn to_pdf(scene: &Scene) -> Vec<u8> {
-    let (stream, alphas) = content(scene);
+    let (stream, alphas, textures) = content(scene);
     let mut states = String::new();
     for (i, a) in alphas.0.iter().enumerate() {
         let _ = write!(states, "/G{i} << /Type /ExtGState /ca ");
@@ -145,29 +226,38 @@ pub fn to_pdf(scene: &Scene) -> Vec<u8> {
         num(&mut states, *a);
         states.push_str(" >> ");
     }
+    let page_h = scene.height as f32 * PT_PER_PX;
     let mut media = String::new();
-    for v in [
-        scene.width as f32 * PT_PER_PX,
-        scene.height as f32 * PT_PER_PX,
-    ] {
+    for v in [scene.width as f32 * PT_PER_PX, page_h] {
         media.push(' ');
         num(&mut media, v);
     }
-    let objects = [
-        "<< /Type /Catalog /Pages 2 0 R >>".to_string(),
-        "<< /Type /Pages /Kids [3 0 R] /Count 1 >>".to_string(),
+    // Objects 1–5 as below, then three per texture from 6 on (`texture_objects`).
+    let mut patterns = String::new();
+    for i in 0..textures.len() {
+        let _ = write!(patterns, "/P{i} {} 0 R ", 6 + 3 * i + 2);
+    }
+    let mut objects: Vec<Vec<u8>> = vec![
+        b"<< /Type /Catalog /Pages 2 0 R >>".to_vec(),
+        b"<< /Type /Pages /Kids [3 0 R] /Count 1 >>".to_vec(),
         format!(
             "<< /Type /Page /Parent 2 0 R /MediaBox [0 0{media}] \
-             /Resources << /ExtGState << {states}>> >> /Contents 4 0 R >>"
-        ),
-        format!("<< /Length {} >>\nstream\n{stream}endstream", stream.len()),
-        "<< /Producer (vectorfusion) >>".to_string(),
+             /Resources << /ExtGState << {states}>> /Pattern << {patterns}>> >> /Contents 4 0 R >>"
+        )
+        .into_bytes(),
+        stream_object("", stream.as_bytes()),
+        b"<< /Producer (vectorfusion) >>".to_vec(),
     ];
+    for (i, t) in textures.iter().enumerate() {
+        objects.extend(texture_objects(t, 6 + 3 * i, page_h));
+    }
     let mut pdf = b"%PDF-1.4\n%\xe2\xe3\xcf\xd3\n".to_vec();
     let mut offsets = Vec::with_capacity(objects.len());
     for (i, body) in objects.iter().enumerate() {
         offsets.push(pdf.len());
-        pdf.extend_from_slice(format!("{} 0 obj\n{body}\nendobj\n", i + 1).as_bytes());
+        pdf.extend_from_slice(format!("{} 0 obj\n", i + 1).as_bytes());
+        pdf.extend_from_slice(body);
+        pdf.extend_from_slice(b"\nendobj\n");
     }
     let xref = pdf.len();
     let mut table = format!("xref\n0 {}\n0000000000 65535 f \n", objects.len() + 1);
@@ -226,7 +316,11 @@ mod tests {
 
     #[test]
     fn every_cross_reference_points_at_its_object() {
-        let text = ascii(&to_pdf(&scene()));
+        cross_references_hold(&ascii(&to_pdf(&scene())), 5);
+    }
+
+    /// The PDF has `n` objects and each cross-reference entry points at its object.
+    fn cross_references_hold(text: &str, n: usize) {
         assert!(text.starts_with("%PDF-1.4"));
         assert!(text.ends_with("%%EOF\n"));
         let start: usize = text
@@ -235,11 +329,11 @@ mod tests {
             .and_then(|t| t.lines().next())
             .and_then(|l| l.parse().ok())
             .unwrap();
-        assert!(text[start..].starts_with("xref\n0 6\n"));
+        assert!(text[start..].starts_with(&format!("xref\n0 {}\n", n + 1)));
         let entries: Vec<usize> = text[start..]
             .lines()
             .skip(3)
-            .take(5)
+            .take(n)
             .map(|l| l[..10].parse().unwrap())
             .collect();
         for (i, off) in entries.iter().enumerate() {
@@ -249,9 +343,10 @@ mod tests {
                 i + 1
             );
         }
-        // The stream's declared length is its length.
+        // The stream's declared length is its length (the end-of-line before `endstream` is not
+        // counted).
         let s = text.find("stream\n").unwrap() + 7;
-        let e = text.find("endstream").unwrap();
+        let e = text.find("\nendstream").unwrap();
         let declared: usize = text[..s]
             .rsplit("/Length ")
             .next()
@@ -259,6 +354,66 @@ mod tests {
             .and_then(|n| n.parse().ok())
             .unwrap();
         assert_eq!(declared, e - s);
+    }
+
+    #[test]
+    fn a_texture_is_a_tiling_pattern_of_its_straight_texels() {
+        use crate::scene::{Affine, Gradients, TextureEdge};
+        let mut s = scene();
+        let mut img = Shape::square(2.0, 2.0, 10.0, Rgba::BLACK).unwrap();
+        img.gradients = Some(Box::new(Gradients {
+            fill: None,
+            stroke: None,
+            texture: Some(Box::new(Texture {
+                width: 2,
+                height: 1,
+                // premultiplied: red at half alpha, opaque blue
+                pixels: vec![128, 0, 0, 128, 0, 0, 255, 255],
+                transform: Affine([5.0, 0.0, 0.0, 10.0, 2.0, 2.0]),
+                edge: TextureEdge::Pad,
+                filter: TextureFilter::Nearest,
+            })),
+        }));
+        s.shapes.push(img);
+        let pdf = to_pdf(&s);
+        let text = ascii(&pdf);
+        cross_references_hold(&text, 8);
+        assert!(text.contains("/Pattern << /P0 8 0 R >>"), "{text}");
+        assert!(text.contains("q /Pattern cs /P0 scn\n2 2 m"), "{text}");
+        assert!(text.contains("/SMask 7 0 R"));
+        assert!(text.contains("/Interpolate false"));
+        // texel space → canvas → points, y flipped on the 15 pt page
+        assert!(
+            text.contains("/XStep 2 /YStep 1 /Matrix [3.75 0 0 -7.5 1.5 13.5]"),
+            "{text}"
+        );
+        assert!(text.contains("q 2 0 0 -1 0 1 cm /I Do Q"));
+        // The colour image holds straight RGB, the mask the alpha.
+        let streams: Vec<Vec<u8>> = pdf
+            .windows(7)
+            .enumerate()
+            .filter(|(i, w)| w == b"stream\n" && pdf[i - 1] == b'\n')
+            .map(|(i, _)| {
+                let head = &text[..i];
+                let n: usize = head
+                    .rsplit("/Length ")
+                    .next()
+                    .and_then(|t| t.split_whitespace().next())
+                    .and_then(|n| n.parse().ok())
+                    .unwrap();
+                pdf[i + 7..i + 7 + n].to_vec()
+            })
+            .collect();
+        let inflate = |b: &[u8]| {
+            use std::io::Read as _;
+            let mut out = Vec::new();
+            flate2::read::ZlibDecoder::new(b)
+                .read_to_end(&mut out)
+                .unwrap();
+            out
+        };
+        assert_eq!(inflate(&streams[1]), [255, 0, 0, 0, 0, 255]);
+        assert_eq!(inflate(&streams[2]), [128, 255]);
     }
 
     #[test]
