@@ -3,17 +3,24 @@
 //!
 //! The page has the SVG's size at CSS resolution (96 px = 72 pt, so 1 px = 0.75 pt); the content
 //! stream flips y once (`cm`) and then draws in canvas pixels, in scene order: the background as
-//! a full-page rectangle when it is not transparent, then each shape's fill (nonzero rule, as the
-//! rasteriser and the SVG) and stroke (round caps and joins, as the rasteriser draws them).
+//! a full-page rectangle when it is not transparent, then each shape's fill (by its fill rule, as
+//! the rasteriser and the SVG) and stroke (round caps and joins, as the rasteriser draws them).
 //! Opacities go through one `ExtGState` per distinct alpha (`/ca` for fills, `/CA` for strokes).
 //! A textured fill (an imported image or pattern) is a tiling pattern whose cell is the texture
 //! (an RGB image with its alpha as a soft mask, deflated), placed by the texture's transform:
-//! the texels repeat as in the SVG export, and an image's shape covers just its one tile.
+//! the texels repeat as in the SVG export, and an image's shape covers just its one tile. A
+//! gradient fill or stroke is a shading pattern (axial or radial, its stops a stitching function,
+//! extended past both ends as `pad`), placed by the gradient's transform; a linear `repeat` or
+//! `reflect` gradient spans the periods the shape covers. Stop opacities are drawn as their mean
+//! (PDF shadings carry no alpha); a radial `repeat` or `reflect` is drawn as `pad`.
 //!
 //! Invariant: the output is a complete PDF whose cross-reference offsets are exact; writing
 //! cannot fail for a valid [`Scene`] (non-finite numbers are written as `0`).
 
-use crate::scene::{Point, Rgba, Scene, Shape, ShapeKind, Texture, TextureFilter};
+use crate::scene::{
+    Affine, FillRule, Gradient, GradientGeometry, Point, Rgba, Scene, Shape, ShapeKind, Spread,
+    Texture, TextureFilter,
+};
 use std::fmt::Write as _;
 
 /// PDF points per canvas pixel (CSS: 96 px per inch, PDF: 72 pt per inch).
@@ -101,12 +108,29 @@ fn color(out: &mut String, c: Rgba, operator: &str) {
     op(out, &[c.r, c.g, c.b], operator);
 }
 
-/// The page's content stream, the alphas it names and the textures its patterns `/P{i}` show.
-fn content(scene: &Scene) -> (String, Alphas, Vec<&Texture>) {
+/// What a pattern `/P{i}` of the page paints.
+enum Paint<'a> {
+    Texture(&'a Texture),
+    /// A gradient and the range of its parameter `t` the shape covers.
+    Gradient(&'a Gradient, [f32; 2]),
+}
+
+impl Paint<'_> {
+    /// How many objects it takes (the pattern last).
+    fn objects(&self) -> usize {
+        match self {
+            Paint::Texture(_) => 3,
+            Paint::Gradient(..) => 1,
+        }
+    }
+}
+
+/// The page's content stream, the alphas it names and the paints its patterns `/P{i}` show.
+fn content(scene: &Scene) -> (String, Alphas, Vec<Paint<'_>>) {
     let (w, h) = (scene.width as f32, scene.height as f32);
     let mut out = String::new();
     let mut alphas = Alphas::default();
-    let mut textures = Vec::new();
+    let mut paints = Vec::new();
     // Canvas pixels, y down, onto the page in points, y up.
     op(
         &mut out,
@@ -121,27 +145,276 @@ fn content(scene: &Scene) -> (String, Alphas, Vec<&Texture>) {
         out.push_str("f Q\n");
     }
     for shape in &scene.shapes {
-        let texture = shape.gradients.as_ref().and_then(|g| g.texture.as_deref());
-        if let (Some(t), Some(_)) = (texture, shape.fill) {
-            let _ = writeln!(out, "q /Pattern cs /P{} scn", textures.len());
-            textures.push(t);
+        let g = shape.gradients.as_deref();
+        let fill_op = match shape.fill_rule {
+            FillRule::NonZero => "f",
+            FillRule::EvenOdd => "f*",
+        };
+        if let (Some(t), Some(_)) = (g.and_then(|g| g.texture.as_deref()), shape.fill) {
+            let _ = writeln!(out, "q /Pattern cs /P{} scn", paints.len());
+            paints.push(Paint::Texture(t));
             path(&mut out, shape);
-            out.push_str("f Q\n");
+            let _ = writeln!(out, "{fill_op} Q");
+        } else if let (Some(gr), Some(_)) = (g.and_then(|g| g.fill.as_ref()), shape.fill) {
+            let a = mean_alpha(gr);
+            let _ = writeln!(
+                out,
+                "q {} gs /Pattern cs /P{} scn",
+                alphas.name(a),
+                paints.len()
+            );
+            paints.push(Paint::Gradient(gr, t_range(gr, shape)));
+            path(&mut out, shape);
+            let _ = writeln!(out, "{fill_op} Q");
         } else if let Some(f) = shape.fill.filter(|f| f.a > 0.0) {
             let _ = writeln!(out, "q {} gs", alphas.name(f.a));
             color(&mut out, f, "rg");
             path(&mut out, shape);
-            out.push_str("f Q\n");
+            let _ = writeln!(out, "{fill_op} Q");
         }
-        if let Some(s) = shape.stroke.filter(|s| s.color.a > 0.0 && s.width > 0.0) {
+        let Some(s) = shape.stroke.filter(|s| s.width > 0.0) else {
+            continue;
+        };
+        if let Some(gr) = g.and_then(|g| g.stroke.as_ref()) {
+            let a = mean_alpha(gr);
+            let _ = writeln!(
+                out,
+                "q {} gs /Pattern CS /P{} SCN",
+                alphas.name(a),
+                paints.len()
+            );
+            paints.push(Paint::Gradient(gr, t_range(gr, shape)));
+        } else if s.color.a > 0.0 {
             let _ = writeln!(out, "q {} gs", alphas.name(s.color.a));
             color(&mut out, s.color, "RG");
-            op(&mut out, &[s.width], "w");
-            path(&mut out, shape);
-            out.push_str("S Q\n");
+        } else {
+            continue;
+        }
+        op(&mut out, &[s.width], "w");
+        path(&mut out, shape);
+        out.push_str("S Q\n");
+    }
+    (out, alphas, paints)
+}
+
+/// The mean of a gradient's stop alphas (a shading has none of its own).
+fn mean_alpha(g: &Gradient) -> f32 {
+    let n = g.stops.len().max(1) as f32;
+    g.stops.iter().map(|s| s.color.a).sum::<f32>() / n
+}
+
+/// The range of a linear gradient's parameter over the shape's control points (which bound
+/// its outline; a stroke's half width added), whole periods outward; `[0, 1]` for `pad` and
+/// for radial gradients.
+fn t_range(g: &Gradient, shape: &Shape) -> [f32; 2] {
+    let GradientGeometry::Linear { x1, y1, x2, y2 } = g.geometry else {
+        return [0.0, 1.0];
+    };
+    let (dx, dy) = (x2 - x1, y2 - y1);
+    let len2 = dx * dx + dy * dy;
+    let Some(inv) = invert(&g.transform) else {
+        return [0.0, 1.0];
+    };
+    if g.spread == Spread::Pad || len2.is_nan() || len2 <= 0.0 {
+        return [0.0, 1.0];
+    }
+    let pad = shape.stroke.map_or(0.0, |s| s.width / 2.0);
+    let (mut lo, mut hi) = (0.0f32, 1.0f32);
+    for p in &shape.points {
+        for (ox, oy) in [(-pad, -pad), (pad, -pad), (-pad, pad), (pad, pad)] {
+            let q = inv.apply(Point::new(p.x + ox, p.y + oy));
+            let t = ((q.x - x1) * dx + (q.y - y1) * dy) / len2;
+            if t.is_finite() {
+                (lo, hi) = (lo.min(t), hi.max(t));
+            }
         }
     }
-    (out, alphas, textures)
+    // At most 256 periods: past that the stripes are finer than any page shows.
+    let lo = lo.floor().max(hi.ceil() - 256.0);
+    [lo, hi.ceil().min(lo + 256.0)]
+}
+
+/// `m`'s inverse, `None` when it is singular.
+fn invert(m: &Affine) -> Option<Affine> {
+    let [a, b, c, d, e, f] = m.0;
+    let det = a * d - b * c;
+    if !(det.abs() > 0.0 && det.is_finite()) {
+        return None;
+    }
+    let (ia, ib, ic, id) = (d / det, -b / det, -c / det, a / det);
+    Some(Affine([
+        ia,
+        ib,
+        ic,
+        id,
+        -(ia * e + ic * f),
+        -(ib * e + id * f),
+    ]))
+}
+
+/// ` [a b c d e f]`: gradient or texel space → canvas (`m`) → page points (y up).
+fn page_matrix(m: &Affine, page_h: f32) -> String {
+    let [a, b, c, d, e, f] = m.0;
+    let k = PT_PER_PX;
+    let mut out = String::from("[");
+    for (i, v) in [k * a, -k * b, k * c, -k * d, k * e, page_h - k * f]
+        .into_iter()
+        .enumerate()
+    {
+        if i > 0 {
+            out.push(' ');
+        }
+        num(&mut out, v);
+    }
+    out.push(']');
+    out
+}
+
+/// The stops of `g` as a function of `t` over `range` (whole periods of `repeat` or `reflect`,
+/// else `[0, 1]`): a stitching function of linear pieces between stops.
+fn stop_function(g: &Gradient, range: [f32; 2]) -> String {
+    // Stops covering [0, 1], colours opaque (the alpha is the pattern's graphics state).
+    let mut stops: Vec<(f32, Rgba)> = g
+        .stops
+        .iter()
+        .map(|s| (s.offset.clamp(0.0, 1.0), s.color))
+        .collect();
+    if stops.is_empty() {
+        stops.push((0.0, Rgba::BLACK));
+    }
+    if stops[0].0 > 0.0 {
+        stops.insert(0, (0.0, stops[0].1));
+    }
+    if let Some(&(o, c)) = stops.last()
+        && o < 1.0
+    {
+        stops.push((1.0, c));
+    }
+    let rgb = |c: Rgba| {
+        let mut s = String::new();
+        for v in [c.r, c.g, c.b] {
+            s.push(' ');
+            num(&mut s, v);
+        }
+        s
+    };
+    let piece = |a: Rgba, b: Rgba| {
+        format!(
+            "<< /FunctionType 2 /Domain [0 1] /C0 [{}] /C1 [{}] /N 1 >>",
+            rgb(a).trim_start(),
+            rgb(b).trim_start()
+        )
+    };
+    // One period: a piece per pair of stops (a pair at one offset is a hard step).
+    let mut funcs = Vec::new();
+    let mut bounds = Vec::new();
+    for w in stops.windows(2) {
+        funcs.push(piece(w[0].1, w[1].1));
+        bounds.push(w[1].0);
+    }
+    bounds.pop();
+    let period = |flip: bool, lo: f32| {
+        let (mut f, mut b) = (funcs.clone(), bounds.clone());
+        let mut encode = vec!["0 1"; f.len()];
+        if flip {
+            f.reverse();
+            b = b.iter().rev().map(|v| 1.0 - v).collect();
+            encode = vec!["1 0"; f.len()];
+        }
+        let mut bs = String::new();
+        for v in b {
+            bs.push(' ');
+            num(&mut bs, lo + v);
+        }
+        let mut dom = String::new();
+        num(&mut dom, lo);
+        dom.push(' ');
+        num(&mut dom, lo + 1.0);
+        format!(
+            "<< /FunctionType 3 /Domain [{dom}] /Functions [{}] /Bounds [{}] /Encode [{}] >>",
+            f.join(" "),
+            bs.trim_start(),
+            encode.join(" ")
+        )
+    };
+    let [lo, hi] = range;
+    if g.spread == Spread::Pad || hi - lo <= 1.0 && lo == 0.0 {
+        return period(false, 0.0);
+    }
+    // Whole periods: each its own stitched function, mirrored on odd ones for `reflect`.
+    let n = (hi - lo).round().max(1.0) as i64;
+    let mut parts = Vec::new();
+    let mut bs = String::new();
+    for k in 0..n {
+        let start = lo + k as f32;
+        let odd = (start as i64).rem_euclid(2) == 1;
+        parts.push(period(g.spread == Spread::Reflect && odd, start));
+        if k > 0 {
+            bs.push(' ');
+            num(&mut bs, start);
+        }
+    }
+    let mut encode = String::new();
+    for k in 0..n {
+        let start = lo + k as f32;
+        let _ = write!(encode, "{} {} ", start, start + 1.0);
+    }
+    let mut dom = String::new();
+    num(&mut dom, lo);
+    dom.push(' ');
+    num(&mut dom, hi);
+    format!(
+        "<< /FunctionType 3 /Domain [{dom}] /Functions [{}] /Bounds [{}] /Encode [{}] >>",
+        parts.join(" "),
+        bs,
+        encode.trim_end()
+    )
+}
+
+/// The shading pattern of gradient `g` over the parameter range `range` on a page `page_h`
+/// points high.
+fn gradient_object(g: &Gradient, range: [f32; 2], page_h: f32) -> Vec<u8> {
+    let [lo, hi] = range;
+    let mut coords = String::new();
+    let kind = match g.geometry {
+        GradientGeometry::Linear { x1, y1, x2, y2 } => {
+            // The axis at the range's ends: t = lo and t = hi.
+            let at = |t: f32| [x1 + t * (x2 - x1), y1 + t * (y2 - y1)];
+            for v in at(lo).into_iter().chain(at(hi)) {
+                coords.push(' ');
+                num(&mut coords, v);
+            }
+            2
+        }
+        GradientGeometry::Radial {
+            cx,
+            cy,
+            r,
+            fx,
+            fy,
+            fr,
+        } => {
+            // From the focal circle (t = 0) to the end circle (t = 1).
+            for v in [fx, fy, fr, cx, cy, r] {
+                coords.push(' ');
+                num(&mut coords, v);
+            }
+            3
+        }
+    };
+    let mut domain = String::new();
+    num(&mut domain, lo);
+    domain.push(' ');
+    num(&mut domain, hi);
+    format!(
+        "<< /Type /Pattern /PatternType 2 /Matrix {} /Shading << /ShadingType {kind} \
+         /ColorSpace /DeviceRGB /Coords [{}] /Domain [{domain}] /Function {} \
+         /Extend [true true] >> >>",
+        page_matrix(&g.transform, page_h),
+        coords.trim_start(),
+        stop_function(g, range)
+    )
+    .into_bytes()
 }
 
 /// `data` deflated (zlib, as `/FlateDecode` reads it).
@@ -194,21 +467,13 @@ fn texture_objects(t: &Texture, first: usize, page_h: f32) -> [Vec<u8>; 3] {
     };
     let color = image("/DeviceRGB", &format!(" /SMask {} 0 R", first + 1), &rgb);
     let mask = image("/DeviceGray", "", &alpha);
-    // Texel space → canvas (the texture's transform) → page points (y up).
-    let [a, b, c, d, e, f] = t.transform.0;
-    let k = PT_PER_PX;
-    let mut matrix = String::new();
-    for v in [k * a, -k * b, k * c, -k * d, k * e, page_h - k * f] {
-        matrix.push(' ');
-        num(&mut matrix, v);
-    }
+    let matrix = page_matrix(&t.transform, page_h);
     // The image's unit square onto the cell, its first row at texel row 0.
     let cell = format!("q {w} 0 0 -{h} 0 {h} cm /I Do Q");
     let pattern = stream_object(
         &format!(
             "/Type /Pattern /PatternType 1 /PaintType 1 /TilingType 1 /BBox [0 0 {w} {h}] \
-             /XStep {w} /YStep {h} /Matrix [{}] /Resources << /XObject << /I {first} 0 R >> >>",
-            matrix.trim_start()
+             /XStep {w} /YStep {h} /Matrix {matrix} /Resources << /XObject << /I {first} 0 R >> >>"
         ),
         cell.as_bytes(),
     );
@@ -217,7 +482,7 @@ fn texture_objects(t: &Texture, first: usize, page_h: f32) -> [Vec<u8>; 3] {
 
 /// `scene` as a one-page vector PDF (see the module docs).
 pub fn to_pdf(scene: &Scene) -> Vec<u8> {
-    let (stream, alphas, textures) = content(scene);
+    let (stream, alphas, paints) = content(scene);
     let mut states = String::new();
     for (i, a) in alphas.0.iter().enumerate() {
         let _ = write!(states, "/G{i} << /Type /ExtGState /ca ");
@@ -232,10 +497,14 @@ pub fn to_pdf(scene: &Scene) -> Vec<u8> {
         media.push(' ');
         num(&mut media, v);
     }
-    // Objects 1–5 as below, then three per texture from 6 on (`texture_objects`).
+    // Objects 1–5 as below, then each paint's objects from 6 on, its pattern last.
     let mut patterns = String::new();
-    for i in 0..textures.len() {
-        let _ = write!(patterns, "/P{i} {} 0 R ", 6 + 3 * i + 2);
+    let mut firsts = Vec::with_capacity(paints.len());
+    let mut next = 6;
+    for (i, p) in paints.iter().enumerate() {
+        firsts.push(next);
+        next += p.objects();
+        let _ = write!(patterns, "/P{i} {} 0 R ", next - 1);
     }
     let mut objects: Vec<Vec<u8>> = vec![
         b"<< /Type /Catalog /Pages 2 0 R >>".to_vec(),
@@ -248,8 +517,11 @@ pub fn to_pdf(scene: &Scene) -> Vec<u8> {
         stream_object("", stream.as_bytes()),
         b"<< /Producer (vectorfusion) >>".to_vec(),
     ];
-    for (i, t) in textures.iter().enumerate() {
-        objects.extend(texture_objects(t, 6 + 3 * i, page_h));
+    for (p, first) in paints.iter().zip(firsts) {
+        match p {
+            Paint::Texture(t) => objects.extend(texture_objects(t, first, page_h)),
+            Paint::Gradient(g, range) => objects.push(gradient_object(g, *range, page_h)),
+        }
     }
     let mut pdf = b"%PDF-1.4\n%\xe2\xe3\xcf\xd3\n".to_vec();
     let mut offsets = Vec::with_capacity(objects.len());

@@ -243,3 +243,47 @@ fn textures_as_pdf_render_the_same_as_the_svg() {
         large * 100.0
     );
 }
+
+/// Gradients (linear with `pad` and `reflect`, radial with a focal point, on a fill and on a
+/// stroke) and an even-odd fill in the PDF look as the SVG does in resvg.
+#[test]
+fn gradients_as_pdf_render_the_same_as_the_svg() {
+    let name = "gradients_as_pdf_render_the_same_as_the_svg";
+    if Command::new("pdftoppm").arg("-v").output().is_err() {
+        common::skip(
+            name,
+            "pdftoppm is not installed (apt-get install poppler-utils)",
+        );
+        return;
+    }
+    let svg = format!(
+        r##"<svg xmlns="http://www.w3.org/2000/svg" width="{SIDE}" height="{SIDE}" viewBox="0 0 128 128">
+        <linearGradient id="a" x1="0" y1="0" x2="1" y2="0.3">
+          <stop offset=".1" stop-color="#1a5fb4"/><stop offset=".5" stop-color="#f6d32d"/><stop offset=".9" stop-color="#c01c28"/></linearGradient>
+        <linearGradient id="b" gradientUnits="userSpaceOnUse" x1="10" y1="80" x2="26" y2="92" spreadMethod="reflect">
+          <stop offset="0" stop-color="#26a269"/><stop offset="1" stop-color="#ffffff"/></linearGradient>
+        <radialGradient id="c" cx=".5" cy=".5" r=".5" fx=".35" fy=".3">
+          <stop offset="0" stop-color="#ffbe6f"/><stop offset="1" stop-color="#613583"/></radialGradient>
+        <rect x="6" y="6" width="70" height="50" fill="url(#a)"/>
+        <rect x="6" y="66" width="56" height="56" fill="url(#b)"/>
+        <circle cx="96" cy="40" r="26" fill="url(#c)" stroke="url(#a)" stroke-width="5"/>
+        <path d="M70 70 H122 V122 H70 Z M82 82 V110 H110 V82 Z" fill="#3584e4" fill-rule="evenodd"/></svg>"##
+    );
+    let scene = vectorfusion::svg::from_svg(&svg).unwrap();
+    let gradients: usize = scene
+        .shapes
+        .iter()
+        .filter_map(|s| s.gradients.as_ref())
+        .map(|g| g.iter().count())
+        .sum();
+    assert_eq!(gradients, 4);
+    let dir = tempfile::tempdir().unwrap();
+    let b = pdf_rgb(&scene, dir.path(), "gradients");
+    let (mean, large) = differences(&resvg_rgb(&svg), &b);
+    eprintln!("gradients: mean {mean:.2}/255, {:.3}% far", large * 100.0);
+    assert!(
+        mean <= MAX_MEAN_ABS && large <= 0.005,
+        "gradients: PDF differs from the SVG: mean {mean:.2}/255, {:.3}% far",
+        large * 100.0
+    );
+}
