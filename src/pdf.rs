@@ -156,14 +156,7 @@ fn content(scene: &Scene) -> (String, Alphas, Vec<Paint<'_>>) {
             path(&mut out, shape);
             let _ = writeln!(out, "{fill_op} Q");
         } else if let (Some(gr), Some(_)) = (g.and_then(|g| g.fill.as_ref()), shape.fill) {
-            let a = mean_alpha(gr);
-            let _ = writeln!(
-                out,
-                "q {} gs /Pattern cs /P{} scn",
-                alphas.name(a),
-                paints.len()
-            );
-            paints.push(Paint::Gradient(gr, t_range(gr, shape)));
+            gradient_paint(&mut out, &mut alphas, &mut paints, gr, shape, "cs", "scn");
             path(&mut out, shape);
             let _ = writeln!(out, "{fill_op} Q");
         } else if let Some(f) = shape.fill.filter(|f| f.a > 0.0) {
@@ -176,14 +169,7 @@ fn content(scene: &Scene) -> (String, Alphas, Vec<Paint<'_>>) {
             continue;
         };
         if let Some(gr) = g.and_then(|g| g.stroke.as_ref()) {
-            let a = mean_alpha(gr);
-            let _ = writeln!(
-                out,
-                "q {} gs /Pattern CS /P{} SCN",
-                alphas.name(a),
-                paints.len()
-            );
-            paints.push(Paint::Gradient(gr, t_range(gr, shape)));
+            gradient_paint(&mut out, &mut alphas, &mut paints, gr, shape, "CS", "SCN");
         } else if s.color.a > 0.0 {
             let _ = writeln!(out, "q {} gs", alphas.name(s.color.a));
             color(&mut out, s.color, "RG");
@@ -195,6 +181,22 @@ fn content(scene: &Scene) -> (String, Alphas, Vec<Paint<'_>>) {
         out.push_str("S Q\n");
     }
     (out, alphas, paints)
+}
+
+/// Opens a graphics state painting with gradient `gr` on `shape` as the next pattern, through
+/// `space` and `set` (`cs`/`scn` for fills, `CS`/`SCN` for strokes), its alpha the stops' mean.
+fn gradient_paint<'a>(
+    out: &mut String,
+    alphas: &mut Alphas,
+    paints: &mut Vec<Paint<'a>>,
+    gr: &'a Gradient,
+    shape: &Shape,
+    space: &str,
+    set: &str,
+) {
+    let gs = alphas.name(mean_alpha(gr));
+    let _ = writeln!(out, "q {gs} gs /Pattern {space} /P{} {set}", paints.len());
+    paints.push(Paint::Gradient(gr, t_range(gr, shape)));
 }
 
 /// The mean of a gradient's stop alphas (a shading has none of its own).
