@@ -214,12 +214,11 @@ fn t_range(g: &Gradient, shape: &Shape) -> [f32; 2] {
     };
     let (dx, dy) = (x2 - x1, y2 - y1);
     let len2 = dx * dx + dy * dy;
-    let Some(inv) = invert(&g.transform) else {
-        return [0.0, 1.0];
-    };
     if g.spread == Spread::Pad || len2.is_nan() || len2 <= 0.0 {
         return [0.0, 1.0];
     }
+    // Canvas → gradient space (a singular map gives non-finite `t`s, which are passed over).
+    let inv = Affine(g.transform.inverse_f64().map(|v| v as f32));
     let pad = shape.stroke.map_or(0.0, |s| s.width / 2.0);
     let (mut lo, mut hi) = (0.0f32, 1.0f32);
     for p in &shape.points {
@@ -234,24 +233,6 @@ fn t_range(g: &Gradient, shape: &Shape) -> [f32; 2] {
     // At most 256 periods: past that the stripes are finer than any page shows.
     let lo = lo.floor().max(hi.ceil() - 256.0);
     [lo, hi.ceil().min(lo + 256.0)]
-}
-
-/// `m`'s inverse, `None` when it is singular.
-fn invert(m: &Affine) -> Option<Affine> {
-    let [a, b, c, d, e, f] = m.0;
-    let det = a * d - b * c;
-    if !(det.abs() > 0.0 && det.is_finite()) {
-        return None;
-    }
-    let (ia, ib, ic, id) = (d / det, -b / det, -c / det, a / det);
-    Some(Affine([
-        ia,
-        ib,
-        ic,
-        id,
-        -(ia * e + ic * f),
-        -(ib * e + id * f),
-    ]))
 }
 
 /// ` [a b c d e f]`: gradient or texel space → canvas (`m`) → page points (y up).
@@ -444,19 +425,12 @@ fn stream_object(dict: &str, data: &[u8]) -> Vec<u8> {
 /// colour image's object number.
 fn texture_objects(t: &Texture, first: usize, page_h: f32) -> [Vec<u8>; 3] {
     let (w, h) = (t.width, t.height);
-    let mut rgb = Vec::with_capacity(3 * t.pixels.len() / 4);
-    let mut alpha = Vec::with_capacity(t.pixels.len() / 4);
-    for p in t.pixels.chunks_exact(4) {
-        let a = u16::from(p[3]);
-        for &c in &p[..3] {
-            rgb.push(
-                (u16::from(c) * 255 + a / 2)
-                    .checked_div(a)
-                    .map_or(0, |v| v.min(255)) as u8,
-            );
-        }
-        alpha.push(p[3]);
-    }
+    let straight = t.straight_pixels();
+    let rgb: Vec<u8> = straight
+        .chunks_exact(4)
+        .flat_map(|p| [p[0], p[1], p[2]])
+        .collect();
+    let alpha: Vec<u8> = straight.chunks_exact(4).map(|p| p[3]).collect();
     let interpolate = t.filter != TextureFilter::Nearest;
     let image = |space: &str, extra: &str, data: &[u8]| {
         stream_object(

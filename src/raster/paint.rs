@@ -8,7 +8,7 @@
 //! derivative of `t`). The gradient transform is fixed (not a parameter).
 
 use super::real::Real;
-use crate::scene::{Affine, Gradient, GradientGeometry, Spread};
+use crate::scene::{Gradient, GradientGeometry, Spread};
 
 /// The colour source of one layer's compositing.
 pub(crate) trait Shade<T: Real> {
@@ -37,21 +37,6 @@ impl<T: Real> Shade<T> for Flat<T> {
     }
 }
 
-/// The inverse of an invertible affine map (canvas → paint space), computed in f64.
-pub(crate) fn inverse<T: Real>(m: &Affine) -> [T; 6] {
-    let [a, b, c, d, e, f] = m.0.map(f64::from);
-    let det = a * d - b * c;
-    [
-        d / det,
-        -b / det,
-        -c / det,
-        a / det,
-        (c * f - d * e) / det,
-        (b * e - a * f) / det,
-    ]
-    .map(T::c)
-}
-
 /// A gradient in the working precision; parameters in [`Gradient::params`] order.
 #[derive(Clone, Debug)]
 pub(crate) struct PaintT<T> {
@@ -74,7 +59,7 @@ impl<T: Real> PaintT<T> {
         PaintT {
             radial: matches!(g.geometry, GradientGeometry::Radial { .. }),
             geom,
-            inv: inverse(&g.transform),
+            inv: g.transform.inverse_f64().map(T::c),
             spread: g.spread,
             offsets: g.stops.iter().map(|s| T::of(s.offset)).collect(),
             colors: g

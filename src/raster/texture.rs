@@ -8,7 +8,7 @@
 //! backward of a texture layer only carries the coverage part, so the shape's outline and the
 //! shapes above and below it get their gradients as usual.
 
-use super::paint::{Shade, inverse};
+use super::paint::Shade;
 use super::real::Real;
 use crate::scene::{Texture, TextureEdge, TextureFilter};
 
@@ -27,7 +27,7 @@ pub(crate) struct TextureT<T> {
 impl<T: Real> TextureT<T> {
     pub fn of(t: &Texture) -> Self {
         TextureT {
-            inv: inverse(&t.transform),
+            inv: t.transform.inverse_f64().map(T::c),
             width: t.width as i32,
             height: t.height as i32,
             texels: t

@@ -71,6 +71,21 @@ impl Affine {
         Affine([x.x - o.x, x.y - o.y, y.x - o.x, y.y - o.y, o.x, o.y])
     }
 
+    /// The inverse map in f64, as `[a b c d e f]`: exact for an invertible map (every valid
+    /// scene's); a singular one gives non-finite values.
+    pub fn inverse_f64(&self) -> [f64; 6] {
+        let [a, b, c, d, e, f] = self.0.map(f64::from);
+        let det = a * d - b * c;
+        [
+            d / det,
+            -b / det,
+            -c / det,
+            a / det,
+            (c * f - d * e) / det,
+            (b * e - a * f) / det,
+        ]
+    }
+
     pub fn det(&self) -> f32 {
         let [a, b, c, d, ..] = self.0;
         a * d - b * c

@@ -117,6 +117,21 @@ impl Texture {
         Rgba::new(c(s[0]), c(s[1]), c(s[2]), (s[3] / n / 255.0) as f32).clamped()
     }
 
+    /// The texels with straight alpha (RGBA8, each colour divided by its alpha, rounded), as
+    /// image files store them.
+    pub fn straight_pixels(&self) -> Vec<u8> {
+        let mut straight = self.pixels.clone();
+        for p in straight.chunks_exact_mut(4) {
+            let a = u16::from(p[3]);
+            for c in &mut p[..3] {
+                if let Some(v) = (u16::from(*c) * 255 + a / 2).checked_div(a) {
+                    *c = v.min(255) as u8;
+                }
+            }
+        }
+        straight
+    }
+
     /// The texture moved with its shape: `m` (canvas → new canvas) after its transform.
     pub fn mapped(&self, m: &Affine) -> Texture {
         Texture {

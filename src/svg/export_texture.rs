@@ -36,15 +36,7 @@ pub(super) fn push_texture(out: &mut String, t: &Texture, id: &str) {
 
 /// The texels as a base64 PNG (straight alpha).
 fn png_base64(t: &Texture) -> String {
-    let mut straight = t.pixels.clone();
-    for p in straight.chunks_exact_mut(4) {
-        let a = u16::from(p[3]);
-        for c in &mut p[..3] {
-            if let Some(v) = (u16::from(*c) * 255 + a / 2).checked_div(a) {
-                *c = v.min(255) as u8;
-            }
-        }
-    }
+    let straight = t.straight_pixels();
     let mut png = Vec::new();
     let enc = image::codecs::png::PngEncoder::new(&mut png);
     use image::ImageEncoder;
