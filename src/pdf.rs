@@ -54,6 +54,18 @@ fn op(out: &mut String, nums: &[f32], operator: &str) {
     out.push('\n');
 }
 
+/// Numbers separated by spaces (as [`num`] writes each).
+fn nums(values: impl IntoIterator<Item = f32>) -> String {
+    let mut out = String::new();
+    for (i, v) in values.into_iter().enumerate() {
+        if i > 0 {
+            out.push(' ');
+        }
+        num(&mut out, v);
+    }
+    out
+}
+
 /// The distinct alphas of a scene, in first-use order: `/G{i}` is `alphas[i]`.
 #[derive(Default)]
 struct Alphas(Vec<f32>);
@@ -239,18 +251,10 @@ fn t_range(g: &Gradient, shape: &Shape) -> [f32; 2] {
 fn page_matrix(m: &Affine, page_h: f32) -> String {
     let [a, b, c, d, e, f] = m.0;
     let k = PT_PER_PX;
-    let mut out = String::from("[");
-    for (i, v) in [k * a, -k * b, k * c, -k * d, k * e, page_h - k * f]
-        .into_iter()
-        .enumerate()
-    {
-        if i > 0 {
-            out.push(' ');
-        }
-        num(&mut out, v);
-    }
-    out.push(']');
-    out
+    format!(
+        "[{}]",
+        nums([k * a, -k * b, k * c, -k * d, k * e, page_h - k * f])
+    )
 }
 
 /// The stops of `g` as a function of `t` over `range` (whole periods of `repeat` or `reflect`,
@@ -273,19 +277,12 @@ fn stop_function(g: &Gradient, range: [f32; 2]) -> String {
     {
         stops.push((1.0, c));
     }
-    let rgb = |c: Rgba| {
-        let mut s = String::new();
-        for v in [c.r, c.g, c.b] {
-            s.push(' ');
-            num(&mut s, v);
-        }
-        s
-    };
+    let rgb = |c: Rgba| nums([c.r, c.g, c.b]);
     let piece = |a: Rgba, b: Rgba| {
         format!(
             "<< /FunctionType 2 /Domain [0 1] /C0 [{}] /C1 [{}] /N 1 >>",
-            rgb(a).trim_start(),
-            rgb(b).trim_start()
+            rgb(a),
+            rgb(b)
         )
     };
     // One period: a piece per pair of stops (a pair at one offset is a hard step).
@@ -304,19 +301,11 @@ fn stop_function(g: &Gradient, range: [f32; 2]) -> String {
             b = b.iter().rev().map(|v| 1.0 - v).collect();
             encode = vec!["1 0"; f.len()];
         }
-        let mut bs = String::new();
-        for v in b {
-            bs.push(' ');
-            num(&mut bs, lo + v);
-        }
-        let mut dom = String::new();
-        num(&mut dom, lo);
-        dom.push(' ');
-        num(&mut dom, lo + 1.0);
         format!(
-            "<< /FunctionType 3 /Domain [{dom}] /Functions [{}] /Bounds [{}] /Encode [{}] >>",
+            "<< /FunctionType 3 /Domain [{}] /Functions [{}] /Bounds [{}] /Encode [{}] >>",
+            nums([lo, lo + 1.0]),
             f.join(" "),
-            bs.trim_start(),
+            nums(b.iter().map(|v| lo + v)),
             encode.join(" ")
         )
     };
@@ -326,31 +315,20 @@ fn stop_function(g: &Gradient, range: [f32; 2]) -> String {
     }
     // Whole periods: each its own stitched function, mirrored on odd ones for `reflect`.
     let n = (hi - lo).round().max(1.0) as i64;
-    let mut parts = Vec::new();
-    let mut bs = String::new();
-    for k in 0..n {
-        let start = lo + k as f32;
-        let odd = (start as i64).rem_euclid(2) == 1;
-        parts.push(period(g.spread == Spread::Reflect && odd, start));
-        if k > 0 {
-            bs.push(' ');
-            num(&mut bs, start);
-        }
-    }
-    let mut encode = String::new();
-    for k in 0..n {
-        let start = lo + k as f32;
-        let _ = write!(encode, "{} {} ", start, start + 1.0);
-    }
-    let mut dom = String::new();
-    num(&mut dom, lo);
-    dom.push(' ');
-    num(&mut dom, hi);
+    let starts: Vec<f32> = (0..n).map(|k| lo + k as f32).collect();
+    let parts: Vec<String> = starts
+        .iter()
+        .map(|&start| {
+            let odd = (start as i64).rem_euclid(2) == 1;
+            period(g.spread == Spread::Reflect && odd, start)
+        })
+        .collect();
     format!(
-        "<< /FunctionType 3 /Domain [{dom}] /Functions [{}] /Bounds [{}] /Encode [{}] >>",
+        "<< /FunctionType 3 /Domain [{}] /Functions [{}] /Bounds [{}] /Encode [{}] >>",
+        nums([lo, hi]),
         parts.join(" "),
-        bs,
-        encode.trim_end()
+        nums(starts[1..].iter().copied()),
+        nums(starts.iter().flat_map(|&s| [s, s + 1.0]))
     )
 }
 
@@ -358,16 +336,11 @@ fn stop_function(g: &Gradient, range: [f32; 2]) -> String {
 /// points high.
 fn gradient_object(g: &Gradient, range: [f32; 2], page_h: f32) -> Vec<u8> {
     let [lo, hi] = range;
-    let mut coords = String::new();
-    let kind = match g.geometry {
+    let (kind, coords) = match g.geometry {
         GradientGeometry::Linear { x1, y1, x2, y2 } => {
             // The axis at the range's ends: t = lo and t = hi.
             let at = |t: f32| [x1 + t * (x2 - x1), y1 + t * (y2 - y1)];
-            for v in at(lo).into_iter().chain(at(hi)) {
-                coords.push(' ');
-                num(&mut coords, v);
-            }
-            2
+            (2, nums(at(lo).into_iter().chain(at(hi))))
         }
         GradientGeometry::Radial {
             cx,
@@ -378,23 +351,15 @@ fn gradient_object(g: &Gradient, range: [f32; 2], page_h: f32) -> Vec<u8> {
             fr,
         } => {
             // From the focal circle (t = 0) to the end circle (t = 1).
-            for v in [fx, fy, fr, cx, cy, r] {
-                coords.push(' ');
-                num(&mut coords, v);
-            }
-            3
+            (3, nums([fx, fy, fr, cx, cy, r]))
         }
     };
-    let mut domain = String::new();
-    num(&mut domain, lo);
-    domain.push(' ');
-    num(&mut domain, hi);
     format!(
         "<< /Type /Pattern /PatternType 2 /Matrix {} /Shading << /ShadingType {kind} \
-         /ColorSpace /DeviceRGB /Coords [{}] /Domain [{domain}] /Function {} \
+         /ColorSpace /DeviceRGB /Coords [{coords}] /Domain [{}] /Function {} \
          /Extend [true true] >> >>",
         page_matrix(&g.transform, page_h),
-        coords.trim_start(),
+        nums([lo, hi]),
         stop_function(g, range)
     )
     .into_bytes()
@@ -468,11 +433,7 @@ pub fn to_pdf(scene: &Scene) -> Vec<u8> {
         states.push_str(" >> ");
     }
     let page_h = scene.height as f32 * PT_PER_PX;
-    let mut media = String::new();
-    for v in [scene.width as f32 * PT_PER_PX, page_h] {
-        media.push(' ');
-        num(&mut media, v);
-    }
+    let media = nums([scene.width as f32 * PT_PER_PX, page_h]);
     // Objects 1–5 as below, then each paint's objects from 6 on, its pattern last.
     let mut patterns = String::new();
     let mut firsts = Vec::with_capacity(paints.len());
@@ -486,7 +447,7 @@ pub fn to_pdf(scene: &Scene) -> Vec<u8> {
         b"<< /Type /Catalog /Pages 2 0 R >>".to_vec(),
         b"<< /Type /Pages /Kids [3 0 R] /Count 1 >>".to_vec(),
         format!(
-            "<< /Type /Page /Parent 2 0 R /MediaBox [0 0{media}] \
+            "<< /Type /Page /Parent 2 0 R /MediaBox [0 0 {media}] \
              /Resources << /ExtGState << {states}>> /Pattern << {patterns}>> >> /Contents 4 0 R >>"
         )
         .into_bytes(),
