@@ -151,17 +151,7 @@ fn first_contact(pts: &[P], par: &[f64], n_segs: usize) -> Option<(f64, f64)> {
             par[i + 1]
         }
     };
-    let boxes: Vec<[f64; 4]> = (0..n)
-        .map(|i| {
-            let (a, b) = (pts[i], pts[(i + 1) % n]);
-            [
-                a.0.min(b.0) - CONTACT,
-                a.1.min(b.1) - CONTACT,
-                a.0.max(b.0) + CONTACT,
-                a.1.max(b.1) + CONTACT,
-            ]
-        })
-        .collect();
+    let boxes = super::simple::edge_boxes(pts, true, CONTACT);
     for i in 0..n {
         for j in i + 2..n {
             if i == 0 && j == n - 1 {

@@ -188,7 +188,7 @@ fn collinear_overlap(a: P, b: P, c: P, d: P) -> bool {
 }
 
 /// Axis-aligned boxes of the edges `i -> i+1` of a (closed or open) polyline, grown by `grow`.
-fn edge_boxes(pts: &[P], closed: bool, grow: f64) -> Vec<[f64; 4]> {
+pub(super) fn edge_boxes(pts: &[P], closed: bool, grow: f64) -> Vec<[f64; 4]> {
     let n = pts.len();
     let m = if closed { n } else { n.saturating_sub(1) };
     (0..m)
