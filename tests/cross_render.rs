@@ -288,3 +288,42 @@ fn gradients_as_pdf_render_the_same_as_the_svg() {
         large * 100.0
     );
 }
+
+/// Groups in the PDF look as the SVG does in resvg: a group's opacity over overlapping shapes,
+/// a blend mode, a one-shape clip (a clipping path), a clip of two shapes with its own clip
+/// (soft masks) and a luminance mask drawn with a gradient (a pattern inside a soft mask).
+#[test]
+fn groups_as_pdf_render_the_same_as_the_svg() {
+    let name = "groups_as_pdf_render_the_same_as_the_svg";
+    if !has_pdftoppm(name) {
+        return;
+    }
+    let svg = format!(
+        r##"<svg xmlns="http://www.w3.org/2000/svg" width="{SIDE}" height="{SIDE}" viewBox="0 0 128 128">
+        <clipPath id="box"><rect x="70" y="8" width="40" height="30"/></clipPath>
+        <clipPath id="half"><rect x="0" y="60" width="50" height="68"/></clipPath>
+        <clipPath id="two" clip-path="url(#half)"><circle cx="24" cy="90" r="18"/><circle cx="44" cy="104" r="16"/></clipPath>
+        <linearGradient id="fade" x1="0" y1="0" x2="1" y2="0">
+          <stop offset="0" stop-color="#fff"/><stop offset="1" stop-color="#000"/></linearGradient>
+        <mask id="m" maskUnits="userSpaceOnUse" x="0" y="0" width="128" height="128">
+          <rect x="66" y="66" width="56" height="56" fill="url(#fade)"/></mask>
+        <rect x="0" y="0" width="128" height="128" fill="#f6f5f4"/>
+        <g opacity="0.5"><circle cx="28" cy="30" r="20" fill="#1c71d8"/><circle cx="44" cy="30" r="20" fill="#e01b24"/></g>
+        <rect x="60" y="44" width="60" height="14" fill="#33d17a"/>
+        <g style="mix-blend-mode:multiply"><rect x="84" y="36" width="14" height="26" fill="#f5c211"/></g>
+        <g clip-path="url(#box)"><circle cx="90" cy="24" r="22" fill="#9141ac"/></g>
+        <g clip-path="url(#two)"><rect x="0" y="64" width="64" height="64" fill="#c64600"/></g>
+        <g mask="url(#m)"><rect x="66" y="66" width="56" height="56" fill="#241f31"/></g></svg>"##
+    );
+    let scene = vectorfusion::svg::from_svg(&svg).unwrap();
+    assert!(scene.groups.len() >= 5, "{:?}", scene.groups.len());
+    let dir = tempfile::tempdir().unwrap();
+    let b = pdf_rgb(&scene, dir.path(), "groups");
+    let (mean, large) = differences(&resvg_rgb(&svg), &b);
+    eprintln!("groups: mean {mean:.2}/255, {:.3}% far", large * 100.0);
+    assert!(
+        mean <= MAX_MEAN_ABS && large <= 0.005,
+        "groups: PDF differs from the SVG: mean {mean:.2}/255, {:.3}% far",
+        large * 100.0
+    );
+}

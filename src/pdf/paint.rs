@@ -1,0 +1,211 @@
+//! The paints of a PDF page: gradients as shading patterns, textures as tiling patterns.
+
+use super::{PT_PER_PX, nums, stream_object};
+use crate::scene::{
+    Affine, Gradient, GradientGeometry, Point, Rgba, Shape, Spread, Texture, TextureFilter,
+};
+
+/// The mean of a gradient's stop alphas (a shading has none of its own).
+pub(super) fn mean_alpha(g: &Gradient) -> f32 {
+    let n = g.stops.len().max(1) as f32;
+    g.stops.iter().map(|s| s.color.a).sum::<f32>() / n
+}
+
+/// The range of a linear gradient's parameter over the shape's control points (which bound
+/// its outline; a stroke's half width added), whole periods outward; `[0, 1]` for `pad` and
+/// for radial gradients.
+pub(super) fn t_range(g: &Gradient, shape: &Shape) -> [f32; 2] {
+    let GradientGeometry::Linear { x1, y1, x2, y2 } = g.geometry else {
+        return [0.0, 1.0];
+    };
+    let (dx, dy) = (x2 - x1, y2 - y1);
+    let len2 = dx * dx + dy * dy;
+    if g.spread == Spread::Pad || len2.is_nan() || len2 <= 0.0 {
+        return [0.0, 1.0];
+    }
+    // Canvas → gradient space (a singular map gives non-finite `t`s, which are passed over).
+    let inv = Affine(g.transform.inverse_f64().map(|v| v as f32));
+    let pad = shape.stroke.map_or(0.0, |s| s.width / 2.0);
+    let (mut lo, mut hi) = (0.0f32, 1.0f32);
+    for p in &shape.points {
+        for (ox, oy) in [(-pad, -pad), (pad, -pad), (-pad, pad), (pad, pad)] {
+            let q = inv.apply(Point::new(p.x + ox, p.y + oy));
+            let t = ((q.x - x1) * dx + (q.y - y1) * dy) / len2;
+            if t.is_finite() {
+                (lo, hi) = (lo.min(t), hi.max(t));
+            }
+        }
+    }
+    // At most 256 periods: past that the stripes are finer than any page shows.
+    let lo = lo.floor().max(hi.ceil() - 256.0);
+    [lo, hi.ceil().min(lo + 256.0)]
+}
+
+/// `[a b c d e f]`: gradient or texel space → canvas (`m`), and on a page `flip` points high
+/// (a pattern drawn in the page's own content) on to page points, y up; a pattern drawn inside
+/// a form stays in canvas pixels, the form's space.
+fn pattern_matrix(m: &Affine, flip: Option<f32>) -> String {
+    let [a, b, c, d, e, f] = m.0;
+    let Some(page_h) = flip else {
+        return format!("[{}]", nums([a, b, c, d, e, f]));
+    };
+    let k = PT_PER_PX;
+    format!(
+        "[{}]",
+        nums([k * a, -k * b, k * c, -k * d, k * e, page_h - k * f])
+    )
+}
+
+/// The stops of `g` as a function of `t` over `range` (whole periods of `repeat` or `reflect`,
+/// else `[0, 1]`): a stitching function of linear pieces between stops.
+fn stop_function(g: &Gradient, range: [f32; 2]) -> String {
+    // Stops covering [0, 1], colours opaque (the alpha is the pattern's graphics state).
+    let mut stops: Vec<(f32, Rgba)> = g
+        .stops
+        .iter()
+        .map(|s| (s.offset.clamp(0.0, 1.0), s.color))
+        .collect();
+    if stops.is_empty() {
+        stops.push((0.0, Rgba::BLACK));
+    }
+    if stops[0].0 > 0.0 {
+        stops.insert(0, (0.0, stops[0].1));
+    }
+    if let Some(&(o, c)) = stops.last()
+        && o < 1.0
+    {
+        stops.push((1.0, c));
+    }
+    let rgb = |c: Rgba| nums([c.r, c.g, c.b]);
+    let piece = |a: Rgba, b: Rgba| {
+        format!(
+            "<< /FunctionType 2 /Domain [0 1] /C0 [{}] /C1 [{}] /N 1 >>",
+            rgb(a),
+            rgb(b)
+        )
+    };
+    // One period: a piece per pair of stops (a pair at one offset is a hard step).
+    let mut funcs = Vec::new();
+    let mut bounds = Vec::new();
+    for w in stops.windows(2) {
+        funcs.push(piece(w[0].1, w[1].1));
+        bounds.push(w[1].0);
+    }
+    bounds.pop();
+    let period = |flip: bool, lo: f32| {
+        let (mut f, mut b) = (funcs.clone(), bounds.clone());
+        let mut encode = vec!["0 1"; f.len()];
+        if flip {
+            f.reverse();
+            b = b.iter().rev().map(|v| 1.0 - v).collect();
+            encode = vec!["1 0"; f.len()];
+        }
+        format!(
+            "<< /FunctionType 3 /Domain [{}] /Functions [{}] /Bounds [{}] /Encode [{}] >>",
+            nums([lo, lo + 1.0]),
+            f.join(" "),
+            nums(b.iter().map(|v| lo + v)),
+            encode.join(" ")
+        )
+    };
+    let [lo, hi] = range;
+    if g.spread == Spread::Pad || hi - lo <= 1.0 && lo == 0.0 {
+        return period(false, 0.0);
+    }
+    // Whole periods: each its own stitched function, mirrored on odd ones for `reflect`.
+    let n = (hi - lo).round().max(1.0) as i64;
+    let starts: Vec<f32> = (0..n).map(|k| lo + k as f32).collect();
+    let parts: Vec<String> = starts
+        .iter()
+        .map(|&start| {
+            let odd = (start as i64).rem_euclid(2) == 1;
+            period(g.spread == Spread::Reflect && odd, start)
+        })
+        .collect();
+    format!(
+        "<< /FunctionType 3 /Domain [{}] /Functions [{}] /Bounds [{}] /Encode [{}] >>",
+        nums([lo, hi]),
+        parts.join(" "),
+        nums(starts[1..].iter().copied()),
+        nums(starts.iter().flat_map(|&s| [s, s + 1.0]))
+    )
+}
+
+/// The shading pattern of gradient `g` over the parameter range `range` (`flip`: see
+/// [`pattern_matrix`]).
+pub(super) fn gradient_object(g: &Gradient, range: [f32; 2], flip: Option<f32>) -> Vec<u8> {
+    let [lo, hi] = range;
+    let (kind, coords) = match g.geometry {
+        GradientGeometry::Linear { x1, y1, x2, y2 } => {
+            // The axis at the range's ends: t = lo and t = hi.
+            let at = |t: f32| [x1 + t * (x2 - x1), y1 + t * (y2 - y1)];
+            (2, nums(at(lo).into_iter().chain(at(hi))))
+        }
+        GradientGeometry::Radial {
+            cx,
+            cy,
+            r,
+            fx,
+            fy,
+            fr,
+        } => {
+            // From the focal circle (t = 0) to the end circle (t = 1).
+            (3, nums([fx, fy, fr, cx, cy, r]))
+        }
+    };
+    format!(
+        "<< /Type /Pattern /PatternType 2 /Matrix {} /Shading << /ShadingType {kind} \
+         /ColorSpace /DeviceRGB /Coords [{coords}] /Domain [{}] /Function {} \
+         /Extend [true true] >> >>",
+        pattern_matrix(&g.transform, flip),
+        nums([lo, hi]),
+        stop_function(g, range)
+    )
+    .into_bytes()
+}
+
+/// `data` deflated (zlib, as `/FlateDecode` reads it).
+fn deflate(data: &[u8]) -> Vec<u8> {
+    use std::io::Write as _;
+    let mut z = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::default());
+    // Writing into memory cannot fail.
+    let _ = z.write_all(data);
+    z.finish().unwrap_or_default()
+}
+
+/// The three objects that draw texture `t` as a tiling pattern (`flip`: see [`pattern_matrix`]):
+/// the texels' colours (straight RGB), their alpha (the soft mask, object `first + 1`), and the
+/// pattern (cell = the texture, placed by its transform and the page's flip); `first` is the
+/// colour image's object number.
+pub(super) fn texture_objects(t: &Texture, first: usize, flip: Option<f32>) -> [Vec<u8>; 3] {
+    let (w, h) = (t.width, t.height);
+    let straight = t.straight_pixels();
+    let rgb: Vec<u8> = straight
+        .chunks_exact(4)
+        .flat_map(|p| [p[0], p[1], p[2]])
+        .collect();
+    let alpha: Vec<u8> = straight.chunks_exact(4).map(|p| p[3]).collect();
+    let interpolate = t.filter != TextureFilter::Nearest;
+    let image = |space: &str, extra: &str, data: &[u8]| {
+        stream_object(
+            &format!(
+                "/Type /XObject /Subtype /Image /Width {w} /Height {h} /ColorSpace {space} \
+                 /BitsPerComponent 8 /Interpolate {interpolate} /Filter /FlateDecode{extra}"
+            ),
+            &deflate(data),
+        )
+    };
+    let color = image("/DeviceRGB", &format!(" /SMask {} 0 R", first + 1), &rgb);
+    let mask = image("/DeviceGray", "", &alpha);
+    let matrix = pattern_matrix(&t.transform, flip);
+    // The image's unit square onto the cell, its first row at texel row 0.
+    let cell = format!("q {w} 0 0 -{h} 0 {h} cm /I Do Q");
+    let pattern = stream_object(
+        &format!(
+            "/Type /Pattern /PatternType 1 /PaintType 1 /TilingType 1 /BBox [0 0 {w} {h}] \
+             /XStep {w} /YStep {h} /Matrix {matrix} /Resources << /XObject << /I {first} 0 R >> >>"
+        ),
+        cell.as_bytes(),
+    );
+    [color, mask, pattern]
+}

@@ -1,0 +1,196 @@
+use super::*;
+use crate::scene::{Stroke, TextureFilter};
+
+fn scene() -> Scene {
+    let mut s = Scene::new(40, 20, Rgba::WHITE).unwrap();
+    s.shapes
+        .push(Shape::circle(10.0, 10.0, 8.0, 4, Rgba::new(1.0, 0.0, 0.0, 0.5)).unwrap());
+    let mut line = Shape::open_cubic(
+        vec![
+            Point::new(20.0, 2.0),
+            Point::new(25.0, 2.0),
+            Point::new(30.0, 18.0),
+            Point::new(38.0, 18.0),
+        ],
+        Stroke::round(Rgba::new(0.0, 0.0, 1.0, 1.0), 2.0),
+    )
+    .unwrap();
+    line.fill = None;
+    s.shapes.push(line);
+    s
+}
+
+/// The PDF as text with its binary-marker bytes as `?`, so byte offsets stay offsets.
+fn ascii(pdf: &[u8]) -> String {
+    pdf.iter()
+        .map(|&b| if b.is_ascii() { b as char } else { '?' })
+        .collect()
+}
+
+#[test]
+fn numbers_are_short_and_finite() {
+    let mut s = String::new();
+    for v in [1.0, 0.5, -0.25, 1.23456, -0.00001, f32::NAN] {
+        num(&mut s, v);
+        s.push(' ');
+    }
+    assert_eq!(s, "1 0.5 -0.25 1.2346 0 0 ");
+}
+
+#[test]
+fn every_cross_reference_points_at_its_object() {
+    cross_references_hold(&ascii(&to_pdf(&scene())), 5);
+}
+
+/// The PDF has `n` objects and each cross-reference entry points at its object.
+fn cross_references_hold(text: &str, n: usize) {
+    assert!(text.starts_with("%PDF-1.4"));
+    assert!(text.ends_with("%%EOF\n"));
+    let start: usize = text
+        .rsplit("startxref\n")
+        .next()
+        .and_then(|t| t.lines().next())
+        .and_then(|l| l.parse().ok())
+        .unwrap();
+    assert!(text[start..].starts_with(&format!("xref\n0 {}\n", n + 1)));
+    let entries: Vec<usize> = text[start..]
+        .lines()
+        .skip(3)
+        .take(n)
+        .map(|l| l[..10].parse().unwrap())
+        .collect();
+    for (i, off) in entries.iter().enumerate() {
+        assert!(
+            text[*off..].starts_with(&format!("{} 0 obj\n", i + 1)),
+            "object {}",
+            i + 1
+        );
+    }
+    // The stream's declared length is its length (the end-of-line before `endstream` is not
+    // counted).
+    let s = text.find("stream\n").unwrap() + 7;
+    let e = text.find("\nendstream").unwrap();
+    let declared: usize = text[..s]
+        .rsplit("/Length ")
+        .next()
+        .and_then(|t| t.split_whitespace().next())
+        .and_then(|n| n.parse().ok())
+        .unwrap();
+    assert_eq!(declared, e - s);
+}
+
+#[test]
+fn a_texture_is_a_tiling_pattern_of_its_straight_texels() {
+    use crate::scene::{Affine, Gradients, TextureEdge};
+    let mut s = scene();
+    let mut img = Shape::square(2.0, 2.0, 10.0, Rgba::BLACK).unwrap();
+    img.gradients = Some(Box::new(Gradients {
+        fill: None,
+        stroke: None,
+        texture: Some(Box::new(Texture {
+            width: 2,
+            height: 1,
+            // premultiplied: red at half alpha, opaque blue
+            pixels: vec![128, 0, 0, 128, 0, 0, 255, 255],
+            transform: Affine([5.0, 0.0, 0.0, 10.0, 2.0, 2.0]),
+            edge: TextureEdge::Pad,
+            filter: TextureFilter::Nearest,
+        })),
+    }));
+    s.shapes.push(img);
+    let pdf = to_pdf(&s);
+    let text = ascii(&pdf);
+    cross_references_hold(&text, 8);
+    assert!(text.contains("/Pattern << /P0 8 0 R >>"), "{text}");
+    assert!(text.contains("q /Pattern cs /P0 scn\n2 2 m"), "{text}");
+    assert!(text.contains("/SMask 7 0 R"));
+    assert!(text.contains("/Interpolate false"));
+    // texel space → canvas → points, y flipped on the 15 pt page
+    assert!(
+        text.contains("/XStep 2 /YStep 1 /Matrix [3.75 0 0 -7.5 1.5 13.5]"),
+        "{text}"
+    );
+    assert!(text.contains("q 2 0 0 -1 0 1 cm /I Do Q"));
+    // The colour image holds straight RGB, the mask the alpha.
+    let streams: Vec<Vec<u8>> = pdf
+        .windows(7)
+        .enumerate()
+        .filter(|(i, w)| w == b"stream\n" && pdf[i - 1] == b'\n')
+        .map(|(i, _)| {
+            let head = &text[..i];
+            let n: usize = head
+                .rsplit("/Length ")
+                .next()
+                .and_then(|t| t.split_whitespace().next())
+                .and_then(|n| n.parse().ok())
+                .unwrap();
+            pdf[i + 7..i + 7 + n].to_vec()
+        })
+        .collect();
+    let inflate = |b: &[u8]| {
+        use std::io::Read as _;
+        let mut out = Vec::new();
+        flate2::read::ZlibDecoder::new(b)
+            .read_to_end(&mut out)
+            .unwrap();
+        out
+    };
+    assert_eq!(inflate(&streams[1]), [255, 0, 0, 0, 0, 255]);
+    assert_eq!(inflate(&streams[2]), [128, 255]);
+}
+
+#[test]
+fn paths_fills_strokes_and_opacities_are_drawn_in_order() {
+    let text = ascii(&to_pdf(&scene()));
+    assert!(text.contains("/MediaBox [0 0 30 15]"), "{text}");
+    assert!(text.contains("0.75 0 0 -0.75 0 15 cm"));
+    // background, red fill at half alpha, blue stroke of width 2
+    let bg = text.find("1 1 1 rg\n0 0 40 20 re\nf Q").unwrap();
+    let red = text.find("1 0 0 rg").unwrap();
+    let blue = text.find("0 0 1 RG\n2 w").unwrap();
+    assert!(bg < red && red < blue);
+    assert!(text.contains("/G1 << /Type /ExtGState /ca 0.5 /CA 0.5 >>"));
+    assert_eq!(text.matches(" c\n").count(), 4 + 1, "4 segments + 1");
+    assert!(text.contains("S Q"));
+}
+
+#[test]
+fn groups_are_forms_with_their_clip_mask_opacity_and_blend() {
+    let svg = r##"<svg xmlns="http://www.w3.org/2000/svg" width="40" height="20">
+        <clipPath id="one"><rect x="2" y="2" width="10" height="10"/></clipPath>
+        <clipPath id="two"><circle cx="20" cy="10" r="5"/><circle cx="26" cy="10" r="5"/></clipPath>
+        <linearGradient id="g"><stop offset="0" stop-color="#fff"/><stop offset="1" stop-color="#000"/></linearGradient>
+        <mask id="m" maskUnits="userSpaceOnUse" x="0" y="0" width="40" height="20"><rect width="40" height="20" fill="url(#g)"/></mask>
+        <g clip-path="url(#one)" opacity="0.5"><rect width="20" height="20" fill="red"/></g>
+        <g clip-path="url(#two)" style="mix-blend-mode:multiply"><rect width="40" height="20" fill="blue"/></g>
+        <g mask="url(#m)"><rect width="40" height="20" fill="green"/></g></svg>"##;
+    let scene = crate::svg::from_svg(svg).unwrap();
+    assert_eq!(scene.groups.len(), 3);
+    let text = ascii(&to_pdf(&scene));
+    // One gradient pattern (object 6), then the forms: the first two groups' shapes (7, 8),
+    // the two-circle clip's coverage (9), the third group's shapes (10), the mask's content
+    // (11) and the masked group (12).
+    cross_references_hold(&text, 6 + 6);
+    // A one-shape clip is a clipping path around the group's form, painted at half opacity.
+    assert!(text.contains("q\n2 2 m\n"), "{text}");
+    assert!(text.contains("h\nW n\n/G1 gs /X0 Do Q"), "{text}");
+    assert!(text.contains("/G1 << /Type /ExtGState /ca 0.5 /CA 0.5 /BM /Normal >>"));
+    // A clip of two shapes is an alpha soft mask of their opaque fills; the blend mode is the
+    // group's state.
+    assert!(
+        text.contains("/SMask << /Type /Mask /S /Alpha /G 9 0 R >>"),
+        "{text}"
+    );
+    assert!(text.contains("/BM /Multiply"));
+    // The mask reads its content's luminosity; the masked group is a form of its own.
+    assert!(
+        text.contains("/SMask << /Type /Mask /S /Luminosity /G 11 0 R >>"),
+        "{text}"
+    );
+    assert!(text.contains("/Group << /S /Transparency /I true /CS /DeviceRGB >>"));
+    // The gradient inside the mask's form is placed in canvas pixels (no page flip).
+    assert!(
+        text.contains("/PatternType 2 /Matrix [40 0 0 20 0 0]"),
+        "{text}"
+    );
+}
