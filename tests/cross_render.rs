@@ -327,3 +327,38 @@ fn groups_as_pdf_render_the_same_as_the_svg() {
         large * 100.0
     );
 }
+
+/// Gradients whose stops differ in opacity (fading to transparent over a striped background,
+/// on a fill, on a stroke and inside a group) in the PDF look as the SVG does in resvg: the
+/// opacities are a soft mask beside the colours' shading.
+#[test]
+fn gradient_stop_opacities_as_pdf_render_the_same_as_the_svg() {
+    let name = "gradient_stop_opacities_as_pdf_render_the_same_as_the_svg";
+    if !has_pdftoppm(name) {
+        return;
+    }
+    let svg = format!(
+        r##"<svg xmlns="http://www.w3.org/2000/svg" width="{SIDE}" height="{SIDE}" viewBox="0 0 128 128">
+        <linearGradient id="fade" x1="0" y1="0" x2="1" y2="0">
+          <stop offset="0" stop-color="#1c71d8"/><stop offset=".6" stop-color="#e01b24" stop-opacity=".6"/><stop offset="1" stop-color="#e01b24" stop-opacity="0"/></linearGradient>
+        <radialGradient id="glow"><stop offset="0" stop-color="#f5c211"/><stop offset="1" stop-color="#613583" stop-opacity=".15"/></radialGradient>
+        <rect width="128" height="128" fill="#ffffff"/>
+        <path d="M0 20H128M0 52H128M0 84H128M0 116H128" stroke="#2ec27e" stroke-width="12"/>
+        <rect x="8" y="8" width="112" height="40" fill="url(#fade)"/>
+        <circle cx="40" cy="88" r="28" fill="url(#glow)" stroke="url(#fade)" stroke-width="6"/>
+        <g opacity=".8"><rect x="76" y="62" width="44" height="58" fill="url(#fade)"/></g></svg>"##
+    );
+    let scene = vectorfusion::svg::from_svg(&svg).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let b = pdf_rgb(&scene, dir.path(), "stop-opacities");
+    let (mean, large) = differences(&resvg_rgb(&svg), &b);
+    eprintln!(
+        "stop opacities: mean {mean:.2}/255, {:.3}% far",
+        large * 100.0
+    );
+    assert!(
+        mean <= MAX_MEAN_ABS && large <= 0.005,
+        "stop opacities: PDF differs from the SVG: mean {mean:.2}/255, {:.3}% far",
+        large * 100.0
+    );
+}

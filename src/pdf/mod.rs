@@ -11,8 +11,8 @@
 //! the texels repeat as in the SVG export, and an image's shape covers just its one tile. A
 //! gradient fill or stroke is a shading pattern (axial or radial, its stops a stitching function,
 //! extended past both ends as `pad`), placed by the gradient's transform; a linear `repeat` or
-//! `reflect` gradient spans the periods the shape covers. Stop opacities are drawn as their mean
-//! (PDF shadings carry no alpha); a radial `repeat` or `reflect` is drawn as `pad`. A group is a
+//! `reflect` gradient spans the periods the shape covers. Stop opacities, which a shading cannot
+//! carry, are a soft mask of the same gradient painting them as greys; a radial `repeat` or `reflect` is drawn as `pad`. A group is a
 //! form XObject painted with its opacity, blend mode, clip and mask (`groups`); a pattern drawn
 //! inside a form is placed in canvas pixels, the form's space, not the page's.
 //!
@@ -26,7 +26,7 @@ use crate::scene::{
     BlendMode, FillRule, Gradient, Group, Point, Rgba, Scene, Shape, ShapeKind, Texture,
 };
 use groups::blend_name;
-use paint::{gradient_object, mean_alpha, t_range, texture_objects};
+use paint::{gradient_object, t_range, texture_objects};
 use std::fmt::Write as _;
 
 /// PDF points per canvas pixel (CSS: 96 px per inch, PDF: 72 pt per inch).
@@ -111,8 +111,9 @@ fn color(out: &mut String, c: Rgba, operator: &str) {
 /// What a pattern `/P{i}` paints.
 enum Paint<'a> {
     Texture(&'a Texture),
-    /// A gradient and the range of its parameter `t` the shape covers.
-    Gradient(&'a Gradient, [f32; 2]),
+    /// A gradient, the range of its parameter `t` the shape covers, and whether it paints the
+    /// stops' colours or their alphas (as greys, for a soft mask).
+    Gradient(&'a Gradient, [f32; 2], bool),
 }
 
 impl Paint<'_> {
@@ -154,6 +155,8 @@ struct Doc<'a> {
     forms: Vec<String>,
     /// Whether what is drawn now goes into the page's content rather than a form.
     on_page: bool,
+    /// The canvas: width and height in pixels.
+    size: (f32, f32),
 }
 
 impl<'a> Doc<'a> {
@@ -254,8 +257,9 @@ impl<'a> Doc<'a> {
     }
 
     /// Opens a graphics state painting with gradient `gr` on `shape` as the next pattern,
-    /// through `space` and `set` (`cs`/`scn` for fills, `CS`/`SCN` for strokes), its alpha the
-    /// stops' mean.
+    /// through `space` and `set` (`cs`/`scn` for fills, `CS`/`SCN` for strokes). A shading has
+    /// no alpha: stops of one alpha are that alpha's state; stops of several are a luminosity
+    /// soft mask of the same gradient painting their alphas as greys over the canvas.
     fn gradient_paint(
         &mut self,
         out: &mut String,
@@ -264,8 +268,24 @@ impl<'a> Doc<'a> {
         space: &str,
         set: &str,
     ) {
-        let gs = self.state(State::Alpha(mean_alpha(gr)));
-        let p = self.paint(Paint::Gradient(gr, t_range(gr, shape)));
+        let range = t_range(gr, shape);
+        let p = self.paint(Paint::Gradient(gr, range, false));
+        let alpha = gr.stops.first().map_or(1.0, |s| s.color.a);
+        let gs = if gr.stops.iter().all(|s| s.color.a == alpha) {
+            self.state(State::Alpha(alpha))
+        } else {
+            let on_page = std::mem::replace(&mut self.on_page, false);
+            let a = self.paint(Paint::Gradient(gr, range, true));
+            self.on_page = on_page;
+            let mut body = format!("q /Pattern cs /P{a} scn\n");
+            op(&mut body, &[0.0, 0.0, self.size.0, self.size.1], "re");
+            body.push_str("f Q\n");
+            let form = self.form(body);
+            self.state(State::SoftMask {
+                luminosity: true,
+                form,
+            })
+        };
         let _ = writeln!(out, "q {gs} gs /Pattern {space} /P{p} {set}");
     }
 }
@@ -286,6 +306,7 @@ fn content(scene: &Scene) -> (String, Doc<'_>) {
         paints: Vec::new(),
         forms: Vec::new(),
         on_page: true,
+        size: (w, h),
     };
     // Canvas pixels, y down, onto the page in points, y up.
     op(
@@ -381,7 +402,9 @@ pub fn to_pdf(scene: &Scene) -> Vec<u8> {
         let flip = on_page.then_some(page_h);
         match p {
             Paint::Texture(t) => objects.extend(texture_objects(t, first, flip)),
-            Paint::Gradient(g, range) => objects.push(gradient_object(g, *range, flip)),
+            Paint::Gradient(g, range, alpha) => {
+                objects.push(gradient_object(g, *range, flip, *alpha))
+            }
         }
     }
     let bbox = nums([0.0, 0.0, w, h]);

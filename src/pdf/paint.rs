@@ -5,12 +5,6 @@ use crate::scene::{
     Affine, Gradient, GradientGeometry, Point, Rgba, Shape, Spread, Texture, TextureFilter,
 };
 
-/// The mean of a gradient's stop alphas (a shading has none of its own).
-pub(super) fn mean_alpha(g: &Gradient) -> f32 {
-    let n = g.stops.len().max(1) as f32;
-    g.stops.iter().map(|s| s.color.a).sum::<f32>() / n
-}
-
 /// The range of a linear gradient's parameter over the shape's control points (which bound
 /// its outline; a stroke's half width added), whole periods outward; `[0, 1]` for `pad` and
 /// for radial gradients.
@@ -57,13 +51,20 @@ fn pattern_matrix(m: &Affine, flip: Option<f32>) -> String {
 }
 
 /// The stops of `g` as a function of `t` over `range` (whole periods of `repeat` or `reflect`,
-/// else `[0, 1]`): a stitching function of linear pieces between stops.
-fn stop_function(g: &Gradient, range: [f32; 2]) -> String {
-    // Stops covering [0, 1], colours opaque (the alpha is the pattern's graphics state).
+/// else `[0, 1]`): a stitching function of linear pieces between stops, of their colours
+/// (opaque: the alpha is the pattern's graphics state) or, with `alpha`, their alphas as greys.
+fn stop_function(g: &Gradient, range: [f32; 2], alpha: bool) -> String {
+    // Stops covering [0, 1].
+    let grey = |c: Rgba| Rgba::new(c.a, c.a, c.a, 1.0);
     let mut stops: Vec<(f32, Rgba)> = g
         .stops
         .iter()
-        .map(|s| (s.offset.clamp(0.0, 1.0), s.color))
+        .map(|s| {
+            (
+                s.offset.clamp(0.0, 1.0),
+                if alpha { grey(s.color) } else { s.color },
+            )
+        })
         .collect();
     if stops.is_empty() {
         stops.push((0.0, Rgba::BLACK));
@@ -132,8 +133,13 @@ fn stop_function(g: &Gradient, range: [f32; 2]) -> String {
 }
 
 /// The shading pattern of gradient `g` over the parameter range `range` (`flip`: see
-/// [`pattern_matrix`]).
-pub(super) fn gradient_object(g: &Gradient, range: [f32; 2], flip: Option<f32>) -> Vec<u8> {
+/// [`pattern_matrix`]), of its colours or, with `alpha`, its alphas ([`stop_function`]).
+pub(super) fn gradient_object(
+    g: &Gradient,
+    range: [f32; 2],
+    flip: Option<f32>,
+    alpha: bool,
+) -> Vec<u8> {
     let [lo, hi] = range;
     let (kind, coords) = match g.geometry {
         GradientGeometry::Linear { x1, y1, x2, y2 } => {
@@ -159,7 +165,7 @@ pub(super) fn gradient_object(g: &Gradient, range: [f32; 2], flip: Option<f32>) 
          /Extend [true true] >> >>",
         pattern_matrix(&g.transform, flip),
         nums([lo, hi]),
-        stop_function(g, range)
+        stop_function(g, range, alpha)
     )
     .into_bytes()
 }

@@ -194,3 +194,18 @@ fn groups_are_forms_with_their_clip_mask_opacity_and_blend() {
         "{text}"
     );
 }
+
+#[test]
+fn stop_opacities_are_a_soft_mask_of_greys() {
+    let svg = r##"<svg xmlns="http://www.w3.org/2000/svg" width="40" height="20">
+        <linearGradient id="g"><stop offset="0" stop-color="#f00"/><stop offset="1" stop-color="#00f" stop-opacity=".25"/></linearGradient>
+        <rect width="40" height="20" fill="url(#g)"/></svg>"##;
+    let text = ascii(&to_pdf(&crate::svg::from_svg(svg).unwrap()));
+    // The colours (object 6) on the page, the alphas (7) in the mask's form (8).
+    cross_references_hold(&text, 8);
+    assert!(text.contains("/C0 [1 0 0] /C1 [0 0 1]"), "{text}");
+    assert!(text.contains("/C0 [1 1 1] /C1 [0.25 0.25 0.25]"), "{text}");
+    assert!(text.contains("/SMask << /Type /Mask /S /Luminosity /G 8 0 R >>"));
+    assert!(text.contains("q /G0 gs /Pattern cs /P0 scn"));
+    assert!(text.contains("q /Pattern cs /P1 scn\n0 0 40 20 re\nf Q"));
+}
