@@ -169,3 +169,35 @@ fn render_names_what_the_import_could_not_draw() {
     let img = vectorfusion::image::Image::open(&out).unwrap();
     assert!(img.pixel(4, 4)[3] > 0.99);
 }
+
+#[test]
+fn render_writes_a_vector_pdf_by_extension() {
+    let dir = tempfile::tempdir().unwrap();
+    let svg = dir.path().join("in.svg");
+    std::fs::write(
+        &svg,
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="40" height="20"><clipPath id="c"><rect width="20" height="20"/></clipPath><circle clip-path="url(#c)" cx="20" cy="10" r="8" fill="red"/></svg>"#,
+    )
+    .unwrap();
+    let pdf = dir.path().join("out.PDF");
+    let o = bin()
+        .args(["render", svg.to_str().unwrap(), "-o", pdf.to_str().unwrap()])
+        .args(["--size", "80"])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let text = String::from_utf8_lossy(&std::fs::read(&pdf).unwrap()).into_owned();
+    assert!(text.starts_with("%PDF-1.4"), "{text}");
+    // 80 px wide at 0.75 pt a pixel; the clip is a clipping path.
+    assert!(text.contains("/MediaBox [0 0 60 30]"), "{text}");
+    assert!(text.contains("W n\n"), "{text}");
+    // Another extension is refused as bad input, naming the flag; nothing is written.
+    let jpg = dir.path().join("out.jpg");
+    let o = bin()
+        .args(["render", svg.to_str().unwrap(), "-o", jpg.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--output: render writes .png or .pdf"));
+    assert!(!jpg.exists());
+}

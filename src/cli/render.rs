@@ -1,5 +1,6 @@
 //! `vectorfusion render IN.svg -o OUT.png [--size N]`: renders an SVG (or scene JSON) through
-//! our own import path and forward rasteriser, so it can be compared with resvg or a browser.
+//! our own import path and forward rasteriser, so it can be compared with resvg or a browser;
+//! `-o OUT.pdf` writes the imported scene as a one-page vector PDF instead ([`crate::pdf`]).
 //! What the import could not draw (filters, images it may not read or decode, broken reference
 //! cycles) is printed on stderr, one `warning: …` line each. Images are read beside the input
 //! file; pattern tiles are drawn at the output's resolution.
@@ -12,7 +13,7 @@ use std::path::PathBuf;
 pub struct RenderArgs {
     /// Input SVG (or `.json` scene: the bench format or a serialised `Scene`).
     pub input: PathBuf,
-    /// Output PNG.
+    /// Output: `.png` (or no extension) a PNG, `.pdf` a one-page vector PDF.
     #[arg(short, long)]
     pub output: PathBuf,
     /// Output width in pixels (the height keeps the aspect ratio). Default: the SVG's size.
@@ -20,9 +21,30 @@ pub struct RenderArgs {
     pub size: Option<u32>,
 }
 
+/// What `render` writes, by the output's extension.
+#[derive(Clone, Copy, PartialEq)]
+enum Format {
+    Png,
+    Pdf,
+}
+
+impl Format {
+    fn of(path: &std::path::Path) -> Result<Format, CliError> {
+        let ext = path.extension().and_then(|e| e.to_str());
+        match ext.map(str::to_ascii_lowercase).as_deref() {
+            None | Some("png") => Ok(Format::Png),
+            Some("pdf") => Ok(Format::Pdf),
+            Some(other) => Err(CliError::Usage(format!(
+                "--output: render writes .png or .pdf, not .{other}"
+            ))),
+        }
+    }
+}
+
 pub fn run(args: RenderArgs) -> Result<(), CliError> {
     // The input is the user's: a file that is missing, unreadable or not a valid scene is bad
     // input (2), as README's exit codes say; only writing the output is a runtime failure (1).
+    let format = Format::of(&args.output)?;
     let usage = |e: svg::SvgError| CliError::Usage(e.to_string());
     let mut import = svg::load_import(&args.input).map_err(usage)?;
     // Pattern tiles are drawn at the output's resolution: import again when it differs.
@@ -49,8 +71,14 @@ pub fn run(args: RenderArgs) -> Result<(), CliError> {
     scene
         .validate()
         .map_err(|e| CliError::Usage(format!("scaled scene is invalid: {e}")))?;
-    let img = raster::render(&scene);
-    img.save_png(&args.output)
-        .map_err(|e| CliError::Other(e.into()))?;
-    Ok(())
+    match format {
+        Format::Png => raster::render(&scene)
+            .save_png(&args.output)
+            .map_err(|e| CliError::Other(e.into())),
+        Format::Pdf => std::fs::write(&args.output, crate::pdf::to_pdf(&scene)).map_err(|e| {
+            CliError::Other(
+                anyhow::Error::new(e).context(format!("cannot write {}", args.output.display())),
+            )
+        }),
+    }
 }
