@@ -7,6 +7,7 @@ Usage:
         crates/resvg/tests/resources crates/resvg/tests/fonts | tar -x -C /tmp/resvg-suite
     scripts/resvg_suite.py /tmp/resvg-suite/crates/resvg/tests/tests \
         [--bin target/release/vectorfusion] [--json out.json] [--fails] [--jobs N] [--fonts DIR]
+        [--pdf]
 
 Reads the folders shapes, painting, structure, paint-servers and masking (filters and the
 `text` folder are out of scope; text inside the other folders is drawn). Text is drawn with the
@@ -16,7 +17,9 @@ difference is at most 1.5 and at most 1 % of the pixels differ by more than 16 i
 an SVG that `render` refuses fails. Prints the pass counts per folder and per feature
 (sub-folder) as Markdown tables; `--fails` lists every failing test with its numbers or error
 and `--json` writes every test's result (warnings included: `render` prints them on stderr).
-Standard library only (its own PNG reader).
+`--pdf` measures the PDF export instead: `render -o OUT.pdf`, drawn by poppler's `pdftoppm` at
+the reference's size, against the reference over white (both opaque), by the same rule.
+Standard library only (its own PNG reader), and `pdftoppm` for `--pdf`.
 """
 
 import argparse
@@ -128,7 +131,18 @@ def compare(ours, ref):
     return total / (4 * n), off / n
 
 
-def run_one(binary, root, svg, tmp, env):
+def over_white(rgba):
+    """Straight RGBA composited over white, opaque."""
+    out = bytearray(rgba)
+    for i in range(0, len(out), 4):
+        a = out[i + 3]
+        for c in range(3):
+            out[i + c] = (out[i + c] * a + 255 * (255 - a) + 127) // 255
+        out[i + 3] = 255
+    return bytes(out)
+
+
+def run_one(binary, root, svg, tmp, env, pdf=False):
     rel = os.path.relpath(svg, root)
     parts = rel.split(os.sep)
     result = {
@@ -140,7 +154,8 @@ def run_one(binary, root, svg, tmp, env):
     }
     try:
         w, h, ref = read_png(svg[:-4] + ".png")
-        out = os.path.join(tmp, rel.replace(os.sep, "__")[:-4] + ".png")
+        stem = os.path.join(tmp, rel.replace(os.sep, "__")[:-4])
+        out = stem + (".pdf" if pdf else ".png")
         proc = subprocess.run(
             [binary, "render", svg, "-o", out, "--size", str(w)],
             capture_output=True,
@@ -156,6 +171,18 @@ def run_one(binary, root, svg, tmp, env):
         if proc.returncode != 0:
             result["error"] = proc.stderr.strip().splitlines()[-1] if proc.stderr else "failed"
             return result
+        if pdf:
+            drawn = subprocess.run(
+                ["pdftoppm", "-png", "-singlefile", "-scale-to-x", str(w), "-scale-to-y", str(h),
+                 out, stem + "-pdf"],
+                capture_output=True,
+                text=True,
+                timeout=60,
+            )
+            if drawn.returncode != 0:
+                result["error"] = "pdftoppm: " + (drawn.stderr.strip() or "failed")
+                return result
+            out, ref = stem + "-pdf.png", over_white(ref)
         ow, oh, ours = read_png(out)
         if (ow, oh) != (w, h):
             result["error"] = f"size {ow}x{oh} vs reference {w}x{h}"
@@ -191,6 +218,7 @@ def main():
         help="only the tests whose path under TESTS starts with one of these (comma-separated, "
         "e.g. paint-servers/pattern,painting/stroke)",
     )
+    ap.add_argument("--pdf", action="store_true", help="measure the PDF export (needs pdftoppm)")
     args = ap.parse_args()
     fonts = args.fonts or os.path.join(args.tests, os.pardir, "fonts")
     env = dict(os.environ, VF_SYSTEM_FONTS="0")
@@ -210,7 +238,7 @@ def main():
         svgs = [p for p in svgs if os.path.relpath(p, args.tests).startswith(keep)]
     svgs.sort()
     with tempfile.TemporaryDirectory() as tmp, ThreadPoolExecutor(args.jobs) as pool:
-        results = list(pool.map(lambda s: run_one(args.bin, args.tests, s, tmp, env), svgs))
+        results = list(pool.map(lambda s: run_one(args.bin, args.tests, s, tmp, env, args.pdf), svgs))
     folders, features = {}, {}
     for r in results:
         for rows, key in ((folders, r["folder"]), (features, r["feature"])):

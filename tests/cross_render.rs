@@ -249,8 +249,8 @@ fn textures_as_pdf_render_the_same_as_the_svg() {
     );
 }
 
-/// Gradients (linear with `pad` and `reflect`, radial with a focal point, on a fill and on a
-/// stroke) and an even-odd fill in the PDF look as the SVG does in resvg.
+/// Gradients (linear with `pad` and `reflect`, radial with a focal point and `reflect`, on a
+/// fill and on a stroke) and an even-odd fill in the PDF look as the SVG does in resvg.
 #[test]
 fn gradients_as_pdf_render_the_same_as_the_svg() {
     let name = "gradients_as_pdf_render_the_same_as_the_svg";
@@ -263,7 +263,7 @@ fn gradients_as_pdf_render_the_same_as_the_svg() {
           <stop offset=".1" stop-color="#1a5fb4"/><stop offset=".5" stop-color="#f6d32d"/><stop offset=".9" stop-color="#c01c28"/></linearGradient>
         <linearGradient id="b" gradientUnits="userSpaceOnUse" x1="10" y1="80" x2="26" y2="92" spreadMethod="reflect">
           <stop offset="0" stop-color="#26a269"/><stop offset="1" stop-color="#ffffff"/></linearGradient>
-        <radialGradient id="c" cx=".5" cy=".5" r=".5" fx=".35" fy=".3">
+        <radialGradient id="c" cx=".5" cy=".5" r=".3" fx=".4" fy=".35" spreadMethod="reflect">
           <stop offset="0" stop-color="#ffbe6f"/><stop offset="1" stop-color="#613583"/></radialGradient>
         <rect x="6" y="6" width="70" height="50" fill="url(#a)"/>
         <rect x="6" y="66" width="56" height="56" fill="url(#b)"/>

@@ -10,9 +10,10 @@
 //! (an RGB image with its alpha as a soft mask, deflated), placed by the texture's transform:
 //! the texels repeat as in the SVG export, and an image's shape covers just its one tile. A
 //! gradient fill or stroke is a shading pattern (axial or radial, its stops a stitching function,
-//! extended past both ends as `pad`), placed by the gradient's transform; a linear `repeat` or
-//! `reflect` gradient spans the periods the shape covers. Stop opacities, which a shading cannot
-//! carry, are a soft mask of the same gradient painting them as greys; a radial `repeat` or `reflect` is drawn as `pad`. A group is a
+//! extended past both ends as `pad`), placed by the gradient's transform; a `repeat` or `reflect`
+//! gradient spans the periods the shape covers (a radial one grows its circles over them). Stop
+//! opacities, which a shading cannot carry, are a soft mask of the same gradient painting them
+//! as greys. A group is a
 //! form XObject painted with its opacity, blend mode, clip and mask (`groups`); a pattern drawn
 //! inside a form is placed in canvas pixels, the form's space, not the page's.
 //!

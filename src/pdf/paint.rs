@@ -5,30 +5,48 @@ use crate::scene::{
     Affine, Gradient, GradientGeometry, Point, Rgba, Shape, Spread, Texture, TextureFilter,
 };
 
-/// The range of a linear gradient's parameter over the shape's control points (which bound
-/// its outline; a stroke's half width added), whole periods outward; `[0, 1]` for `pad` and
-/// for radial gradients.
+/// The range of a gradient's parameter `t` over the shape (its control points bound its
+/// outline; a stroke's half width added), whole periods outward: `[0, 1]` for `pad`; for a
+/// linear gradient the projections onto its axis; for a radial one `[0, n]`, the first circle
+/// that holds every point.
 pub(super) fn t_range(g: &Gradient, shape: &Shape) -> [f32; 2] {
-    let GradientGeometry::Linear { x1, y1, x2, y2 } = g.geometry else {
-        return [0.0, 1.0];
-    };
-    let (dx, dy) = (x2 - x1, y2 - y1);
-    let len2 = dx * dx + dy * dy;
-    if g.spread == Spread::Pad || len2.is_nan() || len2 <= 0.0 {
+    if g.spread == Spread::Pad {
         return [0.0, 1.0];
     }
     // Canvas → gradient space (a singular map gives non-finite `t`s, which are passed over).
     let inv = Affine(g.transform.inverse_f64().map(|v| v as f32));
     let pad = shape.stroke.map_or(0.0, |s| s.width / 2.0);
+    let t_at: Box<dyn Fn(Point) -> f32> = match g.geometry {
+        GradientGeometry::Linear { x1, y1, x2, y2 } => {
+            let (dx, dy) = (x2 - x1, y2 - y1);
+            let len2 = dx * dx + dy * dy;
+            Box::new(move |q: Point| ((q.x - x1) * dx + (q.y - y1) * dy) / len2)
+        }
+        GradientGeometry::Radial {
+            cx,
+            cy,
+            r,
+            fx,
+            fy,
+            fr,
+        } => {
+            // The circle at `t` (centre f + t (c − f), radius fr + t (r − fr)) holds a point at
+            // distance `l` from f once fr + t (r − fr) ≥ l + t |c − f|.
+            let grow = (r - fr) - (cx - fx).hypot(cy - fy);
+            Box::new(move |q: Point| ((q.x - fx).hypot(q.y - fy) - fr) / grow)
+        }
+    };
     let (mut lo, mut hi) = (0.0f32, 1.0f32);
     for p in &shape.points {
         for (ox, oy) in [(-pad, -pad), (pad, -pad), (-pad, pad), (pad, pad)] {
-            let q = inv.apply(Point::new(p.x + ox, p.y + oy));
-            let t = ((q.x - x1) * dx + (q.y - y1) * dy) / len2;
+            let t = t_at(inv.apply(Point::new(p.x + ox, p.y + oy)));
             if t.is_finite() {
                 (lo, hi) = (lo.min(t), hi.max(t));
             }
         }
+    }
+    if matches!(g.geometry, GradientGeometry::Radial { .. }) {
+        lo = 0.0;
     }
     // At most 256 periods: past that the stripes are finer than any page shows.
     let lo = lo.floor().max(hi.ceil() - 256.0);
@@ -155,8 +173,9 @@ pub(super) fn gradient_object(
             fy,
             fr,
         } => {
-            // From the focal circle (t = 0) to the end circle (t = 1).
-            (3, nums([fx, fy, fr, cx, cy, r]))
+            // From the focal circle (t = 0) to the circle at t = hi (the end circle at t = 1).
+            let at = |t: f32| [fx + t * (cx - fx), fy + t * (cy - fy), fr + t * (r - fr)];
+            (3, nums(at(0.0).into_iter().chain(at(hi))))
         }
     };
     format!(
