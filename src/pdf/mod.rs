@@ -4,7 +4,7 @@
 //! The page has the SVG's size at CSS resolution (96 px = 72 pt, so 1 px = 0.75 pt); the content
 //! stream flips y once (`cm`) and then draws in canvas pixels, in scene order: the background as
 //! a full-page rectangle when it is not transparent, then each shape's fill (by its fill rule, as
-//! the rasteriser and the SVG) and stroke (round caps and joins, as the rasteriser draws them).
+//! the rasteriser and the SVG) and stroke (its caps, joins and miter limit; round by default).
 //! Opacities go through one `ExtGState` per distinct alpha (`/ca` for fills, `/CA` for strokes).
 //! A textured fill (an imported image or pattern) is a tiling pattern whose cell is the texture
 //! (an RGB image with its alpha as a soft mask, deflated), placed by the texture's transform:
@@ -24,7 +24,8 @@ mod groups;
 mod paint;
 
 use crate::scene::{
-    BlendMode, FillRule, Gradient, Group, Point, Rgba, Scene, Shape, ShapeKind, Texture,
+    BlendMode, FillRule, Gradient, Group, LineCap, LineJoin, Point, Rgba, Scene, Shape, ShapeKind,
+    Texture,
 };
 use groups::blend_name;
 use paint::{gradient_object, t_range, texture_objects};
@@ -253,6 +254,22 @@ impl<'a> Doc<'a> {
             return;
         }
         op(out, &[s.width], "w");
+        // The page draws round caps and joins (what the optimisers make); others are set here.
+        if s.cap != LineCap::Round {
+            out.push_str(if s.cap == LineCap::Butt {
+                "0 J\n"
+            } else {
+                "2 J\n"
+            });
+        }
+        match s.join {
+            LineJoin::Round => {}
+            LineJoin::Miter => {
+                out.push_str("0 j\n");
+                op(out, &[s.miter_limit], "M");
+            }
+            LineJoin::Bevel => out.push_str("2 j\n"),
+        }
         path(out, shape);
         out.push_str("S Q\n");
     }

@@ -209,3 +209,17 @@ fn stop_opacities_are_a_soft_mask_of_greys() {
     assert!(text.contains("q /G0 gs /Pattern cs /P0 scn"));
     assert!(text.contains("q /Pattern cs /P1 scn\n0 0 40 20 re\nf Q"));
 }
+
+#[test]
+fn strokes_keep_their_caps_joins_and_miter_limit() {
+    let svg = r##"<svg xmlns="http://www.w3.org/2000/svg" width="40" height="20">
+        <path d="M2 2 L20 18 L38 2" fill="none" stroke="#000" stroke-width="3" stroke-linecap="butt" stroke-linejoin="miter" stroke-miterlimit="3"/>
+        <path d="M2 10 L38 10" fill="none" stroke="#000" stroke-linecap="square" stroke-linejoin="bevel"/>
+        <path d="M2 16 L38 16" fill="none" stroke="#000"/></svg>"##;
+    let text = ascii(&to_pdf(&crate::svg::from_svg(svg).unwrap()));
+    assert!(text.contains("3 w\n0 J\n0 j\n3 M\n"), "{text}");
+    assert!(text.contains("1 w\n2 J\n2 j\n"), "{text}");
+    // SVG's defaults (butt, miter 4) are said; round is the page's own.
+    assert!(text.contains("1 J 1 j\n"));
+    assert_eq!(text.matches(" M\n").count(), 2, "{text}");
+}
