@@ -6,11 +6,12 @@ use crate::scene::{
 };
 
 /// The range of a gradient's parameter `t` over the shape (its control points bound its
-/// outline; a stroke's half width added), whole periods outward: `[0, 1]` for `pad`; for a
-/// linear gradient the projections onto its axis; for a radial one `[0, n]`, the first circle
-/// that holds every point.
+/// outline; a stroke's half width added), whole periods outward: `[0, 1]` for `pad` (but for a
+/// linear one that [`steps_at_an_end`]); for a linear gradient the projections onto its axis;
+/// for a radial one `[0, n]`, the first circle that holds every point.
 pub(super) fn t_range(g: &Gradient, shape: &Shape) -> [f32; 2] {
-    if g.spread == Spread::Pad {
+    let linear = matches!(g.geometry, GradientGeometry::Linear { .. });
+    if g.spread == Spread::Pad && !(linear && steps_at_an_end(g)) {
         return [0.0, 1.0];
     }
     // Canvas → gradient space (a singular map gives non-finite `t`s, which are passed over).
@@ -51,6 +52,19 @@ pub(super) fn t_range(g: &Gradient, shape: &Shape) -> [f32; 2] {
     // At most 256 periods: past that the stripes are finer than any page shows.
     let lo = lo.floor().max(hi.ceil() - 256.0);
     [lo, hi.ceil().min(lo + 256.0)]
+}
+
+/// Whether the first two stops (or the last two) stand at the end offset with different
+/// colours: SVG pads with the outer stop's colour, a shading's extension with the inner one's,
+/// so such a `pad` gradient spans the shape's range with the padding drawn as constant pieces.
+fn steps_at_an_end(g: &Gradient) -> bool {
+    let s = &g.stops;
+    let n = s.len();
+    // The import moves the second of two equal offsets up by a hair (as usvg does).
+    const HAIR: f32 = 1e-4;
+    n >= 2
+        && ((s[1].offset <= HAIR && s[0].color != s[1].color)
+            || (s[n - 2].offset >= 1.0 - HAIR && s[n - 2].color != s[n - 1].color))
 }
 
 /// `[a b c d e f]`: gradient or texel space → canvas (`m`), and on a page `flip` points high
@@ -128,8 +142,29 @@ fn stop_function(g: &Gradient, range: [f32; 2], alpha: bool) -> String {
         )
     };
     let [lo, hi] = range;
-    if g.spread == Spread::Pad || hi - lo <= 1.0 && lo == 0.0 {
+    if hi - lo <= 1.0 && lo == 0.0 {
         return period(false, 0.0);
+    }
+    if g.spread == Spread::Pad {
+        // The stops over [0, 1], the outer stops' colours before and after.
+        let (first, last) = (stops[0].1, stops[stops.len() - 1].1);
+        let mut parts = vec![period(false, 0.0)];
+        let mut bounds = Vec::new();
+        if lo < 0.0 {
+            parts.insert(0, piece(first, first));
+            bounds.push(0.0);
+        }
+        if hi > 1.0 {
+            parts.push(piece(last, last));
+            bounds.push(1.0);
+        }
+        return format!(
+            "<< /FunctionType 3 /Domain [{}] /Functions [{}] /Bounds [{}] /Encode [{}] >>",
+            nums([lo, hi]),
+            parts.join(" "),
+            nums(bounds),
+            vec!["0 1"; parts.len()].join(" ")
+        );
     }
     // Whole periods: each its own stitched function, mirrored on odd ones for `reflect`.
     let n = (hi - lo).round().max(1.0) as i64;

@@ -223,3 +223,22 @@ fn strokes_keep_their_caps_joins_and_miter_limit() {
     assert!(text.contains("1 J 1 j\n"));
     assert_eq!(text.matches(" M\n").count(), 2, "{text}");
 }
+
+#[test]
+fn a_pad_gradient_with_a_step_at_its_start_pads_with_the_outer_stop() {
+    let svg = r##"<svg xmlns="http://www.w3.org/2000/svg" width="40" height="20">
+        <linearGradient id="g" x1="0.2" x2="0.8"><stop offset="0" stop-color="#000"/><stop offset="0" stop-color="#f00"/><stop offset="1" stop-color="#00f"/></linearGradient>
+        <rect width="40" height="20" fill="url(#g)"/></svg>"##;
+    let text = ascii(&to_pdf(&crate::svg::from_svg(svg).unwrap()));
+    // t runs from -1/3 to 4/3 over the rect: black before 0, the stops, blue after 1.
+    assert!(
+        text.contains(
+            "/Domain [-1 2] /Functions [<< /FunctionType 2 /Domain [0 1] /C0 [0 0 0] /C1 [0 0 0] /N 1 >>"
+        ),
+        "{text}"
+    );
+    assert!(
+        text.contains("/C0 [0 0 1] /C1 [0 0 1] /N 1 >>] /Bounds [0 1]"),
+        "{text}"
+    );
+}
