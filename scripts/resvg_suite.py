@@ -17,9 +17,9 @@ difference is at most 1.5 and at most 1 % of the pixels differ by more than 16 i
 an SVG that `render` refuses fails. Prints the pass counts per folder and per feature
 (sub-folder) as Markdown tables; `--fails` lists every failing test with its numbers or error
 and `--json` writes every test's result (warnings included: `render` prints them on stderr).
-`--pdf` measures the PDF export instead: `render -o OUT.pdf`, drawn by poppler's `pdftoppm` at
+`--pdf` measures the PDF export instead: `render -o OUT.pdf`, drawn by poppler's `pdftocairo` (cairo: exact-area anti-aliasing, as resvg's is close to; `pdftoppm` snaps thin strokes and rectangles to pixels) at
 the reference's size, against the reference over white (both opaque), by the same rule.
-Standard library only (its own PNG reader), and `pdftoppm` for `--pdf`.
+Standard library only (its own PNG reader), and `pdftocairo` for `--pdf`.
 """
 
 import argparse
@@ -173,14 +173,14 @@ def run_one(binary, root, svg, tmp, env, pdf=False):
             return result
         if pdf:
             drawn = subprocess.run(
-                ["pdftoppm", "-png", "-singlefile", "-scale-to-x", str(w), "-scale-to-y", str(h),
+                ["pdftocairo", "-png", "-singlefile", "-scale-to-x", str(w), "-scale-to-y", str(h),
                  out, stem + "-pdf"],
                 capture_output=True,
                 text=True,
                 timeout=60,
             )
             if drawn.returncode != 0:
-                result["error"] = "pdftoppm: " + (drawn.stderr.strip() or "failed")
+                result["error"] = "pdftocairo: " + (drawn.stderr.strip() or "failed")
                 return result
             out, ref = stem + "-pdf.png", over_white(ref)
         ow, oh, ours = read_png(out)
@@ -218,7 +218,7 @@ def main():
         help="only the tests whose path under TESTS starts with one of these (comma-separated, "
         "e.g. paint-servers/pattern,painting/stroke)",
     )
-    ap.add_argument("--pdf", action="store_true", help="measure the PDF export (needs pdftoppm)")
+    ap.add_argument("--pdf", action="store_true", help="measure the PDF export (needs pdftocairo)")
     args = ap.parse_args()
     fonts = args.fonts or os.path.join(args.tests, os.pardir, "fonts")
     env = dict(os.environ, VF_SYSTEM_FONTS="0")
