@@ -205,6 +205,20 @@ fn differences(a: &[f64], b: &[f64]) -> (f64, f64) {
     (mean, large)
 }
 
+/// The PDF of `scene` (imported from `svg`) drawn by poppler differs from `svg` in resvg by at
+/// most [`MAX_MEAN_ABS`] on average and on at most 0.5 % of the pixels by over 128.
+fn assert_pdf_matches(svg: &str, scene: &vectorfusion::scene::Scene, key: &str) {
+    let dir = tempfile::tempdir().unwrap();
+    let b = pdf_rgb(scene, dir.path(), key);
+    let (mean, large) = differences(&resvg_rgb(svg), &b);
+    eprintln!("{key}: mean {mean:.2}/255, {:.3}% far", large * 100.0);
+    assert!(
+        mean <= MAX_MEAN_ABS && large <= 0.005,
+        "{key}: PDF differs from the SVG: mean {mean:.2}/255, {:.3}% far",
+        large * 100.0
+    );
+}
+
 /// An image and a rotated pattern (textures) in the PDF look as the SVG does in resvg: each is
 /// a tiling pattern of its texels, placed by the texture's transform.
 #[test]
@@ -278,15 +292,7 @@ fn gradients_as_pdf_render_the_same_as_the_svg() {
         .map(|g| g.iter().count())
         .sum();
     assert_eq!(gradients, 4);
-    let dir = tempfile::tempdir().unwrap();
-    let b = pdf_rgb(&scene, dir.path(), "gradients");
-    let (mean, large) = differences(&resvg_rgb(&svg), &b);
-    eprintln!("gradients: mean {mean:.2}/255, {:.3}% far", large * 100.0);
-    assert!(
-        mean <= MAX_MEAN_ABS && large <= 0.005,
-        "gradients: PDF differs from the SVG: mean {mean:.2}/255, {:.3}% far",
-        large * 100.0
-    );
+    assert_pdf_matches(&svg, &scene, "gradients");
 }
 
 /// Groups in the PDF look as the SVG does in resvg: a group's opacity over overlapping shapes,
@@ -317,15 +323,7 @@ fn groups_as_pdf_render_the_same_as_the_svg() {
     );
     let scene = vectorfusion::svg::from_svg(&svg).unwrap();
     assert!(scene.groups.len() >= 5, "{:?}", scene.groups.len());
-    let dir = tempfile::tempdir().unwrap();
-    let b = pdf_rgb(&scene, dir.path(), "groups");
-    let (mean, large) = differences(&resvg_rgb(&svg), &b);
-    eprintln!("groups: mean {mean:.2}/255, {:.3}% far", large * 100.0);
-    assert!(
-        mean <= MAX_MEAN_ABS && large <= 0.005,
-        "groups: PDF differs from the SVG: mean {mean:.2}/255, {:.3}% far",
-        large * 100.0
-    );
+    assert_pdf_matches(&svg, &scene, "groups");
 }
 
 /// Gradients whose stops differ in opacity (fading to transparent over a striped background,
@@ -349,16 +347,5 @@ fn gradient_stop_opacities_as_pdf_render_the_same_as_the_svg() {
         <g opacity=".8"><rect x="76" y="62" width="44" height="58" fill="url(#fade)"/></g></svg>"##
     );
     let scene = vectorfusion::svg::from_svg(&svg).unwrap();
-    let dir = tempfile::tempdir().unwrap();
-    let b = pdf_rgb(&scene, dir.path(), "stop-opacities");
-    let (mean, large) = differences(&resvg_rgb(&svg), &b);
-    eprintln!(
-        "stop opacities: mean {mean:.2}/255, {:.3}% far",
-        large * 100.0
-    );
-    assert!(
-        mean <= MAX_MEAN_ABS && large <= 0.005,
-        "stop opacities: PDF differs from the SVG: mean {mean:.2}/255, {:.3}% far",
-        large * 100.0
-    );
+    assert_pdf_matches(&svg, &scene, "stop-opacities");
 }

@@ -12,7 +12,7 @@
 //!   coloured (not grey) mask passes a little more or less than in the SVG.
 
 use super::{Doc, Mode, State, path};
-use crate::scene::{Clip, Group, Mask, MaskKind, Shape};
+use crate::scene::{Clip, Content, Group, Mask, MaskKind, Shape};
 use std::fmt::Write as _;
 
 impl<'a> Doc<'a> {
@@ -45,18 +45,17 @@ impl<'a> Doc<'a> {
         let _ = writeln!(out, "/X{form} Do Q");
     }
 
+    /// A form drawing a clip's or a mask's content; its index.
+    fn content_form(&mut self, content: &'a Content, mode: Mode) -> usize {
+        let mut body = String::new();
+        let n = content.shapes.len();
+        self.draw(&mut body, &content.shapes, &content.groups, 0..n, mode);
+        self.form(body)
+    }
+
     /// A form that paints form `form` under mask `m`; its index.
     fn masked(&mut self, form: usize, m: &'a Mask) -> usize {
-        let mut body = String::new();
-        let n = m.content.shapes.len();
-        self.draw(
-            &mut body,
-            &m.content.shapes,
-            &m.content.groups,
-            0..n,
-            Mode::Paint,
-        );
-        let mut content = self.form(body);
+        let mut content = self.content_form(&m.content, Mode::Paint);
         if let Some(inner) = &m.mask {
             content = self.masked(content, inner);
         }
@@ -82,16 +81,7 @@ impl<'a> Doc<'a> {
             }
             return;
         }
-        let mut body = String::new();
-        let n = c.content.shapes.len();
-        self.draw(
-            &mut body,
-            &c.content.shapes,
-            &c.content.groups,
-            0..n,
-            Mode::Clip,
-        );
-        let mut form = self.form(body);
+        let mut form = self.content_form(&c.content, Mode::Clip);
         if let Some(inner) = &c.clip {
             let mut head = String::new();
             self.clip(&mut head, inner);
