@@ -9,9 +9,11 @@
 //! - A mask is a soft mask of its content, read by its luminosity or its alpha; a mask's own
 //!   mask masks the content first. PDF computes luminosity with the weights of its
 //!   non-separable blend modes (0.30, 0.59, 0.11) where SVG uses 0.2125, 0.7154, 0.0721, so a
-//!   coloured (not grey) mask passes a little more or less than in the SVG.
+//!   luminance mask's colours and gradient stops are written as greys of SVG's luminance, which
+//!   PDF reads back unchanged (an image in a mask keeps its colours; a blend mode inside a mask
+//!   mixes the greys).
 
-use super::{Doc, Mode, State, path};
+use super::{Channel, Doc, Mode, State, path};
 use crate::scene::{Clip, Content, Group, Mask, MaskKind, Shape};
 use std::fmt::Write as _;
 
@@ -55,7 +57,13 @@ impl<'a> Doc<'a> {
 
     /// A form that paints form `form` under mask `m`; its index.
     fn masked(&mut self, form: usize, m: &'a Mask) -> usize {
+        // A luminance mask's content in SVG's luminance, as greys PDF's luminosity keeps.
+        let channel = self.channel;
+        if m.kind == MaskKind::Luminance {
+            self.channel = Channel::Luminance;
+        }
         let mut content = self.content_form(&m.content, Mode::Paint);
+        self.channel = channel;
         if let Some(inner) = &m.mask {
             content = self.masked(content, inner);
         }

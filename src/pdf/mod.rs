@@ -28,7 +28,7 @@ use crate::scene::{
     Texture,
 };
 use groups::blend_name;
-use paint::{gradient_object, t_range, texture_objects};
+use paint::{Channel, gradient_object, t_range, texture_objects};
 use std::fmt::Write as _;
 
 /// PDF points per canvas pixel (CSS: 96 px per inch, PDF: 72 pt per inch).
@@ -113,9 +113,9 @@ fn color(out: &mut String, c: Rgba, operator: &str) {
 /// What a pattern `/P{i}` paints.
 enum Paint<'a> {
     Texture(&'a Texture),
-    /// A gradient, the range of its parameter `t` the shape covers, and whether it paints the
-    /// stops' colours or their alphas (as greys, for a soft mask).
-    Gradient(&'a Gradient, [f32; 2], bool),
+    /// A gradient, the range of its parameter `t` the shape covers, and what of its stops'
+    /// colours it paints.
+    Gradient(&'a Gradient, [f32; 2], Channel),
 }
 
 impl Paint<'_> {
@@ -159,6 +159,8 @@ struct Doc<'a> {
     on_page: bool,
     /// The canvas: width and height in pixels.
     size: (f32, f32),
+    /// What colours are drawn as now (their luminance inside a luminance mask).
+    channel: Channel,
 }
 
 impl<'a> Doc<'a> {
@@ -238,7 +240,7 @@ impl<'a> Doc<'a> {
             let _ = writeln!(out, "{fill_op} Q");
         } else if let Some(f) = shape.fill.filter(|f| f.a > 0.0) {
             let _ = writeln!(out, "q {} gs", self.state(State::Alpha(f.a)));
-            color(out, f, "rg");
+            color(out, self.channel.map(f), "rg");
             path(out, shape);
             let _ = writeln!(out, "{fill_op} Q");
         }
@@ -249,7 +251,7 @@ impl<'a> Doc<'a> {
             self.gradient_paint(out, gr, shape, "CS", "SCN");
         } else if s.color.a > 0.0 {
             let _ = writeln!(out, "q {} gs", self.state(State::Alpha(s.color.a)));
-            color(out, s.color, "RG");
+            color(out, self.channel.map(s.color), "RG");
         } else {
             return;
         }
@@ -287,13 +289,13 @@ impl<'a> Doc<'a> {
         set: &str,
     ) {
         let range = t_range(gr, shape);
-        let p = self.paint(Paint::Gradient(gr, range, false));
+        let p = self.paint(Paint::Gradient(gr, range, self.channel));
         let alpha = gr.stops.first().map_or(1.0, |s| s.color.a);
         let gs = if gr.stops.iter().all(|s| s.color.a == alpha) {
             self.state(State::Alpha(alpha))
         } else {
             let on_page = std::mem::replace(&mut self.on_page, false);
-            let a = self.paint(Paint::Gradient(gr, range, true));
+            let a = self.paint(Paint::Gradient(gr, range, Channel::Alpha));
             self.on_page = on_page;
             let mut body = format!("q /Pattern cs /P{a} scn\n");
             op(&mut body, &[0.0, 0.0, self.size.0, self.size.1], "re");
@@ -325,6 +327,7 @@ fn content(scene: &Scene) -> (String, Doc<'_>) {
         forms: Vec::new(),
         on_page: true,
         size: (w, h),
+        channel: Channel::Colour,
     };
     // Canvas pixels, y down, onto the page in points, y up.
     op(
@@ -420,8 +423,8 @@ pub fn to_pdf(scene: &Scene) -> Vec<u8> {
         let flip = on_page.then_some(page_h);
         match p {
             Paint::Texture(t) => objects.extend(texture_objects(t, first, flip)),
-            Paint::Gradient(g, range, alpha) => {
-                objects.push(gradient_object(g, *range, flip, *alpha))
+            Paint::Gradient(g, range, channel) => {
+                objects.push(gradient_object(g, *range, flip, *channel))
             }
         }
     }

@@ -82,21 +82,38 @@ fn pattern_matrix(m: &Affine, flip: Option<f32>) -> String {
     )
 }
 
+/// What a colour is drawn as.
+#[derive(Clone, Copy, PartialEq)]
+pub(super) enum Channel {
+    /// Itself.
+    Colour,
+    /// Its alpha, as a grey (a soft mask of stop opacities).
+    Alpha,
+    /// Its luminance by SVG's weights, as a grey, which PDF's luminosity (its own weights) reads
+    /// back unchanged: what a luminance mask's content is drawn in.
+    Luminance,
+}
+
+impl Channel {
+    pub(super) fn map(self, c: Rgba) -> Rgba {
+        let grey = |v: f32| Rgba::new(v, v, v, c.a);
+        match self {
+            Channel::Colour => c,
+            Channel::Alpha => grey(c.a),
+            Channel::Luminance => grey(0.2125 * c.r + 0.7154 * c.g + 0.0721 * c.b),
+        }
+    }
+}
+
 /// The stops of `g` as a function of `t` over `range` (whole periods of `repeat` or `reflect`,
-/// else `[0, 1]`): a stitching function of linear pieces between stops, of their colours
-/// (opaque: the alpha is the pattern's graphics state) or, with `alpha`, their alphas as greys.
-fn stop_function(g: &Gradient, range: [f32; 2], alpha: bool) -> String {
+/// else `[0, 1]`): a stitching function of linear pieces between stops, of their colours as
+/// `channel` draws them (opaque: the alpha is the pattern's graphics state).
+fn stop_function(g: &Gradient, range: [f32; 2], channel: Channel) -> String {
     // Stops covering [0, 1].
-    let grey = |c: Rgba| Rgba::new(c.a, c.a, c.a, 1.0);
     let mut stops: Vec<(f32, Rgba)> = g
         .stops
         .iter()
-        .map(|s| {
-            (
-                s.offset.clamp(0.0, 1.0),
-                if alpha { grey(s.color) } else { s.color },
-            )
-        })
+        .map(|s| (s.offset.clamp(0.0, 1.0), channel.map(s.color)))
         .collect();
     if stops.is_empty() {
         stops.push((0.0, Rgba::BLACK));
@@ -186,12 +203,12 @@ fn stop_function(g: &Gradient, range: [f32; 2], alpha: bool) -> String {
 }
 
 /// The shading pattern of gradient `g` over the parameter range `range` (`flip`: see
-/// [`pattern_matrix`]), of its colours or, with `alpha`, its alphas ([`stop_function`]).
+/// [`pattern_matrix`]), its colours as `channel` draws them ([`stop_function`]).
 pub(super) fn gradient_object(
     g: &Gradient,
     range: [f32; 2],
     flip: Option<f32>,
-    alpha: bool,
+    channel: Channel,
 ) -> Vec<u8> {
     let [lo, hi] = range;
     let (kind, coords) = match g.geometry {
@@ -219,7 +236,7 @@ pub(super) fn gradient_object(
          /Extend [true true] >> >>",
         pattern_matrix(&g.transform, flip),
         nums([lo, hi]),
-        stop_function(g, range, alpha)
+        stop_function(g, range, channel)
     )
     .into_bytes()
 }

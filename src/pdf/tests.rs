@@ -242,3 +242,25 @@ fn a_pad_gradient_with_a_step_at_its_start_pads_with_the_outer_stop() {
         "{text}"
     );
 }
+
+#[test]
+fn a_luminance_mask_is_drawn_in_svg_luminance_greys() {
+    let svg = r##"<svg xmlns="http://www.w3.org/2000/svg" width="40" height="20">
+        <linearGradient id="g"><stop offset="0" stop-color="#0f0"/><stop offset="1" stop-color="#00f"/></linearGradient>
+        <mask id="m" maskUnits="userSpaceOnUse" x="0" y="0" width="40" height="20">
+          <rect width="20" height="20" fill="#f00"/><rect x="20" width="20" height="20" fill="url(#g)"/></mask>
+        <mask id="a" mask-type="alpha" maskUnits="userSpaceOnUse" x="0" y="0" width="40" height="20">
+          <rect width="40" height="20" fill="#f00" fill-opacity=".5"/></mask>
+        <g mask="url(#m)"><rect width="40" height="20" fill="#f00"/></g>
+        <g mask="url(#a)"><rect width="40" height="20" fill="#00f"/></g></svg>"##;
+    let text = ascii(&to_pdf(&crate::svg::from_svg(svg).unwrap()));
+    // Red as its SVG luminance; the gradient's stops as theirs (green 0.7154, blue 0.0721).
+    assert!(text.contains("0.2125 0.2125 0.2125 rg"), "{text}");
+    assert!(
+        text.contains("/C0 [0.7154 0.7154 0.7154] /C1 [0.0721 0.0721 0.0721]"),
+        "{text}"
+    );
+    // The masked shapes and an alpha mask's content keep their colours.
+    assert_eq!(text.matches("1 0 0 rg").count(), 2, "{text}");
+    assert!(text.contains("0 0 1 rg"));
+}
