@@ -106,15 +106,18 @@ impl<T, E: Into<anyhow::Error>> ResultExt<T> for Result<T, E> {
     }
 }
 
+/// The extension of an output path, lower-cased: what format the file is written in.
+pub(crate) fn output_extension(path: &std::path::Path) -> Option<String> {
+    path.extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase)
+}
+
 /// Writes a result SVG to `path` in the format its extension names: `.pdf` a one-page vector
 /// PDF ([`crate::pdf`]), `.png` the resvg render at the SVG's size (as the service's
 /// `result.png`), anything else the SVG itself.
 pub(crate) fn write_result(path: &std::path::Path, svg: &str) -> Result<(), CliError> {
-    let ext = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(str::to_ascii_lowercase);
-    let bytes = match ext.as_deref() {
+    let bytes = match output_extension(path).as_deref() {
         Some("pdf") => crate::svg::from_svg(svg)
             .map(|scene| crate::pdf::to_pdf(&scene))
             .failed(|| "converting the result to PDF".into())?,

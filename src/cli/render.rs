@@ -5,7 +5,7 @@
 //! cycles) is printed on stderr, one `warning: …` line each. Images are read beside the input
 //! file; pattern tiles are drawn at the output's resolution.
 
-use super::CliError;
+use super::{CliError, ResultExt as _};
 use crate::{raster, svg};
 use std::path::PathBuf;
 
@@ -30,8 +30,7 @@ enum Format {
 
 impl Format {
     fn of(path: &std::path::Path) -> Result<Format, CliError> {
-        let ext = path.extension().and_then(|e| e.to_str());
-        match ext.map(str::to_ascii_lowercase).as_deref() {
+        match super::output_extension(path).as_deref() {
             None | Some("png") => Ok(Format::Png),
             Some("pdf") => Ok(Format::Pdf),
             Some(other) => Err(CliError::Usage(format!(
@@ -75,10 +74,7 @@ pub fn run(args: RenderArgs) -> Result<(), CliError> {
         Format::Png => raster::render(&scene)
             .save_png(&args.output)
             .map_err(|e| CliError::Other(e.into())),
-        Format::Pdf => std::fs::write(&args.output, crate::pdf::to_pdf(&scene)).map_err(|e| {
-            CliError::Other(
-                anyhow::Error::new(e).context(format!("cannot write {}", args.output.display())),
-            )
-        }),
+        Format::Pdf => std::fs::write(&args.output, crate::pdf::to_pdf(&scene))
+            .failed(|| format!("cannot write {}", args.output.display())),
     }
 }
