@@ -13,9 +13,9 @@
 //! extended past both ends as `pad`), placed by the gradient's transform; a `repeat` or `reflect`
 //! gradient spans the periods the shape covers (a radial one grows its circles over them). Stop
 //! opacities, which a shading cannot carry, are a soft mask of the same gradient painting them
-//! as greys. A group is a
-//! form XObject painted with its opacity, blend mode, clip and mask (`groups`); a pattern drawn
-//! inside a form is placed in canvas pixels, the form's space, not the page's.
+//! as greys. A group is a form XObject painted with its opacity, blend mode, clip and mask
+//! (`groups`); a pattern drawn inside a form is placed in canvas pixels, the form's space, not
+//! the page's.
 //!
 //! Invariant: the output is a complete PDF whose cross-reference offsets are exact; writing
 //! cannot fail for a valid [`Scene`] (non-finite numbers are written as `0`).

@@ -46,7 +46,7 @@ pub(super) fn t_range(g: &Gradient, shape: &Shape) -> [f32; 2] {
             }
         }
     }
-    if matches!(g.geometry, GradientGeometry::Radial { .. }) {
+    if !linear {
         lo = 0.0;
     }
     // At most 256 periods: past that the stripes are finer than any page shows.
