@@ -17,8 +17,10 @@ difference is at most 1.5 and at most 1 % of the pixels differ by more than 16 i
 an SVG that `render` refuses fails. Prints the pass counts per folder and per feature
 (sub-folder) as Markdown tables; `--fails` lists every failing test with its numbers or error
 and `--json` writes every test's result (warnings included: `render` prints them on stderr).
-`--pdf` measures the PDF export instead: `render -o OUT.pdf`, drawn by poppler's `pdftocairo` (cairo: exact-area anti-aliasing, as resvg's is close to; `pdftoppm` snaps thin strokes and rectangles to pixels) at
-the reference's size, against the reference over white (both opaque), by the same rule.
+`--pdf` measures the PDF export instead: `render -o OUT.pdf`, drawn by poppler's `pdftocairo`
+(cairo's anti-aliasing is close to resvg's; `pdftoppm` snaps thin strokes and rectangles to
+pixels) at the reference's size, against the reference over white (both opaque), by the same
+rule.
 Standard library only (its own PNG reader), and `pdftocairo` for `--pdf`.
 """
 
