@@ -368,15 +368,20 @@ impl Store {
 
     /// The job submitted with this idempotency key, if any.
     pub async fn get_job_by_key(&self, key: &str) -> Result<Option<JobRow>, StoreError> {
-        Ok(sqlx::query_as(sql!(self, "get_job_by_key.sql"))
-            .bind(key)
-            .fetch_optional(&self.pool)
-            .await?)
+        self.row_by(sql!(self, "get_job_by_key.sql"), key).await
     }
 
     pub async fn get_job(&self, id: &str) -> Result<Option<JobRow>, StoreError> {
-        Ok(sqlx::query_as(sql!(self, "get_job.sql"))
-            .bind(id)
+        self.row_by(sql!(self, "get_job.sql"), id).await
+    }
+
+    /// The row, if any, that a read of one key (`$1`) returns, from the reader pool.
+    async fn row_by<T>(&self, statement: &'static str, key: &str) -> Result<Option<T>, StoreError>
+    where
+        T: for<'r> sqlx::FromRow<'r, sqlx::any::AnyRow> + Send + Unpin,
+    {
+        Ok(sqlx::query_as(statement)
+            .bind(key)
             .fetch_optional(&self.pool)
             .await?)
     }
@@ -454,10 +459,7 @@ impl Store {
     }
 
     pub async fn latest_snapshot(&self, job_id: &str) -> Result<Option<SnapshotRow>, StoreError> {
-        Ok(sqlx::query_as(sql!(self, "latest_snapshot.sql"))
-            .bind(job_id)
-            .fetch_optional(&self.pool)
-            .await?)
+        self.row_by(sql!(self, "latest_snapshot.sql"), job_id).await
     }
 
     pub async fn snapshot(&self, job_id: &str, n: i64) -> Result<Option<SnapshotRow>, StoreError> {
@@ -469,10 +471,7 @@ impl Store {
     }
 
     pub async fn result(&self, job_id: &str) -> Result<Option<ResultRow>, StoreError> {
-        Ok(sqlx::query_as(sql!(self, "get_result.sql"))
-            .bind(job_id)
-            .fetch_optional(&self.pool)
-            .await?)
+        self.row_by(sql!(self, "get_result.sql"), job_id).await
     }
 
     /// The SVG of variation `n` (2, 3, ...) of a job's result ([`Store::complete_variations`];
