@@ -23,14 +23,8 @@ pub(super) fn t_range(g: &Gradient, shape: &Shape) -> [f32; 2] {
             let len2 = dx * dx + dy * dy;
             Box::new(move |q: Point| ((q.x - x1) * dx + (q.y - y1) * dy) / len2)
         }
-        GradientGeometry::Radial {
-            cx,
-            cy,
-            r,
-            fx,
-            fy,
-            fr,
-        } => {
+        GradientGeometry::Radial { .. } => {
+            let [[fx, fy, fr], [cx, cy, r]] = g.geometry.ends();
             // The circle at `t` (centre f + t (c − f), radius fr + t (r − fr)) holds a point at
             // distance `l` from f once fr + t (r − fr) ≥ l + t |c − f|.
             let grow = (r - fr) - (cx - fx).hypot(cy - fy);
@@ -211,24 +205,15 @@ pub(super) fn gradient_object(
     channel: Channel,
 ) -> Vec<u8> {
     let [lo, hi] = range;
+    let [start, end] = g.geometry.ends();
+    let at = |t: f32| -> [f32; 3] { std::array::from_fn(|i| start[i] + t * (end[i] - start[i])) };
     let (kind, coords) = match g.geometry {
-        GradientGeometry::Linear { x1, y1, x2, y2 } => {
-            // The axis at the range's ends: t = lo and t = hi.
-            let at = |t: f32| [x1 + t * (x2 - x1), y1 + t * (y2 - y1)];
-            (2, nums(at(lo).into_iter().chain(at(hi))))
+        // The axis at the range's ends: t = lo and t = hi.
+        GradientGeometry::Linear { .. } => {
+            (2, nums(at(lo)[..2].iter().chain(&at(hi)[..2]).copied()))
         }
-        GradientGeometry::Radial {
-            cx,
-            cy,
-            r,
-            fx,
-            fy,
-            fr,
-        } => {
-            // From the focal circle (t = 0) to the circle at t = hi (the end circle at t = 1).
-            let at = |t: f32| [fx + t * (cx - fx), fy + t * (cy - fy), fr + t * (r - fr)];
-            (3, nums(at(0.0).into_iter().chain(at(hi))))
-        }
+        // From the focal circle (t = 0) to the circle at t = hi (the end circle at t = 1).
+        GradientGeometry::Radial { .. } => (3, nums(at(0.0).into_iter().chain(at(hi)))),
     };
     format!(
         "<< /Type /Pattern /PatternType 2 /Matrix {} /Shading << /ShadingType {kind} \

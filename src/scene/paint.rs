@@ -144,6 +144,26 @@ impl GradientGeometry {
         }
     }
 
+    /// The SVG attribute of each of [`Self::values`].
+    pub fn names(&self) -> &'static [&'static str] {
+        match self {
+            Self::Linear { .. } => &["x1", "y1", "x2", "y2"],
+            Self::Radial { .. } => &["cx", "cy", "r", "fx", "fy", "fr"],
+        }
+    }
+
+    /// Where the parameter `t` starts (0) and ends (1): a linear gradient's axis ends
+    /// `[x, y, 0]`, a radial one's focal and end circles `[x, y, r]`.
+    pub fn ends(&self) -> [[f32; 3]; 2] {
+        match *self {
+            Self::Linear { x1, y1, x2, y2 } => [[x1, y1, 0.0], [x2, y2, 0.0]],
+            Self::Radial { .. } => {
+                let v = self.values();
+                [[v[3], v[4], v[5]], [v[0], v[1], v[2]]]
+            }
+        }
+    }
+
     /// The same kind of geometry with these values (radii kept valid).
     fn with_values(&self, v: &[f32]) -> Self {
         match self {

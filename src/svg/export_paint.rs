@@ -66,26 +66,10 @@ pub(super) fn push_gradient(out: &mut String, g: &Gradient, id: &str) {
     let _ = write!(out, "<{tag}");
     push_attr(out, "id", id);
     push_attr(out, "gradientUnits", "userSpaceOnUse");
-    match g.geometry {
-        GradientGeometry::Linear { x1, y1, x2, y2 } => {
-            for (name, v) in [("x1", x1), ("y1", y1), ("x2", x2), ("y2", y2)] {
-                push_attr(out, name, &exact(v));
-            }
-        }
-        GradientGeometry::Radial {
-            cx,
-            cy,
-            r,
-            fx,
-            fy,
-            fr,
-        } => {
-            for (name, v) in [("cx", cx), ("cy", cy), ("r", r), ("fx", fx), ("fy", fy)] {
-                push_attr(out, name, &exact(v));
-            }
-            if fr > 0.0 {
-                push_attr(out, "fr", &exact(fr));
-            }
+    for (&name, v) in g.geometry.names().iter().zip(g.geometry.values()) {
+        // `fr` is SVG 2's, and 0 by default: written only when it is not.
+        if name != "fr" || v > 0.0 {
+            push_attr(out, name, &exact(v));
         }
     }
     if g.transform != crate::scene::Affine::IDENTITY {
