@@ -235,6 +235,20 @@ pub enum SceneError {
 }
 
 impl Shape {
+    /// A closed cubic outline through `points` painted as this shape is (fill, stroke, fill rule,
+    /// gradients) and from its stage: a piece of this shape, as the vector stage splits it.
+    pub fn closed_cubic_like(&self, points: Vec<Point>) -> Shape {
+        Shape {
+            kind: ShapeKind::ClosedCubic,
+            points,
+            fill: self.fill,
+            stroke: self.stroke,
+            fill_rule: self.fill_rule,
+            gradients: self.gradients.clone(),
+            stage: self.stage,
+        }
+    }
+
     /// The shape with every control point moved by `f` and its stroke width multiplied by
     /// `stroke_k` (kind and paint kept): the one way geometry is rescaled or placed. `f` must be
     /// affine; gradients move with the shape.

@@ -11,7 +11,7 @@
 //! have the same orientation; a lobe of opposite orientation nested in another marks a hole
 //! in the original, which the lobes fill (the tracer re-optimises after every cut).
 
-use crate::scene::{Point, Shape, ShapeKind};
+use crate::scene::{Point, Shape};
 
 type P = (f64, f64);
 
@@ -27,36 +27,28 @@ fn lerp(a: P, b: P, t: f64) -> P {
 }
 
 fn eval(s: &[P; 4], t: f64) -> P {
+    split(s, t).0[3]
+}
+
+/// De Casteljau: cubic `s` split at `t` into its parts over `[0, t]` and `[t, 1]`.
+fn split(s: &[P; 4], t: f64) -> ([P; 4], [P; 4]) {
     let ab = lerp(s[0], s[1], t);
     let bc = lerp(s[1], s[2], t);
     let cd = lerp(s[2], s[3], t);
-    lerp(lerp(ab, bc, t), lerp(bc, cd, t), t)
+    let abc = lerp(ab, bc, t);
+    let bcd = lerp(bc, cd, t);
+    let m = lerp(abc, bcd, t);
+    ([s[0], ab, abc, m], [m, bcd, cd, s[3]])
 }
 
 /// The part of cubic `s` between parameters `t0 <= t1`.
 fn sub_cubic(s: &[P; 4], t0: f64, t1: f64) -> [P; 4] {
     // Left part [0, t1], then its right part from t0 / t1.
-    let split_left = |s: &[P; 4], t: f64| -> [P; 4] {
-        let ab = lerp(s[0], s[1], t);
-        let bc = lerp(s[1], s[2], t);
-        let cd = lerp(s[2], s[3], t);
-        let abc = lerp(ab, bc, t);
-        let bcd = lerp(bc, cd, t);
-        [s[0], ab, abc, lerp(abc, bcd, t)]
-    };
-    let split_right = |s: &[P; 4], t: f64| -> [P; 4] {
-        let ab = lerp(s[0], s[1], t);
-        let bc = lerp(s[1], s[2], t);
-        let cd = lerp(s[2], s[3], t);
-        let abc = lerp(ab, bc, t);
-        let bcd = lerp(bc, cd, t);
-        [lerp(abc, bcd, t), bcd, cd, s[3]]
-    };
-    let left = if t1 < 1.0 { split_left(s, t1) } else { *s };
+    let left = if t1 < 1.0 { split(s, t1).0 } else { *s };
     if t0 <= 0.0 || t1 <= 0.0 {
         return left;
     }
-    split_right(&left, (t0 / t1).clamp(0.0, 1.0))
+    split(&left, (t0 / t1).clamp(0.0, 1.0)).1
 }
 
 fn segments(shape: &Shape) -> Vec<[P; 4]> {
@@ -217,15 +209,7 @@ fn to_shape(segs: &[[P; 4]], template: &Shape) -> Option<Shape> {
     for s in segs {
         points.extend_from_slice(&[f(s[0]), f(s[1]), f(s[2])]);
     }
-    let shape = Shape {
-        kind: ShapeKind::ClosedCubic,
-        points,
-        fill: template.fill,
-        stroke: template.stroke,
-        fill_rule: template.fill_rule,
-        gradients: template.gradients.clone(),
-        stage: template.stage,
-    };
+    let shape = template.closed_cubic_like(points);
     shape.validate(0).ok().map(|_| shape)
 }
 

@@ -457,15 +457,7 @@ fn bez_cubic_points(path: &BezPath) -> Vec<Point> {
 /// One simple piece from a simple ring: the cubic fit at `tolerance` if it is simple, else the
 /// ring itself with straight segments.
 pub(super) fn fit_piece(ring: &[P], template: &Shape, tolerance: f64) -> Option<Shape> {
-    let make = |points: Vec<Point>| Shape {
-        kind: ShapeKind::ClosedCubic,
-        points,
-        fill: template.fill,
-        stroke: template.stroke,
-        fill_rule: template.fill_rule,
-        gradients: template.gradients.clone(),
-        stage: template.stage,
-    };
+    let make = |points: Vec<Point>| template.closed_cubic_like(points);
     let mut path = BezPath::new();
     path.move_to(kp(ring[0]));
     for &p in &ring[1..] {
