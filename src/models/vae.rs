@@ -47,6 +47,21 @@ fn default_scaling() -> f64 {
     0.18215
 }
 
+/// `Unsupported`, naming the first block type in `types` that is not `allowed`.
+fn only(
+    setting: &'static str,
+    types: &[String],
+    allowed: &str,
+) -> std::result::Result<(), ConfigIssue> {
+    match types.iter().find(|t| t.as_str() != allowed) {
+        Some(t) => Err(ConfigIssue::Unsupported {
+            setting,
+            value: Some(format!("{t:?}")),
+        }),
+        None => Ok(()),
+    }
+}
+
 impl VaeConfig {
     /// Rejects configs this implementation cannot run, with the reason.
     pub fn validate(&self) -> std::result::Result<(), ConfigIssue> {
@@ -61,26 +76,12 @@ impl VaeConfig {
                 value: Some(format!("{:?} (only \"silu\")", self.act_fn)),
             });
         }
-        if let Some(t) = self
-            .down_block_types
-            .iter()
-            .find(|t| t.as_str() != "DownEncoderBlock2D")
-        {
-            return Err(ConfigIssue::Unsupported {
-                setting: "down_block_types",
-                value: Some(format!("{t:?}")),
-            });
-        }
-        if let Some(t) = self
-            .up_block_types
-            .iter()
-            .find(|t| t.as_str() != "UpDecoderBlock2D")
-        {
-            return Err(ConfigIssue::Unsupported {
-                setting: "up_block_types",
-                value: Some(format!("{t:?}")),
-            });
-        }
+        only(
+            "down_block_types",
+            &self.down_block_types,
+            "DownEncoderBlock2D",
+        )?;
+        only("up_block_types", &self.up_block_types, "UpDecoderBlock2D")?;
         for &c in &self.block_out_channels {
             if self.norm_num_groups == 0 || c % self.norm_num_groups != 0 {
                 return Err(ConfigIssue::Inconsistent(format!(

@@ -80,18 +80,26 @@ impl FromStr for Color8 {
     }
 }
 
-impl Serialize for Color8 {
-    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
-        s.collect_str(self)
-    }
+/// Serde through the type's text form (`Display` out, `FromStr` in): what the CLI and the
+/// JSON both read.
+macro_rules! serde_as_text {
+    ($t:ty) => {
+        impl Serialize for $t {
+            fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+                s.collect_str(self)
+            }
+        }
+
+        impl<'de> Deserialize<'de> for $t {
+            fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+                let s = String::deserialize(d)?;
+                s.parse().map_err(serde::de::Error::custom)
+            }
+        }
+    };
 }
 
-impl<'de> Deserialize<'de> for Color8 {
-    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
-        let s = String::deserialize(d)?;
-        s.parse().map_err(serde::de::Error::custom)
-    }
-}
+serde_as_text!(Color8);
 
 /// Parses a comma-separated palette such as `"#e63946,#f1faee,#1d3557"`: 1 to [`MAX_COLORS`]
 /// colours; repeated colours are kept once, in first-seen order.
@@ -170,18 +178,7 @@ impl FromStr for Background {
     }
 }
 
-impl Serialize for Background {
-    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
-        s.collect_str(self)
-    }
-}
-
-impl<'de> Deserialize<'de> for Background {
-    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
-        let s = String::deserialize(d)?;
-        s.parse().map_err(serde::de::Error::custom)
-    }
-}
+serde_as_text!(Background);
 
 /// The colour settings of a run, in user terms. At most one of `colors` and `palette` is set
 /// (checked by [`ColorPlan::validate`]); with neither, near-equal fills are merged.
