@@ -2,7 +2,8 @@
 
 use super::{PT_PER_PX, nums, stream_object};
 use crate::scene::{
-    Affine, Gradient, GradientGeometry, Point, Rgba, Shape, Spread, Texture, TextureFilter,
+    Affine, Gradient, GradientGeometry, MaskKind, Point, Rgba, Shape, Spread, Texture,
+    TextureFilter,
 };
 
 /// The range of a gradient's parameter `t` over the shape (its control points bound its
@@ -94,7 +95,10 @@ impl Channel {
         match self {
             Channel::Colour => c,
             Channel::Alpha => grey(c.a),
-            Channel::Luminance => grey(0.2125 * c.r + 0.7154 * c.g + 0.0721 * c.b),
+            Channel::Luminance => {
+                let [wr, wg, wb] = MaskKind::LUMINANCE_WEIGHTS.map(|w| w as f32);
+                grey(wr * c.r + wg * c.g + wb * c.b)
+            }
         }
     }
 }

@@ -100,10 +100,12 @@ fn mask_factor<T: Real>(m: &Mask, w: u32, h: u32, tol: f32) -> Vec<T> {
     let img = draw::<T>(&m.content, w, h, tol);
     let mut f: Vec<T> = match m.kind {
         MaskKind::Alpha => img.chunks_exact(4).map(|p| p[3]).collect(),
-        MaskKind::Luminance => img
-            .chunks_exact(4)
-            .map(|p| T::c(0.2125) * p[0] + T::c(0.7154) * p[1] + T::c(0.0721) * p[2])
-            .collect(),
+        MaskKind::Luminance => {
+            let [wr, wg, wb] = MaskKind::LUMINANCE_WEIGHTS.map(T::c);
+            img.chunks_exact(4)
+                .map(|p| wr * p[0] + wg * p[1] + wb * p[2])
+                .collect()
+        }
     };
     if let Some(inner) = &m.mask {
         let g = mask_factor::<T>(inner, w, h, tol);

@@ -240,6 +240,12 @@ pub enum MaskKind {
     Alpha,
 }
 
+impl MaskKind {
+    /// SVG's luminance of a colour: `r, g, b` weighed by these (as resvg), which the rasteriser
+    /// and the PDF export of a luminance mask both read.
+    pub const LUMINANCE_WEIGHTS: [f64; 3] = [0.2125, 0.7154, 0.0721];
+}
+
 /// A mask: its content drawn over transparency, reduced per pixel by `kind`, times its own mask
 /// when it has one (SVG's `mask` on a `<mask>`). The mask region is part of the content (a
 /// clipped group) when it does not cover the canvas.
