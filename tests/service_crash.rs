@@ -40,8 +40,12 @@ fn spawn_server(db: &Path, addr: SocketAddr, extra: &[&str]) -> Child {
 async fn wait_healthy(addr: SocketAddr) {
     let deadline = Instant::now() + Duration::from_secs(20);
     loop {
+        // A server still starting can accept a connection and reset it: a probe that fails so
+        // (its task panics in `get`) counts as not up yet, until the deadline.
         if tokio::net::TcpStream::connect(addr).await.is_ok()
-            && get(addr, "/healthz").await.status == 200
+            && tokio::spawn(get(addr, "/healthz"))
+                .await
+                .is_ok_and(|r| r.status == 200)
         {
             return;
         }
