@@ -14,6 +14,14 @@ own icons) gives the ceiling a perfect emoji drawer would reach.
     # the other-artist ceiling (training icons of the same captions, from SET)
     python scripts/embedded/pixel_rprecision.py ceiling --captions docs/embedded/heldout_fluent48.txt \
         --set fluent-emoji-flat --other twemoji
+
+The held-out sets judge; they never choose. Settings are chosen on the validation protocol
+(docs/embedded/TRAINING.md, "Validation"): captions of the prior's validation split (never trained
+on), judged by a training set's drawings (`--set noto` or `--set twemoji`: references come from
+the training split when SET is not a held-out set) while retrieval leaves that set out
+(`VF_RETRIEVAL_EXCLUDE_SETS`):
+
+    python scripts/embedded/pixel_rprecision.py choose-val     # docs/embedded/val_captions.txt
 """
 
 import argparse
@@ -84,6 +92,11 @@ def main():
     c.add_argument("--out-dir", default="docs/embedded")
     c.add_argument("--suffix", default="", help="a further set: heldout_fluent48SUFFIX.txt, disjoint from the "
                    "captions already in OUT_DIR's heldout_*48.txt")
+    v = sub.add_parser("choose-val")
+    v.add_argument("--train", default="data/icons/train")
+    v.add_argument("--judges", default="noto,twemoji")
+    v.add_argument("--seed", type=int, default=1234, help="train_prior.py's --seed (its validation split)")
+    v.add_argument("--out", default="docs/embedded/val_captions.txt")
     for name in ("score", "ceiling"):
         s = sub.add_parser(name)
         s.add_argument("--captions", required=True)
@@ -114,8 +127,31 @@ def main():
             print(f"{set_name}: {len(pool)} candidate captions, wrote {args.n} to {fname}")
         return
 
+    if args.cmd == "choose-val":
+        sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+        import vf_icon
+
+        _, tcaps = load_split(args.train)
+        index = np.load(os.path.join(args.train, "text_index.npy")).astype(np.int64)
+        n_text = len(json.load(open(os.path.join(args.train, "text_captions.json"))))
+        val = vf_icon.val_caption_ids(n_text, args.seed)
+        judges = args.judges.split(",")
+        sets_of = {}
+        for c, i in zip(tcaps, index):
+            if int(i) in val:
+                sets_of.setdefault(c["caption"], set()).add(c["set"])
+        # drawn by every judge, in at most four words as the held-out lists
+        pick = sorted(c for c, s in sets_of.items() if all(j in s for j in judges) and len(c.split()) <= 4)
+        with open(args.out, "w") as f:
+            f.write("\n".join(pick) + "\n")
+        print(f"{len(sets_of)} validation captions, {len(pick)} drawn by {judges}: {args.out}")
+        return
+
     captions = [l.strip() for l in open(args.captions) if l.strip()]
     raw, ecaps = load_split(args.eval)
+    if not any(c["set"] == args.set for c in ecaps):
+        # a training set judges the validation captions (never trained on)
+        raw, ecaps = load_split(args.train)
     refs_by = first_by_caption(raw, ecaps, args.set)
     missing = [c for c in captions if c not in refs_by]
     if missing:

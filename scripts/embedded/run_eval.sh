@@ -8,7 +8,10 @@
 #   CAPTION_SET: fluent (docs/embedded/heldout_fluent48.txt vs fluent-emoji-flat), fluentb (a
 #                second, disjoint 48: heldout_fluent48b.txt),
 #                openmoji (heldout_openmoji48.txt vs openmoji), paper (the paper's 128 captions;
-#                IconClip scores only), colour (colour60.txt: colour binding, docs/embedded/COLOUR.md)
+#                IconClip scores only), colour (colour60.txt: colour binding, docs/embedded/COLOUR.md),
+#                valnoto / valtwemoji (the validation protocol that settings are chosen on:
+#                val_captions.txt, captions the prior never trained on, judged by a training set's
+#                drawings that retrieval leaves out; docs/embedded/TRAINING.md, "Validation")
 #
 # Needs: a release build (VF overrides the binary), `vectorfusion setup` (MiniLM + retrieval
 # index), data/icons from scripts/embedded/prepare_data.sh and the venv's python (PY) for the
@@ -31,12 +34,15 @@ read -r -a extra <<<"${EVAL_ARGS:-}"
 tag="$preset${TAG:+_$TAG}"
 if [ -n "${METHODS:-}" ]; then methods=(); for m in $METHODS; do methods+=(--method "$m"); done; fi
 for s in "${sets[@]}"; do
+  exclude=
   case "$s" in
     fluent) prompts=docs/embedded/heldout_fluent48.txt; ref=fluent-emoji-flat ;;
     fluentb) prompts=docs/embedded/heldout_fluent48b.txt; ref=fluent-emoji-flat ;;
     openmoji) prompts=docs/embedded/heldout_openmoji48.txt; ref=openmoji ;;
     paper) prompts=../shared/bench/svg_bench_prompts.txt; ref= ;;
     colour) prompts=docs/embedded/colour60.txt; ref= ;;
+    valnoto) prompts=docs/embedded/val_captions.txt; ref=noto; exclude=noto,noto-v1 ;;
+    valtwemoji) prompts=docs/embedded/val_captions.txt; ref=twemoji; exclude=twemoji ;;
     *) echo "unknown caption set $s" >&2; exit 2 ;;
   esac
   for mode in ${MODES:-retrieval noise}; do
@@ -44,7 +50,7 @@ for s in "${sets[@]}"; do
     run=("${methods[@]}")
     [ -n "${SCRATCH:-}" ] && [ "$mode" = retrieval ] && run+=(--method scratch)
     dir="$out/$s-$mode${TAG:+-$TAG}"
-    "$vf" eval --prompts "$prompts" "${run[@]}" "${flag[@]}" "${extra[@]}" --preset "$preset" \
+    VF_RETRIEVAL_EXCLUDE_SETS="${exclude:-}" "$vf" eval --prompts "$prompts" "${run[@]}" "${flag[@]}" "${extra[@]}" --preset "$preset" \
       --scorer models/vf-icon --out-dir "$dir" --json "${JSON_DIR:-docs/embedded}/eval_${s}_${mode}_$tag.json"
     if [ -n "$ref" ]; then
       for ((i = 1; i < ${#run[@]}; i += 2)); do

@@ -1,12 +1,11 @@
 #!/usr/bin/env bash
-# A sweep of one model hint on held-out captions (docs/embedded/TRAINING.md, "SDEdit strength",
-# "Retrieval share"): for each value, a copy of models/vf-icon (links to its weights) whose
-# model_index.json sets KEY, run through run_eval.sh via VF_DEFAULT_MODEL (METHODS, default
-# samples; retrieval on).
+# A sweep of one model hint (docs/embedded/TRAINING.md, "Validation"; val_sweep.sh drives it
+# over seeds and both judges): for each value, a copy of models/vf-icon (links to its weights)
+# whose model_index.json sets KEY, run through run_eval.sh via VF_DEFAULT_MODEL (METHODS, default
+# samples; retrieval on). Choose on the validation sets (valnoto, valtwemoji), never on the
+# held-out ones (fluent, fluentb, openmoji: they judge, they do not choose).
 #
-#   scripts/embedded/sweep_hint.sh _sdedit_strength "0.2 0.3 0.4" fluent fluentb   # repo root
-#   scripts/embedded/sweep_hint.sh _retrieval_share "0.5 1" fluent fluentb
-#   HINTS=_retrieval_share=1 TAG_SUFFIX=-pc scripts/embedded/sweep_hint.sh _retrieval_per_caption 2 fluent
+#   scripts/embedded/sweep_hint.sh _sdedit_strength "0.2 0.3 0.4" valnoto valtwemoji   # repo root
 #   METHODS="samples sd_live_sds" MODES="retrieval noise" scripts/embedded/sweep_hint.sh _colour_steer "off svg" colour
 #
 # HINTS="KEY=VALUE ..." fixes other hints in every copy (TAG_SUFFIX then names the variant); VF,

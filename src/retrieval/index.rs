@@ -190,6 +190,21 @@ impl IconIndex {
         self.file.icons.len()
     }
 
+    /// Leaves the icons of `sets` out of every search (their captions stay, drawn by the other
+    /// sets; a caption left without icons is never a hit). Other names are ignored.
+    pub fn exclude_sets(&mut self, sets: &[String]) {
+        let out: Vec<bool> = self
+            .file
+            .packages
+            .iter()
+            .map(|p| sets.contains(&p.set))
+            .collect();
+        let icons = &self.file.icons;
+        for list in &mut self.by_caption {
+            list.retain(|&i| !out[icons[i].0]);
+        }
+    }
+
     fn icon_ref(&self, i: usize) -> IconRef {
         let (p, name, c) = &self.file.icons[i];
         let pkg = &self.file.packages[*p];
@@ -324,6 +339,20 @@ mod tests {
         let two = idx.nearest(&q, 2, 2, 0).unwrap();
         assert_eq!(two[0].icon.caption, two[1].icon.caption);
         assert!(idx.nearest(&[1.0, 0.0], 1, 1, 0).is_err());
+    }
+
+    #[test]
+    fn an_excluded_set_is_never_retrieved() {
+        let mut idx = toy(PathBuf::from("/nonexistent"));
+        idx.exclude_sets(&["a".into(), "no-such-set".into()]);
+        let q = [0.8f32, 0.6, 0.0];
+        // "red heart" keeps set b's drawing for every seed; "sun" (only in a) is never a hit
+        for seed in 0..3 {
+            let hits = idx.nearest(&q, 3, 2, seed).unwrap();
+            let names: Vec<&str> = hits.iter().map(|h| h.icon.name.as_str()).collect();
+            assert_eq!(names, ["heart-red", "car"]);
+            assert!(hits.iter().all(|h| h.icon.set == "b"));
+        }
     }
 
     #[test]

@@ -15,6 +15,9 @@ use std::path::{Path, PathBuf};
 pub const ENV_ICONS_DIR: &str = "VF_ICONS_DIR";
 /// Environment variable naming the index directory (overrides the cache location).
 pub const ENV_INDEX_DIR: &str = "VF_RETRIEVAL_DIR";
+/// Environment variable listing icon sets (comma-separated) that retrieval passes over: the
+/// validation protocol's judge set (`docs/embedded/TRAINING.md`, "Validation").
+pub const ENV_EXCLUDE_SETS: &str = "VF_RETRIEVAL_EXCLUDE_SETS";
 /// The largest tarball accepted (the biggest pinned set is under 4 MB).
 const MAX_TARBALL_BYTES: u64 = 64 << 20;
 /// The largest `icons.json` accepted inside a tarball.
@@ -79,13 +82,16 @@ pub fn pinned_packages(
 }
 
 /// Where indexes live: `VF_RETRIEVAL_DIR`, else `<cache>/vectorfusion/retrieval-<sha8>` (the
-/// first 8 hex digits of the pinned `packages.json`), plus `VF_ICONS_DIR` and `VF_OFFLINE`.
+/// first 8 hex digits of the pinned `packages.json`), plus `VF_ICONS_DIR`, `VF_OFFLINE` and the
+/// sets `VF_RETRIEVAL_EXCLUDE_SETS` leaves out of a loaded index.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct RetrievalLocations {
     pub index_dir: Option<PathBuf>,
     pub cache: Option<PathBuf>,
     pub icons_dir: Option<PathBuf>,
     pub offline: bool,
+    /// Icon sets [`RetrievalLocations::load`] leaves out (their icons are never retrieved).
+    pub exclude_sets: Vec<String>,
 }
 
 impl RetrievalLocations {
@@ -99,6 +105,9 @@ impl RetrievalLocations {
                 .and_then(|c| c.parent().map(Path::to_path_buf)),
             icons_dir: env_path(ENV_ICONS_DIR),
             offline: minilm.offline,
+            exclude_sets: std::env::var(ENV_EXCLUDE_SETS)
+                .map(|v| set_list(&v))
+                .unwrap_or_default(),
         }
     }
 
@@ -118,13 +127,25 @@ impl RetrievalLocations {
             })
     }
 
-    /// The installed index of `model_dir`'s pinned packages; `Ok(None)` when it pins none.
+    /// The installed index of `model_dir`'s pinned packages, without [`Self::exclude_sets`];
+    /// `Ok(None)` when it pins none.
     pub fn load(&self, model_dir: &Path) -> Result<Option<IconIndex>, RetrievalError> {
         let Some((_, sha)) = pinned_packages(model_dir)? else {
             return Ok(None);
         };
-        IconIndex::load(&self.dir_for(&sha)?, &sha).map(Some)
+        let mut index = IconIndex::load(&self.dir_for(&sha)?, &sha)?;
+        index.exclude_sets(&self.exclude_sets);
+        Ok(Some(index))
     }
+}
+
+/// The set names of a comma-separated list (`"noto, noto-v1"`), blanks dropped.
+fn set_list(v: &str) -> Vec<String> {
+    v.split(',')
+        .map(str::trim)
+        .filter(|s| !s.is_empty())
+        .map(String::from)
+        .collect()
 }
 
 /// Why an npm tarball holds no readable `package/icons.json`.
@@ -367,6 +388,16 @@ mod tests {
             .collect())
     }
 
+    #[test]
+    fn excluded_sets_are_a_comma_separated_list() {
+        assert_eq!(
+            set_list(" noto, noto-v1,,twemoji "),
+            ["noto", "noto-v1", "twemoji"]
+        );
+        assert!(set_list("").is_empty());
+        assert!(set_list(" , ").is_empty());
+    }
+
     /// The index and icon directories under `root` (where [`model_with`] puts the tarball),
     /// with downloads off.
     fn offline_locations(root: &Path) -> RetrievalLocations {
@@ -375,6 +406,7 @@ mod tests {
             cache: None,
             icons_dir: Some(root.join("icons")),
             offline: true,
+            exclude_sets: Vec::new(),
         }
     }
 
