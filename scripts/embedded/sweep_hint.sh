@@ -7,6 +7,7 @@
 #
 #   scripts/embedded/sweep_hint.sh _sdedit_strength "0.2 0.3 0.4" valnoto valtwemoji   # repo root
 #   METHODS="samples sd_live_sds" MODES="retrieval noise" scripts/embedded/sweep_hint.sh _colour_steer "off svg" colour
+#   MODES=noise scripts/embedded/sweep_hint.sh scheduler._class_name EulerAncestralDiscreteScheduler valnoto
 #
 # HINTS="KEY=VALUE ..." fixes other hints in every copy (TAG_SUFFIX then names the variant); VF,
 # PY, EVAL_ARGS as for run_eval.sh; SWEEP (default /tmp/sweep) holds the model copies,
@@ -20,22 +21,30 @@ shift 2
 sweep=${SWEEP:-/tmp/sweep}
 for v in $values; do
   tag="${key#_}$v${TAG_SUFFIX:-}"
+  tag="${tag#scheduler.}" && tag="${tag#_}"
   d="$sweep/m-$tag"
   rm -rf "$d" && mkdir -p "$d"
-  for c in unet vae scheduler scorer text_encoder tokenizer retrieval; do
+  for c in unet vae scorer text_encoder tokenizer retrieval; do
     [ -e "models/vf-icon/$c" ] && ln -s "$PWD/models/vf-icon/$c" "$d/$c"
   done
-  # HINTS="KEY=VALUE ..." sets other hints first (a combination), then KEY=v.
-  python3 - "$d/model_index.json" ${HINTS:-} "$key=$v" <<'PY'
+  mkdir "$d/scheduler"
+  # HINTS="KEY=VALUE ..." sets other hints first (a combination), then KEY=v; a key
+  # `scheduler.FIELD` sets FIELD of scheduler_config.json instead (`scheduler._class_name`).
+  python3 - "$d" ${HINTS:-} "$key=$v" <<'PY'
 import json, sys
 m = json.load(open("models/vf-icon/model_index.json"))
+sched = json.load(open("models/vf-icon/scheduler/scheduler_config.json"))
 for kv in sys.argv[2:]:
     k, v = kv.split("=", 1)
+    target = m
+    if k.startswith("scheduler."):
+        target, k = sched, k.removeprefix("scheduler.")
     try:
-        m[k] = int(v) if v.isdigit() else float(v)
+        target[k] = int(v) if v.isdigit() else float(v)
     except ValueError:
-        m[k] = v  # a word (_colour_steer)
-json.dump(m, open(sys.argv[1], "w"), indent=2)
+        target[k] = v  # a word (_colour_steer, a scheduler's class)
+json.dump(m, open(sys.argv[1] + "/model_index.json", "w"), indent=2)
+json.dump(sched, open(sys.argv[1] + "/scheduler/scheduler_config.json", "w"), indent=2)
 PY
   echo "== $key $v $(date -u +%T)"
   VF_DEFAULT_MODEL=$d OUT="$sweep/out" JSON_DIR="$sweep" TAG="$tag" METHODS=${METHODS:-samples} MODES=${MODES:-retrieval} \

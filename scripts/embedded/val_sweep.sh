@@ -22,7 +22,8 @@ for s in $seeds; do
   EVAL_ARGS="--seed $s" TAG_SUFFIX="-s$s" scripts/embedded/sweep_hint.sh "$key" "$values" "${sets[@]}"
   [ "$mode" = noise ] || continue
   for v in $values; do
-    d="$SWEEP/out/valnoto-noise-${key#_}$v-s$s"
+    tag="${key#_}$v-s$s" && tag="${tag#scheduler.}" && tag="${tag#_}"  # as sweep_hint.sh names it
+    d="$SWEEP/out/valnoto-noise-$tag"
     for m in $METHODS; do
       "$py" scripts/embedded/pixel_rprecision.py score --captions docs/embedded/val_captions.txt \
         --set twemoji --dir "$d/$m" --vf "$vf" --json "$d/$m.twemoji.json" >/dev/null
