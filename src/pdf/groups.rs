@@ -9,9 +9,8 @@
 //! - A mask is a soft mask of its content, read by its luminosity or its alpha; a mask's own
 //!   mask masks the content first. PDF computes luminosity with the weights of its
 //!   non-separable blend modes (0.30, 0.59, 0.11) where SVG uses 0.2125, 0.7154, 0.0721, so a
-//!   luminance mask's colours and gradient stops are written as greys of SVG's luminance, which
-//!   PDF reads back unchanged (an image in a mask keeps its colours; a blend mode inside a mask
-//!   mixes the greys).
+//!   luminance mask's colours, gradient stops and texels are written as greys of SVG's
+//!   luminance, which PDF reads back unchanged (a blend mode inside a mask mixes the greys).
 
 use super::{Channel, Doc, Mode, State, path};
 use crate::scene::{Clip, Content, Group, Mask, MaskKind, Shape};

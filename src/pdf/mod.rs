@@ -112,7 +112,8 @@ fn color(out: &mut String, c: Rgba, operator: &str) {
 
 /// What a pattern `/P{i}` paints.
 enum Paint<'a> {
-    Texture(&'a Texture),
+    /// A texture, and what of its texels' colours it paints.
+    Texture(&'a Texture, Channel),
     /// A gradient, the range of its parameter `t` the shape covers, and what of its stops'
     /// colours it paints.
     Gradient(&'a Gradient, [f32; 2], Channel),
@@ -122,7 +123,7 @@ impl Paint<'_> {
     /// How many objects it takes (the pattern last).
     fn objects(&self) -> usize {
         match self {
-            Paint::Texture(_) => 3,
+            Paint::Texture(..) => 3,
             Paint::Gradient(..) => 1,
         }
     }
@@ -231,7 +232,11 @@ impl<'a> Doc<'a> {
         let g = shape.gradients.as_deref();
         let fill_op = fill_op(shape);
         if let (Some(t), Some(_)) = (g.and_then(|g| g.texture.as_deref()), shape.fill) {
-            let _ = writeln!(out, "q /Pattern cs /P{} scn", self.paint(Paint::Texture(t)));
+            let _ = writeln!(
+                out,
+                "q /Pattern cs /P{} scn",
+                self.paint(Paint::Texture(t, self.channel))
+            );
             path(out, shape);
             let _ = writeln!(out, "{fill_op} Q");
         } else if let (Some(gr), Some(_)) = (g.and_then(|g| g.fill.as_ref()), shape.fill) {
@@ -422,7 +427,7 @@ pub fn to_pdf(scene: &Scene) -> Vec<u8> {
     for ((p, on_page), first) in doc.paints.iter().zip(firsts) {
         let flip = on_page.then_some(page_h);
         match p {
-            Paint::Texture(t) => objects.extend(texture_objects(t, first, flip)),
+            Paint::Texture(t, channel) => objects.extend(texture_objects(t, first, flip, *channel)),
             Paint::Gradient(g, range, channel) => {
                 objects.push(gradient_object(g, *range, flip, *channel))
             }

@@ -103,6 +103,23 @@ impl Channel {
     }
 }
 
+impl Channel {
+    /// A straight RGBA texel's colour as this channel draws it.
+    pub(super) fn map_texel(self, p: [u8; 4]) -> [u8; 3] {
+        if self == Channel::Colour {
+            return [p[0], p[1], p[2]];
+        }
+        let c = Rgba::new(
+            p[0] as f32 / 255.0,
+            p[1] as f32 / 255.0,
+            p[2] as f32 / 255.0,
+            p[3] as f32 / 255.0,
+        );
+        let m = self.map(c);
+        [m.r, m.g, m.b].map(|v| (v * 255.0).round().clamp(0.0, 255.0) as u8)
+    }
+}
+
 /// The stops of `g` as a function of `t` over `range` (whole periods of `repeat` or `reflect`,
 /// else `[0, 1]`): a stitching function of linear pieces between stops, of their colours as
 /// `channel` draws them (opaque: the alpha is the pattern's graphics state).
@@ -240,15 +257,20 @@ fn deflate(data: &[u8]) -> Vec<u8> {
 }
 
 /// The three objects that draw texture `t` as a tiling pattern (`flip`: see [`pattern_matrix`]):
-/// the texels' colours (straight RGB), their alpha (the soft mask, object `first + 1`), and the
-/// pattern (cell = the texture, placed by its transform and the page's flip); `first` is the
-/// colour image's object number.
-pub(super) fn texture_objects(t: &Texture, first: usize, flip: Option<f32>) -> [Vec<u8>; 3] {
+/// the texels' colours (straight RGB, as `channel` draws them), their alpha (the soft mask,
+/// object `first + 1`), and the pattern (cell = the texture, placed by its transform and the
+/// page's flip); `first` is the colour image's object number.
+pub(super) fn texture_objects(
+    t: &Texture,
+    first: usize,
+    flip: Option<f32>,
+    channel: Channel,
+) -> [Vec<u8>; 3] {
     let (w, h) = (t.width, t.height);
     let straight = t.straight_pixels();
     let rgb: Vec<u8> = straight
         .chunks_exact(4)
-        .flat_map(|p| [p[0], p[1], p[2]])
+        .flat_map(|p| channel.map_texel([p[0], p[1], p[2], p[3]]))
         .collect();
     let alpha: Vec<u8> = straight.chunks_exact(4).map(|p| p[3]).collect();
     let interpolate = t.filter != TextureFilter::Nearest;

@@ -112,13 +112,19 @@ fn a_texture_is_a_tiling_pattern_of_its_straight_texels() {
     );
     assert!(text.contains("q 2 0 0 -1 0 1 cm /I Do Q"));
     // The colour image holds straight RGB, the mask the alpha.
-    let streams: Vec<Vec<u8>> = pdf
-        .windows(7)
+    let streams = streams(&pdf);
+    assert_eq!(inflate(&streams[1]), [255, 0, 0, 0, 0, 255]);
+    assert_eq!(inflate(&streams[2]), [128, 255]);
+}
+
+/// The content of every stream object of `pdf`, in order.
+fn streams(pdf: &[u8]) -> Vec<Vec<u8>> {
+    let text = ascii(pdf);
+    pdf.windows(7)
         .enumerate()
-        .filter(|(i, w)| w == b"stream\n" && pdf[i - 1] == b'\n')
+        .filter(|(i, w)| *w == b"stream\n" && pdf[i - 1] == b'\n')
         .map(|(i, _)| {
-            let head = &text[..i];
-            let n: usize = head
+            let n: usize = text[..i]
                 .rsplit("/Length ")
                 .next()
                 .and_then(|t| t.split_whitespace().next())
@@ -126,17 +132,59 @@ fn a_texture_is_a_tiling_pattern_of_its_straight_texels() {
                 .unwrap();
             pdf[i + 7..i + 7 + n].to_vec()
         })
+        .collect()
+}
+
+fn inflate(b: &[u8]) -> Vec<u8> {
+    try_inflate(b).unwrap()
+}
+
+fn try_inflate(b: &[u8]) -> Option<Vec<u8>> {
+    use std::io::Read as _;
+    let mut out = Vec::new();
+    flate2::read::ZlibDecoder::new(b)
+        .read_to_end(&mut out)
+        .ok()?;
+    Some(out)
+}
+
+#[test]
+fn an_image_in_a_luminance_mask_is_drawn_in_svg_luminance_greys() {
+    use crate::scene::{Affine, Content, Gradients, Group, Mask, MaskKind, TextureEdge};
+    let mut s = scene();
+    let n = s.shapes.len();
+    let mut img = Shape::square(2.0, 2.0, 10.0, Rgba::BLACK).unwrap();
+    img.gradients = Some(Box::new(Gradients {
+        fill: None,
+        stroke: None,
+        texture: Some(Box::new(Texture {
+            width: 2,
+            height: 1,
+            // opaque red, opaque green
+            pixels: vec![255, 0, 0, 255, 0, 255, 0, 255],
+            transform: Affine([5.0, 0.0, 0.0, 10.0, 2.0, 2.0]),
+            edge: TextureEdge::Pad,
+            filter: TextureFilter::Nearest,
+        })),
+    }));
+    let mut g = Group::new(0..n, 1.0);
+    g.mask = Some(Box::new(Mask {
+        kind: MaskKind::Luminance,
+        content: Content {
+            shapes: vec![img],
+            groups: Vec::new(),
+        },
+        mask: None,
+    }));
+    s.groups.push(g);
+    let pdf = to_pdf(&s);
+    let greys: Vec<Vec<u8>> = streams(&pdf)
+        .iter()
+        .filter_map(|b| try_inflate(b))
+        .filter(|b| b.len() == 6)
         .collect();
-    let inflate = |b: &[u8]| {
-        use std::io::Read as _;
-        let mut out = Vec::new();
-        flate2::read::ZlibDecoder::new(b)
-            .read_to_end(&mut out)
-            .unwrap();
-        out
-    };
-    assert_eq!(inflate(&streams[1]), [255, 0, 0, 0, 0, 255]);
-    assert_eq!(inflate(&streams[2]), [128, 255]);
+    // SVG's luminance of red (0.2125) and green (0.7154), as greys
+    assert_eq!(greys, [vec![54, 54, 54, 182, 182, 182]], "{}", ascii(&pdf));
 }
 
 #[test]
