@@ -252,12 +252,27 @@ impl<'a> Doc<'a> {
         let Some(s) = shape.stroke.filter(|s| s.width > 0.0) else {
             return;
         };
+        // PDF paints a zero-length subpath's cap only when round (ISO 32000-1, 8.5.3.2); SVG
+        // draws a square cap as a square along the x axis, as the rasteriser does: filled here.
+        let dot = (s.cap == LineCap::Square && shape.points.iter().all(|p| *p == shape.points[0]))
+            .then_some(shape.points[0]);
+        let (space, set, rgb) = if dot.is_some() {
+            ("cs", "scn", "rg")
+        } else {
+            ("CS", "SCN", "RG")
+        };
         if let Some(gr) = g.and_then(|g| g.stroke.as_ref()) {
-            self.gradient_paint(out, gr, shape, "CS", "SCN");
+            self.gradient_paint(out, gr, shape, space, set);
         } else if s.color.a > 0.0 {
             let _ = writeln!(out, "q {} gs", self.state(State::Alpha(s.color.a)));
-            color(out, self.channel.map(s.color), "RG");
+            color(out, self.channel.map(s.color), rgb);
         } else {
+            return;
+        }
+        if let Some(c) = dot {
+            let r = s.width / 2.0;
+            op(out, &[c.x - r, c.y - r, s.width, s.width], "re");
+            out.push_str("f Q\n");
             return;
         }
         op(out, &[s.width], "w");

@@ -273,6 +273,19 @@ fn strokes_keep_their_caps_joins_and_miter_limit() {
 }
 
 #[test]
+fn a_zero_length_subpath_with_square_caps_is_a_filled_square() {
+    let svg = r##"<svg xmlns="http://www.w3.org/2000/svg" width="40" height="20">
+        <path d="M10 10 L10 10" fill="none" stroke="#00f" stroke-width="4" stroke-linecap="square"/>
+        <path d="M30 10 L30 10" fill="none" stroke="#f00" stroke-width="4" stroke-linecap="round"/></svg>"##;
+    let text = ascii(&to_pdf(&crate::svg::from_svg(svg).unwrap()));
+    // the square one as a square fill in the stroke's colour; the round one stroked (PDF
+    // draws a round cap on a zero-length subpath)
+    assert!(text.contains("0 0 1 rg\n8 8 4 4 re\nf Q"), "{text}");
+    assert!(text.contains("1 0 0 RG\n4 w\n"), "{text}");
+    assert!(!text.contains("0 0 1 RG"), "{text}");
+}
+
+#[test]
 fn a_pad_gradient_with_a_step_at_its_start_pads_with_the_outer_stop() {
     let svg = r##"<svg xmlns="http://www.w3.org/2000/svg" width="40" height="20">
         <linearGradient id="g" x1="0.2" x2="0.8"><stop offset="0" stop-color="#000"/><stop offset="0" stop-color="#f00"/><stop offset="1" stop-color="#00f"/></linearGradient>
