@@ -15,7 +15,7 @@
 //! opacities, which a shading cannot carry, are a soft mask of the same gradient painting them
 //! as greys. A group is a form XObject painted with its opacity, blend mode, clip and mask
 //! (`groups`); a pattern drawn inside a form is placed in canvas pixels, the form's space, not
-//! the page's.
+//! the page's. The page and every form name one resources dictionary, the last object.
 //!
 //! Invariant: the output is a complete PDF whose cross-reference offsets are exact; writing
 //! cannot fail for a valid [`Scene`] (non-finite numbers are written as `0`).
@@ -428,12 +428,14 @@ pub fn to_pdf(scene: &Scene) -> Vec<u8> {
         }
         resources.push_str(">>");
     }
+    // One resources dictionary, the last object, for the page and every form.
+    let res = first_form + doc.forms.len();
     let mut objects: Vec<Vec<u8>> = vec![
         b"<< /Type /Catalog /Pages 2 0 R >>".to_vec(),
         b"<< /Type /Pages /Kids [3 0 R] /Count 1 >>".to_vec(),
         format!(
             "<< /Type /Page /Parent 2 0 R /MediaBox [0 0 {media}] \
-             /Resources << {resources} >> /Contents 4 0 R >>"
+             /Resources {res} 0 R /Contents 4 0 R >>"
         )
         .into_bytes(),
         stream_object("", stream.as_bytes()),
@@ -453,11 +455,12 @@ pub fn to_pdf(scene: &Scene) -> Vec<u8> {
         objects.push(stream_object(
             &format!(
                 "/Type /XObject /Subtype /Form /BBox [{bbox}] \
-                 /Group << /S /Transparency /I true /CS /DeviceRGB >> /Resources << {resources} >>"
+                 /Group << /S /Transparency /I true /CS /DeviceRGB >> /Resources {res} 0 R"
             ),
             body.as_bytes(),
         ));
     }
+    objects.push(format!("<< {resources} >>").into_bytes());
     let mut pdf = b"%PDF-1.4\n%\xe2\xe3\xcf\xd3\n".to_vec();
     let mut offsets = Vec::with_capacity(objects.len());
     for (i, body) in objects.iter().enumerate() {

@@ -39,7 +39,7 @@ fn numbers_are_short_and_finite() {
 
 #[test]
 fn every_cross_reference_points_at_its_object() {
-    cross_references_hold(&ascii(&to_pdf(&scene())), 5);
+    cross_references_hold(&ascii(&to_pdf(&scene())), 6);
 }
 
 /// The PDF has `n` objects and each cross-reference entry points at its object.
@@ -100,7 +100,7 @@ fn a_texture_is_a_tiling_pattern_of_its_straight_texels() {
     s.shapes.push(img);
     let pdf = to_pdf(&s);
     let text = ascii(&pdf);
-    cross_references_hold(&text, 8);
+    cross_references_hold(&text, 9);
     assert!(text.contains("/Pattern << /P0 8 0 R >>"), "{text}");
     assert!(text.contains("q /Pattern cs /P0 scn\n2 2 m"), "{text}");
     assert!(text.contains("/SMask 7 0 R"));
@@ -217,8 +217,11 @@ fn groups_are_forms_with_their_clip_mask_opacity_and_blend() {
     let text = ascii(&to_pdf(&scene));
     // One gradient pattern (object 6), then the forms: the first two groups' shapes (7, 8),
     // the two-circle clip's coverage (9), the third group's shapes (10), the mask's content
-    // (11) and the masked group (12).
-    cross_references_hold(&text, 6 + 6);
+    // (11) and the masked group (12); the resources they share (13).
+    cross_references_hold(&text, 6 + 6 + 1);
+    // Every form and the page name the one resources dictionary.
+    assert_eq!(text.matches("/Resources 13 0 R").count(), 7, "{text}");
+    assert_eq!(text.matches("/ExtGState <<").count(), 1, "{text}");
     // A one-shape clip is a clipping path around the group's form, painted at half opacity.
     assert!(text.contains("q\n2 2 m\n"), "{text}");
     assert!(text.contains("h\nW n\n/G1 gs /X0 Do Q"), "{text}");
@@ -250,7 +253,7 @@ fn stop_opacities_are_a_soft_mask_of_greys() {
         <rect width="40" height="20" fill="url(#g)"/></svg>"##;
     let text = ascii(&to_pdf(&crate::svg::from_svg(svg).unwrap()));
     // The colours (object 6) on the page, the alphas (7) in the mask's form (8).
-    cross_references_hold(&text, 8);
+    cross_references_hold(&text, 9);
     assert!(text.contains("/C0 [1 0 0] /C1 [0 0 1]"), "{text}");
     assert!(text.contains("/C0 [1 1 1] /C1 [0.25 0.25 0.25]"), "{text}");
     assert!(text.contains("/SMask << /Type /Mask /S /Luminosity /G 8 0 R >>"));
