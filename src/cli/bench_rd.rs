@@ -44,6 +44,7 @@ use super::bench_vectorize::{
 };
 use super::vectorize::load_input;
 use super::{CliError, ResultExt};
+use crate::retrieval::install::comma_list;
 use crate::stages::live::{InitMode, LiveConfig, PathBudget};
 use peers::{ImageTracer, probe_potrace};
 use serde::Serialize;
@@ -180,14 +181,6 @@ fn parse_list<T: std::str::FromStr>(
     Ok(out)
 }
 
-fn names(text: &str) -> Vec<String> {
-    text.split(',')
-        .map(str::trim)
-        .filter(|s| !s.is_empty())
-        .map(String::from)
-        .collect()
-}
-
 /// Our small-budget runs besides the plain `--paths` ones: each path budget started from
 /// vtracer's trace (`--vtracer-init`), and each `--max-bytes` budget from the largest path
 /// budget (from both starts with `--vtracer-init`).
@@ -308,7 +301,7 @@ struct Grid {
 
 impl Grid {
     fn parse(r: &RdArgs) -> Result<Self, CliError> {
-        let mut peers = names(&r.peers);
+        let mut peers = comma_list(&r.peers);
         if peers == ["none"] {
             peers.clear();
         }
@@ -339,7 +332,7 @@ impl Grid {
                 "a positive size in KB",
             )?,
             peers,
-            bw_sets: names(&r.bw_sets),
+            bw_sets: comma_list(&r.bw_sets),
             vt_input: r.vt_input,
             potrace: r.potrace.clone(),
         })

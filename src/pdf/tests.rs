@@ -79,10 +79,10 @@ fn cross_references_hold(text: &str, n: usize) {
     assert_eq!(declared, e - s);
 }
 
-#[test]
-fn a_texture_is_a_tiling_pattern_of_its_straight_texels() {
+/// A 10-pixel square at (2, 2) filled with a 2×1 texture of premultiplied `pixels`, one texel
+/// 5 × 10 pixels, drawn nearest.
+fn image_square(pixels: Vec<u8>) -> Shape {
     use crate::scene::{Affine, Gradients, TextureEdge};
-    let mut s = scene();
     let mut img = Shape::square(2.0, 2.0, 10.0, Rgba::BLACK).unwrap();
     img.gradients = Some(Box::new(Gradients {
         fill: None,
@@ -90,14 +90,21 @@ fn a_texture_is_a_tiling_pattern_of_its_straight_texels() {
         texture: Some(Box::new(Texture {
             width: 2,
             height: 1,
-            // premultiplied: red at half alpha, opaque blue
-            pixels: vec![128, 0, 0, 128, 0, 0, 255, 255],
+            pixels,
             transform: Affine([5.0, 0.0, 0.0, 10.0, 2.0, 2.0]),
             edge: TextureEdge::Pad,
             filter: TextureFilter::Nearest,
         })),
     }));
-    s.shapes.push(img);
+    img
+}
+
+#[test]
+fn a_texture_is_a_tiling_pattern_of_its_straight_texels() {
+    let mut s = scene();
+    // premultiplied: red at half alpha, opaque blue
+    s.shapes
+        .push(image_square(vec![128, 0, 0, 128, 0, 0, 255, 255]));
     let pdf = to_pdf(&s);
     let text = ascii(&pdf);
     cross_references_hold(&text, 9);
@@ -150,23 +157,11 @@ fn try_inflate(b: &[u8]) -> Option<Vec<u8>> {
 
 #[test]
 fn an_image_in_a_luminance_mask_is_drawn_in_svg_luminance_greys() {
-    use crate::scene::{Affine, Content, Gradients, Group, Mask, MaskKind, TextureEdge};
+    use crate::scene::{Content, Group, Mask, MaskKind};
     let mut s = scene();
     let n = s.shapes.len();
-    let mut img = Shape::square(2.0, 2.0, 10.0, Rgba::BLACK).unwrap();
-    img.gradients = Some(Box::new(Gradients {
-        fill: None,
-        stroke: None,
-        texture: Some(Box::new(Texture {
-            width: 2,
-            height: 1,
-            // opaque red, opaque green
-            pixels: vec![255, 0, 0, 255, 0, 255, 0, 255],
-            transform: Affine([5.0, 0.0, 0.0, 10.0, 2.0, 2.0]),
-            edge: TextureEdge::Pad,
-            filter: TextureFilter::Nearest,
-        })),
-    }));
+    // opaque red, opaque green
+    let img = image_square(vec![255, 0, 0, 255, 0, 255, 0, 255]);
     let mut g = Group::new(0..n, 1.0);
     g.mask = Some(Box::new(Mask {
         kind: MaskKind::Luminance,

@@ -106,7 +106,7 @@ impl RetrievalLocations {
             icons_dir: env_path(ENV_ICONS_DIR),
             offline: minilm.offline,
             exclude_sets: std::env::var(ENV_EXCLUDE_SETS)
-                .map(|v| set_list(&v))
+                .map(|v| comma_list(&v))
                 .unwrap_or_default(),
         }
     }
@@ -139,8 +139,8 @@ impl RetrievalLocations {
     }
 }
 
-/// The set names of a comma-separated list (`"noto, noto-v1"`), blanks dropped.
-fn set_list(v: &str) -> Vec<String> {
+/// The names of a comma-separated list (`"noto, noto-v1"`), trimmed, blanks dropped.
+pub fn comma_list(v: &str) -> Vec<String> {
     v.split(',')
         .map(str::trim)
         .filter(|s| !s.is_empty())
@@ -391,11 +391,11 @@ mod tests {
     #[test]
     fn excluded_sets_are_a_comma_separated_list() {
         assert_eq!(
-            set_list(" noto, noto-v1,,twemoji "),
+            comma_list(" noto, noto-v1,,twemoji "),
             ["noto", "noto-v1", "twemoji"]
         );
-        assert!(set_list("").is_empty());
-        assert!(set_list(" , ").is_empty());
+        assert!(comma_list("").is_empty());
+        assert!(comma_list(" , ").is_empty());
     }
 
     /// The index and icon directories under `root` (where [`model_with`] puts the tarball),

@@ -1,16 +1,16 @@
 //! The image sets of an R–D run: the sub-folders of `--images` (or the PNGs in it), the ones
 //! `--sets` names, `--limit` files of each spread evenly in name order.
 
-use super::names;
 use crate::cli::bench_vectorize::BenchVectorizeArgs;
 use crate::cli::{CliError, ResultExt};
+use crate::retrieval::install::comma_list;
 use std::path::{Path, PathBuf};
 
 /// The image sets of `--images`, only those of `--sets` when given; none is a usage error.
 pub fn select_sets(a: &BenchVectorizeArgs) -> Result<Vec<(String, Vec<PathBuf>)>, CliError> {
     let mut sets = discover_sets(&a.images)?;
     if let Some(only) = &a.rd.sets {
-        let only = names(only);
+        let only = comma_list(only);
         if let Some(missing) = only.iter().find(|s| !sets.iter().any(|(n, _)| n == *s)) {
             let found: Vec<&str> = sets.iter().map(|(n, _)| n.as_str()).collect();
             return Err(CliError::Usage(format!(
