@@ -165,7 +165,7 @@ fn parse_list<T: std::str::FromStr>(
     what: &str,
 ) -> Result<Vec<T>, CliError> {
     let mut out = Vec::new();
-    for part in text.split(',').map(str::trim).filter(|p| !p.is_empty()) {
+    for part in comma_list(text) {
         match part.parse::<T>() {
             Ok(v) if ok(&v) => out.push(v),
             _ => {

@@ -254,8 +254,11 @@ impl<'a> Doc<'a> {
         };
         // PDF paints a zero-length subpath's cap only when round (ISO 32000-1, 8.5.3.2); SVG
         // draws a square cap as a square along the x axis, as the rasteriser does: filled here.
-        let dot = (s.cap == LineCap::Square && shape.points.iter().all(|p| *p == shape.points[0]))
-            .then_some(shape.points[0]);
+        let dot = shape
+            .points
+            .first()
+            .filter(|&&p0| s.cap == LineCap::Square && shape.points.iter().all(|p| *p == p0))
+            .copied();
         let (space, set, rgb) = if dot.is_some() {
             ("cs", "scn", "rg")
         } else {

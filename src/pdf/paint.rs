@@ -101,9 +101,7 @@ impl Channel {
             }
         }
     }
-}
 
-impl Channel {
     /// A straight RGBA texel's colour as this channel draws it.
     pub(super) fn map_texel(self, p: [u8; 4]) -> [u8; 3] {
         if self == Channel::Colour {
