@@ -57,12 +57,26 @@ def first_by_caption(raw, caps, set_name):
     return out
 
 
+def ranks(pictures, refs):
+    """pictures, refs: [N, D]; for each i, how many refs are nearer (L2) to picture i than ref i."""
+    d = ((pictures[:, None, :] - refs[None, :, :]) ** 2).sum(-1)
+    return (d < np.diag(d)[:, None]).sum(1)
+
+
 def rprecision(pictures, refs):
     """pictures, refs: [N, D]; fraction of i whose nearest ref (L2) is ref i, and the mean rank."""
-    d = ((pictures[:, None, :] - refs[None, :, :]) ** 2).sum(-1)
-    own = np.diag(d)
-    rank = (d < own[:, None]).sum(1)
+    rank = ranks(pictures, refs)
     return float((rank == 0).mean()), float(rank.mean())
+
+
+def load_pictures(folder, n, vf):
+    """NNNN.svg (rendered by `vf`) or NNNN.png for N = 1..n in `folder`, as [n, D] over white."""
+    pics = []
+    for i in range(1, n + 1):
+        base = os.path.join(folder, f"{i:04}")
+        path = base + ".svg" if os.path.exists(base + ".svg") else base + ".png"
+        pics.append(small(over_white(read_picture(path, vf))))
+    return np.stack(pics)
 
 
 def read_picture(path, vf):
@@ -165,12 +179,7 @@ def main():
         r1, mr = rprecision(pics, refs[keep])
         res = {"set": args.set, "other": args.other, "n": len(keep), "pixel_r_precision": r1, "mean_rank": mr}
     else:
-        pics = []
-        for i in range(1, len(captions) + 1):
-            base = os.path.join(args.dir, f"{i:04}")
-            path = base + ".svg" if os.path.exists(base + ".svg") else base + ".png"
-            pics.append(small(over_white(read_picture(path, args.vf))))
-        r1, mr = rprecision(np.stack(pics), refs)
+        r1, mr = rprecision(load_pictures(args.dir, len(captions), args.vf), refs)
         res = {"set": args.set, "dir": args.dir, "n": len(captions), "pixel_r_precision": r1, "mean_rank": mr,
                "chance": 1 / len(captions)}
     print(json.dumps(res))

@@ -38,30 +38,28 @@ def main():
         by = pr.first_by_caption(raw, tcaps, j)
         refs[j] = np.stack([pr.small(by[c]) for c in caps])
     seeds = [int(s) for s in args.seeds.split(",")]
+    vf = os.environ.get("VF", "target/release/vectorfusion")
 
     def judged(run):
         """[judgements, captions] hits and ranks of one MODE:TAG."""
         mode, tag = run.split(":", 1)
-        hits, ranks = [], []
+        hits, rank_rows = [], []
         for s in seeds:
+            pictures = {}  # from noise both judges read one folder
             for j in JUDGES:
                 folder = "valnoto" if mode == "noise" or j == "noto" else f"val{j}"
-                d = os.path.join(args.sweep, "out", f"{folder}-{mode}-{tag}-s{s}", args.method)
-                pics = []
-                for i in range(1, len(caps) + 1):
-                    base = os.path.join(d, f"{i:04}")
-                    path = base + ".svg" if os.path.exists(base + ".svg") else base + ".png"
-                    pics.append(pr.small(pr.over_white(pr.read_picture(path, os.environ.get("VF", "target/release/vectorfusion")))))
-                dist = ((np.stack(pics)[:, None, :] - refs[j][None]) ** 2).sum(-1)
-                rank = (dist < np.diag(dist)[:, None]).sum(1)
+                if folder not in pictures:
+                    d = os.path.join(args.sweep, "out", f"{folder}-{mode}-{tag}-s{s}", args.method)
+                    pictures[folder] = pr.load_pictures(d, len(caps), vf)
+                rank = pr.ranks(pictures[folder], refs[j])
                 hits.append(rank == 0)
-                ranks.append(rank)
-        return np.array(hits, float), np.array(ranks, float)
+                rank_rows.append(rank)
+        return np.array(hits, float), np.array(rank_rows, float)
 
-    base_h, base_r = judged(args.baseline)
+    judgements = {run: judged(run) for run in dict.fromkeys([args.baseline] + args.runs)}
+    base_h, base_r = judgements[args.baseline]
     rows = []
-    for run in [args.baseline] + [r for r in args.runs if r != args.baseline]:
-        h, r = judged(run)
+    for run, (h, r) in judgements.items():
         dh, dr = (h - base_h).mean(0), (r - base_r).mean(0)  # per caption
         se = lambda x: float(x.std(ddof=1) / np.sqrt(len(x)))
         row = {"run": run, "pixel_r_precision": float(h.mean()), "mean_rank": float(r.mean()),

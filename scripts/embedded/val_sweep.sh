@@ -1,9 +1,9 @@
 #!/usr/bin/env bash
 # The validation protocol's sweep of one model hint (docs/embedded/TRAINING.md, "Validation"):
-# for each seed, sweep_hint.sh on the validation captions judged by noto and by twemoji (each
-# judge's set left out of retrieval); from noise the pictures do not depend on retrieval, so
-# one run per seed is judged by both. Samples only (METHODS overrides); then
-# val_compare.py tabulates the values with paired standard errors.
+# for each seed, sweep_hint.sh on the validation captions, once per judge (noto, twemoji) with
+# that judge's set left out of retrieval; from noise the pictures do not depend on retrieval, so
+# one run per seed serves both judges. Samples only (METHODS overrides); then val_compare.py
+# judges every picture by both sets and tabulates the values with paired standard errors.
 #
 #   scripts/embedded/val_sweep.sh noise _sample_guidance "3 5 7 10" "0 1 2"        # repo root
 #   scripts/embedded/val_sweep.sh retrieval _sdedit_strength "0.2 0.3 0.4 0.5" "0 1 2"
@@ -15,18 +15,8 @@ cd "$(dirname "$0")/../.."
 mode=${1:?usage: val_sweep.sh noise|retrieval KEY "VALUES" "SEEDS"}
 key=${2:?} values=${3:?} seeds=${4:-0 1 2}
 export SWEEP=${SWEEP:-/tmp/sweep} METHODS=${METHODS:-samples} MODES=$mode
-vf=${VF:-target/release/vectorfusion} py=${PY:-/work/venv/bin/python}
+sets=(valnoto valtwemoji)
+[ "$mode" = noise ] && sets=(valnoto)
 for s in $seeds; do
-  sets=(valnoto valtwemoji)
-  [ "$mode" = noise ] && sets=(valnoto)
   EVAL_ARGS="--seed $s" TAG_SUFFIX="-s$s" scripts/embedded/sweep_hint.sh "$key" "$values" "${sets[@]}"
-  [ "$mode" = noise ] || continue
-  for v in $values; do
-    tag="${key#_}$v-s$s" && tag="${tag#scheduler.}" && tag="${tag#_}"  # as sweep_hint.sh names it
-    d="$SWEEP/out/valnoto-noise-$tag"
-    for m in $METHODS; do
-      "$py" scripts/embedded/pixel_rprecision.py score --captions docs/embedded/val_captions.txt \
-        --set twemoji --dir "$d/$m" --vf "$vf" --json "$d/$m.twemoji.json" >/dev/null
-    done
-  done
 done
