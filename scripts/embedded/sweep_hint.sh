@@ -9,7 +9,8 @@
 #   METHODS="samples sd_live_sds" MODES="retrieval noise" scripts/embedded/sweep_hint.sh _colour_steer "off svg" colour
 #   MODES=noise scripts/embedded/sweep_hint.sh scheduler._class_name EulerAncestralDiscreteScheduler valnoto
 #
-# HINTS="KEY=VALUE ..." fixes other hints in every copy (TAG_SUFFIX then names the variant); VF,
+# HINTS="KEY=VALUE ..." fixes other hints in every copy, and UNET=DIR links a candidate prior's
+# weights instead of the shipped ones (TAG_SUFFIX then names the variant); VF,
 # PY, EVAL_ARGS as for run_eval.sh; SWEEP (default /tmp/sweep) holds the model copies,
 # outputs and reports (eval_SET_retrieval_balanced_KEYVALUE.json, and pixel R-Precision per
 # method under out/SET-MODE-KEYVALUE/). MODES (default retrieval) as for run_eval.sh.
@@ -27,6 +28,7 @@ for v in $values; do
   for c in unet vae scorer text_encoder tokenizer retrieval; do
     [ -e "models/vf-icon/$c" ] && ln -s "$PWD/models/vf-icon/$c" "$d/$c"
   done
+  if [ -n "${UNET:-}" ]; then rm "$d/unet" && ln -s "$(realpath "$UNET")" "$d/unet"; fi
   mkdir "$d/scheduler"
   # HINTS="KEY=VALUE ..." sets other hints first (a combination), then KEY=v; a key
   # `scheduler.FIELD` sets FIELD of scheduler_config.json instead (`scheduler._class_name`).

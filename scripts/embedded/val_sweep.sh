@@ -8,6 +8,7 @@
 #   scripts/embedded/val_sweep.sh noise _sample_guidance "3 5 7 10" "0 1 2"        # repo root
 #   scripts/embedded/val_sweep.sh retrieval _sdedit_strength "0.2 0.3 0.4 0.5" "0 1 2"
 #   HINTS=_retrieval_share=1 scripts/embedded/val_sweep.sh retrieval _retrieval_per_caption "1 2" "0 1 2"
+#   UNET=OUT/export/unet TAG_SUFFIX=-run7 scripts/embedded/val_sweep.sh noise _sample_guidance 5 "0 1 2"
 #
 # VF, PY and SWEEP as for run_eval.sh / sweep_hint.sh (SWEEP default /tmp/sweep).
 set -euo pipefail
@@ -18,5 +19,5 @@ export SWEEP=${SWEEP:-/tmp/sweep} METHODS=${METHODS:-samples} MODES=$mode
 sets=(valnoto valtwemoji)
 [ "$mode" = noise ] && sets=(valnoto)
 for s in $seeds; do
-  EVAL_ARGS="--seed $s" TAG_SUFFIX="-s$s" scripts/embedded/sweep_hint.sh "$key" "$values" "${sets[@]}"
+  EVAL_ARGS="--seed $s" TAG_SUFFIX="${TAG_SUFFIX:-}-s$s" scripts/embedded/sweep_hint.sh "$key" "$values" "${sets[@]}"
 done
