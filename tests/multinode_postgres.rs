@@ -12,21 +12,23 @@
 mod common;
 
 use common::http::{SseEvent, get, post_json, sse};
+use common::node::spawn_listening;
 use common::png_b64;
 use serde_json::json;
 use std::collections::BTreeSet;
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, Command};
 use std::time::{Duration, Instant};
 use vectorfusion::store::{DbLocation, JobStatus, Store};
 use vectorfusion::worker::test_executor::{scene_at, scene_svg};
 
 const STEPS: u32 = 24;
 
-fn free_addr() -> SocketAddr {
+/// A port free now, for the PostgreSQL cluster (which cannot report a port it picked).
+fn free_port() -> u16 {
     let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
-    l.local_addr().unwrap()
+    l.local_addr().unwrap().port()
 }
 
 fn script() -> PathBuf {
@@ -58,9 +60,10 @@ impl Drop for Fleet {
     }
 }
 
-fn node(url: &str, args: &[&str]) -> Child {
-    Command::new(env!("CARGO_BIN_EXE_vectorfusion"))
-        .args(args)
+/// A `serve` or `worker` node on a port it picks (`common::node`), jobs through the test double.
+fn node(url: &str, args: &[&str]) -> (Child, SocketAddr) {
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_vectorfusion"));
+    cmd.args(args)
         .args(["--db", url, "--test-executor", "15"])
         .env("VECTORFUSION_QUEUE_LEASE_SECS", "2")
         .env("VECTORFUSION_QUEUE_HEARTBEAT_SECS", "1")
@@ -72,26 +75,16 @@ fn node(url: &str, args: &[&str]) -> Child {
         .env("VECTORFUSION_SERVER_PROGRESS_INTERVAL_MS", "0")
         .env("VECTORFUSION_SERVER_SNAPSHOT_INTERVAL_MS", "0")
         .env("VECTORFUSION_SERVER_MAX_QUEUE_DEPTH", "10000")
-        .env("VECTORFUSION_DATABASE_MAX_CONNECTIONS", "6")
-        .env("RUST_LOG", "error")
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("spawn node")
+        .env("VECTORFUSION_DATABASE_MAX_CONNECTIONS", "6");
+    spawn_listening(cmd, "error", false)
 }
 
 fn api(url: &str) -> (Child, SocketAddr) {
-    let addr = free_addr();
-    let c = node(
-        url,
-        &["serve", "--workers", "0", "--bind", &addr.to_string()],
-    );
-    (c, addr)
+    node(url, &["serve", "--workers", "0"])
 }
 
 fn worker(url: &str) -> Child {
-    let addr = free_addr().to_string();
-    node(url, &["worker", "--workers", "2", "--bind", &addr])
+    node(url, &["worker", "--workers", "2"]).0
 }
 
 async fn wait_healthy(addr: SocketAddr) {
@@ -160,7 +153,7 @@ async fn api_and_worker_nodes_survive_kills_and_a_database_restart() {
         .and_then(|v| v.parse().ok())
         .unwrap_or(20);
     let dir = tempfile::tempdir().unwrap();
-    let port = free_addr().port().to_string();
+    let port = free_port().to_string();
     let out = Command::new(script())
         .args(["start", dir.path().to_str().unwrap(), &port])
         .env("PG_FAST", "1")

@@ -6,35 +6,26 @@
 mod common;
 
 use common::http::{get, post_json};
+use common::node::spawn_listening;
 use common::png_b64;
 use serde_json::{Value, json};
 use std::net::SocketAddr;
 use std::path::Path;
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, Command};
 use std::time::{Duration, Instant};
 
-fn free_addr() -> SocketAddr {
-    let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
-    l.local_addr().unwrap()
-}
-
-fn spawn_server(db: &Path, addr: SocketAddr, extra: &[&str]) -> Child {
-    Command::new(env!("CARGO_BIN_EXE_vectorfusion"))
-        .arg("serve")
-        .args(["--bind", &addr.to_string()])
+/// The server binary on a port it picks (`common::node`), jobs through the test double.
+fn spawn_server(db: &Path) -> (Child, SocketAddr) {
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_vectorfusion"));
+    cmd.arg("serve")
         .args(["--db", db.to_str().unwrap()])
         .args(["--workers", "2", "--test-executor", "25"])
-        .args(extra)
         .env("VECTORFUSION_QUEUE_LEASE_SECS", "2")
         .env("VECTORFUSION_QUEUE_HEARTBEAT_SECS", "1")
         .env("VECTORFUSION_QUEUE_CHECKPOINT_EVERY_STEPS", "5")
         .env("VECTORFUSION_QUEUE_POLL_INTERVAL_MS", "50")
-        .env("VECTORFUSION_SERVER_PROGRESS_INTERVAL_MS", "0")
-        .env("RUST_LOG", "warn")
-        .stdout(Stdio::null())
-        .stderr(Stdio::inherit())
-        .spawn()
-        .expect("spawn server binary")
+        .env("VECTORFUSION_SERVER_PROGRESS_INTERVAL_MS", "0");
+    spawn_listening(cmd, "warn", true)
 }
 
 async fn wait_healthy(addr: SocketAddr) {
@@ -76,8 +67,7 @@ async fn submit(addr: SocketAddr, steps: u32, seed: u64) -> String {
 async fn kill_9_mid_job_then_restart_completes_every_job_exactly_once() {
     let dir = tempfile::tempdir().unwrap();
     let db = dir.path().join("crash.db");
-    let addr = free_addr();
-    let mut child = spawn_server(&db, addr, &[]);
+    let (mut child, addr) = spawn_server(&db);
     wait_healthy(addr).await;
     let mut ids = Vec::new();
     for seed in 0..6 {
@@ -102,8 +92,7 @@ async fn kill_9_mid_job_then_restart_completes_every_job_exactly_once() {
     child.kill().unwrap(); // SIGKILL
     child.wait().unwrap();
 
-    let addr2 = free_addr();
-    let mut child = spawn_server(&db, addr2, &[]);
+    let (mut child, addr2) = spawn_server(&db);
     wait_healthy(addr2).await;
     let deadline = Instant::now() + Duration::from_secs(60);
     loop {
@@ -173,7 +162,6 @@ async fn kill_9_mid_job_then_restart_completes_every_job_exactly_once() {
 async fn sigterm_checkpoints_and_requeues_then_restart_resumes() {
     let dir = tempfile::tempdir().unwrap();
     let db = dir.path().join("term.db");
-    let addr = free_addr();
     // --config with a file: the settings come from it (here the database path is in the file)
     let cfg = dir.path().join("config.toml");
     std::fs::write(
@@ -184,20 +172,11 @@ async fn sigterm_checkpoints_and_requeues_then_restart_resumes() {
         ),
     )
     .unwrap();
-    let mut child = Command::new(env!("CARGO_BIN_EXE_vectorfusion"))
-        .args([
-            "serve",
-            "--config",
-            cfg.to_str().unwrap(),
-            "--bind",
-            &addr.to_string(),
-        ])
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_vectorfusion"));
+    cmd.args(["serve", "--config", cfg.to_str().unwrap()])
         .args(["--test-executor", "25"])
-        .env("VECTORFUSION_QUEUE_CHECKPOINT_EVERY_STEPS", "5")
-        .env("RUST_LOG", "warn")
-        .stdout(Stdio::null())
-        .spawn()
-        .unwrap();
+        .env("VECTORFUSION_QUEUE_CHECKPOINT_EVERY_STEPS", "5");
+    let (mut child, addr) = spawn_listening(cmd, "warn", true);
     wait_healthy(addr).await;
     let id = submit(addr, 400, 11).await;
     loop {
@@ -234,8 +213,7 @@ async fn sigterm_checkpoints_and_requeues_then_restart_resumes() {
         store.close().await;
     }
 
-    let addr2 = free_addr();
-    let mut child = spawn_server(&db, addr2, &[]);
+    let (mut child, addr2) = spawn_server(&db);
     wait_healthy(addr2).await;
     let deadline = Instant::now() + Duration::from_secs(30);
     loop {

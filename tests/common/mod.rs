@@ -3,6 +3,7 @@
 
 pub mod golden;
 pub mod http;
+pub mod node;
 pub mod runs;
 pub mod server;
 pub mod tensors;
