@@ -86,3 +86,28 @@ pub fn skip(test: &str, why: &str) {
     );
     eprintln!("SKIP {test}: {why}");
 }
+
+/// Reads a child's `pipe` line by line on a thread of its own until it closes (so the child
+/// never blocks on a full pipe) and returns the first value `pick` takes from a line, waiting
+/// at most `timeout`; the lines before and after it go to `other`.
+pub fn first_from_lines<T: Send + 'static>(
+    pipe: impl std::io::Read + Send + 'static,
+    timeout: Duration,
+    pick: impl Fn(&str) -> Option<T> + Send + 'static,
+    other: impl Fn(&str) + Send + 'static,
+) -> Option<T> {
+    use std::io::BufRead;
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let mut tx = Some(tx);
+        for line in std::io::BufReader::new(pipe).lines().map_while(Result::ok) {
+            match tx.as_ref().and_then(|_| pick(&line)) {
+                Some(v) => {
+                    let _ = tx.take().map(|tx| tx.send(v));
+                }
+                None => other(&line),
+            }
+        }
+    });
+    rx.recv_timeout(timeout).ok()
+}

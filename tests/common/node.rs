@@ -1,6 +1,5 @@
 //! A `vectorfusion serve` or `worker` child process listening on a port the kernel picks.
 
-use std::io::{BufRead, BufReader};
 use std::net::SocketAddr;
 use std::process::{Child, Command, Stdio};
 use std::time::Duration;
@@ -18,35 +17,28 @@ pub fn spawn_listening(mut cmd: Command, log: &str, echo: bool) -> (Child, Socke
         .stderr(Stdio::piped());
     let mut child = cmd.spawn().expect("spawn the vectorfusion binary");
     let stderr = child.stderr.take().expect("piped stderr");
-    let (tx, rx) = std::sync::mpsc::channel();
-    // Drains the pipe until the child exits, so the child never blocks on a full pipe.
-    std::thread::spawn(move || {
-        let mut tx = Some(tx);
-        for line in BufReader::new(stderr).lines().map_while(Result::ok) {
-            if let Some(rest) = line.split(" listening addr=").nth(1) {
-                if let Some(tx) = tx.take() {
-                    let _ = tx.send((
-                        line.clone(),
-                        rest.split_whitespace().next().map(str::to_owned),
-                    ));
-                }
-            } else if echo && !line.contains(" INFO ") {
+    let line = super::first_from_lines(
+        stderr,
+        Duration::from_secs(30),
+        |line| line.contains(" listening addr=").then(|| line.to_owned()),
+        move |line| {
+            if echo && !line.contains(" INFO ") {
                 eprintln!("{line}");
             }
-        }
-    });
-    let (line, addr) = match rx.recv_timeout(Duration::from_secs(30)) {
-        Ok(v) => v,
-        Err(e) => {
-            let _ = child.kill();
-            panic!("the child logged no listening address within 30 s ({e})");
-        }
+        },
+    );
+    let Some(line) = line else {
+        let _ = child.kill();
+        panic!("the child logged no listening address within 30 s");
     };
     assert!(
         !line.contains('\u{1b}'),
         "colour codes in a piped log: {line:?}"
     );
-    let addr = addr
+    let addr = line
+        .split(" listening addr=")
+        .nth(1)
+        .and_then(|rest| rest.split_whitespace().next())
         .and_then(|a| a.parse().ok())
         .unwrap_or_else(|| panic!("no address in {line:?}"));
     (child, addr)

@@ -2,7 +2,6 @@
 //! to start headless Chromium through `chromedriver`, type, click, read and screenshot.
 
 use serde_json::{Value, json};
-use std::io::{BufRead, BufReader};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
@@ -60,21 +59,16 @@ impl Browser {
             .spawn()
             .expect("chromedriver starts");
         let stdout = child.stdout.take().expect("piped stdout");
-        let (tx, rx) = std::sync::mpsc::channel();
-        // Drains the pipe until the driver exits, so it never blocks on a full pipe.
-        std::thread::spawn(move || {
-            let mut tx = Some(tx);
-            for line in BufReader::new(stdout).lines().map_while(Result::ok) {
-                let port = line
-                    .split("started successfully on port ")
-                    .nth(1)
-                    .and_then(|p| p.trim_end_matches('.').trim().parse::<u16>().ok());
-                if let (Some(port), Some(tx)) = (port, tx.take_if(|_| port.is_some())) {
-                    let _ = tx.send(port);
-                }
-            }
-        });
-        let Ok(port) = rx.recv_timeout(Duration::from_secs(20)) else {
+        let port = super::first_from_lines(
+            stdout,
+            Duration::from_secs(20),
+            |line| {
+                let rest = line.split("started successfully on port ").nth(1)?;
+                rest.trim_end_matches('.').trim().parse::<u16>().ok()
+            },
+            |_| {},
+        );
+        let Some(port) = port else {
             let _ = child.kill();
             panic!("chromedriver named no port within 20 s");
         };
