@@ -1,8 +1,8 @@
 //! Where the store lives and how to talk to it: SQLite (a file; the embedded default) or
 //! PostgreSQL (a URL; many nodes on one queue). Both are reached through sqlx's `Any` driver, so
-//! one `Store` API runs on either; what differs is the SQL (`sql/sqlite/`, `sql/postgres/`,
-//! picked by [`sql!`]), the migrations (`migrations/sqlite/`, `migrations/postgres/`) and the
-//! connection set-up here.
+//! one `Store` API runs on either; what differs is the SQL of the statements whose dialects
+//! differ (`sql/sqlite/`, `sql/postgres/`, picked by [`sql!`]), the migrations
+//! (`migrations/sqlite/`, `migrations/postgres/`) and the connection set-up here.
 
 use super::StoreError;
 use sqlx::any::{AnyConnectOptions, AnyPoolOptions};
@@ -341,9 +341,14 @@ pub async fn create_test_database(admin_url: &str) -> Result<String, StoreError>
     Ok(url.to_string())
 }
 
-/// The text of one statement for the store's backend: `sql!(self, "claim.sql")` is
-/// `sql/sqlite/claim.sql` or `sql/postgres/claim.sql`.
+/// The text of one statement: `sql!("get_job.sql")` is `sql/get_job.sql`, written once for both
+/// backends (`$N` placeholders, which SQLite binds by number as PostgreSQL does);
+/// `sql!(self, "claim.sql")` is `sql/sqlite/claim.sql` or `sql/postgres/claim.sql`, for a
+/// statement whose dialects differ.
 macro_rules! sql {
+    ($file:literal) => {
+        include_str!(concat!("sql/", $file))
+    };
     ($store:expr, $file:literal) => {
         match $store.backend {
             $crate::store::Backend::Sqlite => include_str!(concat!("sql/sqlite/", $file)),

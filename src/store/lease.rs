@@ -6,13 +6,13 @@ use super::{AttemptOutcome, FailureCode, Heartbeat, JobRow, Lease, Store, StoreE
 impl Store {
     /// Finishes running jobs whose lease expired and that cannot be retried; returns them.
     pub async fn reap_expired(&self, now: i64) -> Result<Vec<JobRow>, StoreError> {
-        let rows: Vec<JobRow> = sqlx::query_as(sql!(self, "reap_expired.sql"))
+        let rows: Vec<JobRow> = sqlx::query_as(sql!("reap_expired.sql"))
             .bind(now)
             .fetch_all(&self.writer)
             .await?;
         for row in &rows {
             self.hint_job(&row.id);
-            sqlx::query(sql!(self, "mark_lost_attempts.sql"))
+            sqlx::query(sql!("mark_lost_attempts.sql"))
                 .bind(&row.id)
                 .bind(i64::MAX)
                 .bind(now)
@@ -81,7 +81,7 @@ impl Store {
         loss: Option<f64>,
         now: i64,
     ) -> Result<bool, StoreError> {
-        let r = sqlx::query(sql!(self, "update_progress.sql"))
+        let r = sqlx::query(sql!("update_progress.sql"))
             .bind(&lease.job_id)
             .bind(&lease.worker)
             .bind(lease.attempt)
@@ -106,7 +106,7 @@ impl Store {
         state: &str,
         now: i64,
     ) -> Result<bool, StoreError> {
-        let r = sqlx::query(sql!(self, "save_checkpoint.sql"))
+        let r = sqlx::query(sql!("save_checkpoint.sql"))
             .bind(&lease.job_id)
             .bind(&lease.worker)
             .bind(lease.attempt)
@@ -141,7 +141,7 @@ impl Store {
         if let Some(n) = n
             && n > keep
         {
-            sqlx::query(sql!(self, "trim_snapshots.sql"))
+            sqlx::query(sql!("trim_snapshots.sql"))
                 .bind(&lease.job_id)
                 .bind(n - keep.max(1))
                 .execute(&self.lease_writer)
@@ -180,7 +180,7 @@ impl Store {
         now: i64,
     ) -> Result<bool, StoreError> {
         let mut tx = self.begin().await?;
-        let r = sqlx::query(sql!(self, "complete_job.sql"))
+        let r = sqlx::query(sql!("complete_job.sql"))
             .bind(&lease.job_id)
             .bind(&lease.worker)
             .bind(lease.attempt)
@@ -191,7 +191,7 @@ impl Store {
             tx.rollback().await?;
             return Ok(false);
         }
-        sqlx::query(sql!(self, "insert_result.sql"))
+        sqlx::query(sql!("insert_result.sql"))
             .bind(&lease.job_id)
             .bind(svg)
             .bind(paths)
@@ -200,7 +200,7 @@ impl Store {
             .execute(&mut *tx)
             .await?;
         for (n, (svg, paths)) in (2i64..).zip(variations) {
-            sqlx::query(sql!(self, "insert_result_variation.sql"))
+            sqlx::query(sql!("insert_result_variation.sql"))
                 .bind(&lease.job_id)
                 .bind(n)
                 .bind(*svg)
@@ -262,7 +262,7 @@ impl Store {
     ) -> Result<Option<JobRow>, StoreError> {
         self.end_attempt(
             lease,
-            sql!(self, "finish_cancelled.sql"),
+            sql!("finish_cancelled.sql"),
             AttemptOutcome::Cancelled,
             now,
         )
@@ -273,7 +273,7 @@ impl Store {
     pub async fn release(&self, lease: &Lease, now: i64) -> Result<Option<JobRow>, StoreError> {
         self.end_attempt(
             lease,
-            sql!(self, "release_job.sql"),
+            sql!("release_job.sql"),
             AttemptOutcome::Interrupted,
             now,
         )
@@ -317,7 +317,7 @@ impl Store {
         error: Option<&str>,
         now: i64,
     ) -> Result<(), StoreError> {
-        sqlx::query(sql!(self, "finish_attempt.sql"))
+        sqlx::query(sql!("finish_attempt.sql"))
             .bind(&lease.job_id)
             .bind(lease.attempt)
             .bind(outcome.as_str())

@@ -1,5 +1,6 @@
 //! The job store: SQLite (embedded, WAL) or PostgreSQL (shared by many nodes) through sqlx,
-//! schema in `migrations/<backend>/`, every statement in a file under `src/store/sql/<backend>/`
+//! schema in `migrations/<backend>/`, every statement in a file: `src/store/sql/` when both
+//! backends run the same text, `src/store/sql/<backend>/` when their dialects differ
 //! (`backend.rs` picks them).
 //!
 //! Jobs move `queued → running → succeeded | failed | cancelled` (a CHECK constraint keeps the
@@ -350,7 +351,7 @@ impl Store {
     async fn not_inserted(&self, job: &NewJob) -> Result<(JobRow, bool), StoreError> {
         let existing: Option<JobRow> = match &job.idempotency_key {
             Some(key) => {
-                sqlx::query_as(sql!(self, "get_job_by_key.sql"))
+                sqlx::query_as(sql!("get_job_by_key.sql"))
                     .bind(key)
                     .fetch_optional(&self.writer)
                     .await?
@@ -368,11 +369,11 @@ impl Store {
 
     /// The job submitted with this idempotency key, if any.
     pub async fn get_job_by_key(&self, key: &str) -> Result<Option<JobRow>, StoreError> {
-        self.row_by(sql!(self, "get_job_by_key.sql"), key).await
+        self.row_by(sql!("get_job_by_key.sql"), key).await
     }
 
     pub async fn get_job(&self, id: &str) -> Result<Option<JobRow>, StoreError> {
-        self.row_by(sql!(self, "get_job.sql"), id).await
+        self.row_by(sql!("get_job.sql"), id).await
     }
 
     /// The row, if any, that a read of one key (`$1`) returns, from the reader pool.
@@ -406,20 +407,20 @@ impl Store {
 
     /// Queued and running jobs of `tenant`.
     pub async fn active_jobs(&self, tenant: &str) -> Result<i64, StoreError> {
-        Ok(sqlx::query_scalar(sql!(self, "active_jobs.sql"))
+        Ok(sqlx::query_scalar(sql!("active_jobs.sql"))
             .bind(tenant)
             .fetch_one(&self.pool)
             .await?)
     }
 
     pub async fn queue_depth(&self) -> Result<i64, StoreError> {
-        Ok(sqlx::query_scalar(sql!(self, "queue_depth.sql"))
+        Ok(sqlx::query_scalar(sql!("queue_depth.sql"))
             .fetch_one(&self.pool)
             .await?)
     }
 
     pub async fn count_by_status(&self) -> Result<Vec<(String, i64)>, StoreError> {
-        Ok(sqlx::query_as(sql!(self, "count_by_status.sql"))
+        Ok(sqlx::query_as(sql!("count_by_status.sql"))
             .fetch_all(&self.pool)
             .await?)
     }
@@ -438,7 +439,7 @@ impl Store {
     }
 
     pub async fn attempts(&self, job_id: &str) -> Result<Vec<AttemptRow>, StoreError> {
-        Ok(sqlx::query_as(sql!(self, "list_attempts.sql"))
+        Ok(sqlx::query_as(sql!("list_attempts.sql"))
             .bind(job_id)
             .fetch_all(&self.pool)
             .await?)
@@ -450,7 +451,7 @@ impl Store {
         after: i64,
         limit: i64,
     ) -> Result<Vec<SnapshotRow>, StoreError> {
-        Ok(sqlx::query_as(sql!(self, "snapshots_after.sql"))
+        Ok(sqlx::query_as(sql!("snapshots_after.sql"))
             .bind(job_id)
             .bind(after)
             .bind(limit)
@@ -459,11 +460,11 @@ impl Store {
     }
 
     pub async fn latest_snapshot(&self, job_id: &str) -> Result<Option<SnapshotRow>, StoreError> {
-        self.row_by(sql!(self, "latest_snapshot.sql"), job_id).await
+        self.row_by(sql!("latest_snapshot.sql"), job_id).await
     }
 
     pub async fn snapshot(&self, job_id: &str, n: i64) -> Result<Option<SnapshotRow>, StoreError> {
-        Ok(sqlx::query_as(sql!(self, "get_snapshot.sql"))
+        Ok(sqlx::query_as(sql!("get_snapshot.sql"))
             .bind(job_id)
             .bind(n)
             .fetch_optional(&self.pool)
@@ -471,7 +472,7 @@ impl Store {
     }
 
     pub async fn result(&self, job_id: &str) -> Result<Option<ResultRow>, StoreError> {
-        self.row_by(sql!(self, "get_result.sql"), job_id).await
+        self.row_by(sql!("get_result.sql"), job_id).await
     }
 
     /// The SVG of variation `n` (2, 3, ...) of a job's result ([`Store::complete_variations`];
@@ -481,7 +482,7 @@ impl Store {
         job_id: &str,
         n: i64,
     ) -> Result<Option<String>, StoreError> {
-        Ok(sqlx::query_scalar(sql!(self, "get_result_variation.sql"))
+        Ok(sqlx::query_scalar(sql!("get_result_variation.sql"))
             .bind(job_id)
             .bind(n)
             .fetch_optional(&self.pool)
@@ -510,7 +511,7 @@ impl Store {
 
     /// Deletes finished jobs (and their snapshots, results, attempts) finished before `before`.
     pub async fn prune(&self, before: i64) -> Result<u64, StoreError> {
-        let r = sqlx::query(sql!(self, "prune.sql"))
+        let r = sqlx::query(sql!("prune.sql"))
             .bind(before)
             .execute(&self.writer)
             .await?;

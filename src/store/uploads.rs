@@ -37,7 +37,7 @@ pub struct UploadRow {
 impl Store {
     /// The upload of a job not yet finished (`None` once it finished, or when it had none).
     pub async fn upload(&self, job_id: &str) -> Result<Option<UploadRow>, StoreError> {
-        Ok(sqlx::query_as(sql!(self, "get_upload.sql"))
+        Ok(sqlx::query_as(sql!("get_upload.sql"))
             .bind(job_id)
             .fetch_optional(&self.pool)
             .await?)

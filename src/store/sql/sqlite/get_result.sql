@@ -1,1 +1,0 @@
-SELECT * FROM results WHERE job_id = ?1

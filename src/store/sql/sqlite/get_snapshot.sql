@@ -1,1 +1,0 @@
-SELECT * FROM snapshots WHERE job_id = ?1 AND n = ?2

@@ -1,1 +1,0 @@
-DELETE FROM snapshots WHERE job_id = ?1 AND n <= ?2
