@@ -5,6 +5,9 @@
 #   flat/   flat colour icons and illustrations: @iconify-json/flat-color-icons and
 #           streamline-ultimate-color (FLAT each, default 6)
 #   mono/   one-colour icons for the black-and-white peer (potrace): @iconify-json/mdi (MONO, 10)
+#   gradient/  colour emoji drawn mostly with gradients, for `--fills`: @iconify-json/noto icons
+#           with at least two `url(#…)` fills making up at least half of their shapes (GRADIENT,
+#           default 6)
 #   photo/  the photos inside the scikit-image wheel (pip download, no install), resized to
 #           SIZE px on the longest side (Lanczos, RGB)
 # Icons: every k-th icon in name order (flags, keycaps, regional letters, skin tones and names
@@ -22,6 +25,7 @@ SIZE="${SIZE:-256}"
 EMOJI="${EMOJI:-8}"
 FLAT="${FLAT:-6}"
 MONO="${MONO:-10}"
+GRADIENT="${GRADIENT:-6}"
 TOOLS="${TOOLS:-$OUT/_tools}"
 SKIMAGE_VERSION="${SKIMAGE_VERSION:-0.26.0}"
 IMAGETRACER_VERSION="${IMAGETRACER_VERSION:-1.2.6}"
@@ -34,6 +38,7 @@ SETS=(
   "flat:flat-color-icons@1.2.3:$FLAT"
   "flat:streamline-ultimate-color@1.2.2:$FLAT"
   "mono:mdi@1.2.3:$MONO"
+  "gradient:noto@1.2.9:$GRADIENT"
 )
 PHOTOS="${PHOTOS:-astronaut.png camera.png chelsea.png coffee.png hubble_deep_field.jpg ihc.png motorcycle_left.png rocket.jpg}"
 TMP="$(mktemp -d)"
@@ -51,8 +56,15 @@ for entry in "${SETS[@]}"; do
 const fs = require('fs');
 const [file, dir, count, prefix] = process.argv.slice(2);
 const set = JSON.parse(fs.readFileSync(file, 'utf8'));
+// The gradient set keeps icons painted mostly with gradients.
+const gradients = body => {
+  const fills = (body.match(/fill="url\(#/g) || []).length;
+  const shapes = (body.match(/<(path|circle|ellipse|rect|polygon)\b/g) || []).length;
+  return fills >= 2 && 2 * fills >= shapes;
+};
 const names = Object.keys(set.icons).sort()
-  .filter(n => !/^(flag|regional|keycap)/.test(n) && !/tone/.test(n) && !/^[0-9]/.test(n));
+  .filter(n => !/^(flag|regional|keycap)/.test(n) && !/tone/.test(n) && !/^[0-9]/.test(n))
+  .filter(n => !dir.endsWith('/gradient') || gradients(set.icons[n].body));
 const step = Math.max(1, Math.floor(names.length / Number(count)));
 for (let i = 0, k = 0; i < names.length && k < Number(count); i += step, k++) {
   const icon = set.icons[names[i]];

@@ -534,15 +534,33 @@ impl Scene {
     }
 
     /// The scene `k` times larger: canvas, geometry and stroke widths (the user units of an
-    /// SVG whose `viewBox` is `k` times its size in pixels).
+    /// SVG whose `viewBox` is `k` times its size in pixels). A shape's gradient that had no
+    /// transform of its own takes the scale into its geometry, on a grid of 1/1000 user unit
+    /// (so a coordinate on the pixel grid stays a short number), instead of a transform.
     pub fn scaled_by(&self, k: u32) -> Scene {
         let s = k as f32;
         let f = |p: &Point| Point::new(p.x * s, p.y * s);
+        let mut shapes: Vec<Shape> = self.shapes.iter().map(|sh| sh.mapped(f, s)).collect();
+        for g in shapes
+            .iter_mut()
+            .filter_map(|sh| sh.gradients.as_deref_mut())
+            .flat_map(|gs| [gs.fill.as_mut(), gs.stroke.as_mut()])
+            .flatten()
+        {
+            g.fold_uniform_transform();
+            if g.transform == Affine::IDENTITY {
+                let mut v = g.params();
+                for x in &mut v[..g.geometry.values().len()] {
+                    *x = ((f64::from(*x) * 1000.0).round() / 1000.0) as f32;
+                }
+                g.set_params(&v);
+            }
+        }
         Scene {
             width: self.width.saturating_mul(k),
             height: self.height.saturating_mul(k),
             background: self.background,
-            shapes: self.shapes.iter().map(|sh| sh.mapped(f, s)).collect(),
+            shapes,
             groups: self.groups.iter().map(|g| g.mapped(&f, s)).collect(),
         }
     }

@@ -247,6 +247,31 @@ impl Gradient {
         }
     }
 
+    /// Folds a transform `x' = s x + e, y' = s y + f` (`s > 0`) into the geometry (points map,
+    /// radii scale; the transform becomes the identity): the same gradient, written without a
+    /// `gradientTransform`. Any other transform stays as it is.
+    pub fn fold_uniform_transform(&mut self) {
+        let [a, b, c, d, e, f] = self.transform.0;
+        if !(b == 0.0 && c == 0.0 && a == d && a > 0.0) {
+            return;
+        }
+        let mut v = self.params();
+        // Linear: x1 y1 x2 y2; radial: cx cy r fx fy fr (points at 0, 3; radii at 2, 5).
+        let (points, radii): (&[usize], &[usize]) = match self.geometry {
+            GradientGeometry::Linear { .. } => (&[0, 2], &[]),
+            GradientGeometry::Radial { .. } => (&[0, 3], &[2, 5]),
+        };
+        for &k in points {
+            v[k] = a * v[k] + e;
+            v[k + 1] = d * v[k + 1] + f;
+        }
+        for &k in radii {
+            v[k] *= a;
+        }
+        self.set_params(&v);
+        self.transform = Affine::IDENTITY;
+    }
+
     /// Number of scalars in [`Gradient::params`].
     pub fn num_params(&self) -> usize {
         self.geometry.values().len() + 5 * self.stops.len()

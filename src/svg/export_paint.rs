@@ -8,9 +8,20 @@ use super::export::{hex, push_attr};
 use crate::scene::{Gradient, GradientGeometry, Scene, Spread};
 use std::fmt::Write;
 
-/// `v` as the shortest decimal that reads back as the same `f32` (`-0` as `0`).
+/// `v` as the shortest decimal that reads back as the same `f32`, without a leading zero
+/// (`.25`, `-.5`; `-0` as `0`).
 pub(super) fn exact(v: f32) -> String {
-    if v == 0.0 { "0".into() } else { format!("{v}") }
+    if v == 0.0 {
+        return "0".into();
+    }
+    let s = format!("{v}");
+    if let Some(rest) = s.strip_prefix("0.") {
+        format!(".{rest}")
+    } else if let Some(rest) = s.strip_prefix("-0.") {
+        format!("-.{rest}")
+    } else {
+        s
+    }
 }
 
 /// The id of every shape's fill and stroke gradient (`None` where the paint is flat).
@@ -88,7 +99,10 @@ pub(super) fn push_gradient(out: &mut String, g: &Gradient, id: &str) {
     out.push_str(">\n");
     for s in &g.stops {
         out.push_str("<stop");
-        push_attr(out, "offset", &exact(s.offset));
+        // 0 is the default offset.
+        if s.offset != 0.0 {
+            push_attr(out, "offset", &exact(s.offset));
+        }
         push_attr(out, "stop-color", &hex(s.color));
         if s.color.a != 1.0 {
             push_attr(out, "stop-opacity", &exact(s.color.a));

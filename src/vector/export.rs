@@ -257,4 +257,56 @@ mod tests {
         assert!(grouped.svg.contains(r#"id="p1""#));
         assert_eq!(grouped.units_per_px, c.units_per_px);
     }
+
+    #[test]
+    fn gradients_on_a_finer_grid_take_the_scale_into_their_numbers() {
+        use crate::scene::{Affine, Gradient, GradientGeometry, GradientStop, Gradients, Spread};
+        let mut s = scene(0.237);
+        let stop = |offset, color| GradientStop { offset, color };
+        s.shapes[0].gradients = Some(Box::new(Gradients {
+            fill: Some(Gradient {
+                geometry: GradientGeometry::Linear {
+                    x1: 10.5,
+                    y1: 14.0,
+                    x2: 38.5,
+                    y2: 42.2,
+                },
+                transform: Affine::IDENTITY,
+                spread: Spread::Pad,
+                stops: vec![
+                    stop(0.0, Rgba::new(1.0, 0.5, 0.0, 1.0)),
+                    stop(0.25, Rgba::new(0.0, 0.2, 0.8, 1.0)),
+                ],
+            }),
+            ..Default::default()
+        }));
+        let c = compact_svg(&s, &SvgOptions::default());
+        let k = c.units_per_px;
+        assert!(k > 1 && c.within, "{c:?}");
+        // No `gradientTransform` for the viewBox's scale: the geometry is in user units, as
+        // short as the grid allows; the default offset 0 is left out, the other has no
+        // leading zero.
+        assert!(!c.svg.contains("gradientTransform"), "{}", c.svg);
+        let x1 = format!(r#"x1="{}""#, 10.5 * k as f32);
+        assert!(c.svg.contains(&x1), "{x1} {}", c.svg);
+        assert!(
+            c.svg.contains(r##"<stop stop-color="#ff8000"/>"##),
+            "{}",
+            c.svg
+        );
+        assert!(c.svg.contains(r#"<stop offset=".25""#), "{}", c.svg);
+        // It reads back as the same gradient, k times larger.
+        let back = from_svg(&c.svg).unwrap();
+        let g = back.shapes[0]
+            .gradients
+            .as_ref()
+            .unwrap()
+            .fill
+            .as_ref()
+            .unwrap();
+        let GradientGeometry::Linear { x1, y2, .. } = g.geometry else {
+            panic!("{g:?}");
+        };
+        assert_eq!((x1, y2), (10.5 * k as f32, 42.2 * k as f32));
+    }
 }

@@ -162,7 +162,7 @@ pub fn tidy_gradients(scene: &mut Scene) {
 
 /// One gradient rounded as [`tidy_gradients`] says.
 fn tidy(g: &mut Gradient) {
-    fold_transform(g);
+    g.fold_uniform_transform();
     let round = |v: f32, d: i32| {
         let k = 10f32.powi(d);
         (v * k).round() / k
@@ -180,30 +180,6 @@ fn tidy(g: &mut Gradient) {
         stop[4] = round(stop[4], 3);
     }
     g.set_params(&values);
-}
-
-/// Folds a transform `x' = s x + e, y' = s y + f` (`s > 0`) into the geometry: points map,
-/// radii scale.
-fn fold_transform(g: &mut Gradient) {
-    let [a, b, c, d, e, f] = g.transform.0;
-    if !(b == 0.0 && c == 0.0 && a == d && a > 0.0) {
-        return;
-    }
-    let mut v = g.params();
-    // Linear: x1 y1 x2 y2; radial: cx cy r fx fy fr (points at 0, 3; radii at 2, 5).
-    let (points, radii): (&[usize], &[usize]) = match g.geometry {
-        GradientGeometry::Linear { .. } => (&[0, 2], &[]),
-        GradientGeometry::Radial { .. } => (&[0, 3], &[2, 5]),
-    };
-    for &k in points {
-        v[k] = a * v[k] + e;
-        v[k + 1] = d * v[k + 1] + f;
-    }
-    for &k in radii {
-        v[k] *= a;
-    }
-    g.set_params(&v);
-    g.transform = Affine::IDENTITY;
 }
 
 /// The gradient painting `shape`'s fill, if any.
