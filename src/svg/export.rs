@@ -326,8 +326,13 @@ pub fn to_svg(scene: &Scene, opts: &SvgOptions) -> String {
     if !scene.groups.is_empty() {
         return super::export_groups::layered(w);
     }
-    super::export_paint::push_defs(&mut w.out, scene);
-    let ids = super::export_paint::gradient_ids(scene);
+    let mut defs = super::export_paint::PaintDefs::default();
+    let ids: Vec<_> = scene.shapes.iter().map(|sh| defs.of_shape(sh)).collect();
+    if !defs.text.is_empty() {
+        w.out.push_str("<defs>\n");
+        w.out.push_str(&defs.text);
+        w.out.push_str("</defs>\n");
+    }
     let items: Vec<(usize, Paint)> = scene
         .shapes
         .iter()

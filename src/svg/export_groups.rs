@@ -5,16 +5,16 @@
 //! (so the same scene gives the same document). Everything is in canvas units
 //! (`clipPathUnits` and `maskUnits` `userSpaceOnUse`, a mask region of the whole canvas); paths
 //! are written one by one with all their paint attributes (no shared-attribute groups), a
-//! gradient as a `<linearGradient>`/`<radialGradient>` in the defs with ids `g1`, `g2`, … in the
-//! order the paths are written (mask content included).
+//! gradient or texture as in the other writer ([`PaintDefs`]: ids `g1`, `g2`, … in the order
+//! the paths are written, mask content included; one element for identical ones).
 //!
 //! SVG allows no `<g>` inside a `<clipPath>`: a clip content's group clip is written on each of
 //! its paths.
 
 use super::export::{Inherited, Paint, Writer, num, opacity_decimals, push_attr, push_paint};
-use super::export_paint::push_gradient;
+use super::export_paint::PaintDefs;
 use super::path_data::push_path_data;
-use crate::scene::{Clip, Gradient, Group, Mask, MaskKind, Shape};
+use crate::scene::{Clip, Group, Mask, MaskKind, Shape};
 
 /// Finishes `w` (header written) for a scene with groups.
 pub(super) fn layered(w: Writer<'_>) -> String {
@@ -23,15 +23,16 @@ pub(super) fn layered(w: Writer<'_>) -> String {
         defs: String::new(),
         clips: 0,
         masks: 0,
-        gradients: 0,
+        paints: PaintDefs::default(),
         p: w.p,
         size: (scene.width, scene.height),
     };
     let mut body = String::new();
     x.content(&scene.shapes, &scene.groups, &mut body);
     let mut out = w.out;
-    if !x.defs.is_empty() {
+    if !(x.defs.is_empty() && x.paints.text.is_empty()) {
         out.push_str("<defs>\n");
+        out.push_str(&x.paints.text);
         out.push_str(&x.defs);
         out.push_str("</defs>\n");
     }
@@ -44,8 +45,8 @@ struct Layered {
     defs: String,
     clips: usize,
     masks: usize,
-    /// Gradients written so far (ids `g1`, `g2`, …).
-    gradients: usize,
+    /// The gradients and textures (ids `g1`, `g2`, …), written before the clips and masks.
+    paints: PaintDefs,
     /// Decimals of coordinates.
     p: usize,
     size: (u32, u32),
@@ -66,7 +67,7 @@ impl Layered {
                 open.push(groups[next].end);
                 next += 1;
             }
-            let ids = self.gradients_of(sh);
+            let ids = self.paints.of_shape(sh);
             let paint = Paint::of(sh, self.p, &ids);
             if paint.visible() {
                 self.path_start(sh, out);
@@ -75,21 +76,6 @@ impl Layered {
             }
         }
         out.extend(open.iter().map(|_| "</g>\n"));
-    }
-
-    /// Writes the gradients of `sh` into the defs; returns their ids (fill, stroke).
-    fn gradients_of(&mut self, sh: &Shape) -> (Option<String>, Option<String>) {
-        let g = sh.gradients.as_deref();
-        let mut push = |g: Option<&Gradient>| {
-            g.map(|g| {
-                self.gradients += 1;
-                let id = format!("g{}", self.gradients);
-                push_gradient(&mut self.defs, g, &id);
-                id
-            })
-        };
-        let fill = push(g.and_then(|g| g.fill.as_ref()));
-        (fill, push(g.and_then(|g| g.stroke.as_ref())))
     }
 
     fn path_start(&self, sh: &Shape, out: &mut String) {

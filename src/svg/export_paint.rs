@@ -1,11 +1,12 @@
-//! Gradient paint → SVG: one `<linearGradient>` / `<radialGradient>` per painted gradient in a
+//! Gradient paint → SVG: one `<linearGradient>` / `<radialGradient>` per distinct gradient in a
 //! `<defs>` after the background, in user space (`gradientUnits="userSpaceOnUse"`, the canvas),
-//! with stable ids `g1, g2, …` in scene order (shape by shape, fill before stroke). Numbers are
+//! with stable ids `g1, g2, …` in scene order (shape by shape, fill before stroke; shapes
+//! painted alike share one; [`PaintDefs`]). Numbers are
 //! written exactly (the shortest decimal that reads back as the same `f32`) and stop colours
 //! at 8 bits per channel, so an imported gradient exports and re-imports unchanged.
 
 use super::export::{hex, push_attr};
-use crate::scene::{Gradient, GradientGeometry, Scene, Spread};
+use crate::scene::{Gradient, GradientGeometry, Shape, Spread};
 use std::fmt::Write;
 
 /// `v` as the shortest decimal that reads back as the same `f32`, without a leading zero
@@ -24,49 +25,51 @@ pub(super) fn exact(v: f32) -> String {
     }
 }
 
-/// The id of every shape's fill and stroke gradient (`None` where the paint is flat).
-pub(super) fn gradient_ids(scene: &Scene) -> Vec<(Option<String>, Option<String>)> {
-    let mut k = 0;
-    let mut next = |present: bool| {
-        present.then(|| {
-            k += 1;
-            format!("g{k}")
-        })
-    };
-    scene
-        .shapes
-        .iter()
-        .map(|sh| {
-            let g = sh.gradients.as_deref();
-            let f = next(g.is_some_and(|g| g.fill.is_some() || g.texture.is_some()));
-            let s = next(g.is_some_and(|g| g.stroke.is_some()));
-            (f, s)
-        })
-        .collect()
+/// The paint servers of a document's shapes (gradients, and textures as patterns), each
+/// distinct one written once: two shapes painted with the same gradient refer to one element.
+/// Ids are `g1, g2, …` in the order the shapes ask for them (fill before stroke).
+#[derive(Default)]
+pub(super) struct PaintDefs {
+    /// The elements, in id order.
+    pub(super) text: String,
+    /// Each element's text with an empty id → its id.
+    seen: std::collections::HashMap<String, String>,
 }
 
-/// Writes the `<defs>` of every gradient and texture of `scene` (nothing when there is none),
-/// in the order of [`gradient_ids`].
-pub(super) fn push_defs(out: &mut String, scene: &Scene) {
-    let paints = scene.shapes.iter().filter_map(|s| s.gradients.as_deref());
-    if paints.clone().next().is_none() {
-        return;
+impl PaintDefs {
+    /// The ids of `sh`'s fill (a texture or a gradient) and stroke paint servers (`None` where
+    /// the paint is flat), writing the ones not written yet.
+    pub(super) fn of_shape(&mut self, sh: &Shape) -> (Option<String>, Option<String>) {
+        let Some(g) = sh.gradients.as_deref() else {
+            return (None, None);
+        };
+        let fill = if let Some(t) = &g.texture {
+            let mut el = String::new();
+            super::export_texture::push_texture(&mut el, t, "");
+            Some(self.entry(el))
+        } else {
+            g.fill.as_ref().map(|g| self.gradient(g))
+        };
+        (fill, g.stroke.as_ref().map(|g| self.gradient(g)))
     }
-    out.push_str("<defs>\n");
-    let mut k = 0;
-    let mut id = || {
-        k += 1;
-        format!("g{k}")
-    };
-    for g in paints {
-        if let Some(t) = &g.texture {
-            super::export_texture::push_texture(out, t, &id());
-        }
-        for g in g.iter() {
-            push_gradient(out, g, &id());
-        }
+
+    fn gradient(&mut self, g: &Gradient) -> String {
+        let mut el = String::new();
+        push_gradient(&mut el, g, "");
+        self.entry(el)
     }
-    out.push_str("</defs>\n");
+
+    /// The id of element `el` (written with `id=""`), written now if it is new.
+    fn entry(&mut self, el: String) -> String {
+        if let Some(id) = self.seen.get(&el) {
+            return id.clone();
+        }
+        let id = format!("g{}", self.seen.len() + 1);
+        self.text
+            .push_str(&el.replacen(r#" id="""#, &format!(r#" id="{id}""#), 1));
+        self.seen.insert(el, id.clone());
+        id
+    }
 }
 
 pub(super) fn push_gradient(out: &mut String, g: &Gradient, id: &str) {

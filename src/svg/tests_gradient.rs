@@ -146,3 +146,43 @@ fn scaled_scenes_move_their_gradients() {
     assert!((2.0 * a.x - b.x).abs() < 1e-4 && (2.0 * a.y - b.y).abs() < 1e-4);
     big.validate().unwrap();
 }
+
+#[test]
+fn shapes_painted_alike_share_one_paint_server() {
+    // Two rectangles with one gradient, a third with another, an image twice: one element
+    // each, in and out of a group.
+    let png = {
+        use base64::Engine;
+        let mut img = crate::image::Image::new(4, 4);
+        for (i, px) in img.data.chunks_exact_mut(4).enumerate() {
+            px.copy_from_slice(&[(i % 4) as f32 / 3.0, (i / 4) as f32 / 3.0, 0.5, 1.0]);
+        }
+        base64::engine::general_purpose::STANDARD.encode(img.encode_png().unwrap())
+    };
+    for group in ["", r#" opacity="0.5""#] {
+        let src = format!(
+            r##"<svg xmlns="http://www.w3.org/2000/svg" width="64" height="64">
+<linearGradient id="a" gradientUnits="userSpaceOnUse" x1="0" y1="0" x2="64" y2="0">
+<stop offset="0" stop-color="#f00"/><stop offset="1" stop-color="#00f"/></linearGradient>
+<linearGradient id="b" gradientUnits="userSpaceOnUse" x1="0" y1="0" x2="0" y2="64">
+<stop offset="0" stop-color="#f00"/><stop offset="1" stop-color="#00f"/></linearGradient>
+<g{group}>
+<rect x="2" y="2" width="20" height="20" fill="url(#a)"/>
+<rect x="30" y="2" width="20" height="20" fill="url(#a)"/>
+<rect x="2" y="30" width="20" height="20" stroke="url(#b)"/>
+<image x="30" y="30" width="8" height="8" href="data:image/png;base64,{png}"/>
+<image x="30" y="30" width="8" height="8" href="data:image/png;base64,{png}"/>
+</g></svg>"##
+        );
+        let s = from_svg(&src).unwrap();
+        let svg = to_svg(&s, &SvgOptions::default());
+        assert_eq!(svg.matches("<linearGradient").count(), 2, "{svg}");
+        assert_eq!(svg.matches("<pattern").count(), 1, "{svg}");
+        assert_eq!(svg.matches(r#"fill="url(#g1)""#).count(), 2, "{svg}");
+        let back = from_svg(&svg).unwrap();
+        let (a, b) = (crate::raster::render(&s), crate::raster::render(&back));
+        // A texture goes back through a pattern tile (resampled): the suite's tolerance.
+        let d: f32 = a.data.iter().zip(&b.data).map(|(x, y)| (x - y).abs()).sum();
+        assert!(d / (a.data.len() as f32) < 1.5 / 255.0, "{svg}");
+    }
+}
