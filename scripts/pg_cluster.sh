@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # A throwaway PostgreSQL cluster for tests and benchmarks, from Debian's packages.
 #   scripts/pg_cluster.sh start DIR PORT   # initdb (first time) + start; prints the URL
+#                                          # (PORT 0: a free one, tried until one binds)
 #   scripts/pg_cluster.sh stop DIR         # fast shutdown
 #   scripts/pg_cluster.sh restart DIR      # immediate stop (as a crash) + start
 # Listens on 127.0.0.1:PORT and a unix socket in DIR; user `vf`, trust auth, database `postgres`.
@@ -26,7 +27,7 @@ case "$cmd" in
       "${as_pg[@]}" "$bindir/initdb" -D "$data" -A trust -U vf --no-sync -E UTF8 >"$dir/initdb.log" 2>&1 \
         || { cat "$dir/initdb.log" >&2; exit 1; }
       {
-        echo "port = $port"
+        if [ "$port" = 0 ]; then echo "port = $((20000 + RANDOM % 40000))"; else echo "port = $port"; fi
         echo "listen_addresses = '127.0.0.1'"
         echo "unix_socket_directories = '$dir'"
         echo "max_connections = 400"
@@ -34,7 +35,16 @@ case "$cmd" in
         if [ "${PG_FAST:-0}" = 1 ]; then echo "fsync = off"; echo "synchronous_commit = off"; echo "full_page_writes = off"; fi
       } >>"$data/postgresql.conf"
     fi
-    "${as_pg[@]}" "$bindir/pg_ctl" -D "$data" -l "$dir/server.log" -w -t 60 start >/dev/null
+    # PORT 0: the cluster's last port if it still binds, else random ones until one does (a
+    # port probed free beforehand could be taken before the server binds it).
+    tries=1; [ "$port" = 0 ] && tries=20
+    for ((i = 1; ; i++)); do
+      if "${as_pg[@]}" "$bindir/pg_ctl" -D "$data" -l "$dir/server.log" -w -t 60 start >/dev/null; then
+        break
+      fi
+      if [ "$i" -ge "$tries" ]; then tail -5 "$dir/server.log" >&2; exit 1; fi
+      echo "port = $((20000 + RANDOM % 40000))" >>"$data/postgresql.conf"
+    done
     echo "postgres://vf@127.0.0.1:$(sed -n 's/^port = //p' "$data/postgresql.conf" | tail -1)/postgres"
     ;;
   stop)
