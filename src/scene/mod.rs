@@ -549,11 +549,7 @@ impl Scene {
         {
             g.fold_uniform_transform();
             if g.transform == Affine::IDENTITY {
-                let mut v = g.params();
-                for x in &mut v[..g.geometry.values().len()] {
-                    *x = ((f64::from(*x) * 1000.0).round() / 1000.0) as f32;
-                }
-                g.set_params(&v);
+                g.round_geometry(1000.0);
             }
         }
         Scene {

@@ -272,6 +272,15 @@ impl Gradient {
         self.transform = Affine::IDENTITY;
     }
 
+    /// Rounds the geometry (points and radii) to a grid of `1 / per_unit`.
+    pub fn round_geometry(&mut self, per_unit: f32) {
+        let mut v = self.params();
+        for x in &mut v[..self.geometry.values().len()] {
+            *x = (*x * per_unit).round() / per_unit;
+        }
+        self.set_params(&v);
+    }
+
     /// Number of scalars in [`Gradient::params`].
     pub fn num_params(&self) -> usize {
         self.geometry.values().len() + 5 * self.stops.len()

@@ -163,15 +163,13 @@ pub fn tidy_gradients(scene: &mut Scene) {
 /// One gradient rounded as [`tidy_gradients`] says.
 fn tidy(g: &mut Gradient) {
     g.fold_uniform_transform();
+    g.round_geometry(10f32.powi(GEOMETRY_DECIMALS));
     let round = |v: f32, d: i32| {
         let k = 10f32.powi(d);
         (v * k).round() / k
     };
     let mut values: Vec<f32> = g.params();
     let ng = g.geometry.values().len();
-    for v in &mut values[..ng] {
-        *v = round(*v, GEOMETRY_DECIMALS);
-    }
     for stop in values[ng..].chunks_exact_mut(5) {
         stop[0] = round(stop[0], OFFSET_DECIMALS);
         for c in &mut stop[1..4] {
