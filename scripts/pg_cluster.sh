@@ -18,6 +18,7 @@ fi
 as_pg=()
 if [ "$(id -u)" = 0 ]; then as_pg=(runuser -u postgres --); fi
 data="$dir/data"
+random_port() { echo $((20000 + RANDOM % 40000)); }
 case "$cmd" in
   start)
     [ -n "$port" ] || { echo "start needs a PORT" >&2; exit 2; }
@@ -27,7 +28,7 @@ case "$cmd" in
       "${as_pg[@]}" "$bindir/initdb" -D "$data" -A trust -U vf --no-sync -E UTF8 >"$dir/initdb.log" 2>&1 \
         || { cat "$dir/initdb.log" >&2; exit 1; }
       {
-        if [ "$port" = 0 ]; then echo "port = $((20000 + RANDOM % 40000))"; else echo "port = $port"; fi
+        if [ "$port" = 0 ]; then echo "port = $(random_port)"; else echo "port = $port"; fi
         echo "listen_addresses = '127.0.0.1'"
         echo "unix_socket_directories = '$dir'"
         echo "max_connections = 400"
@@ -43,7 +44,7 @@ case "$cmd" in
         break
       fi
       if [ "$i" -ge "$tries" ]; then tail -5 "$dir/server.log" >&2; exit 1; fi
-      echo "port = $((20000 + RANDOM % 40000))" >>"$data/postgresql.conf"
+      echo "port = $(random_port)" >>"$data/postgresql.conf"
     done
     echo "postgres://vf@127.0.0.1:$(sed -n 's/^port = //p' "$data/postgresql.conf" | tail -1)/postgres"
     ;;
