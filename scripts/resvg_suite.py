@@ -7,14 +7,16 @@ Usage:
         crates/resvg/tests/resources crates/resvg/tests/fonts | tar -x -C /tmp/resvg-suite
     scripts/resvg_suite.py /tmp/resvg-suite/crates/resvg/tests/tests \
         [--bin target/release/vectorfusion] [--json out.json] [--fails] [--jobs N] [--fonts DIR]
-        [--pdf]
+        [--pdf] [--antialias exact|supersampled]
 
 Reads the folders shapes, painting, structure, paint-servers and masking (filters and the
 `text` folder are out of scope; text inside the other folders is drawn). Text is drawn with the
 fonts of `--fonts` (default: `../fonts` beside TESTS, resvg's test fonts, when it exists) and
 no system fonts (`VF_FONT_DIRS`, `VF_SYSTEM_FONTS=0`), as resvg's harness draws it. A test passes when, over premultiplied RGBA in 0..255 units, the mean absolute
 difference is at most 1.5 and at most 1 % of the pixels differ by more than 16 in some channel;
-an SVG that `render` refuses fails. Prints the pass counts per folder and per feature
+an SVG that `render` refuses fails. Pictures are drawn with `render --antialias supersampled`
+(16 samples a pixel, as tiny-skia anti-aliases resvg's references); `--antialias exact` measures
+the exact area coverage the optimisers use instead. Prints the pass counts per folder and per feature
 (sub-folder) as Markdown tables; `--fails` lists every failing test with its numbers or error
 and `--json` writes every test's result (warnings included: `render` prints them on stderr).
 `--pdf` measures the PDF export instead: `render -o OUT.pdf`, drawn by poppler's `pdftocairo`
@@ -144,7 +146,7 @@ def over_white(rgba):
     return bytes(out)
 
 
-def run_one(binary, root, svg, tmp, env, pdf=False):
+def run_one(binary, root, svg, tmp, env, pdf=False, antialias="exact"):
     rel = os.path.relpath(svg, root)
     parts = rel.split(os.sep)
     result = {
@@ -159,7 +161,8 @@ def run_one(binary, root, svg, tmp, env, pdf=False):
         stem = os.path.join(tmp, rel.replace(os.sep, "__")[:-4])
         out = stem + (".pdf" if pdf else ".png")
         proc = subprocess.run(
-            [binary, "render", svg, "-o", out, "--size", str(w)],
+            [binary, "render", svg, "-o", out, "--size", str(w)]
+            + ([] if pdf else ["--antialias", antialias]),
             capture_output=True,
             text=True,
             timeout=60,
@@ -221,6 +224,13 @@ def main():
         "e.g. paint-servers/pattern,painting/stroke)",
     )
     ap.add_argument("--pdf", action="store_true", help="measure the PDF export (needs pdftocairo)")
+    ap.add_argument(
+        "--antialias",
+        choices=("exact", "supersampled"),
+        default="supersampled",
+        help="render's anti-aliasing of the PNG (default supersampled: 4 x 4 samples a pixel, as "
+        "resvg anti-aliases its references; exact: area coverage, the optimisers' model)",
+    )
     args = ap.parse_args()
     fonts = args.fonts or os.path.join(args.tests, os.pardir, "fonts")
     env = dict(os.environ, VF_SYSTEM_FONTS="0")
@@ -240,7 +250,7 @@ def main():
         svgs = [p for p in svgs if os.path.relpath(p, args.tests).startswith(keep)]
     svgs.sort()
     with tempfile.TemporaryDirectory() as tmp, ThreadPoolExecutor(args.jobs) as pool:
-        results = list(pool.map(lambda s: run_one(args.bin, args.tests, s, tmp, env, args.pdf), svgs))
+        results = list(pool.map(lambda s: run_one(args.bin, args.tests, s, tmp, env, args.pdf, args.antialias), svgs))
     folders, features = {}, {}
     for r in results:
         for rows, key in ((folders, r["folder"]), (features, r["feature"])):

@@ -201,3 +201,41 @@ fn render_writes_a_vector_pdf_by_extension() {
     assert!(String::from_utf8_lossy(&o.stderr).contains("--output: render writes .png or .pdf"));
     assert!(!jpg.exists());
 }
+
+#[test]
+fn render_antialias_supersampled_counts_samples() {
+    // A rectangle whose left edge is at x = 1.3: exact coverage 0.7 in column 1; 16 samples a
+    // pixel (at quarter-pixel centres) put three of four columns of samples inside: 0.75.
+    let dir = std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR"));
+    let svg = dir.join("cli_aa.svg");
+    std::fs::write(
+        &svg,
+        r##"<svg xmlns="http://www.w3.org/2000/svg" width="8" height="8"><rect x="1.3" y="0" width="5" height="8" fill="#000"/></svg>"##,
+    )
+    .unwrap();
+    let alpha = |aa: &str| {
+        let out = dir.join(format!("cli_aa_{aa}.png"));
+        let o = bin()
+            .args(["render", svg.to_str().unwrap(), "-o", out.to_str().unwrap()])
+            .args(["--antialias", aa])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        vectorfusion::image::Image::open(&out).unwrap().pixel(1, 4)[3]
+    };
+    assert!((alpha("exact") - 0.7).abs() < 0.003);
+    assert!((alpha("supersampled") - 0.75).abs() < 0.003);
+    let o = bin()
+        .args([
+            "render",
+            svg.to_str().unwrap(),
+            "-o",
+            "x.png",
+            "--antialias",
+            "fine",
+        ])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--antialias"));
+}

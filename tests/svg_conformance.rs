@@ -261,3 +261,38 @@ fn export_and_import_again_gives_the_same_scene() {
         compare(&format!("{name}_export"), &ours, &theirs, &Tolerance::SUITE);
     }
 }
+
+/// `render --antialias supersampled` samples as resvg does: at a scale that puts edges between
+/// quarter pixels (an 80-unit `viewBox` at 300 px, as resvg's image tests), exact coverage and
+/// resvg's part by 1/8 on every such edge (past the suite's tolerance), supersampled coverage
+/// does not.
+#[test]
+fn supersampled_antialiasing_draws_edges_as_resvg_does() {
+    let text = r##"<svg xmlns="http://www.w3.org/2000/svg" width="300" height="300" viewBox="0 0 80 80">
+      <defs><clipPath id="c"><circle cx="60" cy="20" r="13"/></clipPath></defs>
+      <rect x="1" y="1" width="78" height="78" fill="none" stroke="#000"/>
+      <path fill-rule="evenodd" fill="#36c" d="M20.13 5.07l9.02 26.9-23.11-16.95h28.1l-23.05 17.03z"/>
+      <rect x="41" y="3" width="36" height="34" fill="#c33" clip-path="url(#c)"/>
+      <polyline points="8.1,70.2 20.3,45.1 31.9,70.3 44.2,48.1" fill="none" stroke="#2a2" stroke-width="3.3" stroke-linejoin="miter"/>
+      <ellipse cx="62" cy="60" rx="13" ry="9" fill="#fa0" stroke="#000" stroke-width="1.7"/>
+      <path d="M5 40H75" stroke="#888" stroke-width="0.2"/>
+    </svg>"##;
+    let scene = from_svg(text).unwrap();
+    let theirs = resvg_render(text);
+    // Curves stay apart by a sample here and there (tiny-skia flattens and offsets them more
+    // coarsely), so the suite's tolerance, not a tighter one.
+    let sampled = raster::render_with(&scene, raster::Antialias::Supersampled);
+    compare(
+        "supersampled_vs_resvg",
+        &sampled,
+        &theirs,
+        &Tolerance::SUITE,
+    );
+    let off = |ours| golden::share_off_by(ours, &theirs, 16.0 / 255.0);
+    let (exact, sampled) = (off(&raster::render(&scene)), off(&sampled));
+    eprintln!("pixels off by more than 16: {exact} exact, {sampled} supersampled");
+    assert!(
+        exact > Tolerance::SUITE.max_share && sampled < exact / 4.0,
+        "pixels off by more than 16: {exact} exact, {sampled} supersampled"
+    );
+}

@@ -1,4 +1,4 @@
-//! `vectorfusion render IN.svg -o OUT.png [--size N]`: renders an SVG (or scene JSON) through
+//! `vectorfusion render IN.svg -o OUT.png [--size N] [--antialias exact|supersampled]`: renders an SVG (or scene JSON) through
 //! our own import path and forward rasteriser, so it can be compared with resvg or a browser;
 //! `-o OUT.pdf` writes the imported scene as a one-page vector PDF instead ([`crate::pdf`]).
 //! What the import could not draw (filters, images it may not read or decode, broken reference
@@ -19,6 +19,27 @@ pub struct RenderArgs {
     /// Output width in pixels (the height keeps the aspect ratio). Default: the SVG's size.
     #[arg(long)]
     pub size: Option<u32>,
+    /// Anti-aliasing of a PNG: `exact` area coverage (the differentiable rasteriser's), or
+    /// `supersampled`, 16 samples a pixel on a 4 × 4 grid as resvg (tiny-skia) draws, for
+    /// pixel-for-pixel comparisons with it. A PDF is vector and takes none.
+    #[arg(long, value_enum, default_value_t = AntialiasArg::Exact)]
+    pub antialias: AntialiasArg,
+}
+
+/// `--antialias`: [`raster::Antialias`] on the command line.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum AntialiasArg {
+    Exact,
+    Supersampled,
+}
+
+impl From<AntialiasArg> for raster::Antialias {
+    fn from(a: AntialiasArg) -> Self {
+        match a {
+            AntialiasArg::Exact => raster::Antialias::Exact,
+            AntialiasArg::Supersampled => raster::Antialias::Supersampled,
+        }
+    }
 }
 
 /// What `render` writes, by the output's extension.
@@ -46,12 +67,17 @@ pub fn run(args: RenderArgs) -> Result<(), CliError> {
     let format = Format::of(&args.output)?;
     let usage = |e: svg::SvgError| CliError::Usage(e.to_string());
     let mut import = svg::load_import(&args.input).map_err(usage)?;
-    // Pattern tiles are drawn at the output's resolution: import again when it differs.
-    if let Some(n) = args.size {
-        let res = n as f32 / import.scene.width as f32;
-        if res != 1.0 && import.scene.width > 0 {
-            import = svg::load_import_at(&args.input, res).map_err(usage)?;
-        }
+    // Pattern tiles are drawn at the output's resolution and anti-aliasing: import again when
+    // they differ from the canvas's.
+    let drawn = svg::DrawnAt {
+        resolution: match args.size {
+            Some(n) if import.scene.width > 0 => n as f32 / import.scene.width as f32,
+            _ => 1.0,
+        },
+        antialias: args.antialias.into(),
+    };
+    if drawn != svg::DrawnAt::CANVAS {
+        import = svg::load_import_at(&args.input, drawn).map_err(usage)?;
     }
     for w in &import.warnings {
         eprintln!("warning: {w}");
@@ -71,7 +97,7 @@ pub fn run(args: RenderArgs) -> Result<(), CliError> {
         .validate()
         .map_err(|e| CliError::Usage(format!("scaled scene is invalid: {e}")))?;
     match format {
-        Format::Png => raster::render(&scene)
+        Format::Png => raster::render_with(&scene, args.antialias.into())
             .save_png(&args.output)
             .map_err(|e| CliError::Other(e.into())),
         Format::Pdf => std::fs::write(&args.output, crate::pdf::to_pdf(&scene))

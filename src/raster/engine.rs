@@ -3,6 +3,7 @@
 //! The canvas is cut into horizontal bands that are processed in parallel (rayon); inside a
 //! band, layers are painted in order, each only over its bounding box ∩ band.
 
+use super::Antialias;
 use super::composite::{Area, composite, composite_back};
 use super::geom::{Layer, LayerKind, SceneT};
 use super::grad::{GradT, reduce};
@@ -103,6 +104,7 @@ pub(crate) struct PaintScratch<T> {
     acc: Vec<T>,
     vals: Vec<T>,
     stroke: stroke::Scratch<T>,
+    sampled: super::sampled::Scratch<T>,
 }
 
 /// Paints one band. `img` holds the band's rows (4 channels, full width).
@@ -185,6 +187,10 @@ pub(crate) fn paint_layer<T: Real>(
     buf.resize(start + cw * rows, T::zero());
     let out = &mut buf[start..];
     match l.kind {
+        // Forward-only: a pass with a tape (a backward to follow) keeps exact coverage.
+        _ if sc.aa == Antialias::Supersampled && record.is_none() => {
+            super::sampled::coverage(l, clip, out, &mut st.sampled);
+        }
         LayerKind::Fill => {
             let stride = cw + 1;
             let acc = &mut st.acc;

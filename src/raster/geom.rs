@@ -8,6 +8,7 @@
 //! - A stroke layer keeps the polyline and half-width; its coverage comes from the distance to
 //!   the polyline (see `stroke`).
 
+use super::Antialias;
 use super::layer::GroupT;
 use super::paint::PaintT;
 use super::real::Real;
@@ -70,6 +71,8 @@ pub(crate) struct SceneT<T> {
     pub paints: Vec<PaintT<T>>,
     /// Every fill texture, shape by shape (constants, see `texture`).
     pub textures: Vec<TextureT<T>>,
+    /// How edges are anti-aliased: [`Antialias::Exact`] for every pass that has a backward.
+    pub aa: Antialias,
 }
 
 fn seg_f32(kind: ShapeKind, p: &[[f32; 2]], i: usize) -> [[f32; 2]; 4] {
@@ -83,6 +86,12 @@ fn seg_f32(kind: ShapeKind, p: &[[f32; 2]], i: usize) -> [[f32; 2]; 4] {
 
 impl<T: Real> SceneT<T> {
     pub fn from_scene(scene: &Scene, tol: f32) -> Self {
+        Self::from_scene_aa(scene, tol, Antialias::Exact)
+    }
+
+    /// The scene with its clips and masks drawn by anti-aliasing `aa` (which the forward pass
+    /// then uses too).
+    pub fn from_scene_aa(scene: &Scene, tol: f32, aa: Antialias) -> Self {
         let c4 = |c: crate::scene::Rgba| c.to_array().map(T::of);
         let mut paints = Vec::new();
         let mut add = |g: Option<&crate::scene::Gradient>| {
@@ -129,7 +138,8 @@ impl<T: Real> SceneT<T> {
             height: scene.height,
             bg: c4(scene.background),
             shapes,
-            groups: super::layer::groups_t(scene, tol),
+            groups: super::layer::groups_t(scene, tol, aa),
+            aa,
             paints,
             textures,
         }

@@ -17,6 +17,7 @@
 //! clipped and masked shapes and the opacity get exact gradients. The tape keeps `P` and `G`
 //! (8 floats per pixel of the group's box) per group and band.
 
+use super::Antialias;
 use super::blend::{blend_px, blend_px_back};
 use super::engine::{
     BandGrad, BandTape, GradScratch, PaintScratch, Rec, RecKind, backward_layer, box_clip,
@@ -39,7 +40,7 @@ pub(crate) struct GroupT<T> {
 }
 
 /// The groups of `scene`, their clips and masks drawn at flattening tolerance `tol`.
-pub(crate) fn groups_t<T: Real>(scene: &Scene, tol: f32) -> Vec<GroupT<T>> {
+pub(crate) fn groups_t<T: Real>(scene: &Scene, tol: f32, aa: Antialias) -> Vec<GroupT<T>> {
     let (w, h) = (scene.width, scene.height);
     scene
         .groups
@@ -49,14 +50,14 @@ pub(crate) fn groups_t<T: Real>(scene: &Scene, tol: f32) -> Vec<GroupT<T>> {
             end: g.end,
             opacity: T::of(g.opacity),
             blend: g.blend,
-            factor: group_factor(g, w, h, tol),
+            factor: group_factor(g, w, h, tol, aa),
         })
         .collect()
 }
 
-fn group_factor<T: Real>(g: &Group, w: u32, h: u32, tol: f32) -> Option<Vec<T>> {
-    let clip = g.clip.as_deref().map(|c| clip_factor(c, w, h, tol));
-    let mask = g.mask.as_deref().map(|m| mask_factor(m, w, h, tol));
+fn group_factor<T: Real>(g: &Group, w: u32, h: u32, tol: f32, aa: Antialias) -> Option<Vec<T>> {
+    let clip = g.clip.as_deref().map(|c| clip_factor(c, w, h, tol, aa));
+    let mask = g.mask.as_deref().map(|m| mask_factor(m, w, h, tol, aa));
     match (clip, mask) {
         (Some(mut c), Some(m)) => {
             c.iter_mut().zip(&m).for_each(|(a, b)| *a *= *b);
@@ -67,7 +68,7 @@ fn group_factor<T: Real>(g: &Group, w: u32, h: u32, tol: f32) -> Option<Vec<T>> 
 }
 
 /// Draws `content` over transparency on a `w × h` canvas (premultiplied RGBA).
-fn draw<T: Real>(content: &Content, w: u32, h: u32, tol: f32) -> Vec<T> {
+fn draw<T: Real>(content: &Content, w: u32, h: u32, tol: f32, aa: Antialias) -> Vec<T> {
     let scene = Scene {
         width: w,
         height: h,
@@ -75,29 +76,29 @@ fn draw<T: Real>(content: &Content, w: u32, h: u32, tol: f32) -> Vec<T> {
         shapes: content.shapes.clone(),
         groups: content.groups.clone(),
     };
-    super::render_t(&SceneT::<T>::from_scene(&scene, tol))
+    super::render_t(&SceneT::<T>::from_scene_aa(&scene, tol, aa))
 }
 
-fn clip_factor<T: Real>(c: &ClipPath, w: u32, h: u32, tol: f32) -> Vec<T> {
+fn clip_factor<T: Real>(c: &ClipPath, w: u32, h: u32, tol: f32, aa: Antialias) -> Vec<T> {
     let mut opaque = c.content.clone();
     for s in &mut opaque.shapes {
         s.fill = Some(Rgba::BLACK);
         s.stroke = None;
         s.gradients = None;
     }
-    let mut f: Vec<T> = draw::<T>(&opaque, w, h, tol)
+    let mut f: Vec<T> = draw::<T>(&opaque, w, h, tol, aa)
         .chunks_exact(4)
         .map(|p| p[3])
         .collect();
     if let Some(inner) = &c.clip {
-        let g = clip_factor::<T>(inner, w, h, tol);
+        let g = clip_factor::<T>(inner, w, h, tol, aa);
         f.iter_mut().zip(&g).for_each(|(a, b)| *a *= *b);
     }
     f
 }
 
-fn mask_factor<T: Real>(m: &Mask, w: u32, h: u32, tol: f32) -> Vec<T> {
-    let img = draw::<T>(&m.content, w, h, tol);
+fn mask_factor<T: Real>(m: &Mask, w: u32, h: u32, tol: f32, aa: Antialias) -> Vec<T> {
+    let img = draw::<T>(&m.content, w, h, tol, aa);
     let mut f: Vec<T> = match m.kind {
         MaskKind::Alpha => img.chunks_exact(4).map(|p| p[3]).collect(),
         MaskKind::Luminance => {
@@ -108,7 +109,7 @@ fn mask_factor<T: Real>(m: &Mask, w: u32, h: u32, tol: f32) -> Vec<T> {
         }
     };
     if let Some(inner) = &m.mask {
-        let g = mask_factor::<T>(inner, w, h, tol);
+        let g = mask_factor::<T>(inner, w, h, tol, aa);
         f.iter_mut().zip(&g).for_each(|(a, b)| *a *= *b);
     }
     f

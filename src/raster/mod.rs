@@ -11,6 +11,8 @@
 //!   area coverage and equals the nonzero rule; where an outline overlaps itself it saturates.
 //!   An even-odd fill's coverage is the distance from `A` to the nearest even integer (0 where
 //!   the winding is even, 1 where odd, exact wherever a pixel is crossed by one edge).
+//!   Forward-only renders may ask for [`Antialias::Supersampled`] instead: the share of 16
+//!   point samples inside, as resvg's tiny-skia anti-aliases (see `sampled`).
 //! - A round-capped, round-joined stroke is the union of one capsule per polyline edge
 //!   ([`crate::svg::to_svg`] writes `stroke-linecap="round" stroke-linejoin="round"` so other
 //!   renderers agree); butt and square caps and miter (with its limit) and bevel joins are
@@ -52,6 +54,7 @@ mod grad;
 mod layer;
 mod paint;
 mod real;
+mod sampled;
 mod stroke;
 mod texture;
 mod walk;
@@ -66,6 +69,8 @@ mod tests_layer;
 mod tests_layer_paint;
 #[cfg(test)]
 mod tests_paint;
+#[cfg(test)]
+mod tests_sampled;
 #[cfg(test)]
 mod tests_stroke;
 #[cfg(test)]
@@ -162,7 +167,29 @@ fn take_pooled(n: usize) -> Vec<engine::BandTape<f32>> {
 
 /// Renders `scene` to a premultiplied RGBA image of the scene's size.
 pub fn render(scene: &Scene) -> Image {
-    let sc = SceneT::<f32>::from_scene(scene, FLATTEN_TOLERANCE);
+    render_with(scene, Antialias::Exact)
+}
+
+/// How the forward pass anti-aliases edges.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Antialias {
+    /// Exact area coverage (a box filter): the differentiable model, and the default.
+    #[default]
+    Exact,
+    /// The share of 16 point samples per pixel on a 4 × 4 grid, as tiny-skia (resvg) and
+    /// Skia's CPU rasteriser anti-alias (see `sampled`): forward only, for pixel-for-pixel
+    /// comparisons with them. Passes with a backward always use [`Antialias::Exact`].
+    Supersampled,
+}
+
+/// [`render`] with anti-aliasing `aa`.
+pub fn render_with(scene: &Scene, aa: Antialias) -> Image {
+    // Sampling a quarter pixel apart, the curves are flattened four times as finely.
+    let tol = match aa {
+        Antialias::Exact => FLATTEN_TOLERANCE,
+        Antialias::Supersampled => FLATTEN_TOLERANCE / 4.0,
+    };
+    let sc = SceneT::<f32>::from_scene_aa(scene, tol, aa);
     Image {
         width: scene.width,
         height: scene.height,

@@ -1,6 +1,7 @@
 //! Scene files: the benchmark scene JSON format, and loading a scene (SVG or JSON) from disk with
 //! a size cap.
 
+use super::import_pattern::DrawnAt;
 use super::{ImageLimits, SvgError, SvgImport, import_svg_in};
 use crate::scene::{Point, Rgba, Scene, Shape};
 use std::path::Path;
@@ -71,10 +72,9 @@ pub fn load_scene(path: &Path) -> Result<Scene, SvgError> {
     load_import(path).map(|i| i.scene)
 }
 
-/// [`load_import`] for a scene that will be drawn at `resolution` device pixels per canvas
-/// pixel: pattern tiles are drawn that finely.
-pub fn load_import_at(path: &Path, resolution: f32) -> Result<SvgImport, SvgError> {
-    super::import_pattern::at_resolution(resolution, || load_import(path))
+/// [`load_import`] for a scene that will be drawn as `d` says: pattern tiles are drawn alike.
+pub fn load_import_at(path: &Path, d: DrawnAt) -> Result<SvgImport, SvgError> {
+    super::import_pattern::drawn_at(d, || load_import(path))
 }
 
 /// [`load_scene`], with the SVG import's warnings (none for JSON).

@@ -5,10 +5,12 @@
 //! of the path's transform and `patternTransform`, rounded to whole pixels), then sampled with
 //! [`TextureEdge::Repeat`]. The content overflowing the tile is cut (`overflow` is ignored, as
 //! in resvg). Patterns inside pattern tiles nest [`MAX_DEPTH`] deep (each drawn at its tile's
-//! resolution, which includes the [`at_resolution`] factor once); deeper ones paint nothing.
+//! resolution, which includes the [`drawn_at`] factor once); deeper ones paint nothing. Tiles
+//! are anti-aliased as the scene will be ([`DrawnAt::antialias`]).
 
 use super::images::{ImageLimits, Images};
 use super::walk::{Mode, Walk};
+use crate::raster::Antialias;
 use crate::scene::{Affine, Content, Rgba, Scene, Texture, TextureEdge, TextureFilter};
 use resvg::usvg;
 use std::cell::Cell;
@@ -21,24 +23,39 @@ pub const MAX_DEPTH: u32 = 4;
 const MAX_TILE_SIDE: f32 = 2048.0;
 const MAX_TILE_PIXELS: f32 = 1024.0 * 1024.0;
 
-thread_local! {
-    static DEPTH: Cell<u32> = const { Cell::new(0) };
-    /// Device pixels per canvas pixel the imported scene will be drawn at (see [`at_resolution`]).
-    static RESOLUTION: Cell<f32> = const { Cell::new(1.0) };
+/// How an imported scene will be drawn, so that its pattern tiles are drawn alike.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DrawnAt {
+    /// Device pixels per canvas pixel (`render --size`): a tile drawn at the canvas's own
+    /// resolution and magnified would be blurred. Clamped to `(0, 16]` (1 when not finite).
+    pub resolution: f32,
+    pub antialias: Antialias,
 }
 
-/// Runs `f` (an import on this thread) with pattern tiles drawn at `resolution` device pixels
-/// per canvas pixel, for a scene that will be drawn scaled (`render --size`): a tile drawn at
-/// the canvas's own resolution and magnified would be blurred.
-pub fn at_resolution<R>(resolution: f32, f: impl FnOnce() -> R) -> R {
-    let r = if resolution.is_finite() && resolution > 0.0 {
-        resolution.min(16.0)
+impl DrawnAt {
+    /// The canvas's own resolution, exact coverage: how every pass that optimises draws.
+    pub const CANVAS: DrawnAt = DrawnAt {
+        resolution: 1.0,
+        antialias: Antialias::Exact,
+    };
+}
+
+thread_local! {
+    static DEPTH: Cell<u32> = const { Cell::new(0) };
+    /// How the imported scene will be drawn (see [`drawn_at`]).
+    static DRAWN_AT: Cell<DrawnAt> = const { Cell::new(DrawnAt::CANVAS) };
+}
+
+/// Runs `f` (an import on this thread) with pattern tiles drawn as `d` says.
+pub fn drawn_at<R>(d: DrawnAt, f: impl FnOnce() -> R) -> R {
+    let resolution = if d.resolution.is_finite() && d.resolution > 0.0 {
+        d.resolution.min(16.0)
     } else {
         1.0
     };
-    let old = RESOLUTION.with(|c| c.replace(r));
+    let old = DRAWN_AT.with(|c| c.replace(DrawnAt { resolution, ..d }));
     let out = f();
-    RESOLUTION.with(|c| c.set(old));
+    DRAWN_AT.with(|c| c.set(old));
     out
 }
 
@@ -59,8 +76,8 @@ fn tile(p: &usvg::Pattern, ts: Transform, opacity: f32) -> Option<Texture> {
     let m = ts.pre_concat(p.transform());
     let rect = p.rect();
     let (mut sx, mut sy) = m.get_scale();
-    let res = RESOLUTION.with(Cell::get);
-    (sx, sy) = (sx * res, sy * res);
+    let drawn = DRAWN_AT.with(Cell::get);
+    (sx, sy) = (sx * drawn.resolution, sy * drawn.resolution);
     // Keep the tile within its bounds, at one scale for both axes.
     let (w, h) = (rect.width() * sx, rect.height() * sy);
     let k = (MAX_TILE_SIDE / w.max(h))
@@ -79,7 +96,11 @@ fn tile(p: &usvg::Pattern, ts: Transform, opacity: f32) -> Option<Texture> {
     let mut walk = Walk::new((tw, th), Arc::new(images));
     let mut content = Content::default();
     // The tile is drawn at device resolution already: patterns inside it take no more.
-    at_resolution(1.0, || {
+    let inner = DrawnAt {
+        resolution: 1.0,
+        ..drawn
+    };
+    drawn_at(inner, || {
         walk.group(
             p.root(),
             Transform::from_scale(sx, sy),
@@ -95,7 +116,7 @@ fn tile(p: &usvg::Pattern, ts: Transform, opacity: f32) -> Option<Texture> {
         groups: content.groups,
     };
     scene.validate().ok()?;
-    let img = crate::raster::render(&scene);
+    let img = crate::raster::render_with(&scene, drawn.antialias);
     let q = |v: f32| (v * opacity * 255.0).round().clamp(0.0, 255.0) as u8;
     let to_canvas = m
         .pre_translate(rect.x(), rect.y())

@@ -113,6 +113,7 @@ pub use file::{
 pub use guard::{Parsed, SvgLimits, SvgRejected};
 pub use images::ImageLimits;
 pub use import::{SvgImport, from_svg, import_svg, import_svg_in, import_svg_with_fonts};
+pub use import_pattern::DrawnAt;
 pub use profile::{ProfileViolation, check_safe_output};
 
 use crate::scene::{MAX_SIDE, SceneError};
