@@ -24,6 +24,8 @@ use super::walk::{Clip, deposit};
 
 /// Sub-cells per pixel side.
 const SUB: i32 = 4;
+/// Pixel rows drawn at a time.
+const CHUNK_ROWS: i32 = 16;
 /// The shift, in sub-cells, that breaks ties of samples lying on an edge.
 const TIE_SHIFT: f64 = 1.0 / 64.0;
 
@@ -42,8 +44,20 @@ fn to_sub<T: Real>(p: [T; 2]) -> [T; 2] {
 }
 
 /// Writes the supersampled coverage (in `0..=1`, the fill rule applied) of layer `l` over
-/// `clip` into `out` (`cw * rows`).
+/// `clip` into `out` (`cw * rows`), [`CHUNK_ROWS`] pixel rows at a time so that the sub-cell
+/// buffers stay small whatever the canvas.
 pub(crate) fn coverage<T: Real>(l: &Layer<T>, clip: Clip, out: &mut [T], s: &mut Scratch<T>) {
+    let cw = (clip.x1 - clip.x0) as usize;
+    let mut y = clip.y0;
+    while y < clip.y1 {
+        let y1 = (y + CHUNK_ROWS).min(clip.y1);
+        let rows = (y - clip.y0) as usize * cw..(y1 - clip.y0) as usize * cw;
+        chunk(l, Clip { y0: y, y1, ..clip }, &mut out[rows], s);
+        y = y1;
+    }
+}
+
+fn chunk<T: Real>(l: &Layer<T>, clip: Clip, out: &mut [T], s: &mut Scratch<T>) {
     let sub = Clip {
         x0: clip.x0 * SUB,
         x1: clip.x1 * SUB,
