@@ -445,14 +445,14 @@ mod tests {
         scene
             .shapes
             .push(Shape::circle(5.0, 5.0, 3.0, 4, Rgba::BLACK).unwrap());
-        let twisted = vec![
-            Point::new(0.0, 0.0),
-            Point::new(10.0, 10.0),
-            Point::new(10.0, 0.0),
-            Point::new(0.0, 10.0),
-            Point::new(-3.0, 12.0),
-            Point::new(-5.0, 2.0),
-        ];
+        let twisted = Point::list(&[
+            (0.0, 0.0),
+            (10.0, 10.0),
+            (10.0, 0.0),
+            (0.0, 10.0),
+            (-3.0, 12.0),
+            (-5.0, 2.0),
+        ]);
         scene
             .shapes
             .push(Shape::closed_cubic(twisted, Rgba::BLACK).unwrap());

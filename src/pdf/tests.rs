@@ -6,12 +6,7 @@ fn scene() -> Scene {
     s.shapes
         .push(Shape::circle(10.0, 10.0, 8.0, 4, Rgba::new(1.0, 0.0, 0.0, 0.5)).unwrap());
     let mut line = Shape::open_cubic(
-        vec![
-            Point::new(20.0, 2.0),
-            Point::new(25.0, 2.0),
-            Point::new(30.0, 18.0),
-            Point::new(38.0, 18.0),
-        ],
+        Point::list(&[(20.0, 2.0), (25.0, 2.0), (30.0, 18.0), (38.0, 18.0)]),
         Stroke::round(Rgba::new(0.0, 0.0, 1.0, 1.0), 2.0),
     )
     .unwrap();

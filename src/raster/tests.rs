@@ -288,12 +288,7 @@ fn stroke_area_is_length_times_width_plus_caps() {
     let mut s = Scene::new(64, 32, Rgba::TRANSPARENT).unwrap();
     s.shapes.push(
         Shape::open_cubic(
-            vec![
-                Point::new(10.0, 16.0),
-                Point::new(20.0, 16.0),
-                Point::new(40.0, 16.0),
-                Point::new(50.0, 16.0),
-            ],
+            Point::list(&[(10.0, 16.0), (20.0, 16.0), (40.0, 16.0), (50.0, 16.0)]),
             Stroke::round(Rgba::BLACK, 4.0),
         )
         .unwrap(),

@@ -107,12 +107,7 @@ fn clips_and_masks_multiply_the_layer() {
     let mut c = g.clip.take().unwrap();
     c.clip = Some(clip(vec![
         Shape::polygon(
-            vec![
-                Point::new(0.0, 0.0),
-                Point::new(16.0, 0.0),
-                Point::new(16.0, 8.0),
-                Point::new(0.0, 8.0),
-            ],
+            Point::list(&[(0.0, 0.0), (16.0, 0.0), (16.0, 8.0), (0.0, 8.0)]),
             Rgba::BLACK,
         )
         .unwrap(),

@@ -78,12 +78,7 @@ pub(super) fn scene(spread: Spread) -> Scene {
     let rs = radial(spread, 0.7);
     s.shapes.push(with(disc, Some(rs.clone()), Some(rs)));
     let line = Shape::open_cubic(
-        vec![
-            Point::new(1.0, 17.0),
-            Point::new(8.0, 12.0),
-            Point::new(15.0, 19.0),
-            Point::new(22.5, 13.0),
-        ],
+        Point::list(&[(1.0, 17.0), (8.0, 12.0), (15.0, 19.0), (22.5, 13.0)]),
         Stroke::round(Rgba::BLACK, 3.0),
     )
     .unwrap();
@@ -180,12 +175,7 @@ fn shapes_and_flat_parameters_keep_exact_gradients_under_gradient_paint() {
 fn linear_gradient_colours_follow_the_stops() {
     let mut s = Scene::new(20, 4, Rgba::TRANSPARENT).unwrap();
     let rect = Shape::polygon(
-        vec![
-            Point::new(0.0, 0.0),
-            Point::new(20.0, 0.0),
-            Point::new(20.0, 4.0),
-            Point::new(0.0, 4.0),
-        ],
+        Point::list(&[(0.0, 0.0), (20.0, 0.0), (20.0, 4.0), (0.0, 4.0)]),
         Rgba::BLACK,
     )
     .unwrap();

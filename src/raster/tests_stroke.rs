@@ -113,12 +113,7 @@ fn shaped_stroke_gradients_match_finite_differences() {
             &[(3.2, 4.1), (17.3, 5.2), (6.4, 15.3), (20.6, 16.7)],
             styled(cap, join, limit, 3.1),
         ));
-        let curve = vec![
-            Point::new(2.5, 18.0),
-            Point::new(8.0, 2.0),
-            Point::new(14.0, 26.0),
-            Point::new(22.4, 9.3),
-        ];
+        let curve = Point::list(&[(2.5, 18.0), (8.0, 2.0), (14.0, 26.0), (22.4, 9.3)]);
         s.shapes
             .push(Shape::open_cubic(curve, styled(cap, join, limit, 1.3)).unwrap());
         // Off the pixel grid: a pixel centre exactly on a piece's edge is a tie between pieces

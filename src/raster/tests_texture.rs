@@ -89,12 +89,7 @@ fn finite_differences_over_and_under_an_image() {
         texture(3.1, (2.3, 1.7), TextureEdge::Pad, TextureFilter::Bicubic),
     ));
     let line = Shape::open_cubic(
-        vec![
-            Point::new(1.0, 12.0),
-            Point::new(6.0, 3.0),
-            Point::new(10.0, 13.0),
-            Point::new(12.6, 4.2),
-        ],
+        Point::list(&[(1.0, 12.0), (6.0, 3.0), (10.0, 13.0), (12.6, 4.2)]),
         Stroke::round(Rgba::new(0.9, 0.1, 0.1, 0.7), 2.0),
     )
     .unwrap();

@@ -47,6 +47,11 @@ impl Point {
         Self { x, y }
     }
 
+    /// The points of `xy`, in order.
+    pub fn list(xy: &[(f32, f32)]) -> Vec<Point> {
+        xy.iter().map(|&(x, y)| Point::new(x, y)).collect()
+    }
+
     /// The control points of the cubic that is the straight segment from `a` to `b`: its
     /// thirds (how a polygon edge, an SVG `L` and a straightened segment are drawn).
     pub fn line_controls(a: Point, b: Point) -> [Point; 2] {
@@ -313,12 +318,7 @@ impl Shape {
     /// An axis-aligned square (pixel-art cell) as a 4-gon.
     pub fn square(x: f32, y: f32, side: f32, fill: Rgba) -> Result<Self, SceneError> {
         Self::polygon(
-            vec![
-                Point::new(x, y),
-                Point::new(x + side, y),
-                Point::new(x + side, y + side),
-                Point::new(x, y + side),
-            ],
+            Point::list(&[(x, y), (x + side, y), (x + side, y + side), (x, y + side)]),
             fill,
         )
     }

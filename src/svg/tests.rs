@@ -7,23 +7,14 @@ fn sample_scene() -> Scene {
         .push(Shape::circle(20.0, 20.0, 12.0, 4, Rgba::new(1.0, 0.0, 0.0, 0.5)).unwrap());
     s.shapes.push(
         Shape::polygon(
-            vec![
-                Point::new(30.0, 5.0),
-                Point::new(60.0, 10.0),
-                Point::new(40.0, 40.0),
-            ],
+            Point::list(&[(30.0, 5.0), (60.0, 10.0), (40.0, 40.0)]),
             Rgba::new(0.0, 0.4, 1.0, 1.0),
         )
         .unwrap(),
     );
     s.shapes.push(
         Shape::open_cubic(
-            vec![
-                Point::new(5.0, 40.0),
-                Point::new(20.0, 30.0),
-                Point::new(35.0, 47.0),
-                Point::new(60.0, 35.0),
-            ],
+            Point::list(&[(5.0, 40.0), (20.0, 30.0), (35.0, 47.0), (60.0, 35.0)]),
             Stroke::round(Rgba::new(0.0, 0.0, 0.0, 0.75), 3.0),
         )
         .unwrap(),

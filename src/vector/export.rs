@@ -169,23 +169,19 @@ mod tests {
         );
         s.shapes.push(
             Shape::polygon(
-                vec![
-                    Point::new(30.0 + o, 6.0),
-                    Point::new(60.0, 12.0 + o),
-                    Point::new(44.0 + o, 58.0 - o),
-                ],
+                Point::list(&[(30.0 + o, 6.0), (60.0, 12.0 + o), (44.0 + o, 58.0 - o)]),
                 Rgba::new(0.1, 0.3, 0.9, 0.8),
             )
             .unwrap(),
         );
         s.shapes.push(
             Shape::open_cubic(
-                vec![
-                    Point::new(4.0, 50.0 + o),
-                    Point::new(20.0 + o, 36.0),
-                    Point::new(36.0, 62.0 - o),
-                    Point::new(60.0 - o, 44.0),
-                ],
+                Point::list(&[
+                    (4.0, 50.0 + o),
+                    (20.0 + o, 36.0),
+                    (36.0, 62.0 - o),
+                    (60.0 - o, 44.0),
+                ]),
                 Stroke::round(Rgba::BLACK, 2.0),
             )
             .unwrap(),

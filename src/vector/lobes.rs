@@ -339,10 +339,6 @@ mod tests {
     use crate::scene::{Rgba, Scene};
     use crate::vector::simple::is_simple;
 
-    fn pts(v: &[(f32, f32)]) -> Vec<Point> {
-        v.iter().map(|&(x, y)| Point::new(x, y)).collect()
-    }
-
     fn red() -> Rgba {
         Rgba::new(0.8, 0.1, 0.1, 1.0)
     }
@@ -350,7 +346,7 @@ mod tests {
     /// A figure eight: two lobes of opposite orientation crossing at the centre.
     fn figure_eight() -> Shape {
         Shape::closed_cubic(
-            pts(&[
+            Point::list(&[
                 (8.0, 8.0),
                 (16.0, 8.0),
                 (16.0, 24.0),
@@ -407,7 +403,7 @@ mod tests {
     fn a_small_twist_at_a_corner_is_cut_into_its_own_lobe() {
         // A square whose corner handles cross, making a tiny loop at the top-right corner.
         let sq = Shape::closed_cubic(
-            pts(&[
+            Point::list(&[
                 (4.0, 4.0),
                 (12.0, 4.0),
                 (31.0, 7.0),

@@ -110,20 +110,20 @@ mod tests {
     fn straighten_moves_near_straight_controls_only_and_keeps_the_render() {
         let mut s = Scene::new(32, 32, Rgba::WHITE).unwrap();
         // A square whose top edge bows by 0.1 px and whose bottom edge bulges by 6 px.
-        let pts = vec![
-            Point::new(4.0, 4.0),
-            Point::new(12.0, 4.1),
-            Point::new(20.0, 3.9),
-            Point::new(28.0, 4.0),
-            Point::new(28.0, 12.0),
-            Point::new(28.0, 20.0),
-            Point::new(28.0, 28.0),
-            Point::new(20.0, 34.0),
-            Point::new(12.0, 34.0),
-            Point::new(4.0, 28.0),
-            Point::new(4.0, 20.0),
-            Point::new(4.0, 12.0),
-        ];
+        let pts = Point::list(&[
+            (4.0, 4.0),
+            (12.0, 4.1),
+            (20.0, 3.9),
+            (28.0, 4.0),
+            (28.0, 12.0),
+            (28.0, 20.0),
+            (28.0, 28.0),
+            (20.0, 34.0),
+            (12.0, 34.0),
+            (4.0, 28.0),
+            (4.0, 20.0),
+            (4.0, 12.0),
+        ]);
         s.shapes
             .push(Shape::closed_cubic(pts, Rgba::BLACK).unwrap());
         let before = crate::raster::render(&s);
