@@ -133,6 +133,7 @@ fn bench_raster_prints_json_with_the_documented_keys() {
     assert_eq!(v["size"], 64);
     for k in [
         "forward_ms",
+        "supersampled_forward_ms",
         "forward_backward_ms",
         "tiny_skia_forward_ms",
         "loss",

@@ -59,6 +59,8 @@ pub struct RasterBench {
     pub size: u32,
     pub paint: super::bench_paint::BenchPaint,
     pub forward_ms: f64,
+    /// `raster::render_with(.., Antialias::Supersampled)`: 16 samples a pixel, as tiny-skia.
+    pub supersampled_forward_ms: f64,
     pub forward_backward_ms: f64,
     pub tiny_skia_forward_ms: f64,
     pub loss: f64,
@@ -211,6 +213,9 @@ fn raster_bench(a: RasterBenchArgs) -> Result<(), CliError> {
         .validate()
         .map_err(|e| CliError::Usage(format!("scaled scene is invalid: {e}")))?;
     let forward_ms = time_ms(a.iters, || raster::render(&scene));
+    let supersampled_forward_ms = time_ms(a.iters, || {
+        raster::render_with(&scene, raster::Antialias::Supersampled)
+    });
     let mut loss = 0.0;
     let forward_backward_ms = time_ms(a.iters, || {
         let (img, tape) = raster::render_tape(&scene);
@@ -223,6 +228,7 @@ fn raster_bench(a: RasterBenchArgs) -> Result<(), CliError> {
         size: a.size,
         paint: a.paint,
         forward_ms,
+        supersampled_forward_ms,
         forward_backward_ms,
         tiny_skia_forward_ms,
         loss,
@@ -242,6 +248,7 @@ fn raster_bench(a: RasterBenchArgs) -> Result<(), CliError> {
             r.threads
         );
         println!("  forward            {:8.3} ms", r.forward_ms);
+        println!("  forward, 4x4 AA    {:8.3} ms", r.supersampled_forward_ms);
         println!("  forward+backward   {:8.3} ms", r.forward_backward_ms);
         println!("  tiny-skia forward  {:8.3} ms", r.tiny_skia_forward_ms);
         println!("  loss (L2 vs ramp)  {:.6}", r.loss);
