@@ -16,8 +16,8 @@ no system fonts (`VF_FONT_DIRS`, `VF_SYSTEM_FONTS=0`), as resvg's harness draws 
 difference is at most 1.5 and at most 1 % of the pixels differ by more than 16 in some channel;
 an SVG that `render` refuses fails. Pictures are drawn with `render --antialias supersampled`
 (16 samples a pixel, as tiny-skia anti-aliases resvg's references); `--antialias exact` measures
-the exact area coverage the optimisers use instead. Prints the pass counts per folder and per feature
-(sub-folder) as Markdown tables; `--fails` lists every failing test with its numbers or error
+the exact area coverage the optimisers use instead. Prints the pass counts per folder and per
+feature (sub-folder) as Markdown tables; `--fails` lists every failing test with its numbers or error
 and `--json` writes every test's result (warnings included: `render` prints them on stderr).
 `--pdf` measures the PDF export instead: `render -o OUT.pdf`, drawn by poppler's `pdftocairo`
 (cairo's anti-aliasing is close to resvg's; `pdftoppm` snaps thin strokes and rectangles to
@@ -146,7 +146,7 @@ def over_white(rgba):
     return bytes(out)
 
 
-def run_one(binary, root, svg, tmp, env, pdf=False, antialias="exact"):
+def run_one(binary, root, svg, tmp, env, pdf, antialias):
     rel = os.path.relpath(svg, root)
     parts = rel.split(os.sep)
     result = {
@@ -250,7 +250,10 @@ def main():
         svgs = [p for p in svgs if os.path.relpath(p, args.tests).startswith(keep)]
     svgs.sort()
     with tempfile.TemporaryDirectory() as tmp, ThreadPoolExecutor(args.jobs) as pool:
-        results = list(pool.map(lambda s: run_one(args.bin, args.tests, s, tmp, env, args.pdf, args.antialias), svgs))
+        def one(svg):
+            return run_one(args.bin, args.tests, svg, tmp, env, args.pdf, args.antialias)
+
+        results = list(pool.map(one, svgs))
     folders, features = {}, {}
     for r in results:
         for rows, key in ((folders, r["folder"]), (features, r["feature"])):

@@ -1,9 +1,10 @@
-//! `vectorfusion render IN.svg -o OUT.png [--size N] [--antialias exact|supersampled]`: renders an SVG (or scene JSON) through
-//! our own import path and forward rasteriser, so it can be compared with resvg or a browser;
+//! `vectorfusion render IN.svg -o OUT.png [--size N] [--antialias exact|supersampled]`: renders
+//! an SVG (or scene JSON) through our own import path and forward rasteriser, so it can be
+//! compared with resvg or a browser;
 //! `-o OUT.pdf` writes the imported scene as a one-page vector PDF instead ([`crate::pdf`]).
 //! What the import could not draw (filters, images it may not read or decode, broken reference
 //! cycles) is printed on stderr, one `warning: …` line each. Images are read beside the input
-//! file; pattern tiles are drawn at the output's resolution.
+//! file; pattern tiles are drawn at the output's resolution and anti-aliasing.
 
 use super::{CliError, ResultExt as _};
 use crate::{raster, svg};

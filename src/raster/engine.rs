@@ -89,7 +89,8 @@ fn layer_clip<T>(l: &Layer<T>, y0: i32, y1: i32) -> Option<Clip> {
     box_clip(l.bbox, y0, y1)
 }
 
-fn for_each_edge<T: Real>(l: &Layer<T>, mut f: impl FnMut(usize, usize)) {
+/// Calls `f(a, b)` with the vertex indices of every edge of every contour of `l`.
+pub(crate) fn for_each_edge<T: Real>(l: &Layer<T>, mut f: impl FnMut(usize, usize)) {
     for &(start, len) in &l.contours {
         let (s, n) = (start as usize, len as usize);
         for k in 0..n {

@@ -17,6 +17,7 @@
 //!
 //! [`Antialias::Supersampled`]: super::Antialias::Supersampled
 
+use super::engine::for_each_edge;
 use super::geom::{Layer, LayerKind};
 use super::real::Real;
 use super::stroke;
@@ -47,6 +48,23 @@ fn to_sub<T: Real>(p: [T; 2]) -> [T; 2] {
 /// `clip` into `out` (`cw * rows`), [`CHUNK_ROWS`] pixel rows at a time so that the sub-cell
 /// buffers stay small whatever the canvas.
 pub(crate) fn coverage<T: Real>(l: &Layer<T>, clip: Clip, out: &mut [T], s: &mut Scratch<T>) {
+    // A stroke at most a pixel wide is what tiny-skia draws as a hairline: a one-pixel line's
+    // coverage (exact here, analytic there) scaled by the width; no sub-cells.
+    if l.kind == LayerKind::Stroke && l.radius <= T::c(0.5) {
+        let one_px_radius = T::c(0.5);
+        stroke::coverage(
+            &l.poly,
+            l.closed,
+            one_px_radius,
+            l.style,
+            clip,
+            out,
+            &mut s.stroke,
+        );
+        let width = l.radius * T::c(2.0);
+        out.iter_mut().for_each(|v| *v *= width);
+        return;
+    }
     let cw = (clip.x1 - clip.x0) as usize;
     let mut y = clip.y0;
     while y < clip.y1 {
@@ -73,13 +91,10 @@ fn chunk<T: Real>(l: &Layer<T>, clip: Clip, out: &mut [T], s: &mut Scratch<T>) {
             let stride = scw + 1;
             s.acc.clear();
             s.acc.resize(stride * srows, T::zero());
-            for &(start, len) in &l.contours {
-                let (start, n) = (start as usize, len as usize);
-                for k in 0..n {
-                    let (a, b) = (l.verts[start + k], l.verts[start + (k + 1) % n]);
-                    deposit(to_sub(a), to_sub(b), sub, &mut s.acc, stride);
-                }
-            }
+            let acc = &mut s.acc;
+            for_each_edge(l, |a, b| {
+                deposit(to_sub(l.verts[a]), to_sub(l.verts[b]), sub, acc, stride)
+            });
             let half = T::c(0.5);
             for (arow, irow) in s
                 .acc
@@ -98,22 +113,6 @@ fn chunk<T: Real>(l: &Layer<T>, clip: Clip, out: &mut [T], s: &mut Scratch<T>) {
                     *v = if inside { T::one() } else { T::zero() };
                 }
             }
-        }
-        // A stroke at most a pixel wide is what tiny-skia draws as a hairline: a one-pixel line's
-        // coverage (exact here, analytic there) scaled by the width.
-        LayerKind::Stroke if l.radius <= T::c(0.5) => {
-            stroke::coverage(
-                &l.poly,
-                l.closed,
-                T::c(0.5),
-                l.style,
-                clip,
-                out,
-                &mut s.stroke,
-            );
-            let width = l.radius * T::c(2.0);
-            out.iter_mut().for_each(|v| *v *= width);
-            return;
         }
         LayerKind::Stroke => {
             s.poly.clear();
