@@ -114,3 +114,23 @@ fn real_minilm_matches_reference_sentence_embeddings_when_available() {
     let d = max_abs_diff(&cond, &r["cond0"]);
     assert!(d < 1e-4, "UNet conditioning max abs diff {d}");
 }
+
+#[test]
+fn config_reads_activations_and_refuses_what_is_not_implemented() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("config.json");
+    let read = |json: &str| {
+        std::fs::write(&p, json).unwrap();
+        model::read_config(&p)
+    };
+    // transformers' defaults fill what a config leaves out
+    let c = read(r#"{"model_type": "bert", "hidden_size": 16, "num_attention_heads": 4}"#).unwrap();
+    assert_eq!((c.vocab_size, c.max_position_embeddings), (30522, 512));
+    assert_eq!(c.hidden_act, model::HiddenAct::Gelu);
+    let c = read(r#"{"hidden_act": "gelu_pytorch_tanh"}"#).unwrap();
+    assert_eq!(c.hidden_act, model::HiddenAct::GeluTanh);
+    let e = read(r#"{"position_embedding_type": "relative_key"}"#).unwrap_err();
+    assert!(e.to_string().contains("relative_key"), "{e}");
+    assert!(read(r#"{"hidden_act": "swish"}"#).is_err());
+    assert!(read(r#"{"hidden_size": 10, "num_attention_heads": 4}"#).is_err());
+}
