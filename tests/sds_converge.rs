@@ -331,3 +331,21 @@ fn xing_loss_untangles_a_self_intersecting_path_in_the_loop() {
     eprintln!("Xing {before} -> {after}");
     assert!(after < 0.5 * before, "Xing loss {before} -> {after}");
 }
+
+#[test]
+fn an_opaque_background_stays_opaque() {
+    // Targets on a mid-grey ground, a scene on white: SDS moves the background's colour, never
+    // its opacity (a translucent background rectangle is no designer's intent).
+    let mut grey = Image::filled(SIZE, SIZE, [0.5, 0.5, 0.5, 1.0]);
+    disk(&mut grey, 32.0, 32.0, 18.0, [0.95, 0.55, 0.1]);
+    let te = teacher(vec![("grey".into(), grey)]);
+    let mut cfg = fast_config(Style::Iconography, 120, 3);
+    cfg.schedules.background = cfg.schedules.points.scaled(1.0 / 20.0);
+    let (_, out) = run(&te, Style::Iconography, 8, &cfg);
+    let bg = out.scene.background;
+    assert!(
+        bg.r < 0.9,
+        "the background's colour moved toward the grey: {bg:?}"
+    );
+    assert_eq!(bg.a, 1.0, "{bg:?}");
+}

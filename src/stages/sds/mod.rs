@@ -400,6 +400,11 @@ impl<B: Backend> Fixed<'_, B> {
             }
         }
         grad.mask(&cfg.trainable);
+        // The background is there or not: its colour is trained, its opacity stays as it
+        // started (an SVG's background rectangle drawn 99.6 % opaque is no one's intent).
+        if let Some(a) = grad.get_mut(ParamGroup::Background).get_mut(3) {
+            *a = 0.0;
+        }
         if cfg.opaque_fills {
             for rgba in grad.get_mut(ParamGroup::Fill).chunks_exact_mut(4) {
                 rgba[3] = 0.0;
