@@ -4,8 +4,8 @@
 //! tiny fixtures, against `tests/fixtures/golden/run_plan.json` (AVX2 kernels) or
 //! `run_plan_avx512.json` (AVX-512 kernels).
 //!
-//! The AVX2 file was written by the code before the run-plan refactor, which had to reproduce
-//! it; the AVX-512 one by the code after it, on the same requests. Both SVGs are read back into scenes (`same`), so the spelling of
+//! Both files are written by the same code on the same requests (the AVX2 one by a build with
+//! `--no-default-features --features mimalloc`). Both SVGs are read back into scenes (`same`), so the spelling of
 //! the numbers (absolute or relative, shorthand commands, grouping: the compact writer) does not
 //! matter, and points are compared with a tolerance (`TOL` SVG units), so the last digits of
 //! another CPU's cache blocking still pass while any change of behaviour (another seed, size,

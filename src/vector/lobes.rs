@@ -13,7 +13,7 @@
 
 use crate::scene::{Point, Shape};
 
-type P = (f64, f64);
+use super::simple::P;
 
 /// Contact distance (px): non-adjacent edges of the flattened outline closer than this meet.
 const CONTACT: f64 = 1e-3;
@@ -26,7 +26,7 @@ fn lerp(a: P, b: P, t: f64) -> P {
     (a.0 + (b.0 - a.0) * t, a.1 + (b.1 - a.1) * t)
 }
 
-fn eval(s: &[P; 4], t: f64) -> P {
+pub(super) fn eval(s: &[P; 4], t: f64) -> P {
     split(s, t).0[3]
 }
 
@@ -51,7 +51,7 @@ fn sub_cubic(s: &[P; 4], t0: f64, t1: f64) -> [P; 4] {
     split(&left, (t0 / t1).clamp(0.0, 1.0)).1
 }
 
-fn segments(shape: &Shape) -> Vec<[P; 4]> {
+pub(super) fn segments(shape: &Shape) -> Vec<[P; 4]> {
     let f = |p: Point| (p.x as f64, p.y as f64);
     (0..shape.num_segments())
         .map(|i| {
@@ -172,7 +172,7 @@ fn first_contact(pts: &[P], par: &[f64], n_segs: usize) -> Option<(f64, f64)> {
 }
 
 /// The outline from parameter `from` to `to` (`to` may pass `n`: it wraps), as cubics.
-fn arc(segs: &[[P; 4]], from: f64, to: f64) -> Vec<[P; 4]> {
+pub(super) fn arc(segs: &[[P; 4]], from: f64, to: f64) -> Vec<[P; 4]> {
     let n = segs.len() as f64;
     let mut out = Vec::new();
     let mut s = from;
@@ -190,7 +190,7 @@ fn arc(segs: &[[P; 4]], from: f64, to: f64) -> Vec<[P; 4]> {
 }
 
 /// Signed area of the closed curve made of `segs` (flattened finely).
-fn area(segs: &[[P; 4]]) -> f64 {
+pub(super) fn area(segs: &[[P; 4]]) -> f64 {
     let mut a = 0.0;
     for s in segs {
         let mut prev = s[0];
@@ -203,7 +203,7 @@ fn area(segs: &[[P; 4]]) -> f64 {
     0.5 * a
 }
 
-fn to_shape(segs: &[[P; 4]], template: &Shape) -> Option<Shape> {
+pub(super) fn to_shape(segs: &[[P; 4]], template: &Shape) -> Option<Shape> {
     let f = |p: P| Point::new(p.0 as f32, p.1 as f32);
     let mut points = Vec::with_capacity(3 * segs.len());
     for s in segs {

@@ -3,12 +3,14 @@
 //! | file | job |
 //! |---|---|
 //! | [`lobes`] | exact repair of a looping outline: cut it where it meets itself into lobes |
+//! | [`canvas`] | outlines reaching past the canvas cut to it, their own cubics joined along its edge |
 //! | [`simple`] | simple outlines: find paths that cross themselves or fold into spikes, split them into simple pieces |
 //! | [`check`] | editability counts of any SVG (self-intersecting, hidden, slivers, colours) |
 //! | [`export`] | compact, exact SVG text (fewest decimals within a render tolerance) |
 //! | [`palette`] | a small palette: k-means of the target, user palettes, snapping fills |
 //! | [`straight`] | near-straight segments made straight, so that they are written as lines |
 
+pub mod canvas;
 pub mod check;
 pub mod export;
 pub mod fill;
@@ -318,12 +320,16 @@ pub struct FinishReport {
     /// Paths merged into a touching path of the same fill ([`merge`]).
     #[serde(default)]
     pub merged: usize,
+    /// Paths cut to the canvas ([`canvas`]).
+    #[serde(default)]
+    pub cut: usize,
     /// Distinct fills left.
     pub colors: usize,
 }
 
 /// The finish of a run without a target image (after score distillation): looping outlines
-/// split into simple pieces, hidden paths dropped, with `drop_small` paths too small to see
+/// split into simple pieces, paths reaching past the canvas cut to it ([`canvas`]), hidden
+/// paths dropped, with `drop_small` paths too small to see
 /// (not for styles whose cells are meant to be one pixel: pixel art, strokes), fills reduced as `colors`
 /// says (a user palette: each fill to its nearest entry; a colour cap: k-means of the fills
 /// weighted by what they show; otherwise near-equal fills merged), touching paths of one fill
@@ -331,6 +337,7 @@ pub struct FinishReport {
 /// ([`straight`]), and the background set.
 pub fn finish_scene(scene: &mut Scene, colors: &ColorPlan, drop_small: bool) -> FinishReport {
     let split = make_simple(scene, SIMPLE_MIN_AREA);
+    let cut = canvas::cut_scene_to_canvas(scene);
     let mut dropped = drop_hidden(scene);
     if drop_small {
         dropped += drop_unseen(scene, 1.0);
@@ -365,6 +372,7 @@ pub fn finish_scene(scene: &mut Scene, colors: &ColorPlan, drop_small: bool) -> 
         split,
         dropped,
         merged,
+        cut,
         colors: palette::distinct_fills(scene),
     }
 }

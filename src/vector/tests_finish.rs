@@ -1,4 +1,4 @@
-//! Tests of the finish in [`super`]: hidden paths.
+//! Tests of the finish in [`super`]: hidden paths, outlines cut to the canvas.
 
 use super::*;
 use crate::scene::{Rgba, Scene, Shape};
@@ -50,4 +50,33 @@ fn hidden_paths_go_as_whole_renders_decide() {
         assert!(removed >= 2, "seed {seed}: {removed}");
         assert_eq!(crate::raster::render(&a), crate::raster::render(&b));
     }
+}
+
+#[test]
+fn the_finish_leaves_no_outline_past_the_canvas() {
+    let mut rng = ChaCha8Rng::seed_from_u64(11);
+    let mut s = Scene::new(64, 48, Rgba::WHITE).unwrap();
+    for _ in 0..16 {
+        let (x, y) = (rng.random_range(-8.0..72.0), rng.random_range(-8.0..56.0));
+        let r = rng.random_range(4.0..16.0);
+        s.shapes
+            .push(Shape::circle(x, y, r, 4, opaque(&mut rng)).unwrap());
+    }
+    let past = |s: &Scene| {
+        s.shapes
+            .iter()
+            .filter(|sh| {
+                simple::flatten_f64(sh, 0.01)
+                    .iter()
+                    .any(|p| p.0 < -1e-3 || p.1 < -1e-3 || p.0 > 64.0 + 1e-3 || p.1 > 48.0 + 1e-3)
+            })
+            .count()
+    };
+    assert!(past(&s) >= 4, "{}", past(&s));
+    let before = crate::raster::render(&s);
+    let report = finish_scene(&mut s, &ColorPlan::default(), true);
+    assert_eq!(past(&s), 0);
+    assert!(report.cut >= 4, "{report:?}");
+    let (mean, _) = export::diff(&before, &crate::raster::render(&s));
+    assert!(mean < 1.0 / 255.0, "{mean}");
 }
