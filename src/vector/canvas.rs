@@ -12,8 +12,8 @@
 //! the outline's box); any piece that would not be a valid simple outline leaves the shape as
 //! it was.
 
-use super::lobes::{arc, area, eval, segments, to_shape};
-use super::simple::{P, flatten_f64, is_simple, piece_ok, ring_area};
+use super::lobes::{arc, area, at, eval, segments, to_shape};
+use super::simple::{P, flatten_f64, is_simple, piece_ok, ring_area, ring_contains};
 use crate::scene::{MAX_PATHS, Scene, Shape, ShapeKind};
 use kurbo::common::solve_cubic;
 
@@ -167,27 +167,16 @@ fn crossings(segs: &[Seg], cv: Canvas) -> Vec<Crossing> {
 
 /// The outline's point halfway (in parameter) from `a` to `b`, wrapping past the end.
 fn between(segs: &[Seg], a: f64, b: f64) -> P {
-    let n = segs.len() as f64;
-    let b = if b <= a { b + n } else { b };
-    let m = (0.5 * (a + b)).rem_euclid(n);
-    let k = (m.floor() as usize).min(segs.len() - 1);
-    eval(&segs[k], m - k as f64)
+    let b = if b <= a { b + segs.len() as f64 } else { b };
+    at(segs, 0.5 * (a + b)).0
 }
 
-/// Whether `p` is inside the closed outline (nonzero, flattened finely).
-fn encloses(shape: &Shape, p: P) -> bool {
-    let ring = flatten_f64(shape, 0.05);
-    let mut wn = 0i32;
-    for i in 0..ring.len() {
-        let (a, b) = (ring[i], ring[(i + 1) % ring.len()]);
-        let side = (b.0 - a.0) * (p.1 - a.1) - (p.0 - a.0) * (b.1 - a.1);
-        if a.1 <= p.1 && b.1 > p.1 && side > 0.0 {
-            wn += 1;
-        } else if a.1 > p.1 && b.1 <= p.1 && side < 0.0 {
-            wn -= 1;
-        }
-    }
-    wn != 0
+/// For each crossing, whether the outline from it to the next one lies on the canvas.
+fn sides(segs: &[Seg], cuts: &[Crossing], cv: Canvas) -> Vec<bool> {
+    let k = cuts.len();
+    (0..k)
+        .map(|i| cv.within(between(segs, cuts[i].s, cuts[(i + 1) % k].s)))
+        .collect()
 }
 
 /// The pieces of `shape` on the canvas `w × h`: `None` when it stays as it is (it lies on the
@@ -219,14 +208,9 @@ pub fn cut_to_canvas(shape: &Shape, w: u32, h: u32) -> Option<Vec<Shape>> {
     }
     let mut cuts = crossings(&segs, cv);
     // Keep only crossings between a piece on the canvas and one off it (drop touches).
-    loop {
+    let mut on = sides(&segs, &cuts, cv);
+    while cuts.len() >= 2 {
         let k = cuts.len();
-        if k < 2 {
-            break;
-        }
-        let on: Vec<bool> = (0..k)
-            .map(|i| cv.within(between(&segs, cuts[i].s, cuts[(i + 1) % k].s)))
-            .collect();
         let keep: Vec<bool> = (0..k).map(|i| on[(i + k - 1) % k] != on[i]).collect();
         if keep.iter().all(|&x| x) {
             break;
@@ -236,6 +220,7 @@ pub fn cut_to_canvas(shape: &Shape, w: u32, h: u32) -> Option<Vec<Shape>> {
             .zip(keep)
             .filter_map(|(c, x)| x.then_some(c))
             .collect();
+        on = sides(&segs, &cuts, cv);
     }
     if cuts.len() < 2 {
         // No crossing: all on the canvas (its box only touched past an edge), all off it, or
@@ -244,8 +229,8 @@ pub fn cut_to_canvas(shape: &Shape, w: u32, h: u32) -> Option<Vec<Shape>> {
         if on {
             return None;
         }
-        let centre = (0.5 * cv.w, 0.5 * cv.h);
-        if !encloses(shape, centre) {
+        let centre = kurbo::Point::new(0.5 * cv.w, 0.5 * cv.h);
+        if !ring_contains(&flatten_f64(shape, 0.05), centre) {
             return Some(Vec::new());
         }
         let corners = [(0.0, 0.0), (cv.w, 0.0), (cv.w, cv.h), (0.0, cv.h)];
@@ -257,7 +242,7 @@ pub fn cut_to_canvas(shape: &Shape, w: u32, h: u32) -> Option<Vec<Shape>> {
     // The pieces on the canvas, each from an entry to an exit.
     let k = cuts.len();
     let pieces: Vec<(Crossing, Crossing)> = (0..k)
-        .filter(|&i| cv.within(between(&segs, cuts[i].s, cuts[(i + 1) % k].s)))
+        .filter(|&i| on[i])
         .map(|i| (cuts[i], cuts[(i + 1) % k]))
         .collect();
     let n = segs.len() as f64;

@@ -214,7 +214,7 @@ pub(super) fn to_shape(segs: &[[P; 4]], template: &Shape) -> Option<Shape> {
 }
 
 /// The curve's point and derivative at parameter `s` (wrapping).
-fn at(segs: &[[P; 4]], s: f64) -> (P, P) {
+pub(super) fn at(segs: &[[P; 4]], s: f64) -> (P, P) {
     let n = segs.len() as f64;
     let s = s.rem_euclid(n);
     let k = (s.floor() as usize).min(segs.len() - 1);

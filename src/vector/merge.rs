@@ -5,7 +5,7 @@
 //! ([`super::simple::is_simple`]), has no more segments than the two had together, and the
 //! render stays within [`MergeTolerance`] of the render before.
 
-use super::simple::{P, piece_ok, ring_area, snapped};
+use super::simple::{P, piece_ok, ring_area, ring_contains, snapped};
 use crate::image::Image;
 use crate::scene::{Scene, Shape};
 use crate::svg::written_color;
@@ -103,9 +103,9 @@ pub fn union_shape(a: &Shape, b: &Shape) -> Option<Shape> {
         };
         eval(&sa, m)
     };
-    let (first, second) = if !inside(mid(x.0, y.0), &ring_b) {
+    let (first, second) = if !ring_contains(&ring_b, mid(x.0, y.0)) {
         (x, y)
-    } else if !inside(mid(y.0, x.0), &ring_b) {
+    } else if !ring_contains(&ring_b, mid(y.0, x.0)) {
         (y, x)
     } else {
         return None;
@@ -159,19 +159,6 @@ fn eval(segs: &[CubicBez], u: f64) -> kurbo::Point {
     let u = u.rem_euclid(n);
     let i = (u.floor() as usize).min(segs.len() - 1);
     segs[i].eval(u - i as f64)
-}
-
-/// Even-odd point-in-polygon.
-fn inside(p: kurbo::Point, ring: &[P]) -> bool {
-    let mut c = false;
-    let n = ring.len();
-    for i in 0..n {
-        let (a, b) = (ring[i], ring[(i + 1) % n]);
-        if (a.1 > p.y) != (b.1 > p.y) && p.x < a.0 + (p.y - a.1) / (b.1 - a.1) * (b.0 - a.0) {
-            c = !c;
-        }
-    }
-    c
 }
 
 /// The parameters `(on a, on b)` of the two places where the outlines cross, refined on the

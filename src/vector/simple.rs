@@ -306,6 +306,19 @@ pub fn rings_cross(a: &[P], b: &[P]) -> bool {
 }
 
 /// Signed area of a ring (shoelace).
+/// Even-odd point-in-polygon (for a simple ring, the same as nonzero).
+pub(super) fn ring_contains(ring: &[P], p: kurbo::Point) -> bool {
+    let mut c = false;
+    let n = ring.len();
+    for i in 0..n {
+        let (a, b) = (ring[i], ring[(i + 1) % n]);
+        if (a.1 > p.y) != (b.1 > p.y) && p.x < a.0 + (p.y - a.1) / (b.1 - a.1) * (b.0 - a.0) {
+            c = !c;
+        }
+    }
+    c
+}
+
 pub(super) fn ring_area(r: &[P]) -> f64 {
     let n = r.len();
     (0..n).map(|i| cross(r[i], r[(i + 1) % n])).sum::<f64>() * 0.5
