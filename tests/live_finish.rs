@@ -240,3 +240,59 @@ fn touching_paths_of_one_fill_are_merged_once_and_for_all() {
     assert_eq!(more, 0);
     assert!(r.scene.shapes.iter().all(is_simple));
 }
+
+/// A 96 px target (traced at 64 px, so the working scene is scaled by 1.5 on the way out)
+/// whose shapes run off every edge: a disc over the top-left corner, a band across the
+/// right edge, a bar along the bottom.
+fn off_the_edges() -> Image {
+    let mut s = Scene::new(96, 96, Rgba::WHITE).unwrap();
+    s.shapes
+        .push(Shape::circle(4.0, 6.0, 30.0, 8, Rgba::new(0.9, 0.1, 0.1, 1.0)).unwrap());
+    s.shapes
+        .push(Shape::square(90.0, 48.0, 28.0, Rgba::new(0.1, 0.2, 0.8, 1.0)).unwrap());
+    s.shapes.push(
+        Shape::polygon(
+            vec![
+                Point::new(20.0, 86.0),
+                Point::new(76.0, 86.0),
+                Point::new(76.0, 100.0),
+                Point::new(20.0, 100.0),
+            ],
+            Rgba::new(0.1, 0.7, 0.2, 1.0),
+        )
+        .unwrap(),
+    );
+    raster::render(&s)
+}
+
+#[test]
+fn outlines_are_cut_to_the_canvas_they_are_written_on() {
+    let target = off_the_edges();
+    let mut cut = 0;
+    for seed in 0..3 {
+        let c = LiveConfig {
+            seed,
+            ..cfg(ColorPlan::default())
+        };
+        let r = vectorize(&target, &c, &NullSink, &CancelToken::new()).unwrap();
+        assert_eq!((r.scene.width, r.scene.height), (96, 96));
+        cut += r.cut;
+        // Every outline (its curve, not its handles) lies on the canvas, and stays simple.
+        for (i, s) in r.scene.shapes.iter().enumerate() {
+            for (x, y) in vectorfusion::vector::simple::flatten(s, 0.05) {
+                assert!(
+                    (-1e-3..=96.001).contains(&x) && (-1e-3..=96.001).contains(&y),
+                    "seed {seed}, path {i}: ({x}, {y})"
+                );
+            }
+            assert!(is_simple(s), "seed {seed}, path {i}");
+        }
+        // The trace still fits its target (cutting changes no pixel on the canvas).
+        assert!(r.psnr > 24.0, "seed {seed}: {}", r.psnr);
+        // Cut pieces end on the canvas's edges, not short of them: the corner pixel is red.
+        let img = raster::render(&r.scene);
+        let px = &img.data[..3];
+        assert!(px[0] > 0.7 && px[1] < 0.35, "seed {seed}: corner {px:?}");
+    }
+    assert!(cut > 0, "no path reached past the canvas in three seeds");
+}

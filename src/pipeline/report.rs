@@ -189,6 +189,9 @@ pub struct RunReport {
     /// Vectorize: paths merged into a touching path of the same fill.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub paths_merged: Option<usize>,
+    /// Vectorize: paths that reached past the canvas, cut to it (text runs: `finish.cut`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub paths_cut: Option<usize>,
     /// Paths in the SVG.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub paths_needed: Option<usize>,
@@ -215,6 +218,7 @@ impl RunReport {
             paths_needed: Some(r.paths),
             paths_pruned: Some(r.pruned),
             paths_merged: Some(r.merged),
+            paths_cut: Some(r.cut),
             steps: Some(r.steps),
             stages: r.stages.clone(),
             editability: Some(r.editability.clone()),

@@ -183,6 +183,12 @@ fn sides(segs: &[Seg], cuts: &[Crossing], cv: Canvas) -> Vec<bool> {
 /// canvas, is not a shape this cuts, or a piece would not be a simple outline), else the
 /// pieces (none when nothing of it is on the canvas).
 pub fn cut_to_canvas(shape: &Shape, w: u32, h: u32) -> Option<Vec<Shape>> {
+    cut_to(shape, w as f64, h as f64)
+}
+
+/// [`cut_to_canvas`] against the rectangle `[0, w] × [0, h]` of any size (`w`, `h` > 0): the
+/// canvas of a scene that is drawn at another scale than it is written.
+fn cut_to(shape: &Shape, w: f64, h: f64) -> Option<Vec<Shape>> {
     if shape.kind != ShapeKind::ClosedCubic
         || shape.stroke.is_some()
         || shape.gradients.is_some()
@@ -191,10 +197,7 @@ pub fn cut_to_canvas(shape: &Shape, w: u32, h: u32) -> Option<Vec<Shape>> {
     {
         return None;
     }
-    let cv = Canvas {
-        w: w as f64,
-        h: h as f64,
-    };
+    let cv = Canvas { w, h };
     let (lo, hi) = shape.control_bounds();
     if lo.x >= 0.0 && lo.y >= 0.0 && hi.x as f64 <= cv.w && hi.y as f64 <= cv.h {
         return None;
@@ -314,12 +317,19 @@ pub fn cut_to_canvas(shape: &Shape, w: u32, h: u32) -> Option<Vec<Shape>> {
 /// many shapes were cut. The scene never grows past `MAX_PATHS`: a shape whose pieces would
 /// pass it stays whole.
 pub fn cut_scene_to_canvas(scene: &mut Scene) -> usize {
-    let (w, h) = (scene.width, scene.height);
+    let (w, h) = (scene.width as f64, scene.height as f64);
+    cut_scene_to(scene, w, h)
+}
+
+/// [`cut_scene_to_canvas`] against `[0, w] × [0, h]` instead of the scene's canvas: a trace
+/// at its working size cut to the canvas it will be written at (`w`, `h` > 0, in the scene's
+/// units).
+pub fn cut_scene_to(scene: &mut Scene, w: f64, h: f64) -> usize {
     let mut count = scene.shapes.len();
     let mut cut = 0;
     let mut pieces = Vec::with_capacity(scene.shapes.len());
     for s in &scene.shapes {
-        match cut_to_canvas(s, w, h) {
+        match cut_to(s, w, h) {
             Some(p) if count + p.len() <= MAX_PATHS + 1 => {
                 count = count + p.len() - 1;
                 cut += 1;

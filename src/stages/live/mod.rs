@@ -21,6 +21,7 @@ pub mod tracer;
 
 mod border;
 mod config;
+mod finish;
 mod run;
 
 pub use config::{CANVAS_SIDES, InitMode, LiveConfig, LiveError, MIN_OPACITY, PathBudget};
@@ -73,6 +74,8 @@ pub struct LiveResult {
     pub pruned: usize,
     /// Paths merged into a touching path of the same fill ([`crate::vector::merge`]).
     pub merged: usize,
+    /// Paths that reached past the canvas, cut to it ([`crate::vector::canvas`]).
+    pub cut: usize,
     /// Adam steps taken.
     pub steps: u32,
     /// What a designer finds in the SVG: self-intersecting, hidden and sliver paths, colours.
@@ -299,7 +302,7 @@ fn traced(
         st.prev_psnr = run.psnr(&st.scene);
     }
     run.add_stages(&mut st, &mut rng, &stages_plan, max_total, checkpoint)?;
-    let (out, pruned, merged) = run.finish(st.scene, st.reports.len())?;
+    let (out, done) = run.finish(st.scene, st.reports.len())?;
     let psnr = crate::image::psnr(&crate::raster::render(&out), target);
     run.report_done(&out, psnr);
     Ok(LiveResult {
@@ -308,8 +311,9 @@ fn traced(
         scene: out,
         psnr,
         stages: st.reports,
-        pruned,
-        merged,
+        pruned: done.pruned,
+        merged: done.merged,
+        cut: done.cut,
         steps: run.step,
     })
 }

@@ -1,7 +1,9 @@
 //! One LIVE run's state and steps ([`Run`]): the optimiser loop of a stage, the stages that add
-//! paths, the vtracer start, clean geometry between steps (looping outlines cut into lobes) and
-//! the finish at the output size. [`super::vectorize_resumable`] sets a run up and drives it.
+//! paths, the vtracer start, clean geometry between steps (looping outlines cut into lobes); the
+//! finish at the output size is [`super::finish`]. [`super::vectorize_resumable`] sets a run up
+//! and drives it.
 
+use super::finish::svg_bytes;
 use super::{
     LiveCheckpoint, LiveConfig, LiveError, LiveState, PathBudget, StageReport, init, prune,
     schedule, tracer,
@@ -15,7 +17,7 @@ use crate::optim::{Adam, AdamConfig, GroupSchedules, LrSchedule};
 use crate::progress::{CancelToken, Progress, ProgressSink, Stage};
 use crate::scene::{ParamGroup, Params, Rgba, Scene, Trainable};
 use crate::vector::lobes;
-use crate::vector::palette::{self, ColorPlan};
+use crate::vector::palette;
 use rand_chacha::ChaCha8Rng;
 use std::ops::Range;
 
@@ -80,7 +82,7 @@ impl Run<'_> {
 
     /// Optimises every path of `scene` for `iters` steps; the UDF term focuses on `focus`.
     /// Fills are optimised only when `fills` is set and no palette is in force.
-    fn optimise(
+    pub(super) fn optimise(
         &mut self,
         scene: &mut Scene,
         focus: Range<usize>,
@@ -310,7 +312,7 @@ impl Run<'_> {
 
     /// Gives the paths their palette colours (when a palette is in force) and new paths the
     /// gradient paint of a gradient fill (painting as their flat colour does).
-    fn choose_colours(&self, scene: &mut Scene) {
+    pub(super) fn choose_colours(&self, scene: &mut Scene) {
         if let Some(p) = &self.palette {
             palette::choose_fills(scene, Some(&self.target), p);
         }
@@ -319,7 +321,7 @@ impl Run<'_> {
 
     /// Splits every path whose outline crosses itself or folds into a spike into simple pieces
     /// that cover the same pixels (see [`crate::vector::simple`]). Returns how many were split.
-    fn make_simple(&self, scene: &mut Scene) -> usize {
+    pub(super) fn make_simple(&self, scene: &mut Scene) -> usize {
         crate::vector::make_simple(scene, crate::vector::SIMPLE_MIN_AREA)
     }
 }
@@ -370,18 +372,6 @@ fn tagged(mut shapes: Vec<crate::scene::Shape>, stage: usize) -> Vec<crate::scen
         s.stage = tag;
     }
     shapes
-}
-
-/// `scene` (at the working size) scaled to the target's `tw`×`th` canvas.
-fn output_scene(scene: &Scene, tw: u32, th: u32) -> Scene {
-    let mut out = scene.scaled_to_width(tw);
-    out.height = th;
-    out
-}
-
-/// Bytes of the SVG the run would write now.
-fn svg_bytes(scene: &Scene, tw: u32, th: u32, colors: &ColorPlan) -> usize {
-    crate::vector::write_svg(&output_scene(scene, tw, th), colors).len()
 }
 
 impl Run<'_> {
@@ -532,62 +522,5 @@ impl Run<'_> {
             }
         }
         Ok(())
-    }
-
-    /// The end of a trace after `stages` stages: colours settled, the final pass, then faint,
-    /// unseen paths dropped, overlapping paths of one fill merged ([`crate::vector::merge`]),
-    /// paths past `max_bytes` and hidden paths dropped, near-straight segments made straight,
-    /// outlines made simple.
-    /// Returns the scene at the target's size, the number of paths pruned and of merges.
-    pub(super) fn finish(
-        &mut self,
-        mut scene: Scene,
-        stages: usize,
-    ) -> Result<(Scene, usize, usize), LiveError> {
-        let cfg = self.cfg;
-        self.switch_to_full(&mut scene);
-        // Colours settle before the last pass, which then fits the geometry to them.
-        if self.palette.is_some() {
-            self.choose_colours(&mut scene);
-        } else {
-            palette::merge_similar(&mut scene, palette::MERGE_DISTANCE);
-        }
-        if cfg.final_iters > 0 && !scene.shapes.is_empty() {
-            let n = scene.shapes.len();
-            self.optimise(&mut scene, n..n, cfg.final_iters, stages + 1, false)?;
-        }
-        // Drop paths that stayed faint or tiny after the last re-initialisation.
-        let weak = prune::weak_paths(&scene, cfg.reinit_min_opacity, 1.0);
-        for &i in weak.iter().rev() {
-            scene.shapes.remove(i);
-        }
-        // Clean geometry: the last pass may have folded outlines again; splitting keeps the
-        // pixels.
-        self.make_simple(&mut scene);
-        let (tw, th) = (self.out_width, self.out_height);
-        let scale = tw as f32 / self.target.width as f32;
-        let mut pruned = crate::vector::drop_unseen(&mut scene, scale);
-        let merged = crate::vector::merge::merge_touching(&mut scene, Default::default());
-        if let PathBudget::Auto {
-            prune_tolerance, ..
-        } = cfg.budget
-        {
-            pruned += prune::prune_paths(&mut scene, prune_tolerance).len();
-        }
-        if let Some(max) = cfg.max_bytes {
-            pruned += prune::trim_to_bytes(&mut scene, &self.target, max, |s| {
-                svg_bytes(s, tw, th, &cfg.colors)
-            });
-        }
-        // At the output size: flattening is finer there, and hidden paths are judged there.
-        let mut out = output_scene(&scene, tw, th);
-        crate::vector::straight::straighten(&mut out, crate::vector::straight::STRAIGHT_TOLERANCE);
-        crate::vector::make_simple(&mut out, crate::vector::SIMPLE_MIN_AREA);
-        pruned += crate::vector::drop_hidden(&mut out);
-        if !cfg.fill.is_flat() {
-            crate::vector::fill::tidy_gradients(&mut out);
-        }
-        out.validate()?;
-        Ok((out, pruned, merged))
     }
 }
