@@ -97,44 +97,29 @@ impl std::ops::Deref for AppState {
 /// Every route of the API: (method, path, handler). The router is built from this table and the
 /// OpenAPI sync test compares it with `openapi.yaml`.
 fn route_table() -> Vec<(Method, &'static str, MethodRouter<AppState>)> {
+    use routes::{
+        cancel, get_job, healthz, list, metrics, readyz, result_pdf, result_png, result_svg,
+        result_variation, snapshot, submit,
+    };
+    const GET: Method = Method::GET;
     vec![
-        (Method::POST, "/jobs", post(routes::submit)),
-        (Method::GET, "/jobs", get(routes::list)),
-        (Method::GET, "/jobs/{id}", get(routes::get_job)),
-        (Method::DELETE, "/jobs/{id}", delete(routes::cancel)),
-        (Method::GET, "/jobs/{id}/events", get(sse::events)),
-        (
-            Method::GET,
-            "/jobs/{id}/result.svg",
-            get(routes::result_svg),
-        ),
-        (
-            Method::GET,
-            "/jobs/{id}/result.png",
-            get(routes::result_png),
-        ),
-        (
-            Method::GET,
-            "/jobs/{id}/result.pdf",
-            get(routes::result_pdf),
-        ),
-        (
-            Method::GET,
-            "/jobs/{id}/snapshots/{file}",
-            get(routes::snapshot),
-        ),
-        (
-            Method::GET,
-            "/jobs/{id}/result/{file}",
-            get(routes::result_variation),
-        ),
-        (Method::GET, "/healthz", get(routes::healthz)),
-        (Method::GET, "/readyz", get(routes::readyz)),
-        (Method::GET, "/metrics", get(routes::metrics)),
-        (Method::GET, "/", get(page::index)),
-        (Method::GET, "/app.js", get(page::app_js)),
-        (Method::GET, "/js/{module}", get(page::module)),
-        (Method::GET, "/style.css", get(page::style_css)),
+        (Method::POST, "/jobs", post(submit)),
+        (GET, "/jobs", get(list)),
+        (GET, "/jobs/{id}", get(get_job)),
+        (Method::DELETE, "/jobs/{id}", delete(cancel)),
+        (GET, "/jobs/{id}/events", get(sse::events)),
+        (GET, "/jobs/{id}/result.svg", get(result_svg)),
+        (GET, "/jobs/{id}/result.png", get(result_png)),
+        (GET, "/jobs/{id}/result.pdf", get(result_pdf)),
+        (GET, "/jobs/{id}/snapshots/{file}", get(snapshot)),
+        (GET, "/jobs/{id}/result/{file}", get(result_variation)),
+        (GET, "/healthz", get(healthz)),
+        (GET, "/readyz", get(readyz)),
+        (GET, "/metrics", get(metrics)),
+        (GET, "/", get(page::index)),
+        (GET, "/app.js", get(page::app_js)),
+        (GET, "/js/{module}", get(page::module)),
+        (GET, "/style.css", get(page::style_css)),
     ]
 }
 
