@@ -8,7 +8,8 @@ use crate::vector::palette::{Background, ColorPlan, Grouping, check_colors, pars
 #[derive(clap::Args, Debug, Clone)]
 pub struct VectorArgs {
     /// At most N distinct fill colours (1..=64): a palette of N found by k-means, each path's
-    /// fill chosen from it [default: near-equal fills merged].
+    /// fill chosen from it [default: near-equal fills merged; text runs then keep the fewest
+    /// colours whose render stays within 35 dB].
     #[arg(long)]
     pub colors: Option<u32>,
     /// Fills restricted to these colours, e.g. "#e63946,#f1faee,#1d3557" (with --colors N: at

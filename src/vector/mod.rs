@@ -329,11 +329,12 @@ pub struct FinishReport {
 
 /// The finish of a run without a target image (after score distillation): looping outlines
 /// split into simple pieces, paths reaching past the canvas cut to it ([`canvas`]), hidden
-/// paths dropped, with `drop_small` paths too small to see
-/// (not for styles whose cells are meant to be one pixel: pixel art, strokes), fills reduced as `colors`
-/// says (a user palette: each fill to its nearest entry; a colour cap: k-means of the fills
-/// weighted by what they show; otherwise near-equal fills merged), touching paths of one fill
-/// merged ([`merge`]; with `drop_small` only), near-straight segments made straight
+/// paths dropped, with `drop_small` paths too small to see (not for styles whose cells are
+/// meant to be one pixel: pixel art, strokes), fills reduced as `colors` says (a user palette:
+/// each fill to its nearest entry; a colour cap: k-means of the fills weighted by what they
+/// show; otherwise near-equal fills merged, then the fewest colours whose render stays within
+/// [`palette::FEWEST_COLOURS_PSNR`] dB: [`palette::fewest_colours`]), touching paths of one
+/// fill merged ([`merge`]; with `drop_small` only), near-straight segments made straight
 /// ([`straight`]), and the background set.
 pub fn finish_scene(scene: &mut Scene, colors: &ColorPlan, drop_small: bool) -> FinishReport {
     let split = make_simple(scene, SIMPLE_MIN_AREA);
@@ -349,6 +350,9 @@ pub fn finish_scene(scene: &mut Scene, colors: &ColorPlan, drop_small: bool) -> 
         }
         None => {
             palette::merge_similar(scene, palette::MERGE_DISTANCE);
+            if let Some(p) = palette::fewest_colours(scene, palette::FEWEST_COLOURS_PSNR) {
+                palette::choose_fills(scene, None, &p);
+            }
         }
     }
     // Pixel cells and strokes stay as they are drawn.

@@ -523,6 +523,42 @@ pub fn palette_of_fills(scene: &Scene, k: usize) -> Vec<Rgba> {
         .collect()
 }
 
+/// How close (PSNR, dB, over white) the render with [`fewest_colours`]' palette stays to the
+/// render before it.
+pub const FEWEST_COLOURS_PSNR: f64 = 35.0;
+
+/// The smallest palette of the scene's own fills ([`palette_of_fills`]: k-means weighted by
+/// what each fill shows) whose colours, each fill taking its nearest ([`choose_fills`]),
+/// render within `min_psnr` dB of the scene as it is; `None` when no palette smaller than the
+/// scene's distinct fills does. The search halves the range of `k` (the error falls with `k`
+/// but not strictly: the `k` found passes, and `k − 1` fails or was not tried).
+pub fn fewest_colours(scene: &Scene, min_psnr: f64) -> Option<Vec<Rgba>> {
+    let n = distinct_fills(scene);
+    if n < 2 {
+        return None;
+    }
+    let reference = crate::raster::render(scene);
+    let within = |p: &[Rgba]| {
+        let mut trial = scene.clone();
+        choose_fills(&mut trial, None, p);
+        crate::image::psnr(&crate::raster::render(&trial), &reference) >= min_psnr
+    };
+    // Smallest passing k in [lo, hi]; `best` the passing palette of the smallest k tried.
+    let (mut lo, mut hi) = (1, n - 1);
+    let mut best = None;
+    while lo <= hi {
+        let k = (lo + hi) / 2;
+        let p = palette_of_fills(scene, k);
+        if within(&p) {
+            best = Some(p);
+            hi = k - 1;
+        } else {
+            lo = k + 1;
+        }
+    }
+    best
+}
+
 /// A cluster of [`merge_similar`]: seed colour, weighted colour sum, weight, members.
 type Cluster = ([f32; 3], [f64; 3], f64, Vec<usize>);
 

@@ -169,3 +169,61 @@ fn merge_joins_near_equal_fills_only() {
     assert_eq!(s.shapes[1].fill.unwrap().a, 1.0);
     assert_ne!(s.shapes[0].fill, s.shapes[2].fill);
 }
+
+/// Eight squares in shades a few levels apart of red and of blue, and one small green one.
+fn shaded() -> Scene {
+    let mut s = Scene::new(64, 64, Rgba::WHITE).unwrap();
+    for i in 0..4 {
+        let d = 0.02 * i as f32;
+        let (x, y) = (2.0 + 15.0 * i as f32, 2.0);
+        s.shapes
+            .push(square(x, y, 12.0, Rgba::new(0.8 + d, 0.1, 0.1 + d, 1.0)));
+        s.shapes.push(square(
+            x,
+            y + 20.0,
+            12.0,
+            Rgba::new(0.1, 0.2 - d, 0.7 + d, 1.0),
+        ));
+    }
+    s.shapes
+        .push(square(30.0, 48.0, 6.0, Rgba::new(0.1, 0.7, 0.2, 1.0)));
+    s
+}
+
+#[test]
+fn the_fewest_colours_keep_the_picture() {
+    let s = shaded();
+    assert_eq!(distinct_fills(&s), 9);
+    let reference = crate::raster::render(&s);
+    let p = fewest_colours(&s, FEWEST_COLOURS_PSNR).expect("a smaller palette");
+    // The shades fold into a few colours; the small green square keeps its own.
+    assert!((3..=5).contains(&p.len()), "{p:?}");
+    assert!(p.iter().any(|c| c.g > 0.6 && c.r < 0.3), "{p:?}");
+    let mut t = s.clone();
+    choose_fills(&mut t, None, &p);
+    assert_eq!(distinct_fills(&t), p.len());
+    let q = crate::image::psnr(&crate::raster::render(&t), &reference);
+    assert!(q >= FEWEST_COLOURS_PSNR, "{q}");
+    // One colour fewer would not keep it.
+    let mut fewer = s.clone();
+    choose_fills(&mut fewer, None, &palette_of_fills(&s, p.len() - 1));
+    let q = crate::image::psnr(&crate::raster::render(&fewer), &reference);
+    assert!(q < FEWEST_COLOURS_PSNR, "{q}");
+    // Asking for a closer render keeps more colours; asking for the picture exactly, all.
+    assert!(fewest_colours(&s, 60.0).is_none_or(|q| q.len() > p.len()));
+    assert_eq!(fewest_colours(&s, f64::INFINITY), None);
+}
+
+#[test]
+fn distinct_colours_stay_distinct() {
+    let mut s = Scene::new(32, 32, Rgba::WHITE).unwrap();
+    s.shapes
+        .push(square(2.0, 2.0, 12.0, Rgba::new(0.9, 0.1, 0.1, 1.0)));
+    s.shapes
+        .push(square(18.0, 2.0, 12.0, Rgba::new(0.1, 0.1, 0.9, 1.0)));
+    s.shapes
+        .push(square(2.0, 18.0, 12.0, Rgba::new(0.1, 0.8, 0.1, 1.0)));
+    assert_eq!(fewest_colours(&s, FEWEST_COLOURS_PSNR), None);
+    s.shapes.truncate(1);
+    assert_eq!(fewest_colours(&s, FEWEST_COLOURS_PSNR), None);
+}
