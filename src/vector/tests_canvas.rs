@@ -140,7 +140,7 @@ fn what_lies_on_the_canvas_or_is_not_cut_stays() {
     .unwrap();
     assert!(bulge.control_bounds().1.x > 32.0);
     assert_eq!(cut_to_canvas(&bulge, 32, 32), None);
-    // Stroked outlines and those painted by a gradient keep their geometry.
+    // Stroked outlines keep their geometry (the stroke would show along the cut).
     let mut stroked = Shape::circle(30.0, 16.0, 8.0, 4, RED).unwrap();
     stroked.stroke = Some(crate::scene::Stroke::round(Rgba::BLACK, 1.0));
     assert_eq!(cut_to_canvas(&stroked, 32, 32), None);
@@ -183,4 +183,47 @@ fn random_circles(seed: u64) {
     assert!(past > 10, "{past} of {n} reach past an edge");
     let s = cut_checked(s);
     assert!(s.shapes.iter().all(|sh| on_canvas(sh, 64.0, 64.0)));
+}
+
+#[test]
+fn a_gradient_fill_is_kept_by_every_piece_and_paints_as_before() {
+    use crate::scene::{Affine, Gradient, GradientGeometry, GradientStop, Gradients, Spread};
+    let stop = |offset, color| GradientStop { offset, color };
+    let paint = Gradient {
+        geometry: GradientGeometry::Linear {
+            x1: 4.0,
+            y1: 2.0,
+            x2: 30.0,
+            y2: 28.0,
+        },
+        transform: Affine([1.1, 0.3, -0.2, 0.9, 1.5, -2.0]),
+        spread: Spread::Reflect,
+        stops: vec![
+            stop(0.1, Rgba::new(1.0, 0.6, 0.0, 1.0)),
+            stop(0.8, Rgba::new(0.1, 0.2, 0.9, 0.7)),
+        ],
+    };
+    // A U whose bottom bar lies below the canvas: its legs are two pieces on it.
+    let mut u = outline(&[
+        (4.0, 2.0),
+        (10.0, 2.0),
+        (10.0, 34.0),
+        (22.0, 34.0),
+        (22.0, 2.0),
+        (28.0, 2.0),
+        (28.0, 40.0),
+        (4.0, 40.0),
+    ]);
+    u.gradients = Some(Box::new(Gradients {
+        fill: Some(paint.clone()),
+        ..Default::default()
+    }));
+    let s = cut_checked(scene(32, 32, vec![u]));
+    assert_eq!(s.shapes.len(), 2);
+    for sh in &s.shapes {
+        assert_eq!(
+            sh.gradients.as_ref().and_then(|g| g.fill.as_ref()),
+            Some(&paint)
+        );
+    }
 }
