@@ -8,9 +8,10 @@
 //! (positive shoelace area on screen, y down); leaving the canvas at an exit, the cut outline
 //! follows the canvas's edge forward to the next entry. A shape whose outline encloses the whole
 //! canvas becomes the canvas's rectangle. Only filled, unstroked, simple closed cubic shapes
-//! are cut (a stroke would show along the cut); a gradient or texture fill is placed in canvas
-//! space (exported `userSpaceOnUse`), so every piece keeps it and paints as the whole did. Any
-//! piece that would not be a valid simple outline leaves the shape as it was.
+//! are cut (a stroke would show along the cut); a gradient fill is placed in canvas space
+//! (exported `userSpaceOnUse`), so every piece keeps it and paints as the whole did. A texture
+//! fill stays whole (each piece would write its pixels again). Any piece that would not be a
+//! valid simple outline leaves the shape as it was.
 
 use super::lobes::{arc, area, at, eval, segments, to_shape};
 use super::simple::{P, flatten_f64, is_simple, piece_ok, ring_area, ring_contains};
@@ -191,6 +192,10 @@ pub fn cut_to_canvas(shape: &Shape, w: u32, h: u32) -> Option<Vec<Shape>> {
 fn cut_to(shape: &Shape, w: f64, h: f64) -> Option<Vec<Shape>> {
     if shape.kind != ShapeKind::ClosedCubic
         || shape.stroke.is_some()
+        || shape
+            .gradients
+            .as_ref()
+            .is_some_and(|g| g.texture.is_some())
         || shape.fill.is_none_or(|f| f.a <= 0.0)
         || !is_simple(shape)
     {

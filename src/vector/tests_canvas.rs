@@ -140,10 +140,24 @@ fn what_lies_on_the_canvas_or_is_not_cut_stays() {
     .unwrap();
     assert!(bulge.control_bounds().1.x > 32.0);
     assert_eq!(cut_to_canvas(&bulge, 32, 32), None);
-    // Stroked outlines keep their geometry (the stroke would show along the cut).
+    // Stroked outlines keep their geometry (the stroke would show along the cut), and so do
+    // textured ones (a piece each would write the pixels again).
     let mut stroked = Shape::circle(30.0, 16.0, 8.0, 4, RED).unwrap();
     stroked.stroke = Some(crate::scene::Stroke::round(Rgba::BLACK, 1.0));
     assert_eq!(cut_to_canvas(&stroked, 32, 32), None);
+    let mut textured = Shape::circle(30.0, 16.0, 8.0, 4, RED).unwrap();
+    textured.gradients = Some(Box::new(crate::scene::Gradients {
+        texture: Some(Box::new(crate::scene::Texture {
+            width: 1,
+            height: 1,
+            pixels: vec![200, 20, 20, 255],
+            transform: crate::scene::Affine([32.0, 0.0, 0.0, 32.0, 0.0, 0.0]),
+            edge: Default::default(),
+            filter: crate::scene::TextureFilter::Nearest,
+        })),
+        ..Default::default()
+    }));
+    assert_eq!(cut_to_canvas(&textured, 32, 32), None);
     let inside = Shape::circle(16.0, 16.0, 8.0, 4, RED).unwrap();
     assert_eq!(cut_to_canvas(&inside, 32, 32), None);
 }
