@@ -531,10 +531,12 @@ pub const FEWEST_COLOURS_PSNR: f64 = 35.0;
 /// what each fill shows) whose colours, each fill taking its nearest ([`choose_fills`]),
 /// render within `min_psnr` dB of the scene as it is; `None` when no palette smaller than the
 /// scene's distinct fills does. The search halves the range of `k` (the error falls with `k`
-/// but not strictly: the `k` found passes, and `k − 1` fails or was not tried).
+/// but not strictly: the `k` found passes, and `k − 1` fails or was not tried). A scene with a
+/// gradient or texture paint keeps its colours (`None`): those shapes' flat fills are stand-ins
+/// that no render shows, as a palette with gradient fills is refused.
 pub fn fewest_colours(scene: &Scene, min_psnr: f64) -> Option<Vec<Rgba>> {
     let n = distinct_fills(scene);
-    if n < 2 {
+    if n < 2 || scene.shapes.iter().any(|s| s.gradients.is_some()) {
         return None;
     }
     let reference = crate::raster::render(scene);

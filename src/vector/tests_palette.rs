@@ -212,6 +212,10 @@ fn the_fewest_colours_keep_the_picture() {
     // Asking for a closer render keeps more colours; asking for the picture exactly, all.
     assert!(fewest_colours(&s, 60.0).is_none_or(|q| q.len() > p.len()));
     assert_eq!(fewest_colours(&s, f64::INFINITY), None);
+    // A gradient paint anywhere: the flat fills are stand-ins, the colours stay.
+    let mut g = s.clone();
+    g.shapes[0].gradients = Some(Box::default());
+    assert_eq!(fewest_colours(&g, FEWEST_COLOURS_PSNR), None);
 }
 
 #[test]
