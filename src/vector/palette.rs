@@ -377,8 +377,13 @@ pub fn choose_fills(scene: &mut Scene, target: Option<&Image>, palette: &[Rgba])
         return 0;
     }
     let vis = visibility(scene, target);
+    fills_from(scene, &vis, palette)
+}
+
+/// [`choose_fills`] given the scene's [`visibility`] (`vis`, one entry a shape).
+fn fills_from(scene: &mut Scene, vis: &[Visible], palette: &[Rgba]) -> usize {
     let mut changed = 0;
-    for (sh, v) in scene.shapes.iter_mut().zip(&vis) {
+    for (sh, v) in scene.shapes.iter_mut().zip(vis) {
         let want = if v.area > 0.0 {
             v.mean
         } else {
@@ -514,7 +519,11 @@ pub fn palette_of_image(img: &Image, k: usize) -> Vec<Rgba> {
 /// A `k`-colour palette of the scene's own fills, each weighted by its visible area (for runs
 /// without a target image, e.g. after score distillation).
 pub fn palette_of_fills(scene: &Scene, k: usize) -> Vec<Rgba> {
-    let vis = visibility(scene, None);
+    palette_of_visible(&visibility(scene, None), k)
+}
+
+/// [`palette_of_fills`] given the scene's [`visibility`] without a target.
+fn palette_of_visible(vis: &[Visible], k: usize) -> Vec<Rgba> {
     let points: Vec<[f32; 3]> = vis.iter().map(|v| v.mean).collect();
     let weights: Vec<f32> = vis.iter().map(|v| v.area.max(1e-3)).collect();
     kmeans(&points, &weights, k, 30)
@@ -540,9 +549,12 @@ pub fn fewest_colours(scene: &Scene, min_psnr: f64) -> Option<Vec<Rgba>> {
         return None;
     }
     let reference = crate::raster::render(scene);
+    // What each shape shows depends on the geometry and opacities alone, which no trial
+    // changes: one visibility pass serves every palette and every trial's fills.
+    let vis = visibility(scene, None);
     let within = |p: &[Rgba]| {
         let mut trial = scene.clone();
-        choose_fills(&mut trial, None, p);
+        fills_from(&mut trial, &vis, p);
         crate::image::psnr(&crate::raster::render(&trial), &reference) >= min_psnr
     };
     // Smallest passing k in [lo, hi]; `best` the passing palette of the smallest k tried.
@@ -550,7 +562,7 @@ pub fn fewest_colours(scene: &Scene, min_psnr: f64) -> Option<Vec<Rgba>> {
     let mut best = None;
     while lo <= hi {
         let k = (lo + hi) / 2;
-        let p = palette_of_fills(scene, k);
+        let p = palette_of_visible(&vis, k);
         if within(&p) {
             best = Some(p);
             hi = k - 1;
