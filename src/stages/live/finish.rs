@@ -42,8 +42,8 @@ impl Run<'_> {
         let scale = tw as f32 / self.target.width as f32;
         // The canvas of the SVG in the working units (the output's height is rounded on its
         // own), so that no piece ends short of its edge.
-        let k = self.target.width as f64 / tw as f64;
-        let cut = crate::vector::canvas::cut_scene_to(&mut scene, tw as f64 * k, th as f64 * k);
+        let ww = self.target.width as f64;
+        let cut = crate::vector::canvas::cut_scene_to(&mut scene, ww, th as f64 * ww / tw as f64);
         let mut pruned = crate::vector::drop_unseen(&mut scene, scale);
         let merged = crate::vector::merge::merge_touching(&mut scene, Default::default());
         if let PathBudget::Auto {
