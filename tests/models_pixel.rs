@@ -395,6 +395,7 @@ fn model_index_style_suffix_switch() {
             seed: 7,
             strength: 0.6,
             negative_prompt: String::new(),
+            size_conditioning: None,
         };
         let sink = vectorfusion::progress::NullSink;
         let cancel = vectorfusion::progress::CancelToken::new();

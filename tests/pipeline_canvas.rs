@@ -6,23 +6,17 @@
 mod common;
 
 use common::http::{get, post_json};
+use common::recording::run_recorded;
 use common::runs;
 use common::server::TestServer;
 use common::wait_status;
 use serde_json::{Value, json};
 use std::path::{Path, PathBuf};
-use std::sync::{Arc, Mutex};
 use std::time::Duration;
-use vectorfusion::image::Image;
 use vectorfusion::pipeline::canvas::CanvasPlan;
-use vectorfusion::pipeline::{
-    Aspect, CanvasRequest, DefaultExecutor, Method, ModelDirs, Models, PlanRequest, Preset, Start,
-    Style, run_text,
-};
-use vectorfusion::progress::{CancelToken, NullSink, ProgressSink};
-use vectorfusion::teacher::{
-    Conditioning, Latent, SampleConfig, SampleError, SdTeacher, Teacher, TeacherError,
-};
+use vectorfusion::pipeline::{Aspect, CanvasRequest, Method, PlanRequest, Preset, Style};
+use vectorfusion::progress::{CancelToken, NullSink};
+use vectorfusion::teacher::{SampleConfig, SdTeacher, Teacher};
 
 fn fixture(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -178,61 +172,6 @@ fn generate_writes_a_16_9_svg_and_refuses_bad_canvas_flags() {
     assert!(err.contains("--negative-prompt"), "{err}");
 }
 
-/// The tiny Stable Diffusion teacher, recording the negative prompts it is given.
-struct Recording {
-    inner: SdTeacher,
-    seen: Arc<Mutex<Vec<String>>>,
-}
-
-impl Teacher for Recording {
-    fn sample(
-        &self,
-        prompt: &str,
-        starts: &[Image],
-        cfg: &SampleConfig,
-        sink: &dyn ProgressSink,
-        cancel: &CancelToken,
-    ) -> Result<Vec<Image>, SampleError> {
-        let note = format!("sample: {}", cfg.negative_prompt);
-        self.seen.lock().unwrap().push(note);
-        self.inner.sample(prompt, starts, cfg, sink, cancel)
-    }
-    fn name(&self) -> String {
-        self.inner.name()
-    }
-    fn image_size(&self) -> u32 {
-        self.inner.image_size()
-    }
-    fn image_dims(&self) -> (u32, u32) {
-        self.inner.image_dims()
-    }
-    fn latent_shape(&self) -> [usize; 3] {
-        self.inner.latent_shape()
-    }
-    fn alphas_cumprod(&self) -> &[f32] {
-        self.inner.alphas_cumprod()
-    }
-    fn condition(&self, prompt: &str, negative: &str) -> Result<Conditioning, TeacherError> {
-        self.seen.lock().unwrap().push(format!("sds: {negative}"));
-        self.inner.condition(prompt, negative)
-    }
-    fn encode(&self, image: &Image) -> Result<Latent, TeacherError> {
-        self.inner.encode(image)
-    }
-    fn encode_vjp(&self, image: &Image, d: &Latent) -> Result<Vec<f32>, TeacherError> {
-        self.inner.encode_vjp(image, d)
-    }
-    fn predict_noise(
-        &self,
-        z: &Latent,
-        t: usize,
-        cond: &Conditioning,
-        guidance: f32,
-    ) -> Result<Latent, TeacherError> {
-        self.inner.predict_noise(z, t, cond, guidance)
-    }
-}
-
 fn sd_tiny(dir: &Path) -> SdTeacher {
     SdTeacher::load(dir, 32).unwrap()
 }
@@ -249,29 +188,8 @@ fn a_negative_prompt_reaches_sampling_and_sds() {
     let text = plan.text.as_ref().unwrap();
     assert_eq!(text.negative_prompt.as_deref(), Some("blurry, text"));
     assert_eq!(text.sds_config().unwrap().negative_prompt, "blurry, text");
-    let seen = Arc::new(Mutex::new(Vec::new()));
-    let models = Models {
-        teacher: Box::new(Recording {
-            inner: sd_tiny(&fixture("sd-tiny")),
-            seen: seen.clone(),
-        }),
-        scorer: None,
-        retrieval: Err(vectorfusion::stages::sample::NoStarts::NoIconSets),
-    };
-    let cancel = CancelToken::new();
-    let out = run_text(
-        &models,
-        text,
-        &plan.key(),
-        "a crown",
-        &Start::Method,
-        &NullSink,
-        &cancel,
-        None,
-    )
-    .unwrap();
-    assert!(out.paths > 0);
-    let seen = seen.lock().unwrap().clone();
+    let (paths, seen) = run_recorded(sd_tiny(&fixture("sd-tiny")), &plan);
+    assert!(paths > 0);
     assert_eq!(seen, ["sample: blurry, text", "sds: blurry, text"]);
 
     // And it changes what the model draws: the unconditional branch embeds it.
@@ -284,9 +202,10 @@ fn a_negative_prompt_reaches_sampling_and_sds() {
             seed: 1,
             strength: 1.0,
             negative_prompt: negative.into(),
+            size_conditioning: None,
         };
         teacher
-            .sample("a crown", &[], &cfg, &NullSink, &cancel)
+            .sample("a crown", &[], &cfg, &NullSink, &CancelToken::new())
             .unwrap()
     };
     assert_eq!(draw("").len(), 1);
@@ -296,18 +215,15 @@ fn a_negative_prompt_reaches_sampling_and_sds() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_16_9_text_job_through_the_service() {
-    let exec = DefaultExecutor::new(ModelDirs {
-        sd_dir: Some(fixture("sd-tiny")),
-        ..ModelDirs::default()
-    });
-    let srv = TestServer::start(Arc::new(exec), |c| c.queue.workers = 1).await;
+    let srv = TestServer::with_model(fixture("sd-tiny")).await;
     let a = srv.addr;
-    let body = json!({"kind": "text", "caption": "a crown", "method": "sd_live",
-        "preset": "draft", "samples": 2, "seed": 5, "aspect": "16:9",
-        "negative_prompt": "blurry"});
-    let r = post_json(a, "/jobs", &body).await;
-    assert_eq!(r.status, 202, "{}", r.text());
-    let job = r.json();
+    let job = srv
+        .submit(
+            &json!({"kind": "text", "caption": "a crown", "method": "sd_live",
+            "preset": "draft", "samples": 2, "seed": 5, "aspect": "16:9",
+            "negative_prompt": "blurry"}),
+        )
+        .await;
     let id = job["id"].as_str().unwrap().to_string();
     assert_eq!(job["params"]["aspect"], "16:9", "{job}");
     assert_eq!(job["params"]["negative_prompt"], "blurry", "{job}");
@@ -328,5 +244,10 @@ async fn a_16_9_text_job_through_the_service() {
     .await;
     assert_eq!(r.status, 400, "{}", r.text());
     assert_eq!(r.json()["error"]["field"], "height");
+    // Stable Diffusion 1.x has no size conditioning (SDXL's): refused, naming the field.
+    let body = json!({"kind": "text", "caption": "x", "size_conditioning": {"crop_top": 0}});
+    let r = post_json(a, "/jobs", &body).await;
+    assert_eq!(r.status, 400, "{}", r.text());
+    assert_eq!(r.json()["error"]["field"], "size_conditioning");
     srv.stop().await;
 }

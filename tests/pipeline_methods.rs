@@ -278,6 +278,7 @@ fn spec(kind: JobKind) -> JobSpec {
         vector: Default::default(),
         canvas: Default::default(),
         negative_prompt: None,
+        size_conditioning: None,
         plan: None,
         variations: None,
     }

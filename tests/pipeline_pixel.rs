@@ -109,6 +109,7 @@ fn service_executor_runs_a_text_job_on_the_default_pixel_model() {
         vector: Default::default(),
         canvas: Default::default(),
         negative_prompt: None,
+        size_conditioning: None,
         plan: None,
         variations: None,
     };

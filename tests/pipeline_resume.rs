@@ -49,6 +49,7 @@ fn spec(method: Method, style: Style) -> JobSpec {
         vector: Default::default(),
         canvas: Default::default(),
         negative_prompt: None,
+        size_conditioning: None,
         plan: None,
         variations: None,
     }
@@ -311,6 +312,7 @@ fn vectorize_jobs_checkpoint_each_live_stage_and_resume_exactly() {
         vector: Default::default(),
         canvas: Default::default(),
         negative_prompt: None,
+        size_conditioning: None,
         plan: None,
         variations: None,
     };

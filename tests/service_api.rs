@@ -902,6 +902,26 @@ async fn bad_input_gets_clear_4xx_json_never_500() {
             json!({"negative_prompt": "x".repeat(1001)}),
             "negative_prompt",
         ),
+        (
+            "size conditioning out of range",
+            json!({"size_conditioning": {"original_width": 0.0}}),
+            "size_conditioning.original_width",
+        ),
+        (
+            "unknown size conditioning field",
+            json!({"size_conditioning": {"width": 1024}}),
+            "size_conditioning",
+        ),
+        (
+            "size conditioning not an object",
+            json!({"size_conditioning": "1024x1024"}),
+            "size_conditioning",
+        ),
+        (
+            "size conditioning as an array",
+            json!({"size_conditioning": [1024, 1024, 0, 0]}),
+            "size_conditioning",
+        ),
     ] {
         let mut b = json!({"kind": "text", "caption": "a cat"});
         b.as_object_mut()
@@ -909,11 +929,11 @@ async fn bad_input_gets_clear_4xx_json_never_500() {
             .extend(body.as_object().unwrap().clone());
         cases.push(json_case(name, b, "invalid_field", field));
     }
-    for field in ["aspect", "negative_prompt"] {
-        let v = if field == "aspect" {
-            json!("16:9")
-        } else {
-            json!("blurry")
+    for field in ["aspect", "negative_prompt", "size_conditioning"] {
+        let v = match field {
+            "aspect" => json!("16:9"),
+            "negative_prompt" => json!("blurry"),
+            _ => json!({"original_width": 1024}),
         };
         cases.push(json_case(
             "canvas on vectorize",

@@ -11,7 +11,7 @@ use super::request_args::{ModelArgs, RequestArgs, cli_limits, parse_word};
 use super::{CliError, ResultExt};
 use crate::pipeline::{
     Aspect, CanvasRequest, DefaultExecutor, EncoderChoice, Executor, JobContext, Method, ModelDirs,
-    PlanRequest, RunInput, StartKind, default_model_dir,
+    PlanRequest, RunInput, SizeConditioningRequest, StartKind, default_model_dir,
 };
 use crate::progress::{CancelToken, Progress, Stage};
 use anyhow::Context;
@@ -103,10 +103,47 @@ pub struct CanvasArgs {
     /// unconditional prompt instead of "").
     #[arg(long)]
     pub negative_prompt: Option<String>,
+    /// SDXL only: the original image size the drawing stands for, WIDTHxHEIGHT px (its size
+    /// conditioning; SDXL draws sharper when told a large original, e.g. 1024x1024)
+    /// [default: the drawn size].
+    #[arg(long, value_name = "WxH", value_parser = parse_pair::<'x'>)]
+    pub sdxl_original_size: Option<(u32, u32)>,
+    /// SDXL only: the top-left corner of the crop within the original, LEFT,TOP px (its crop
+    /// conditioning; 0,0 asks for a centred, uncropped subject) [default: 0,0].
+    #[arg(long, value_name = "LEFT,TOP", value_parser = parse_pair::<','>)]
+    pub sdxl_crop: Option<(u32, u32)>,
+}
+
+impl CanvasArgs {
+    /// The SDXL size conditioning asked for (`None`: neither flag).
+    pub fn size_conditioning(&self) -> Option<SizeConditioningRequest> {
+        if self.sdxl_original_size.is_none() && self.sdxl_crop.is_none() {
+            return None;
+        }
+        Some(SizeConditioningRequest {
+            original_width: self.sdxl_original_size.map(|s| s.0),
+            original_height: self.sdxl_original_size.map(|s| s.1),
+            crop_left: self.sdxl_crop.map(|c| c.0),
+            crop_top: self.sdxl_crop.map(|c| c.1),
+        })
+    }
 }
 
 fn parse_aspect(s: &str) -> Result<Aspect, String> {
     s.parse()
+}
+
+/// Two whole numbers separated by `SEP` (`1024x768`, `16,8`).
+fn parse_pair<const SEP: char>(s: &str) -> Result<(u32, u32), String> {
+    let number = |t: &str| {
+        t.trim()
+            .parse::<u32>()
+            .map_err(|e| format!("{t:?} is not a whole number: {e}"))
+    };
+    let (a, b) = s
+        .split_once(SEP)
+        .ok_or_else(|| format!("expected two whole numbers separated by '{SEP}', got {s:?}"))?;
+    Ok((number(a)?, number(b)?))
 }
 
 /// `--model`, else `VECTORFUSION_MODELS_SD_DIR` (and `..._CLIP_DIR` as the scorer), else the
@@ -305,6 +342,7 @@ fn request_and_input(
             height: args.canvas.height,
         },
         negative_prompt: args.canvas.negative_prompt.clone(),
+        size_conditioning: args.canvas.size_conditioning(),
         ..args.request.plan_request(&args.caption, method)
     };
     Ok((request, input, warnings))

@@ -149,7 +149,13 @@ impl From<crate::pipeline::PipelineError> for CliError {
 /// A request the plan refuses: a usage error naming the flag of the refused field.
 impl From<crate::pipeline::SpecError> for CliError {
     fn from(e: crate::pipeline::SpecError) -> Self {
-        CliError::Usage(format!("--{}: {}", e.field.replace('_', "-"), e.reason))
+        let flag = match e.field {
+            "size_conditioning" => "--sdxl-original-size / --sdxl-crop".to_string(),
+            f if f.starts_with("size_conditioning.original") => "--sdxl-original-size".into(),
+            f if f.starts_with("size_conditioning.crop") => "--sdxl-crop".into(),
+            f => format!("--{}", f.replace('_', "-")),
+        };
+        CliError::Usage(format!("{flag}: {}", e.reason))
     }
 }
 

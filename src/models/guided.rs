@@ -55,16 +55,81 @@ impl TextCond {
     }
 }
 
+/// SDXL's size and crop conditioning ("micro-conditioning", SDXL paper §2.2): the size of the
+/// original image the drawn one was cropped from, and where the crop's top-left corner lay.
+/// The UNet's time ids are `[original (h, w), crop (top, left), target (h, w)]` (diffusers'
+/// `_get_add_time_ids`), the target being the drawn image's size.
+///
+/// Invariant (checked by [`SizeConditioning::check`]): both original sides are within
+/// `1..=`[`MAX_ORIGINAL_SIDE`], both crop coordinates within `0..=`[`MAX_ORIGINAL_SIDE`]
+/// (the UNet embeds each number on its own, so a crop past the original is allowed, as in
+/// diffusers).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct SizeConditioning {
+    pub original_width: u32,
+    pub original_height: u32,
+    pub crop_left: u32,
+    pub crop_top: u32,
+}
+
+/// The largest original side and crop coordinate [`SizeConditioning`] takes (px).
+pub const MAX_ORIGINAL_SIDE: u32 = 16384;
+
+impl SizeConditioning {
+    /// A `width x height` px image drawn whole: what `StableDiffusionXLPipeline` sets by
+    /// default (the original is the drawn size, no crop).
+    pub fn drawn(width: u32, height: u32) -> Self {
+        SizeConditioning {
+            original_width: width,
+            original_height: height,
+            crop_left: 0,
+            crop_top: 0,
+        }
+    }
+
+    /// Why the conditioning breaks its invariant, if it does.
+    pub fn check(&self) -> std::result::Result<(), String> {
+        let (w, h) = (self.original_width, self.original_height);
+        if !(1..=MAX_ORIGINAL_SIDE).contains(&w) || !(1..=MAX_ORIGINAL_SIDE).contains(&h) {
+            return Err(format!(
+                "the original size must be 1 to {MAX_ORIGINAL_SIDE} px a side, got {w}x{h}"
+            ));
+        }
+        if self.crop_left > MAX_ORIGINAL_SIDE || self.crop_top > MAX_ORIGINAL_SIDE {
+            return Err(format!(
+                "the crop's left and top must be 0 to {MAX_ORIGINAL_SIDE} px, got {}, {}",
+                self.crop_left, self.crop_top
+            ));
+        }
+        Ok(())
+    }
+
+    /// The six time ids for an image drawn at `width x height` px.
+    pub fn time_ids(&self, (width, height): (u32, u32)) -> [f32; 6] {
+        [
+            self.original_height as f32,
+            self.original_width as f32,
+            self.crop_top as f32,
+            self.crop_left as f32,
+            height as f32,
+            width as f32,
+        ]
+    }
+
+    /// [`SizeConditioning::time_ids`] as a `[1, 6]` tensor.
+    pub fn time_ids_tensor(&self, target: (u32, u32), device: &Device) -> Result<Tensor> {
+        Ok(Tensor::from_vec(
+            self.time_ids(target).to_vec(),
+            (1, 6),
+            device,
+        )?)
+    }
+}
+
 /// SDXL's time ids for a `width x height` px image drawn whole, as `StableDiffusionXLPipeline`
-/// sets them by default: `[original_size (h, w), crop top-left (0, 0), target_size (h, w)]`,
-/// `[1, 6]`.
+/// sets them by default ([`SizeConditioning::drawn`]), `[1, 6]`.
 pub fn size_time_ids(width: u32, height: u32, device: &Device) -> Result<Tensor> {
-    let (w, h) = (width as f32, height as f32);
-    Ok(Tensor::from_vec(
-        vec![h, w, 0.0, 0.0, h, w],
-        (1, 6),
-        device,
-    )?)
+    SizeConditioning::drawn(width, height).time_ids_tensor((width, height), device)
 }
 
 impl StableDiffusion {
@@ -83,10 +148,23 @@ impl StableDiffusion {
         negative: &str,
         (width, height): (u32, u32),
     ) -> Result<(TextCond, TextCond)> {
+        let drawn = SizeConditioning::drawn(width, height);
+        self.text_cond_sized(prompt, negative, (width, height), &drawn)
+    }
+
+    /// [`StableDiffusion::text_cond`] with SDXL's size and crop conditioning `size` (both
+    /// branches); models without it ignore `size`.
+    pub fn text_cond_sized(
+        &self,
+        prompt: &str,
+        negative: &str,
+        target: (u32, u32),
+        size: &SizeConditioning,
+    ) -> Result<(TextCond, TextCond)> {
         let dev = self.device();
         match self.text.as_ref().ok_or(ModelError::NoTextEncoder)? {
             TextEncoder::Sdxl(te) => {
-                let time_ids = size_time_ids(width, height, dev)?;
+                let time_ids = size.time_ids_tensor(target, dev)?;
                 let branch = |e: super::sdxl_text::SdxlEmbedding| TextCond {
                     context: e.context,
                     added: Some(AddedCond {

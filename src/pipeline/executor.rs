@@ -163,6 +163,7 @@ pub fn request_of(spec: &JobSpec) -> PlanRequest {
         vector: spec.vector.clone(),
         canvas: spec.canvas,
         negative_prompt: spec.negative_prompt.clone(),
+        size_conditioning: spec.size_conditioning,
         tuning: Tuning::default(),
     }
 }

@@ -34,7 +34,10 @@ pub use models::{
     default_model_dir, find_taesd, is_model_dir, is_pixel_model, is_small_model,
     resolve_default_model, resolve_encoder,
 };
-pub use plan::{MAX_VARIATIONS, ModelFacts, PlanRequest, RunPlan, StartKind, TextPlan, Tuning};
+pub use plan::{
+    MAX_VARIATIONS, ModelFacts, PlanRequest, RunPlan, SizeConditioningRequest, StartKind, TextPlan,
+    Tuning,
+};
 pub use presets::PresetSettings;
 pub use report::{
     RerankReport, ResumePoint, RetrievalReport, RunMethod, RunOutput, RunReport, SdsReport,

@@ -274,6 +274,7 @@ impl ModelDirs {
             // Sampling and SDS guide with `embed(prompt)` against `embed(negative prompt)` (the
             // embedded model too, trained with dropped captions): any such model takes one.
             negative_prompt: true,
+            size_conditioning: takes_size_conditioning(sd),
             few_step: few_step(sampler_kind(sd), &hints),
         })
     }
@@ -317,13 +318,26 @@ impl ModelDirs {
     }
 }
 
+/// Whether the UNet of the diffusers directory `dir` takes SDXL's added size/crop conditioning
+/// (`unet/config.json`'s `addition_embed_type` is `text_time`); an unreadable config says no
+/// (the loader reports it when the run starts).
+pub fn takes_size_conditioning(dir: &Path) -> bool {
+    component_config(dir, "unet")
+        .is_some_and(|v| v.get("addition_embed_type").and_then(|a| a.as_str()) == Some("text_time"))
+}
+
+/// The `config.json` of component `part` (`unet`, `vae`) of the diffusers directory `dir`.
+fn component_config(dir: &Path, part: &str) -> Option<serde_json::Value> {
+    let text = std::fs::read_to_string(dir.join(part).join("config.json")).ok()?;
+    serde_json::from_str(&text).ok()
+}
+
 /// The side multiple (px) a latent model samples at: its autoencoder's downsampling times
 /// its UNet's (`2^(levels - 1)`), read from `vae/config.json` and `unet/config.json`; 64 (Stable
 /// Diffusion 1.x/2.x: 8 × 8) when they cannot be read (the loader then says why).
 pub fn sample_multiple(dir: &Path) -> u32 {
     let levels = |part: &str| -> Option<u32> {
-        let text = std::fs::read_to_string(dir.join(part).join("config.json")).ok()?;
-        let v: serde_json::Value = serde_json::from_str(&text).ok()?;
+        let v = component_config(dir, part)?;
         let n = v.get("block_out_channels")?.as_array()?.len() as u32;
         (1..=8).contains(&n).then_some(n)
     };

@@ -3,7 +3,7 @@
 //! [`Preset`]) and the hard [`Limits`] every entry point checks it against.
 
 use super::canvas::CanvasRequest;
-use super::plan::RunPlan;
+use super::plan::{RunPlan, SizeConditioningRequest};
 use crate::scene::MAX_PATHS;
 pub use crate::stages::styles::Style;
 use crate::vector::VectorOptions;
@@ -175,6 +175,9 @@ pub struct JobSpec {
     /// Text jobs: what classifier-free guidance steers away from.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub negative_prompt: Option<String>,
+    /// Text jobs on SDXL: the size and crop conditioning (none: the drawn size, no crop).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub size_conditioning: Option<SizeConditioningRequest>,
     /// The run, resolved once when the job was accepted ([`RunPlan`]): workers run this and
     /// nothing else, so a queued job runs the same whatever the preset table says later. Jobs
     /// stored before plans existed have none and are resolved when they run.
@@ -313,6 +316,7 @@ impl JobSpec {
             (self.canvas.width.is_some(), "width"),
             (self.canvas.height.is_some(), "height"),
             (self.negative_prompt.is_some(), "negative_prompt"),
+            (self.size_conditioning.is_some(), "size_conditioning"),
         ] {
             if set {
                 return Err(SpecError::new(field, "only applies to kind \"text\""));

@@ -20,6 +20,7 @@ fn spec() -> JobSpec {
         vector: Default::default(),
         canvas: Default::default(),
         negative_prompt: None,
+        size_conditioning: None,
         plan: None,
         variations: None,
     }

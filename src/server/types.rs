@@ -45,6 +45,7 @@ pub const SUBMIT_FIELDS: &[&str] = &[
     "width",
     "height",
     "negative_prompt",
+    "size_conditioning",
 ];
 
 /// Fields whose omission means "the preset decides": the job's [`crate::pipeline::RunPlan`]
@@ -60,10 +61,28 @@ fn field<T: DeserializeOwned>(obj: &Map<String, Value>, name: &str) -> Result<Op
     }
 }
 
-/// JSON Schema (and so `openapi.yaml`) counts `7374.0` as an integer; serde does not. Top-level
-/// whole-number floats within `i64::MIN..2^64` become integers (the range checks then apply).
+/// [`field`] for a JSON object (serde alone would also read a struct from an array).
+fn object_field<T: DeserializeOwned>(
+    obj: &Map<String, Value>,
+    name: &str,
+) -> Result<Option<T>, ApiError> {
+    match obj.get(name) {
+        Some(v) if !v.is_object() && !v.is_null() => {
+            Err(ApiError::invalid(name, "must be a JSON object"))
+        }
+        _ => field(obj, name),
+    }
+}
+
+/// JSON Schema (and so `openapi.yaml`) counts `7374.0` as an integer; serde does not. Whole-number
+/// floats within `i64::MIN..2^64`, at the top level and in nested objects, become integers (the
+/// range checks then apply).
 fn whole_numbers_as_integers(obj: &mut Map<String, Value>) {
     for v in obj.values_mut() {
+        if let Value::Object(inner) = v {
+            whole_numbers_as_integers(inner);
+            continue;
+        }
         let Value::Number(n) = v else { continue };
         let Some(f) = n.as_f64().filter(|f| n.is_f64() && f.fract() == 0.0) else {
             continue;
@@ -233,6 +252,7 @@ fn request_from(obj: &Map<String, Value>, default_seed: u64) -> Result<JobSpec, 
             height: field(obj, "height")?,
         },
         negative_prompt: field(obj, "negative_prompt")?,
+        size_conditioning: object_field(obj, "size_conditioning")?,
         plan: None,
     })
 }
@@ -329,6 +349,9 @@ pub struct ParamsView {
     pub canvas: crate::pipeline::CanvasRequest,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub negative_prompt: Option<String>,
+    /// Text jobs on SDXL: the size and crop conditioning, as submitted.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub size_conditioning: Option<crate::pipeline::SizeConditioningRequest>,
     /// The run plan resolved when the job was accepted: every number the job runs with.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub plan: Option<RunPlan>,
@@ -517,6 +540,7 @@ impl JobView {
                 vector: s.vector,
                 canvas: s.canvas,
                 negative_prompt: s.negative_prompt,
+                size_conditioning: s.size_conditioning,
                 plan: s.plan,
             }),
             links: Links {

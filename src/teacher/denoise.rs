@@ -5,6 +5,7 @@
 //! reranking are the sample stage's ([`crate::stages::sample`]).
 
 use crate::image::Image;
+use crate::models::guided::SizeConditioning;
 use crate::models::scheduler::{SamplerKind, SamplerRun};
 use crate::models::{StableDiffusion, TextCond};
 use crate::progress::{CancelToken, Progress, ProgressSink};
@@ -26,6 +27,9 @@ pub struct SampleConfig {
     /// What classifier-free guidance steers away from: the unconditional branch embeds it
     /// (empty: the unconditional prompt "").
     pub negative_prompt: String,
+    /// SDXL's size and crop conditioning (`None`: the drawn size, no crop); other models
+    /// ignore it.
+    pub size_conditioning: Option<SizeConditioning>,
 }
 
 /// Why sampling stopped.

@@ -15,6 +15,7 @@ pub use denoise::{SampleConfig, SampleError};
 pub use sd::SdTeacher;
 
 use crate::image::Image;
+use crate::models::guided::SizeConditioning;
 use crate::models::stable_diffusion::ModelHints;
 use crate::progress::{CancelToken, ProgressSink};
 use rand::{Rng, RngExt};
@@ -90,6 +91,17 @@ pub struct Conditioning {
     pub uncond: Vec<f32>,
     /// SDXL's added conditioning; `None` for models without it.
     pub added: Option<AddedConditioning>,
+}
+
+impl Conditioning {
+    /// The conditioning with SDXL's time ids set from `size` for an image drawn at `target`
+    /// px (`None`, or a model without added conditioning: unchanged).
+    pub fn sized(mut self, size: Option<&SizeConditioning>, target: (u32, u32)) -> Self {
+        if let (Some(s), Some(a)) = (size, self.added.as_mut()) {
+            a.time_ids = s.time_ids(target).to_vec();
+        }
+        self
+    }
 }
 
 /// SDXL's added conditioning, flattened: the pooled text embedding of each branch (`[1, d]`)

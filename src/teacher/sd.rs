@@ -14,6 +14,7 @@ use super::{
 };
 use crate::image::Image;
 use crate::models::codec::CodecKind;
+use crate::models::guided::SizeConditioning;
 use crate::models::stable_diffusion::ModelHints;
 use crate::models::unet::AddedCond;
 use crate::models::{ComputeDevice, LoadOptions, StableDiffusion, TextCond};
@@ -240,9 +241,13 @@ impl Teacher for SdTeacher {
         sink: &dyn ProgressSink,
         cancel: &CancelToken,
     ) -> Result<Vec<Image>, SampleError> {
+        let target = (self.width, self.height);
+        let size = cfg
+            .size_conditioning
+            .unwrap_or(SizeConditioning::drawn(self.width, self.height));
         let conds = self
             .sd
-            .text_cond(prompt, &cfg.negative_prompt, (self.width, self.height))
+            .text_cond_sized(prompt, &cfg.negative_prompt, target, &size)
             .map_err(|e| SampleError::failed("text encoder", e))?;
         super::denoise::draw(
             &self.sd,

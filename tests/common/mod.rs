@@ -4,6 +4,7 @@
 pub mod golden;
 pub mod http;
 pub mod node;
+pub mod recording;
 pub mod runs;
 pub mod server;
 pub mod tensors;

@@ -42,6 +42,23 @@ impl TestServer {
         }
     }
 
+    /// A server with one worker running the diffusers model in `sd_dir` (no scorer).
+    pub async fn with_model(sd_dir: std::path::PathBuf) -> TestServer {
+        let exec =
+            vectorfusion::pipeline::DefaultExecutor::new(vectorfusion::pipeline::ModelDirs {
+                sd_dir: Some(sd_dir),
+                ..Default::default()
+            });
+        TestServer::start(Arc::new(exec), |c| c.queue.workers = 1).await
+    }
+
+    /// Submits `body` to `POST /jobs`, which must accept it (202); the job view.
+    pub async fn submit(&self, body: &serde_json::Value) -> serde_json::Value {
+        let r = super::http::post_json(self.addr, "/jobs", body).await;
+        assert_eq!(r.status, 202, "{}", r.text());
+        r.json()
+    }
+
     pub async fn stop(mut self) {
         if let Some(tx) = self.stop.take() {
             let _ = tx.send(());

@@ -20,6 +20,8 @@ pub struct ModelFacts {
     pub sample_shape: SampleShape,
     /// Its guidance has an unconditional branch that can embed a negative prompt.
     pub negative_prompt: bool,
+    /// Its UNet takes SDXL's size and crop conditioning (`addition_embed_type` `text_time`).
+    pub size_conditioning: bool,
     /// It samples in a few steps ([`few_step`]); the `cpu` preset reads it
     /// ([`crate::pipeline::Preset::settings_for_model`]).
     pub few_step: bool,
@@ -44,6 +46,7 @@ impl ModelFacts {
             taesd_found: false,
             sample_shape: SampleShape::Square,
             negative_prompt: false,
+            size_conditioning: false,
             few_step: false,
         }
     }

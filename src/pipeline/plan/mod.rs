@@ -9,6 +9,7 @@ use super::presets::PresetSettings;
 use super::spec::{check_range, check_text};
 use super::{EncoderChoice, JobKind, Limits, Method, Preset, SpecError, Style};
 use crate::caption::CaptionPlan;
+use crate::models::guided::SizeConditioning;
 use crate::stages::live::{CANVAS_SIDES, LiveConfig, PathBudget};
 use crate::stages::sds::{T_MAX, T_MIN};
 use crate::vector::VectorOptions;
@@ -68,6 +69,8 @@ pub struct PlanRequest {
     pub canvas: CanvasRequest,
     /// Text runs: what classifier-free guidance steers away from.
     pub negative_prompt: Option<String>,
+    /// Text runs on SDXL: the size and crop conditioning asked for (nothing: the drawn size).
+    pub size_conditioning: Option<SizeConditioningRequest>,
     /// Settings only the command line exposes (none from HTTP).
     pub tuning: Tuning,
 }
@@ -91,6 +94,7 @@ impl PlanRequest {
             vector: VectorOptions::default(),
             canvas: CanvasRequest::default(),
             negative_prompt: None,
+            size_conditioning: None,
             tuning: Tuning::default(),
         }
     }
@@ -231,6 +235,11 @@ pub struct TextPlan {
     /// and of SDS embeds it instead of the empty prompt.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub negative_prompt: Option<String>,
+    /// SDXL's size and crop conditioning of sampling and SDS, resolved for every run of a
+    /// model that takes it ([`ModelFacts::size_conditioning`]); `None` for other models (and
+    /// SDXL plans stored before it existed: the drawn size, no crop, the same numbers).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub size_conditioning: Option<SizeConditioning>,
     /// Paths (iconography, low-poly), strokes (sketch, painting) or cells (pixel art).
     pub paths: u32,
     /// `None`: the start needs no samples.
@@ -520,6 +529,8 @@ fn text_plan(
         .canvas
         .check(limits.max_canvas_side)?
         .map(|c| resolve_canvas(c, n.size, sample_shape(req, model)));
+    let drawn = canvas.map_or((n.size, n.size), |c| (c.sample_width, c.sample_height));
+    let size_conditioning = size_conditioning(req, model, drawn)?;
     let distil = !from_method || req.method != Method::SdLive;
     let augment = from_method && req.method == Method::Scratch && req.tuning.augment != Some(false);
     let sds = distil
@@ -533,6 +544,7 @@ fn text_plan(
         size: n.size,
         canvas,
         negative_prompt: negative_prompt(req, model, limits)?,
+        size_conditioning,
         paths: n.paths,
         // Only a run that samples is steered toward the caption's colour and objects.
         caption: sample
@@ -558,7 +570,8 @@ fn text_plan(
 }
 
 mod text_plan;
-use text_plan::{check_fill_style, negative_prompt, sample_shape};
+pub use text_plan::SizeConditioningRequest;
+use text_plan::{check_fill_style, negative_prompt, sample_shape, size_conditioning};
 
 mod facts;
 mod variations;
@@ -570,3 +583,5 @@ use variations::check_variations;
 mod tests;
 #[cfg(test)]
 mod tests_fill;
+#[cfg(test)]
+mod tests_size;

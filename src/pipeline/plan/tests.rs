@@ -19,6 +19,7 @@ fn facts(small_prior: bool) -> ModelFacts {
             SampleShape::Multiple(64)
         },
         negative_prompt: true,
+        size_conditioning: false,
         few_step: false,
     }
 }

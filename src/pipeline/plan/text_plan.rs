@@ -2,12 +2,14 @@
 //! SDS configurations it runs.
 
 use super::{Limits, ModelFacts, PlanRequest, SpecError, TextPlan, check_text};
+use crate::models::guided::{MAX_ORIGINAL_SIDE, SizeConditioning};
 use crate::pipeline::canvas::SampleShape;
 use crate::scene::Trainable;
 use crate::stages::live::{LiveConfig, PathBudget};
 use crate::stages::sds::{ReinitConfig, SdsConfig};
 use crate::stages::styles::Style;
 use crate::vector::fill::FillKind;
+use serde::{Deserialize, Serialize};
 
 impl TextPlan {
     /// `(width, height)` of the image the model samples, LIVE traces and SDS distils.
@@ -51,6 +53,7 @@ impl TextPlan {
         Some(SdsConfig {
             prompt: self.prompt.clone(),
             negative_prompt: self.negative_prompt.clone().unwrap_or_default(),
+            size_conditioning: self.size_conditioning,
             t_min: sp.t_min,
             t_max: sp.t_max,
             t_max_end: sp.t_max_end,
@@ -125,4 +128,71 @@ pub(super) fn negative_prompt(
         ));
     }
     Ok(Some(n.clone()))
+}
+
+/// The SDXL size and crop conditioning a caller asks for (SDXL paper §2.2): the original image
+/// the drawn one stands for, and the crop's top-left corner in it. An omitted original side is
+/// the drawn image's, an omitted crop coordinate 0 (diffusers' defaults); a model without
+/// size conditioning refuses any.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SizeConditioningRequest {
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub original_width: Option<u32>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub original_height: Option<u32>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub crop_left: Option<u32>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub crop_top: Option<u32>,
+}
+
+impl SizeConditioningRequest {
+    /// The request completed for an image drawn at `(width, height)` px and checked; an error
+    /// names the field (`size_conditioning.original_width`, ...).
+    pub fn resolve(&self, (width, height): (u32, u32)) -> Result<SizeConditioning, SpecError> {
+        let max = MAX_ORIGINAL_SIDE;
+        for (field, v, min) in [
+            ("size_conditioning.original_width", self.original_width, 1),
+            ("size_conditioning.original_height", self.original_height, 1),
+            ("size_conditioning.crop_left", self.crop_left, 0),
+            ("size_conditioning.crop_top", self.crop_top, 0),
+        ] {
+            if let Some(v) = v.filter(|v| !(min..=max).contains(v)) {
+                return Err(SpecError::new(
+                    field,
+                    format!("must be between {min} and {max} px, got {v}"),
+                ));
+            }
+        }
+        let s = SizeConditioning {
+            original_width: self.original_width.unwrap_or(width),
+            original_height: self.original_height.unwrap_or(height),
+            crop_left: self.crop_left.unwrap_or(0),
+            crop_top: self.crop_top.unwrap_or(0),
+        };
+        s.check()
+            .map_err(|reason| SpecError::new("size_conditioning", reason))?;
+        Ok(s)
+    }
+}
+
+/// The size conditioning of a run drawn at `drawn` px on `model`: resolved for a model that
+/// takes it (the drawn size, no crop, unless asked), refused when asked of another.
+pub(super) fn size_conditioning(
+    req: &PlanRequest,
+    model: &ModelFacts,
+    drawn: (u32, u32),
+) -> Result<Option<SizeConditioning>, SpecError> {
+    match (&req.size_conditioning, model.size_conditioning) {
+        (r, true) => r.unwrap_or_default().resolve(drawn).map(Some),
+        (None, false) => Ok(None),
+        (Some(_), false) => Err(SpecError::new(
+            "size_conditioning",
+            format!(
+                "{} has no size conditioning (SDXL's original size and crop time ids)",
+                model.name
+            ),
+        )),
+    }
 }

@@ -50,6 +50,7 @@ pub fn sample_ranked(
         seed: plan.seeds.sample,
         strength: sp.strength,
         negative_prompt: plan.negative_prompt.clone().unwrap_or_default(),
+        size_conditioning: plan.size_conditioning,
     };
     sample_and_rerank(
         models.teacher(),

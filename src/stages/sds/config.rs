@@ -1,6 +1,7 @@
 //! What an SDS run is asked to do ([`SdsConfig`] and its parts) and how it can fail.
 
 use crate::augment::{AugmentConfig, AugmentError};
+use crate::models::guided::SizeConditioning;
 use crate::optim::{AdamConfig, GroupSchedules};
 use crate::scene::{SceneError, Trainable};
 use crate::stages::live::MIN_OPACITY;
@@ -86,6 +87,10 @@ pub struct SdsConfig {
     /// Caption with style suffix (what the teacher is conditioned on).
     pub prompt: String,
     pub negative_prompt: String,
+    /// SDXL's size and crop conditioning of the teacher's time ids (`None`: the teacher's
+    /// drawn size, no crop); models without time ids ignore it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub size_conditioning: Option<SizeConditioning>,
     /// Timestep range `[t_min, t_max]` (inclusive) at the start …
     pub t_min: usize,
     pub t_max: usize,
@@ -123,6 +128,7 @@ impl SdsConfig {
             steps,
             prompt: style.prompt(caption),
             negative_prompt: String::new(),
+            size_conditioning: None,
             t_min: T_MIN,
             t_max: T_MAX,
             t_max_end: None,

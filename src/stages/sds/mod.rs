@@ -516,7 +516,9 @@ fn prepare<'a, B: Backend>(
             cfg.steps
         )));
     }
-    let cond = teacher.condition(&cfg.prompt, &cfg.negative_prompt)?;
+    let cond = teacher
+        .condition(&cfg.prompt, &cfg.negative_prompt)?
+        .sized(cfg.size_conditioning.as_ref(), teacher.image_dims());
     let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);
     rng.set_word_pos(u128::from(rng_word_pos));
     let fixed = Fixed {
