@@ -10,6 +10,7 @@
 #           default 6)
 #   photo/  the photos inside the scikit-image wheel (pip download, no install), resized to
 #           SIZE px on the longest side (Lanczos, RGB)
+#   banner/ non-square strips of the emoji (below)
 # Icons: every k-th icon in name order (flags, keycaps, regional letters, skin tones and names
 # starting with a digit left out), rendered with resvg at SIZE px (transparent background,
 # examples/fidelity_render.rs, as scripts/prepare_fidelity_set.sh does). fluent-emoji* and
@@ -102,6 +103,28 @@ with zipfile.ZipFile(whl) as z:
         k = size / max(im.size)
         im = im.resize((max(1, round(im.width * k)), max(1, round(im.height * k))), Image.LANCZOS)
         im.save(f"{out}/photo-{p.rsplit('.', 1)[0]}.png")
+PY
+
+# banner/: strips of the emoji above at 64 px, side by side on white (w4-*: 4 in a row, 256x64;
+# w8-*: 8 in a row, 512x64; t8-*: the w8 strips transposed, 64x512), for non-square inputs.
+mkdir -p "$OUT/banner"
+"$PY" - "$OUT/emoji" "$OUT/banner" <<'PY'
+import os, sys
+from PIL import Image
+src, out = sys.argv[1], sys.argv[2]
+names = sorted(n for n in os.listdir(src) if n.endswith(".png"))
+ims = [Image.open(os.path.join(src, n)).convert("RGBA").resize((64, 64), Image.LANCZOS) for n in names]
+def strip(group):
+    b = Image.new("RGBA", (64 * len(group), 64), (255, 255, 255, 255))
+    for i, im in enumerate(group):
+        b.alpha_composite(im, (64 * i, 0))
+    return b
+for j in range(len(ims) // 4):
+    strip(ims[4 * j:4 * j + 4]).save(f"{out}/w4-{j}.png")
+for j in range(len(ims) // 8):
+    s = strip(ims[8 * j:8 * j + 8])
+    s.save(f"{out}/w8-{j}.png")
+    s.transpose(Image.TRANSPOSE).save(f"{out}/t8-{j}.png")
 PY
 
 echo "installing imagetracerjs $IMAGETRACER_VERSION + pngjs $PNGJS_VERSION into $TOOLS" >&2

@@ -26,7 +26,8 @@ pub struct VectorizeArgs {
     /// Custom stage schedule, e.g. `8,8,16,16,16` (overrides --paths N).
     #[arg(long)]
     pub schedule: Option<String>,
-    /// Working size in pixels (longest side) for the optimisation; the preset's by default.
+    /// Working side in pixels: the optimisation runs on the image scaled to the area of a square
+    /// of this side (never enlarged); the preset's by default.
     #[arg(long)]
     pub size: Option<u32>,
     /// Adam iterations per stage; the preset's by default.

@@ -101,8 +101,9 @@ pub enum InitMode {
 /// User-facing LIVE settings.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct LiveConfig {
-    /// Longest side (pixels) of the canvas the optimisation runs at (never more than the
-    /// target's); the result is scaled back to the target's size.
+    /// Working side (pixels): the optimisation runs on the target scaled to the area of a
+    /// `size`×`size` square (a square target: `size` a side; never larger than the target);
+    /// the result is scaled back to the target's size.
     pub size: u32,
     pub budget: PathBudget,
     pub init: InitMode,

@@ -170,10 +170,14 @@ fn check_target(target: &Image) -> Result<(), LiveError> {
     Ok(())
 }
 
-/// The working size for a `tw`×`th` target and a working side of `size`: never upsampled,
+/// The working size for a `tw`×`th` target and a working side of `size`: the target scaled to
+/// the area of a `size`×`size` square (a square target: `size` a side; a 16:1 banner keeps
+/// the pixels of each of its parts instead of shrinking them 4× further), never upsampled, so
 /// small inputs are optimised at their own size.
 fn working_size(size: u32, tw: u32, th: u32) -> (u32, u32) {
-    let k = (size as f32 / tw.max(th) as f32).min(1.0);
+    // A square's side is exact, so a square target scales by `size / side` as it always did.
+    let side = (f64::from(tw) * f64::from(th)).sqrt() as f32;
+    let k = (size as f32 / side).min(1.0);
     (
         ((tw as f32 * k).round() as u32).max(1),
         ((th as f32 * k).round() as u32).max(1),

@@ -88,3 +88,16 @@ fn border_colour_is_the_frame_mean() {
     }
     assert_eq!(border_colour(&im), Rgba::WHITE);
 }
+
+/// The working canvas has the area of the working square: a square target as before, a 16:1
+/// banner's parts as large as a square's would be (not a quarter of it), nothing upsampled.
+#[test]
+fn the_working_size_keeps_the_area_of_the_working_square() {
+    assert_eq!(working_size(160, 256, 256), (160, 160));
+    assert_eq!(working_size(80, 1000, 1000), (80, 80));
+    assert_eq!(working_size(160, 100, 100), (100, 100));
+    assert_eq!(working_size(160, 1024, 64), (640, 40));
+    assert_eq!(working_size(160, 64, 1024), (40, 640));
+    assert_eq!(working_size(160, 256, 170), (196, 130));
+    assert_eq!(working_size(160, 300, 1), (300, 1));
+}
