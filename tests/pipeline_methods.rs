@@ -17,7 +17,7 @@ use vectorfusion::pipeline::{
     Preset, RunInput, StartKind, Style, Tuning,
 };
 use vectorfusion::progress::{CancelToken, Progress, Stage};
-use vectorfusion::scene::Scene;
+use vectorfusion::scene::{Scene, ShapeKind};
 
 fn fixture(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -97,7 +97,15 @@ fn every_method_and_style_runs_on_the_tiny_model_without_nan() {
                 }
             }
             if style == Style::PixelArt {
-                assert_eq!(out.paths, 32 * 32, "pixel art keeps its grid");
+                // The grid's cells, those of one colour side by side merged into one outline.
+                let f = d.finish.as_ref().unwrap();
+                assert_eq!(out.paths + f.merged + f.dropped, 32 * 32, "{f:?}");
+                assert!(
+                    out.scene
+                        .shapes
+                        .iter()
+                        .all(|s| s.kind == ShapeKind::Polygon)
+                );
             }
         }
     }

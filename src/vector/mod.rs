@@ -11,6 +11,7 @@
 //! | [`straight`] | near-straight segments made straight, so that they are written as lines |
 
 pub mod canvas;
+pub mod cells;
 pub mod check;
 pub mod export;
 pub mod fill;
@@ -317,7 +318,8 @@ pub struct FinishReport {
     pub split: usize,
     /// Paths dropped as hidden or too small to see.
     pub dropped: usize,
-    /// Paths merged into a touching path of the same fill ([`merge`]).
+    /// Paths merged into a touching path of the same fill ([`merge`]), or pixel-art cells
+    /// merged into the outline of their region ([`cells`]).
     #[serde(default)]
     pub merged: usize,
     /// Paths cut to the canvas ([`canvas`]).
@@ -355,11 +357,11 @@ pub fn finish_scene(scene: &mut Scene, colors: &ColorPlan, drop_small: bool) -> 
             }
         }
     }
-    // Pixel cells and strokes stay as they are drawn.
+    // Strokes stay as they are drawn; pixel cells become one outline per region of a colour.
     let merged = if drop_small {
         merge::merge_touching(scene, merge::MergeTolerance::default())
     } else {
-        0
+        cells::merge_cells(scene)
     };
     // Last, so that no choice above sees the (sub-pixel) change; outlines stay simple.
     straight::straighten(scene, straight::STRAIGHT_TOLERANCE);
