@@ -60,8 +60,8 @@ impl TextCond {
 /// The UNet's time ids are `[original (h, w), crop (top, left), target (h, w)]` (diffusers'
 /// `_get_add_time_ids`), the target being the drawn image's size.
 ///
-/// Invariant (checked by [`SizeConditioning::check`]): both original sides are within
-/// `1..=`[`MAX_ORIGINAL_SIDE`], both crop coordinates within `0..=`[`MAX_ORIGINAL_SIDE`]
+/// Invariant (what `pipeline::SizeConditioningRequest::resolve` checks): both original sides
+/// within `1..=`[`MAX_ORIGINAL_SIDE`], both crop coordinates within `0..=`[`MAX_ORIGINAL_SIDE`]
 /// (the UNet embeds each number on its own, so a crop past the original is allowed, as in
 /// diffusers).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -85,23 +85,6 @@ impl SizeConditioning {
             crop_left: 0,
             crop_top: 0,
         }
-    }
-
-    /// Why the conditioning breaks its invariant, if it does.
-    pub fn check(&self) -> std::result::Result<(), String> {
-        let (w, h) = (self.original_width, self.original_height);
-        if !(1..=MAX_ORIGINAL_SIDE).contains(&w) || !(1..=MAX_ORIGINAL_SIDE).contains(&h) {
-            return Err(format!(
-                "the original size must be 1 to {MAX_ORIGINAL_SIDE} px a side, got {w}x{h}"
-            ));
-        }
-        if self.crop_left > MAX_ORIGINAL_SIDE || self.crop_top > MAX_ORIGINAL_SIDE {
-            return Err(format!(
-                "the crop's left and top must be 0 to {MAX_ORIGINAL_SIDE} px, got {}, {}",
-                self.crop_left, self.crop_top
-            ));
-        }
-        Ok(())
     }
 
     /// The six time ids for an image drawn at `width x height` px.
