@@ -156,3 +156,53 @@ fn bench_vectorize_prints_json_rows() {
     let live = rows.iter().find(|r| r["method"] == "live").unwrap();
     assert_eq!(live["paths"], 4);
 }
+
+/// `--init pixels` copies a sprite exactly, one outline per region of a colour; an image too
+/// large for a square per pixel, or a byte target, is refused (exit 2).
+#[test]
+fn vectorize_init_pixels_copies_pixel_art() {
+    let d = tmpdir("pixels");
+    let input = d.join("sprite.png");
+    let mut sprite = image::RgbaImage::new(16, 12);
+    for (x, y, p) in sprite.enumerate_pixels_mut() {
+        *p = match (x, y) {
+            (0, _) | (_, 0) => image::Rgba([0, 0, 0, 0]),
+            (4..=7, 3..=6) => image::Rgba([30, 90, 220, 255]),
+            _ => image::Rgba([240, 150, 40, 255]),
+        };
+    }
+    sprite.save(&input).unwrap();
+    let svg = d.join("sprite.svg");
+    let args = [
+        "vectorize",
+        input.to_str().unwrap(),
+        "--init",
+        "pixels",
+        "-q",
+        "-o",
+    ];
+    let out = bin().args(args).arg(&svg).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    let text = std::fs::read_to_string(&svg).unwrap();
+    assert_eq!(text.matches("<path").count(), 2, "{text}");
+    let back = vectorfusion::svg::from_svg(&text).unwrap();
+    let drawn = raster::render(&back);
+    let want = vectorfusion::image::Image::decode(&std::fs::read(&input).unwrap()).unwrap();
+    let (_, worst) = vectorfusion::vector::export::diff(&drawn, &want);
+    assert!(worst < 1e-3, "{worst}");
+
+    let big = d.join("big.png");
+    image::RgbaImage::new(200, 8).save(&big).unwrap();
+    for (img, extra) in [(&big, None), (&input, Some("--max-bytes"))] {
+        let mut cmd = bin();
+        cmd.args(["vectorize", img.to_str().unwrap(), "--init", "pixels", "-q"]);
+        if let Some(flag) = extra {
+            cmd.args([flag, "2000"]);
+        }
+        let out = cmd.args(["-o", "/dev/null"]).output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{err}");
+        assert!(err.contains("init pixels"), "{err}");
+    }
+}

@@ -40,7 +40,8 @@ pub struct VectorizeArgs {
     /// and the service.
     #[arg(long, default_value = "balanced")]
     pub preset: String,
-    /// Start from vtracer's trace instead of circles.
+    /// Where the paths come from: LIVE's circles, vtracer's trace (refined), or `pixels`: no
+    /// tracing, a square per pixel merged per region of a colour (pixel art, up to 128 px).
     #[arg(long, value_enum, default_value = "circles")]
     pub init: InitArg,
     /// Weight of the self-intersection (Xing) loss.
@@ -80,6 +81,8 @@ pub struct VectorizeArgs {
 pub enum InitArg {
     Circles,
     Vtracer,
+    /// A square per pixel, merged per region of a colour: pixel art copied exactly.
+    Pixels,
 }
 
 /// Reads an image, refusing unreadable files and images over [`MAX_INPUT_SIDE`] with a clear
@@ -162,6 +165,7 @@ pub fn config_from_args(a: &VectorizeArgs) -> Result<LiveConfig, CliError> {
     cfg.init = match a.init {
         InitArg::Circles => InitMode::Circles,
         InitArg::Vtracer => InitMode::Vtracer,
+        InitArg::Pixels => InitMode::Pixels,
     };
     cfg.validate().map_err(|e| CliError::Usage(e.to_string()))?;
     Ok(cfg)
@@ -283,9 +287,8 @@ fn trace(
         image: Some(target),
         ..RunInput::default()
     };
-    let result = exec
-        .run_plan(&plan, &input, &ctx)
-        .failed(|| "vectorize failed".into())?;
+    // Bad input or settings (a refused image or configuration) exit 2, other failures 1.
+    let result = exec.run_plan(&plan, &input, &ctx)?;
     bar.finish_and_clear();
     Ok((plan, result))
 }

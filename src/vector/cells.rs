@@ -13,9 +13,10 @@
 //! outline is simple (the outer outline and a hole's meet at that corner). Holes are not
 //! cut: a hole of a region is filled by its outline and the regions inside it are painted
 //! after it (a filled outline holds the filled outline of every region inside it, so painting
-//! larger filled areas first is the nesting order). A region with a hole that no cell fills
-//! (an empty grid place) keeps its cells. The render is the same where cells meet the pixel
-//! grid, and has no seams between cells of one colour where they do not.
+//! larger filled areas first is the nesting order). A region with a hole that no opaque cell
+//! hides (an empty grid place, a translucent cell) is written as rectangles instead: its rows'
+//! runs of cells, runs of one span in consecutive rows joined. The render is the same where
+//! cells meet the pixel grid, and has no seams between cells of one colour where they do not.
 
 use crate::scene::{Point, Rgba, Scene, Shape, ShapeKind};
 use std::collections::{BTreeMap, BTreeSet, HashMap};
@@ -126,11 +127,12 @@ pub fn merge_cells(scene: &mut Scene) -> usize {
     let mut shapes = Vec::with_capacity(before);
     for r in order {
         let template = &scene.shapes[r.first_shape];
-        if !r.holes_filled {
-            shapes.extend(r.cells.iter().map(|p| scene.shapes[grid.cells[p]].clone()));
-            continue;
-        }
-        for outline in outlines(&r.cells) {
+        let pieces = if r.holes_filled {
+            outlines(&r.cells)
+        } else {
+            rectangles(&r.cells)
+        };
+        for outline in pieces {
             let points = outline
                 .iter()
                 .map(|&(x, y)| Point {
@@ -182,7 +184,8 @@ fn regions(grid: &Grid, key_of: impl Fn(&(i32, i32)) -> Option<[u16; 4]>) -> Vec
             }
             i += 1;
         }
-        let (holes, holes_filled) = holes_of(&cells, |p| grid.cells.contains_key(p));
+        let opaque = |p: &(i32, i32)| key_of(p).is_some_and(|k| k[3] == 1000);
+        let (holes, holes_filled) = holes_of(&cells, opaque);
         let first_shape = cells.iter().map(|p| grid.cells[p]).min().unwrap_or(0);
         out.push(Region {
             filled: cells.len() + holes,
@@ -195,7 +198,8 @@ fn regions(grid: &Grid, key_of: impl Fn(&(i32, i32)) -> Option<[u16; 4]>) -> Vec
 }
 
 /// How many grid places `cells` enclose (not reachable from outside their box through
-/// 4-connected places outside the region), and whether `occupied` holds for all of them.
+/// 4-connected places outside the region), and whether `occupied` holds for all of them (an
+/// opaque cell: what is painted over a filled hole must hide it).
 fn holes_of(cells: &[(i32, i32)], occupied: impl Fn(&(i32, i32)) -> bool) -> (usize, bool) {
     let (mut x0, mut y0, mut x1, mut y1) = (i32::MAX, i32::MAX, i32::MIN, i32::MIN);
     for &(x, y) in cells {
@@ -288,6 +292,39 @@ fn outlines(cells: &[(i32, i32)]) -> Vec<Vec<(i32, i32)>> {
         .into_iter()
         .filter(|lp| signed_area(lp) > 0)
         .map(|lp| without_collinear(&lp))
+        .collect()
+}
+
+/// A region whose holes cannot be filled as rectangles: each row's runs of cells, runs of the
+/// same span in consecutive rows joined, as clockwise corner loops.
+fn rectangles(cells: &[(i32, i32)]) -> Vec<Vec<(i32, i32)>> {
+    let mut sorted = cells.to_vec();
+    sorted.sort_by_key(|&(x, y)| (y, x));
+    // Runs `(y, x0, x1)`, in row order.
+    let mut runs: Vec<(i32, i32, i32)> = Vec::new();
+    for (x, y) in sorted {
+        match runs.last_mut() {
+            Some(r) if r.0 == y && r.2 == x => r.2 = x + 1,
+            _ => runs.push((y, x, x + 1)),
+        }
+    }
+    // Open rectangles by span: `(x0, x1) -> (top row, last row)`.
+    let mut open: BTreeMap<(i32, i32), (i32, i32)> = BTreeMap::new();
+    let mut done = Vec::new();
+    for (y, x0, x1) in runs {
+        match open.get_mut(&(x0, x1)) {
+            Some(r) if r.1 + 1 == y => r.1 = y,
+            _ => {
+                if let Some((top, last)) = open.insert((x0, x1), (y, y)) {
+                    done.push((x0, x1, top, last));
+                }
+            }
+        }
+    }
+    done.extend(open.into_iter().map(|((x0, x1), (t, l))| (x0, x1, t, l)));
+    done.sort_by_key(|&(x0, _, top, _)| (top, x0));
+    done.into_iter()
+        .map(|(x0, x1, top, last)| vec![(x0, top), (x1, top), (x1, last + 1), (x0, last + 1)])
         .collect()
 }
 

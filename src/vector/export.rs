@@ -143,7 +143,7 @@ fn colors_as_written(scene: &Scene) -> Scene {
 }
 
 /// Mean and largest absolute difference over all channel values of two same-size images.
-pub(super) fn diff(a: &Image, b: &Image) -> (f64, f64) {
+pub fn diff(a: &Image, b: &Image) -> (f64, f64) {
     if a.data.len() != b.data.len() || a.data.is_empty() {
         return (f64::INFINITY, f64::INFINITY);
     }

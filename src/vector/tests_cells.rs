@@ -130,11 +130,20 @@ fn a_region_touching_itself_at_a_corner_is_written_as_simple_outlines() {
 }
 
 #[test]
-fn a_hole_over_an_empty_place_keeps_the_cells_of_its_region() {
-    // A blue ring around an empty place: filling its outline would paint the hole.
+fn a_hole_nothing_opaque_hides_makes_its_region_rectangles() {
+    // A blue ring around an empty place: filling its outline would paint the hole. Top row,
+    // the two sides, bottom row.
     let s = grid(3, 4.0, |x, y| (x != 1 || y != 1).then_some(BLUE));
     let m = merged_within(s, 1e-6);
-    assert_eq!(m.shapes.len(), 8);
+    assert_eq!(m.shapes.len(), 4);
+    // Around a translucent cell the same: the ring's fill would show through it.
+    let glass = Rgba::new(0.2, 0.7, 0.3, 0.6);
+    let s = grid(5, 4.0, |x, y| {
+        Some(if (x, y) == (2, 2) { glass } else { BLUE })
+    });
+    let m = merged_within(s, 1e-5);
+    // Rows 0-1 whole, row 2 left and right of the glass, rows 3-4 whole; and the glass.
+    assert_eq!(m.shapes.len(), 5);
 }
 
 #[test]

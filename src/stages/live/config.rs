@@ -96,6 +96,9 @@ pub enum InitMode {
     Circles,
     /// Start from vtracer's trace (simple closed paths), refine, then add what it misses.
     Vtracer,
+    /// No tracing: a square per pixel, merged into one outline per region of a colour (pixel
+    /// art, up to [`super::pixels::MAX_PIXELS_SIDE`] px a side; [`super::pixels`]).
+    Pixels,
 }
 
 /// User-facing LIVE settings.

@@ -15,6 +15,7 @@
 //! stage; a run resumed from one ends exactly as the uninterrupted run.
 
 pub mod init;
+pub mod pixels;
 pub mod prune;
 pub mod schedule;
 pub mod tracer;
@@ -241,6 +242,9 @@ fn traced(
 ) -> Result<LiveResult, LiveError> {
     cfg.validate()?;
     check_target(target)?;
+    if cfg.init == InitMode::Pixels {
+        return pixels::trace_pixels(target, cfg);
+    }
     let (tw, th) = (target.width, target.height);
     let (ww, wh) = working_size(cfg.size, tw, th);
     let over = target.over([1.0, 1.0, 1.0]);
