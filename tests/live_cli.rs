@@ -193,7 +193,7 @@ fn vectorize_init_pixels_copies_pixel_art() {
     assert!(worst < 1e-3, "{worst}");
 
     let big = d.join("big.png");
-    image::RgbaImage::new(200, 8).save(&big).unwrap();
+    image::RgbaImage::new(300, 8).save(&big).unwrap();
     for (img, extra) in [(&big, None), (&input, Some("--max-bytes"))] {
         let mut cmd = bin();
         cmd.args(["vectorize", img.to_str().unwrap(), "--init", "pixels", "-q"]);

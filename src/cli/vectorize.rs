@@ -41,7 +41,7 @@ pub struct VectorizeArgs {
     #[arg(long, default_value = "balanced")]
     pub preset: String,
     /// Where the paths come from: LIVE's circles, vtracer's trace (refined), or `pixels`: no
-    /// tracing, a square per pixel merged per region of a colour (pixel art, up to 128 px).
+    /// tracing, a square per pixel merged per region of a colour (pixel art, up to 256 px).
     #[arg(long, value_enum, default_value = "circles")]
     pub init: InitArg,
     /// Weight of the self-intersection (Xing) loss.

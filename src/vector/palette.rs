@@ -581,16 +581,22 @@ type Cluster = ([f32; 3], [f64; 3], f64, Vec<usize>);
 /// member then takes its cluster's visibility-weighted mean colour (rounded to 8 bits), and
 /// near-opaque fills (opacity ≥ 0.97) become opaque. Returns the number of distinct fills left.
 pub fn merge_similar(scene: &mut Scene, distance: f32) -> usize {
-    let vis = visibility(scene, None);
+    let areas: Vec<f32> = visibility(scene, None).iter().map(|v| v.area).collect();
+    merge_similar_by_area(scene, &areas, distance)
+}
+
+/// [`merge_similar`] with each shape's visible area given (`areas[i]`, px²): for scenes whose
+/// visibility is known without rendering, such as pixel cells, which never overlap.
+pub fn merge_similar_by_area(scene: &mut Scene, areas: &[f32], distance: f32) -> usize {
     let mut order: Vec<usize> = (0..scene.shapes.len())
         .filter(|&i| scene.shapes[i].fill.is_some())
         .collect();
-    order.sort_by(|&a, &b| vis[b].area.total_cmp(&vis[a].area).then(a.cmp(&b)));
+    order.sort_by(|&a, &b| areas[b].total_cmp(&areas[a]).then(a.cmp(&b)));
     let mut clusters: Vec<Cluster> = Vec::new();
     let d2 = distance * distance;
     for i in order {
         let c = fill_rgb(scene.shapes[i].fill);
-        let w = vis[i].area.max(1e-3) as f64;
+        let w = areas[i].max(1e-3) as f64;
         let slot = clusters.iter().position(|cl| dist2(cl.0, c) <= d2);
         let cl = match slot {
             Some(j) => &mut clusters[j],

@@ -11,7 +11,7 @@ use crate::scene::{Rgba, Scene, Shape};
 use crate::vector::palette::{self, Background};
 
 /// The longest side `init = pixels` takes: a cell per pixel is for pixel art, not photos.
-pub const MAX_PIXELS_SIDE: u32 = 128;
+pub const MAX_PIXELS_SIDE: u32 = 256;
 
 /// The pixel copy of `target` (see the module docs).
 pub(super) fn trace_pixels(target: &Image, cfg: &LiveConfig) -> Result<LiveResult, LiveError> {
@@ -56,7 +56,9 @@ pub(super) fn trace_pixels(target: &Image, cfg: &LiveConfig) -> Result<LiveResul
             palette::choose_fills(&mut scene, None, &p);
         }
         None => {
-            palette::merge_similar(&mut scene, palette::MERGE_DISTANCE);
+            // Cells never overlap: each shows its whole pixel, no render needed to know it.
+            let areas = vec![1.0; scene.shapes.len()];
+            palette::merge_similar_by_area(&mut scene, &areas, palette::MERGE_DISTANCE);
         }
     }
     let merged = crate::vector::cells::merge_cells(&mut scene);
