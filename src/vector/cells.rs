@@ -19,7 +19,7 @@
 //! cells meet the pixel grid, and has no seams between cells of one colour where they do not.
 
 use crate::scene::{Point, Rgba, Scene, Shape, ShapeKind};
-use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::collections::{BTreeMap, BTreeSet, HashMap, HashSet};
 
 /// How far (in cells) a corner may lie off the grid, or a side differ from the common side.
 const GRID_TOLERANCE: f32 = 1e-3;
@@ -88,18 +88,8 @@ fn square_of(s: &Shape) -> Option<(f32, f32, f32)> {
     square.then_some((p[0].x, p[0].y, side))
 }
 
-/// The fill as the SVG writes it (8-bit RGB, opacity to 1/1000): cells that look alike merge.
-fn colour_key(c: Rgba) -> [u16; 4] {
-    let q = |v: f32| (v.clamp(0.0, 1.0) * 255.0).round() as u16;
-    [
-        q(c.r),
-        q(c.g),
-        q(c.b),
-        (c.a.clamp(0.0, 1.0) * 1000.0).round() as u16,
-    ]
-}
-
-/// One region: its cells and the places of its holes (grid places it encloses).
+/// One region: its cells, how many places it fills (its cells and the places its holes
+/// enclose), the first shape of its cells, and whether its holes may be filled.
 struct Region {
     cells: Vec<(i32, i32)>,
     filled: usize,
@@ -113,10 +103,12 @@ pub fn merge_cells(scene: &mut Scene) -> usize {
     let Some(grid) = grid_of(scene) else {
         return 0;
     };
+    // The fill as the SVG writes it: cells that look alike merge.
     let key_of = |place: &(i32, i32)| {
         grid.cells
             .get(place)
-            .and_then(|&i| scene.shapes[i].fill.map(colour_key))
+            .and_then(|&i| scene.shapes[i].fill)
+            .map(|c| crate::svg::written_color(c, super::export::MAX_DECIMALS))
     };
     let regions = regions(&grid, key_of);
     let before = scene.shapes.len();
@@ -132,26 +124,28 @@ pub fn merge_cells(scene: &mut Scene) -> usize {
         } else {
             rectangles(&r.cells)
         };
-        for outline in pieces {
-            let points = outline
-                .iter()
-                .map(|&(x, y)| Point {
-                    x: grid.origin.0 + x as f32 * grid.side,
-                    y: grid.origin.1 + y as f32 * grid.side,
-                })
-                .collect();
-            match Shape::polygon(points, template.fill.unwrap_or(Rgba::TRANSPARENT)) {
-                Ok(s) => shapes.push(Shape {
+        let polygons: Result<Vec<Shape>, _> = pieces
+            .iter()
+            .map(|outline| {
+                let points = outline
+                    .iter()
+                    .map(|&(x, y)| Point {
+                        x: grid.origin.0 + x as f32 * grid.side,
+                        y: grid.origin.1 + y as f32 * grid.side,
+                    })
+                    .collect();
+                let s = Shape::polygon(points, template.fill.unwrap_or(Rgba::TRANSPARENT))?;
+                Ok::<_, crate::scene::SceneError>(Shape {
                     stage: template.stage,
                     ..s
-                }),
-                // An outline the scene cannot hold (it cannot happen for grid corners): the
-                // region's cells as they were.
-                Err(_) => {
-                    shapes.extend(r.cells.iter().map(|p| scene.shapes[grid.cells[p]].clone()));
-                    break;
-                }
-            }
+                })
+            })
+            .collect();
+        match polygons {
+            Ok(p) => shapes.extend(p),
+            // An outline the scene cannot hold (it cannot happen for grid corners): the
+            // region's cells as they were.
+            Err(_) => shapes.extend(r.cells.iter().map(|p| scene.shapes[grid.cells[p]].clone())),
         }
     }
     scene.shapes = shapes;
@@ -159,32 +153,29 @@ pub fn merge_cells(scene: &mut Scene) -> usize {
 }
 
 /// The 4-connected regions of equal colour key, each with its filled area (cells and holes)
-/// and whether every hole place holds a cell.
-fn regions(grid: &Grid, key_of: impl Fn(&(i32, i32)) -> Option<[u16; 4]>) -> Vec<Region> {
+/// and whether every hole place holds an opaque cell.
+fn regions(grid: &Grid, key_of: impl Fn(&(i32, i32)) -> Option<Rgba>) -> Vec<Region> {
     let mut places: Vec<(i32, i32)> = grid.cells.keys().copied().collect();
     places.sort_by_key(|p| grid.cells[p]);
-    let mut seen: HashMap<(i32, i32), usize> = HashMap::with_capacity(places.len());
+    let mut seen: HashSet<(i32, i32)> = HashSet::with_capacity(places.len());
     let mut out = Vec::new();
     for start in places {
-        if seen.contains_key(&start) {
+        if !seen.insert(start) {
             continue;
         }
         let key = key_of(&start);
-        let id = out.len();
         let mut cells = vec![start];
-        seen.insert(start, id);
         let mut i = 0;
         while i < cells.len() {
             let (x, y) = cells[i];
             for n in [(x + 1, y), (x - 1, y), (x, y + 1), (x, y - 1)] {
-                if !seen.contains_key(&n) && grid.cells.contains_key(&n) && key_of(&n) == key {
-                    seen.insert(n, id);
+                if grid.cells.contains_key(&n) && key_of(&n) == key && seen.insert(n) {
                     cells.push(n);
                 }
             }
             i += 1;
         }
-        let opaque = |p: &(i32, i32)| key_of(p).is_some_and(|k| k[3] == 1000);
+        let opaque = |p: &(i32, i32)| key_of(p).is_some_and(|c| c.a >= 1.0);
         let (holes, holes_filled) = holes_of(&cells, opaque);
         let first_shape = cells.iter().map(|p| grid.cells[p]).min().unwrap_or(0);
         out.push(Region {
@@ -295,7 +286,7 @@ fn outlines(cells: &[(i32, i32)]) -> Vec<Vec<(i32, i32)>> {
         .collect()
 }
 
-/// A region whose holes cannot be filled as rectangles: each row's runs of cells, runs of the
+/// A region whose holes cannot be filled, as rectangles: each row's runs of cells, runs of the
 /// same span in consecutive rows joined, as clockwise corner loops.
 fn rectangles(cells: &[(i32, i32)]) -> Vec<Vec<(i32, i32)>> {
     let mut sorted = cells.to_vec();

@@ -251,6 +251,10 @@ impl LiveConfig {
         if let Some(v) = self.max_bytes {
             check_max_bytes(v).map_err(|e| LiveError::Config(format!("max_bytes: {e}")))?;
         }
+        if self.init == InitMode::Pixels && (self.target_psnr.is_some() || self.max_bytes.is_some())
+        {
+            return bad("init pixels copies every pixel: target_psnr and max_bytes do not apply");
+        }
         if self.coarse_size != 0 && !CANVAS_SIDES.contains(&self.coarse_size) {
             return Err(LiveError::Config(format!(
                 "coarse_size must be 0 or in {}..={}",

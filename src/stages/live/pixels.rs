@@ -2,7 +2,8 @@
 //! no optimisation, written as one outline per region of a colour ([`crate::vector::cells`]):
 //! the exact vector copy of pixel art (a sprite, an icon drawn on a grid), which LIVE's curves
 //! would round off. Colours: `colors` or a palette snap every cell to it; otherwise near-equal
-//! colours merge ([`palette::merge_similar`]). The background is the configured one (`auto`:
+//! colours merge ([`palette::merge_similar_by_area`]). `target_psnr` and `max_bytes` do not
+//! apply ([`LiveConfig::validate`] refuses them). The background is the configured one (`auto`:
 //! none, every pixel is a cell).
 
 use super::{LiveConfig, LiveError, LiveResult, MAX_PATHS};
@@ -22,34 +23,21 @@ pub(super) fn trace_pixels(target: &Image, cfg: &LiveConfig) -> Result<LiveResul
              {MAX_PIXELS_SIDE} px a side (scale it to its pixel grid first)"
         )));
     }
-    if cfg.target_psnr.is_some() || cfg.max_bytes.is_some() {
-        return Err(LiveError::Config(
-            "init pixels copies every pixel: target_psnr and max_bytes do not apply".into(),
-        ));
-    }
     let background = match cfg.colors.background {
         Background::Color(c) => c.to_rgba(),
         Background::Transparent | Background::Auto => Rgba::TRANSPARENT,
     };
     let mut scene = Scene::new(w, h, background)?;
-    for y in 0..h {
-        for x in 0..w {
-            let i = 4 * (y * w + x) as usize;
-            let a = target.data[i + 3];
-            if a <= 0.5 / 255.0 {
-                continue;
-            }
-            let c = |v: f32| (v / a).clamp(0.0, 1.0);
-            let fill = Rgba::new(
-                c(target.data[i]),
-                c(target.data[i + 1]),
-                c(target.data[i + 2]),
-                a.min(1.0),
-            );
-            scene
-                .shapes
-                .push(Shape::square(x as f32, y as f32, 1.0, fill)?);
+    // Straight 8-bit colours, as a PNG holds them and as the SVG writes them.
+    let pixels = target.to_rgba8();
+    for (i, px) in pixels.chunks_exact(4).enumerate() {
+        if px[3] == 0 {
+            continue;
         }
+        let (x, y) = ((i as u32 % w) as f32, (i as u32 / w) as f32);
+        let c = |v: u8| f32::from(v) / 255.0;
+        let fill = Rgba::new(c(px[0]), c(px[1]), c(px[2]), c(px[3]));
+        scene.shapes.push(Shape::square(x, y, 1.0, fill)?);
     }
     match cfg.colors.resolve(|k| palette::palette_of_image(target, k)) {
         Some(p) => {
@@ -176,10 +164,7 @@ mod tests {
                 ..cfg()
             },
         ] {
-            assert!(matches!(
-                trace_pixels(&sprite(1.0), &c),
-                Err(LiveError::Config(_))
-            ));
+            assert!(matches!(c.validate(), Err(LiveError::Config(_))));
         }
     }
 }
