@@ -108,15 +108,17 @@ pub trait Executor: Send + Sync {
     /// Resolves a request into the [`RunPlan`] this executor would run (presets, the model's
     /// hints and the limits applied once). The service calls it at submit time and stores the
     /// plan with the job.
-    /// The default resolves text requests with the paper's model hints (Stable Diffusion's
-    /// presets and its sample shapes, a negative prompt accepted), as an executor that is not
-    /// backed by a model directory would.
+    /// The default resolves text requests, when they can run, with [`Executor::model_facts`].
     fn plan(&self, request: &PlanRequest, limits: &Limits) -> Result<RunPlan, SpecError> {
-        let facts = self
-            .text_ready()
-            .is_ok()
-            .then(|| super::ModelFacts::stable_diffusion("executor"));
+        let facts = self.text_ready().is_ok().then(|| self.model_facts());
         super::plan::resolve(request, facts.as_ref(), limits)
+    }
+
+    /// What the default [`Executor::plan`] knows of the model: the paper's model hints (Stable
+    /// Diffusion's presets and its sample shapes, a negative prompt accepted), as an executor
+    /// that is not backed by a model directory would.
+    fn model_facts(&self) -> super::ModelFacts {
+        super::ModelFacts::stable_diffusion("executor")
     }
 }
 

@@ -199,19 +199,13 @@ impl Executor for TestExecutor {
         }
     }
 
-    /// Plans as for an SDXL-like model: Stable Diffusion's presets and sample shapes, a
-    /// negative prompt and size conditioning accepted, so every request the API spec allows
-    /// is planned.
-    fn plan(
-        &self,
-        request: &crate::pipeline::PlanRequest,
-        limits: &crate::pipeline::Limits,
-    ) -> Result<crate::pipeline::RunPlan, crate::pipeline::SpecError> {
-        let facts = self.text_ready.then(|| crate::pipeline::ModelFacts {
+    /// An SDXL-like model: Stable Diffusion's presets and sample shapes, a negative prompt and
+    /// size conditioning accepted, so every request the API spec allows is planned.
+    fn model_facts(&self) -> crate::pipeline::ModelFacts {
+        crate::pipeline::ModelFacts {
             size_conditioning: true,
             ..crate::pipeline::ModelFacts::stable_diffusion("test executor")
-        });
-        crate::pipeline::plan::resolve(request, facts.as_ref(), limits)
+        }
     }
 }
 

@@ -529,14 +529,12 @@ fn text_plan(
         .canvas
         .check(limits.max_canvas_side)?
         .map(|c| resolve_canvas(c, n.size, sample_shape(req, model)));
-    let drawn = canvas.map_or((n.size, n.size), |c| (c.sample_width, c.sample_height));
-    let size_conditioning = size_conditioning(req, model, drawn)?;
     let distil = !from_method || req.method != Method::SdLive;
     let augment = from_method && req.method == Method::Scratch && req.tuning.augment != Some(false);
     let sds = distil
         .then(|| sds_plan(req, model, &n, augment))
         .transpose()?;
-    Ok(TextPlan {
+    let mut plan = TextPlan {
         method: req.method,
         style: req.style,
         start,
@@ -544,7 +542,7 @@ fn text_plan(
         size: n.size,
         canvas,
         negative_prompt: negative_prompt(req, model, limits)?,
-        size_conditioning,
+        size_conditioning: None,
         paths: n.paths,
         // Only a run that samples is steered toward the caption's colour and objects.
         caption: sample
@@ -566,7 +564,9 @@ fn text_plan(
         colors: req.vector.colors.clone(),
         fill: req.vector.fill,
         variations,
-    })
+    };
+    plan.size_conditioning = size_conditioning(req, model, plan.sample_dims())?;
+    Ok(plan)
 }
 
 mod text_plan;
